@@ -1,0 +1,70 @@
+//! Forward dynamics q̈ = M(q)⁻¹ (τ − C(q,q̇)q̇ − g(q) − friction(q̇)), for the simulator.
+
+use nalgebra::DMatrix;
+
+use super::rnea::{mass_matrix, rnea_terms, Terms};
+use super::{Data, Model};
+
+/// Joint accelerations (rad/s²) for applied joint torques `tau` (N·m),
+/// written into `qdd`. Uses `data` as workspace; allocates nothing.
+pub fn forward_dynamics(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], tau: &[f64], qdd: &mut [f64]) {
+    let n = model.dof();
+    // Bias torques: Coriolis, centrifugal, gravity (q̈ = 0, so rotors drop out).
+    qdd.iter_mut().for_each(|a| *a = 0.0);
+    rnea_terms(
+        model,
+        data,
+        q,
+        qd,
+        qdd,
+        Terms {
+            gravity: true,
+            friction: false,
+            rotor: false,
+        },
+    );
+    for i in 0..n {
+        qdd[i] = tau[i] - data.tau[i] - model.friction[i].torque(qd[i]);
+    }
+    mass_matrix(model, data, q);
+    cholesky_solve_in_place(&mut data.mass, qdd);
+}
+
+/// Solves M x = b for symmetric positive definite M, overwriting M with its
+/// Cholesky factor and b with x.
+///
+/// # Panics
+/// If M is not positive definite (a robot with a massless, rotor-less chain end).
+pub fn cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) {
+    let n = b.len();
+    for j in 0..n {
+        let mut d = m[(j, j)];
+        for k in 0..j {
+            d -= m[(j, k)] * m[(j, k)];
+        }
+        assert!(d > 0.0, "mass matrix is not positive definite (pivot {j}: {d})");
+        let d = d.sqrt();
+        m[(j, j)] = d;
+        for i in j + 1..n {
+            let mut s = m[(i, j)];
+            for k in 0..j {
+                s -= m[(i, k)] * m[(j, k)];
+            }
+            m[(i, j)] = s / d;
+        }
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= m[(i, k)] * b[k];
+        }
+        b[i] = s / m[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= m[(k, i)] * b[k];
+        }
+        b[i] = s / m[(i, i)];
+    }
+}

@@ -1,0 +1,21 @@
+//! Rigid-body dynamics of serial chains: an immutable [`Model`], a
+//! preallocated [`Data`] workspace and free functions over them, one
+//! algorithm per file, each cross-checked against the Lagrangian twin in
+//! `lagrange.rs`.
+
+mod data;
+mod forward_dynamics;
+mod kinematics;
+pub mod lagrange;
+pub mod model;
+mod rnea;
+mod robot_file;
+mod urdf;
+
+pub use data::Data;
+pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
+pub use kinematics::{end_effector_position, forward_kinematics};
+pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
+pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
+pub use robot_file::{load_robot, parse_robot_file};
+pub use urdf::{load_urdf, parse_urdf};

@@ -1,0 +1,269 @@
+//! The immutable robot description: a serial chain of revolute joints, each
+//! carrying one rigid link, plus per-joint drive (gear, torque constant,
+//! encoder, rotor) and friction data. Built once from a robot file
+//! (`robot_file.rs`) or a URDF (`urdf.rs`); algorithms take `&Model` and a
+//! preallocated [`super::Data`].
+
+use nalgebra::{Matrix3, Unit, Vector3};
+
+/// Rigid-body inertia of one link, in the link frame (the frame of the joint
+/// that moves it, after the joint rotation).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Inertial {
+    /// kg
+    pub mass: f64,
+    /// Centre of mass in the link frame, m.
+    pub com: Vector3<f64>,
+    /// Inertia tensor about the centre of mass, link-frame axes, kg·m².
+    pub inertia_com: Matrix3<f64>,
+}
+
+impl Inertial {
+    /// First moment of mass h = m·c, kg·m.
+    pub fn first_moment(&self) -> Vector3<f64> {
+        self.com * self.mass
+    }
+
+    /// Inertia about the link-frame origin (parallel-axis theorem), kg·m².
+    pub fn inertia_origin(&self) -> Matrix3<f64> {
+        let c = self.com;
+        self.inertia_com + (Matrix3::identity() * c.dot(&c) - c * c.transpose()) * self.mass
+    }
+
+    /// Adds a rigid body given in this link's frame (used to lump fixed
+    /// children, e.g. a URDF tool flange, into the moving link).
+    pub fn merge(&self, other: &Inertial) -> Inertial {
+        let m = self.mass + other.mass;
+        if m == 0.0 {
+            return self.clone();
+        }
+        let com = (self.com * self.mass + other.com * other.mass) / m;
+        let shift = |i: &Inertial| {
+            let d = i.com - com;
+            i.inertia_com + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * i.mass
+        };
+        Inertial {
+            mass: m,
+            com,
+            inertia_com: shift(self) + shift(other),
+        }
+    }
+}
+
+/// Joint friction, joint side (Bona eq. 2): for q̇ > 0 the torque is
+/// `viscous_pos·q̇ + coulomb_pos`, for q̇ < 0 `viscous_neg·q̇ − coulomb_neg`,
+/// zero at rest; `offset` is added always. Coulomb values are magnitudes (≥ 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Friction {
+    /// N·m·s/rad
+    pub viscous_pos: f64,
+    /// N·m·s/rad
+    pub viscous_neg: f64,
+    /// N·m
+    pub coulomb_pos: f64,
+    /// N·m
+    pub coulomb_neg: f64,
+    /// N·m
+    pub offset: f64,
+}
+
+impl Friction {
+    pub fn symmetric(viscous: f64, coulomb: f64) -> Friction {
+        Friction {
+            viscous_pos: viscous,
+            viscous_neg: viscous,
+            coulomb_pos: coulomb,
+            coulomb_neg: coulomb,
+            offset: 0.0,
+        }
+    }
+
+    /// Friction torque at joint velocity `qd` (rad/s), N·m.
+    #[inline]
+    pub fn torque(&self, qd: f64) -> f64 {
+        self.offset
+            + if qd > 0.0 {
+                self.viscous_pos * qd + self.coulomb_pos
+            } else if qd < 0.0 {
+                self.viscous_neg * qd - self.coulomb_neg
+            } else {
+                0.0
+            }
+    }
+
+    pub fn is_zero(&self) -> bool {
+        *self == Friction::default()
+    }
+}
+
+/// The actuator of one joint: what turns motor current and encoder counts
+/// into joint torque and angle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Drive {
+    /// Motor turns per joint turn (≥ 1 for a reducer).
+    pub gear_ratio: f64,
+    /// Motor torque per ampere, N·m/A (motor side).
+    pub torque_constant: f64,
+    /// Encoder counts per motor revolution.
+    pub encoder_counts_per_rev: f64,
+    /// Rotor inertia, motor side, kg·m²; reflected to the joint as `J·gear²`.
+    pub rotor_inertia: f64,
+}
+
+impl Default for Drive {
+    fn default() -> Self {
+        Drive {
+            gear_ratio: 1.0,
+            torque_constant: 1.0,
+            encoder_counts_per_rev: 1_048_576.0,
+            rotor_inertia: 0.0,
+        }
+    }
+}
+
+impl Drive {
+    /// Joint torque per ampere of motor current, N·m/A.
+    pub fn joint_torque_per_amp(&self) -> f64 {
+        self.torque_constant * self.gear_ratio
+    }
+
+    /// Joint angle of one encoder count, rad.
+    pub fn radians_per_count(&self) -> f64 {
+        2.0 * std::f64::consts::PI / (self.encoder_counts_per_rev * self.gear_ratio)
+    }
+
+    /// Rotor inertia seen at the joint, kg·m².
+    pub fn reflected_inertia(&self) -> f64 {
+        self.rotor_inertia * self.gear_ratio * self.gear_ratio
+    }
+}
+
+/// Motion limits of one joint (used by the simulator's report and the
+/// excitation design). `None` means unlimited.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Limits {
+    /// rad
+    pub position: Option<(f64, f64)>,
+    /// rad/s (symmetric)
+    pub velocity: Option<f64>,
+    /// rad/s² (symmetric)
+    pub acceleration: Option<f64>,
+    /// N·m (symmetric)
+    pub torque: Option<f64>,
+}
+
+/// A revolute joint: its frame relative to the parent link frame at q = 0
+/// (rotation `origin_rot`, translation `origin_xyz`), then a rotation by q
+/// about `axis` (expressed in the joint frame).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Joint {
+    pub name: String,
+    pub origin_rot: Matrix3<f64>,
+    pub origin_xyz: Vector3<f64>,
+    pub axis: Unit<Vector3<f64>>,
+}
+
+/// A serial chain of revolute joints. Index i is joint i, the link it moves,
+/// its drive, friction and limits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Model {
+    pub name: String,
+    /// Gravity vector in the base frame, m/s².
+    pub gravity: Vector3<f64>,
+    pub joints: Vec<Joint>,
+    pub links: Vec<Inertial>,
+    pub drives: Vec<Drive>,
+    pub friction: Vec<Friction>,
+    pub limits: Vec<Limits>,
+    /// A point on the last link (its frame), m: the end effector for
+    /// Cartesian constraints and plots.
+    pub end_effector: Vector3<f64>,
+    /// What loading the description tolerated (shown to the user).
+    pub warnings: Vec<String>,
+}
+
+impl Model {
+    /// Number of joints (degrees of freedom).
+    pub fn dof(&self) -> usize {
+        self.joints.len()
+    }
+
+    pub fn joint_names(&self) -> Vec<String> {
+        self.joints.iter().map(|j| j.name.clone()).collect()
+    }
+
+    /// Checks the physical sanity of the description: positive masses
+    /// (zero allowed), symmetric positive semidefinite inertias satisfying
+    /// the triangle inequalities, positive drive constants.
+    pub fn check(&self) -> Result<(), String> {
+        let n = self.dof();
+        if n == 0 {
+            return Err("the robot has no moving joint".into());
+        }
+        for (what, len) in [
+            ("links", self.links.len()),
+            ("drives", self.drives.len()),
+            ("friction", self.friction.len()),
+            ("limits", self.limits.len()),
+        ] {
+            if len != n {
+                return Err(format!("{n} joints but {len} {what}"));
+            }
+        }
+        for (i, (j, l)) in self.joints.iter().zip(&self.links).enumerate() {
+            let ctx = format!("joint {} (`{}`)", i + 1, j.name);
+            if !(l.mass >= 0.0) || !l.mass.is_finite() {
+                return Err(format!("{ctx}: link mass must be ≥ 0, found {}", l.mass));
+            }
+            let ic = l.inertia_com;
+            if (ic - ic.transpose()).abs().max() > 1e-12 * (1.0 + ic.abs().max()) {
+                return Err(format!("{ctx}: inertia tensor is not symmetric"));
+            }
+            let eig = ic.symmetric_eigenvalues();
+            let tol = 1e-12 * (1.0 + ic.abs().max());
+            if eig.iter().any(|e| *e < -tol) {
+                return Err(format!(
+                    "{ctx}: inertia about the centre of mass has a negative principal moment"
+                ));
+            }
+            let (a, b, c) = (eig[0], eig[1], eig[2]);
+            if a + b < c - tol || a + c < b - tol || b + c < a - tol {
+                return Err(format!(
+                    "{ctx}: principal moments {a}, {b}, {c} violate the triangle inequality"
+                ));
+            }
+            let d = &self.drives[i];
+            if !(d.gear_ratio > 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
+                return Err(format!(
+                    "{ctx}: gear ratio, torque constant and encoder counts must be > 0"
+                ));
+            }
+            if d.rotor_inertia < 0.0 {
+                return Err(format!("{ctx}: rotor inertia must be ≥ 0"));
+            }
+            let f = &self.friction[i];
+            if f.coulomb_pos < 0.0 || f.coulomb_neg < 0.0 {
+                return Err(format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Rotation matrix about a unit axis by angle `q` (Rodrigues), without
+/// allocation.
+#[inline]
+pub fn axis_rotation(axis: &Unit<Vector3<f64>>, q: f64) -> Matrix3<f64> {
+    let (s, c) = q.sin_cos();
+    let k = axis.into_inner();
+    let kx = Matrix3::new(0.0, -k.z, k.y, k.z, 0.0, -k.x, -k.y, k.x, 0.0);
+    Matrix3::identity() + kx * s + kx * kx * (1.0 - c)
+}
+
+/// Rotation from roll-pitch-yaw (URDF convention: R = Rz(yaw)·Ry(pitch)·Rx(roll)).
+pub fn rpy_rotation(rpy: [f64; 3]) -> Matrix3<f64> {
+    let x = Unit::new_unchecked(Vector3::x());
+    let y = Unit::new_unchecked(Vector3::y());
+    let z = Unit::new_unchecked(Vector3::z());
+    axis_rotation(&z, rpy[2]) * axis_rotation(&y, rpy[1]) * axis_rotation(&x, rpy[0])
+}

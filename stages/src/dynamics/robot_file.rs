@@ -1,0 +1,285 @@
+//! The robot file: a TOML description of a serial chain, either complete
+//! (joint origins and link inertials listed here) or pointing at a URDF for
+//! kinematics and inertials and adding drive and friction data by joint name.
+//! The format is documented in `docs/robot-file.md`.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Unit, Vector3};
+use serde::Deserialize;
+
+use super::model::{rpy_rotation, Drive, Friction, Inertial, Joint, Limits, Model};
+use crate::{Error, Result};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RobotFile {
+    name: String,
+    /// Gravity in the base frame, m/s².
+    #[serde(default = "default_gravity")]
+    gravity: [f64; 3],
+    /// URDF giving kinematics and inertials, relative to this file.
+    urdf: Option<PathBuf>,
+    /// Point on the last link, m.
+    end_effector: Option<[f64; 3]>,
+    /// Free text: where the numbers come from and under which licence.
+    #[allow(dead_code)]
+    source: Option<String>,
+    #[serde(default, rename = "joint")]
+    joints: Vec<JointEntry>,
+}
+
+fn default_gravity() -> [f64; 3] {
+    [0.0, 0.0, -9.81]
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct JointEntry {
+    name: String,
+    origin: Option<Origin>,
+    dh: Option<ModifiedDh>,
+    axis: Option<[f64; 3]>,
+    mass: Option<f64>,
+    com: Option<[f64; 3]>,
+    inertia: Option<InertiaEntry>,
+    gear_ratio: Option<f64>,
+    torque_constant: Option<f64>,
+    encoder_counts_per_rev: Option<f64>,
+    rotor_inertia: Option<f64>,
+    viscous: Option<f64>,
+    viscous_pos: Option<f64>,
+    viscous_neg: Option<f64>,
+    coulomb: Option<f64>,
+    coulomb_pos: Option<f64>,
+    coulomb_neg: Option<f64>,
+    offset: Option<f64>,
+    limits: Option<LimitsEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Origin {
+    #[serde(default)]
+    xyz: [f64; 3],
+    #[serde(default)]
+    rpy: [f64; 3],
+}
+
+/// Modified (Craig) Denavit–Hartenberg: T = Rx(alpha)·Tx(a)·Rz(theta + q)·Tz(d).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModifiedDh {
+    a: f64,
+    alpha: f64,
+    d: f64,
+    #[serde(default)]
+    theta: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InertiaEntry {
+    ixx: f64,
+    iyy: f64,
+    izz: f64,
+    #[serde(default)]
+    ixy: f64,
+    #[serde(default)]
+    ixz: f64,
+    #[serde(default)]
+    iyz: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LimitsEntry {
+    position: Option<[f64; 2]>,
+    velocity: Option<f64>,
+    acceleration: Option<f64>,
+    torque: Option<f64>,
+}
+
+/// Loads a robot from a `.toml` robot file or directly from a `.urdf`.
+pub fn load_robot(path: &Path) -> Result<Model> {
+    let is_urdf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+    let model = if is_urdf {
+        super::urdf::load_urdf(path)?
+    } else {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        parse_robot_file(&text, path)?
+    };
+    model.check().map_err(|msg| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    })?;
+    Ok(model)
+}
+
+/// Parses robot-file text; `path` names the file in errors and anchors a
+/// relative `urdf` path.
+pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let file: RobotFile = toml::from_str(text).map_err(|e| err(e.to_string()))?;
+    let gravity = Vector3::from(file.gravity);
+    let mut model = match &file.urdf {
+        Some(urdf) => {
+            let full = path.parent().unwrap_or(Path::new(".")).join(urdf);
+            let mut m = super::urdf::load_urdf(&full)?;
+            for entry in &file.joints {
+                let i = m.joints.iter().position(|j| j.name == entry.name).ok_or_else(|| {
+                    err(format!(
+                        "joint `{}` is not a moving joint of {}",
+                        entry.name,
+                        full.display()
+                    ))
+                })?;
+                for (key, given) in [
+                    ("origin", entry.origin.is_some()),
+                    ("dh", entry.dh.is_some()),
+                    ("axis", entry.axis.is_some()),
+                    ("mass", entry.mass.is_some()),
+                    ("com", entry.com.is_some()),
+                    ("inertia", entry.inertia.is_some()),
+                ] {
+                    if given {
+                        return Err(err(format!(
+                            "joint `{}`: `{key}` comes from the URDF and cannot be set here",
+                            entry.name
+                        )));
+                    }
+                }
+                apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i]).map_err(err)?;
+            }
+            m.name = file.name.clone();
+            m
+        }
+        None => {
+            if file.joints.is_empty() {
+                return Err(err("no [[joint]] entries and no `urdf`".into()));
+            }
+            let mut m = Model {
+                name: file.name.clone(),
+                gravity,
+                joints: Vec::new(),
+                links: Vec::new(),
+                drives: Vec::new(),
+                friction: Vec::new(),
+                limits: Vec::new(),
+                end_effector: Vector3::zeros(),
+                warnings: Vec::new(),
+            };
+            for entry in &file.joints {
+                let ctx = |msg: String| err(format!("joint `{}`: {msg}", entry.name));
+                let (origin_rot, origin_xyz) = match (&entry.origin, &entry.dh) {
+                    (Some(o), None) => (rpy_rotation(o.rpy), Vector3::from(o.xyz)),
+                    (None, Some(dh)) => {
+                        let x = Unit::new_unchecked(Vector3::x());
+                        let z = Unit::new_unchecked(Vector3::z());
+                        let rx = super::model::axis_rotation(&x, dh.alpha);
+                        (
+                            rx * super::model::axis_rotation(&z, dh.theta),
+                            Vector3::new(dh.a, 0.0, 0.0) + rx * Vector3::new(0.0, 0.0, dh.d),
+                        )
+                    }
+                    (None, None) => (Matrix3::identity(), Vector3::zeros()),
+                    (Some(_), Some(_)) => return Err(ctx("give either `origin` or `dh`, not both".into())),
+                };
+                let axis = match (entry.axis, entry.dh.is_some()) {
+                    (Some(_), true) => return Err(ctx("with `dh` the axis is z; remove `axis`".into())),
+                    (Some(a), false) => a,
+                    (None, _) => [0.0, 0.0, 1.0],
+                };
+                let axis = Vector3::from(axis);
+                if !(axis.norm() > 0.0) {
+                    return Err(ctx("`axis` must be a non-zero vector".into()));
+                }
+                let mass = entry.mass.ok_or_else(|| ctx("`mass` is required".into()))?;
+                let com = Vector3::from(entry.com.unwrap_or([0.0; 3]));
+                let inertia = entry
+                    .inertia
+                    .as_ref()
+                    .ok_or_else(|| ctx("`inertia` is required".into()))?;
+                let inertia_com = Matrix3::new(
+                    inertia.ixx,
+                    inertia.ixy,
+                    inertia.ixz,
+                    inertia.ixy,
+                    inertia.iyy,
+                    inertia.iyz,
+                    inertia.ixz,
+                    inertia.iyz,
+                    inertia.izz,
+                );
+                m.joints.push(Joint {
+                    name: entry.name.clone(),
+                    origin_rot,
+                    origin_xyz,
+                    axis: Unit::new_normalize(axis),
+                });
+                m.links.push(Inertial { mass, com, inertia_com });
+                let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
+                apply_actuation(entry, &mut d, &mut f, &mut l).map_err(ctx)?;
+                m.drives.push(d);
+                m.friction.push(f);
+                m.limits.push(l);
+            }
+            m
+        }
+    };
+    model.gravity = gravity;
+    if let Some(ee) = file.end_effector {
+        model.end_effector = Vector3::from(ee);
+    }
+    let mut names: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
+    names.sort_unstable();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(err(format!("joint name `{}` is used twice", w[0])));
+    }
+    Ok(model)
+}
+
+/// Drive, friction and limit keys of a joint entry, over the given defaults.
+fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limits) -> Result<(), String> {
+    if let Some(v) = e.gear_ratio {
+        d.gear_ratio = v;
+    }
+    if let Some(v) = e.torque_constant {
+        d.torque_constant = v;
+    }
+    if let Some(v) = e.encoder_counts_per_rev {
+        d.encoder_counts_per_rev = v;
+    }
+    if let Some(v) = e.rotor_inertia {
+        d.rotor_inertia = v;
+    }
+    let pick = |both: Option<f64>, one: Option<f64>, name: &str, current: f64| -> Result<f64, String> {
+        match (both, one) {
+            (Some(_), Some(_)) => Err(format!("give `{name}` or its `_pos`/`_neg` forms, not both")),
+            (Some(v), None) | (None, Some(v)) => Ok(v),
+            (None, None) => Ok(current),
+        }
+    };
+    f.viscous_pos = pick(e.viscous, e.viscous_pos, "viscous", f.viscous_pos)?;
+    f.viscous_neg = pick(e.viscous, e.viscous_neg, "viscous", f.viscous_neg)?;
+    f.coulomb_pos = pick(e.coulomb, e.coulomb_pos, "coulomb", f.coulomb_pos)?;
+    f.coulomb_neg = pick(e.coulomb, e.coulomb_neg, "coulomb", f.coulomb_neg)?;
+    if let Some(v) = e.offset {
+        f.offset = v;
+    }
+    if let Some(lim) = &e.limits {
+        if let Some([lo, hi]) = lim.position {
+            if lo >= hi {
+                return Err(format!("position limits [{lo}, {hi}] are empty"));
+            }
+            l.position = Some((lo, hi));
+        }
+        l.velocity = lim.velocity.or(l.velocity);
+        l.acceleration = lim.acceleration.or(l.acceleration);
+        l.torque = lim.torque.or(l.torque);
+    }
+    Ok(())
+}

@@ -1,0 +1,219 @@
+//! URDF → [`Model`]: follows the chain of moving joints from the root link,
+//! composing fixed joints into the next joint's origin and lumping the
+//! inertia of rigidly attached links into the moving link that carries them.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use nalgebra::{Matrix3, Unit, Vector3};
+use urdf_rs::JointType;
+
+use super::model::{rpy_rotation, Drive, Friction, Inertial, Joint, Limits, Model};
+use crate::{Error, Result};
+
+/// A rigid transform (rotation, translation).
+type Frame = (Matrix3<f64>, Vector3<f64>);
+
+fn compose(a: &Frame, b: &Frame) -> Frame {
+    (a.0 * b.0, a.0 * b.1 + a.1)
+}
+
+fn pose(p: &urdf_rs::Pose) -> Frame {
+    (rpy_rotation(p.rpy.0), Vector3::from(p.xyz.0))
+}
+
+pub fn load_urdf(path: &Path) -> Result<Model> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_urdf(&text, path)
+}
+
+pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(format!("invalid XML: {e}")))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
+    let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
+    for j in &robot.joints {
+        children.entry(j.parent.link.as_str()).or_default().push(j);
+    }
+    let roots: Vec<&str> = robot
+        .links
+        .iter()
+        .map(|l| l.name.as_str())
+        .filter(|l| !robot.joints.iter().any(|j| j.child.link == *l))
+        .collect();
+    let [root] = roots[..] else {
+        return Err(err(format!(
+            "expected one root link, found {}: {:?}",
+            roots.len(),
+            roots
+        )));
+    };
+    // Whether a link's subtree holds a moving joint (memoised walk).
+    fn moving_below<'a>(link: &'a str, children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>) -> bool {
+        children.get(link).is_some_and(|js| {
+            js.iter()
+                .any(|j| j.joint_type != JointType::Fixed || moving_below(&j.child.link, children))
+        })
+    }
+    let inertial_of = |name: &str, frame: &Frame| -> Inertial {
+        let l = links[name];
+        let (r, p) = compose(frame, &pose(&l.inertial.origin));
+        let i = &l.inertial.inertia;
+        let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+        Inertial {
+            mass: l.inertial.mass.value,
+            com: p,
+            inertia_com: r * local * r.transpose(),
+        }
+    };
+
+    let mut model = Model {
+        name: robot.name.clone(),
+        gravity: Vector3::new(0.0, 0.0, -9.81),
+        joints: Vec::new(),
+        links: Vec::new(),
+        drives: Vec::new(),
+        friction: Vec::new(),
+        limits: Vec::new(),
+        end_effector: Vector3::zeros(),
+        warnings: Vec::new(),
+    };
+    // `frame`: the current URDF link's frame in the current moving link's
+    // frame (or the base frame before the first moving joint).
+    let mut frame: Frame = (Matrix3::identity(), Vector3::zeros());
+    let mut link = root;
+    loop {
+        if !model.links.is_empty() {
+            let add = inertial_of(link, &frame);
+            let last = model.links.last_mut().expect("non-empty");
+            *last = last.merge(&add);
+        }
+        let kids = children.get(link).cloned().unwrap_or_default();
+        let mut next = None;
+        for j in kids {
+            if j.mimic.is_some() {
+                return Err(err(format!("joint `{}`: mimic joints are not supported", j.name)));
+            }
+            if moving_below(&j.child.link, &children) || j.joint_type != JointType::Fixed {
+                if next.is_some() {
+                    return Err(err(format!(
+                        "link `{link}` branches into several moving chains; robotid handles serial chains"
+                    )));
+                }
+                next = Some(j);
+            } else if !model.links.is_empty() {
+                lump_fixed(
+                    &j.child.link,
+                    compose(&frame, &pose(&j.origin)),
+                    &children,
+                    &inertial_of,
+                    model.links.last_mut().expect("non-empty"),
+                );
+            }
+        }
+        let Some(j) = next else { break };
+        let origin = compose(&frame, &pose(&j.origin));
+        match &j.joint_type {
+            JointType::Fixed => {
+                frame = origin;
+            }
+            JointType::Revolute | JointType::Continuous => {
+                let axis = Vector3::from(j.axis.xyz.0);
+                if !(axis.norm() > 0.0) {
+                    return Err(err(format!("joint `{}`: zero axis", j.name)));
+                }
+                model.joints.push(Joint {
+                    name: j.name.clone(),
+                    origin_rot: origin.0,
+                    origin_xyz: origin.1,
+                    axis: Unit::new_normalize(axis),
+                });
+                model.links.push(Inertial {
+                    mass: 0.0,
+                    com: Vector3::zeros(),
+                    inertia_com: Matrix3::zeros(),
+                });
+                model.drives.push(Drive::default());
+                let (viscous, coulomb) = j.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
+                model.friction.push(Friction::symmetric(viscous, coulomb));
+                let lim = &j.limit;
+                model.limits.push(Limits {
+                    position: (j.joint_type == JointType::Revolute && lim.upper > lim.lower)
+                        .then_some((lim.lower, lim.upper)),
+                    velocity: (lim.velocity > 0.0).then_some(lim.velocity),
+                    acceleration: None,
+                    torque: (lim.effort > 0.0).then_some(lim.effort),
+                });
+                frame = (Matrix3::identity(), Vector3::zeros());
+            }
+            other => {
+                return Err(err(format!(
+                    "joint `{}`: {other:?} joints are not supported (revolute chains only)",
+                    j.name
+                )));
+            }
+        }
+        link = &j.child.link;
+    }
+    // The tool point: follow a single chain of fixed links past the last
+    // moving joint (e.g. a flange or `ee_link`).
+    while let Some([j]) = children.get(link).map(Vec::as_slice) {
+        frame = compose(&frame, &pose(&j.origin));
+        link = &j.child.link;
+    }
+    model.end_effector = frame.1;
+    model.warnings = warnings;
+    if model.joints.is_empty() {
+        return Err(err("no revolute joint found".into()));
+    }
+    Ok(model)
+}
+
+fn lump_fixed<'a>(
+    link: &'a str,
+    frame: Frame,
+    children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    inertial_of: &dyn Fn(&str, &Frame) -> Inertial,
+    into: &mut Inertial,
+) {
+    *into = into.merge(&inertial_of(link, &frame));
+    for j in children.get(link).cloned().unwrap_or_default() {
+        lump_fixed(
+            &j.child.link,
+            compose(&frame, &pose(&j.origin)),
+            children,
+            inertial_of,
+            into,
+        );
+    }
+}
+
+/// Some xacro-generated URDFs carry two `<origin>` elements in one joint;
+/// ROS's parser (urdfdom) takes the first. Do the same: cut the later ones
+/// out of the text and say so.
+fn drop_duplicate_origins(text: &str) -> Result<(String, Vec<String>), roxmltree::Error> {
+    let doc = roxmltree::Document::parse(text)?;
+    let mut cuts = Vec::new();
+    let mut warnings = Vec::new();
+    for joint in doc.descendants().filter(|n| n.has_tag_name("joint")) {
+        let origins: Vec<_> = joint.children().filter(|n| n.has_tag_name("origin")).collect();
+        for extra in origins.iter().skip(1) {
+            cuts.push(extra.range());
+            let line = doc.text_pos_at(extra.range().start).row;
+            warnings.push(format!(
+                "joint `{}` has more than one <origin>; the first is used and the one at line {line} ignored, as ROS does",
+                joint.attribute("name").unwrap_or("?")
+            ));
+        }
+    }
+    let mut out = text.to_string();
+    cuts.sort_by_key(|r| std::cmp::Reverse(r.start));
+    for r in cuts {
+        out.replace_range(r, "");
+    }
+    Ok((out, warnings))
+}

@@ -1,0 +1,189 @@
+//! RNEA against independent truths: closed forms (1-dof, planar 2-dof) and
+//! the Lagrangian twin (energies by forward kinematics, finite differences).
+
+use std::path::{Path, PathBuf};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use robotid_stages::dynamics::{self, lagrange, Data, Model};
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+fn rel_err(a: &[f64], b: &[f64]) -> f64 {
+    let num = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let den = b.iter().map(|y| y.abs()).fold(0.0, f64::max);
+    num / den
+}
+
+fn random_state(rng: &mut ChaCha8Rng, n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
+    (v(3.0), v(2.0), v(5.0))
+}
+
+#[test]
+fn one_dof_matches_swevers_eq7() {
+    let model = dynamics::load_robot(&fixture("robots/kuka_axis3.toml")).unwrap();
+    let mut data = Data::new(&model);
+    let link = &model.links[0];
+    let (m, lx, ly) = (link.mass, link.com.x, link.com.y);
+    let j = link.inertia_com[(2, 2)] + m * (lx * lx + ly * ly);
+    assert!(
+        (j - 8.348).abs() < 1e-12,
+        "inertia about the axis is Swevers' 8.348, got {j}"
+    );
+    let g = 9.81;
+    let (v, c) = (3.676, 15.8927);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for _ in 0..200 {
+        let (q, qd, qdd) = random_state(&mut rng, 1);
+        let expected = j * qdd[0] - m * g * lx * q[0].sin() - m * g * ly * q[0].cos() + v * qd[0] + c * qd[0].signum();
+        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd)[0];
+        assert!(rel_err(&[tau], &[expected]) < 1e-12, "{tau} vs {expected}");
+    }
+}
+
+const PLANAR_2DOF: &str = r#"
+name = "planar2"
+gravity = [0.0, -9.81, 0.0]
+[[joint]]
+name = "j1"
+mass = 3.0
+com = [0.35, 0.0, 0.0]
+inertia = { ixx = 0.01, iyy = 0.2, izz = 0.21 }
+[[joint]]
+name = "j2"
+origin = { xyz = [0.8, 0.0, 0.0] }
+mass = 2.0
+com = [0.25, 0.0, 0.0]
+inertia = { ixx = 0.01, iyy = 0.1, izz = 0.11 }
+"#;
+
+#[test]
+fn planar_two_dof_matches_closed_form() {
+    let model = dynamics::parse_robot_file(PLANAR_2DOF, Path::new("planar2.toml")).unwrap();
+    let mut data = Data::new(&model);
+    let (m1, m2, l1, c1, c2, i1, i2, g) = (3.0, 2.0, 0.8, 0.35, 0.25, 0.21, 0.11, 9.81);
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for _ in 0..200 {
+        let (q, qd, qdd) = random_state(&mut rng, 2);
+        let (s2, k2) = q[1].sin_cos();
+        let m11 = i1 + i2 + m1 * c1 * c1 + m2 * (l1 * l1 + c2 * c2 + 2.0 * l1 * c2 * k2);
+        let m12 = i2 + m2 * (c2 * c2 + l1 * c2 * k2);
+        let m22 = i2 + m2 * c2 * c2;
+        let h = m2 * l1 * c2 * s2;
+        let g1 = (m1 * c1 + m2 * l1) * g * q[0].cos() + m2 * c2 * g * (q[0] + q[1]).cos();
+        let g2 = m2 * c2 * g * (q[0] + q[1]).cos();
+        let t1 = m11 * qdd[0] + m12 * qdd[1] - h * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]) + g1;
+        let t2 = m12 * qdd[0] + m22 * qdd[1] + h * qd[0] * qd[0] + g2;
+        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).as_slice().to_vec();
+        assert!(rel_err(&tau, &[t1, t2]) < 1e-12, "{tau:?} vs {:?}", [t1, t2]);
+    }
+}
+
+fn check_against_lagrangian(model: &Model, seed: u64) {
+    let mut data = Data::new(model);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let n = model.dof();
+    for _ in 0..20 {
+        let (q, qd, qdd) = random_state(&mut rng, n);
+        // Mass matrix: from the kinetic energy, exact up to round-off.
+        let m_lag = lagrange::mass_matrix_lagrange(model, &mut data, &q);
+        let m_ne = dynamics::mass_matrix(model, &mut data, &q).clone();
+        assert!(rel_err(m_ne.as_slice(), m_lag.as_slice()) < 1e-12, "mass matrix");
+        // Full torque: gravity and Coriolis by central differences (h = 1e-5
+        // rad: truncation ~1e-10, round-off ~1e-11 relative).
+        let lag = lagrange::inverse_dynamics_lagrange(model, &mut data, &q, &qd, &qdd, 1e-5);
+        let ne = dynamics::rnea(model, &mut data, &q, &qd, &qdd).clone();
+        let e = rel_err(ne.as_slice(), lag.as_slice());
+        assert!(e < 1e-6, "{}: RNEA vs Lagrangian relative error {e:e}", model.name);
+    }
+}
+
+#[test]
+fn six_dof_ur5_matches_lagrangian() {
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    assert_eq!(model.dof(), 6);
+    assert_eq!(model.joints[0].name, "shoulder_pan_joint");
+    // The fixed ee_link adds no mass; the tool point is 0.0823 m out on y.
+    assert!((model.end_effector - nalgebra::Vector3::new(0.0, 0.0823, 0.0)).norm() < 1e-15);
+    check_against_lagrangian(&model, 3);
+}
+
+#[test]
+fn three_dof_arm_matches_lagrangian() {
+    let model = dynamics::load_robot(&fixture("robots/arm3.toml")).unwrap();
+    check_against_lagrangian(&model, 4);
+}
+
+#[test]
+fn real_kuka_lwr4_urdf_loads_and_matches_lagrangian() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/kuka_lwr4/kuka_lwr4.urdf");
+    let model = dynamics::load_robot(&path).unwrap();
+    assert_eq!(model.dof(), 7);
+    assert_eq!(model.warnings.len(), 1, "{:?}", model.warnings);
+    assert!(model.warnings[0].contains("box_lwr_base_joint"));
+    check_against_lagrangian(&model, 5);
+}
+
+#[test]
+fn forward_dynamics_inverts_rnea() {
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let mut data = Data::new(&model);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    for _ in 0..50 {
+        let (q, qd, qdd) = random_state(&mut rng, 6);
+        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).as_slice().to_vec();
+        let mut back = vec![0.0; 6];
+        dynamics::forward_dynamics(&model, &mut data, &q, &qd, &tau, &mut back);
+        assert!(rel_err(&back, &qdd) < 1e-9, "{back:?} vs {qdd:?}");
+    }
+}
+
+#[test]
+fn robot_file_errors_name_the_place() {
+    let bad = "name = \"x\"\n[[joint]]\nname = \"a\"\nmass = 1.0\ninertia = { ixx = 1.0, iyy = 1.0, izz = 1.0 }\nmasss = 2.0\n";
+    let e = dynamics::parse_robot_file(bad, Path::new("bad.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bad.toml") && e.contains("masss") && e.contains("line 6"),
+        "{e}"
+    );
+
+    let both = PLANAR_2DOF.replace("name = \"j2\"", "name = \"j2\"\nviscous = 1.0\nviscous_pos = 2.0");
+    let e = dynamics::parse_robot_file(&both, Path::new("p.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("joint `j2`") && e.contains("viscous"), "{e}");
+
+    let dup = PLANAR_2DOF.replace("name = \"j2\"", "name = \"j1\"");
+    let e = dynamics::parse_robot_file(&dup, Path::new("p.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`j1` is used twice"), "{e}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("neg.toml");
+    std::fs::write(&p, PLANAR_2DOF.replace("mass = 2.0", "mass = -2.0")).unwrap();
+    let e = dynamics::load_robot(&p).unwrap_err().to_string();
+    assert!(e.contains("joint 2 (`j2`)") && e.contains("mass"), "{e}");
+}
+
+#[test]
+fn modified_dh_equals_explicit_origin() {
+    let dh = PLANAR_2DOF.replace(
+        "origin = { xyz = [0.8, 0.0, 0.0] }",
+        "dh = { a = 0.8, alpha = 0.0, d = 0.0 }",
+    );
+    let a = dynamics::parse_robot_file(PLANAR_2DOF, Path::new("a.toml")).unwrap();
+    let b = dynamics::parse_robot_file(&dh, Path::new("b.toml")).unwrap();
+    assert_eq!(a.joints[1].origin_xyz, b.joints[1].origin_xyz);
+    // A twisted DH joint: alpha = pi/2 turns z into -y... of the parent.
+    let twisted = dh.replace("alpha = 0.0, d = 0.0", "alpha = 1.5707963267948966, d = 0.3");
+    let c = dynamics::parse_robot_file(&twisted, Path::new("c.toml")).unwrap();
+    let z_in_parent = c.joints[1].origin_rot * nalgebra::Vector3::z();
+    assert!((z_in_parent - nalgebra::Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-15);
+    assert!((c.joints[1].origin_xyz - nalgebra::Vector3::new(0.8, -0.3, 0.0)).norm() < 1e-15);
+}
