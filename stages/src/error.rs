@@ -33,4 +33,17 @@ impl Error {
     }
 }
 
+/// A TOML parse error as one line: `line L, column C: message`.
+pub fn toml_message(text: &str, e: &toml::de::Error) -> String {
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {col}: {}", e.message().trim())
+        }
+        None => e.message().trim().to_string(),
+    }
+}
+
 pub type Result<T, E = Error> = std::result::Result<T, E>;

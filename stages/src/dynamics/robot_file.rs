@@ -123,7 +123,7 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
         path: path.to_path_buf(),
         msg,
     };
-    let file: RobotFile = toml::from_str(text).map_err(|e| err(e.to_string()))?;
+    let file: RobotFile = toml::from_str(text).map_err(|e| err(crate::error::toml_message(text, &e)))?;
     let gravity = Vector3::from(file.gravity);
     let mut model = match &file.urdf {
         Some(urdf) => {

@@ -1,0 +1,64 @@
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use robotid_schemas::metadata;
+use robotid_stages::dynamics::load_robot;
+use robotid_stages::formats::sha256_hex;
+use robotid_stages::simulate::{simulate, write_simulation, SimConfig};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Simulation file (TOML), see docs/simulation-file.md.
+    pub config: PathBuf,
+    /// Output folder (default: out/<config name>).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let (cfg, text) = SimConfig::load(&args.config)?;
+    let model = load_robot(&cfg.robot)?;
+    for w in &model.warnings {
+        eprintln!("warning: {}: {w}", cfg.robot.display());
+    }
+    let robot_bytes = std::fs::read(&cfg.robot).with_context(|| format!("reading {}", cfg.robot.display()))?;
+    let name = |p: &PathBuf| {
+        p.file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let provenance = BTreeMap::from([
+        (metadata::SOURCE_FILE.to_string(), name(&args.config)),
+        (metadata::SOURCE_SHA256.to_string(), sha256_hex(text.as_bytes())),
+        (metadata::CONFIG_SHA256.to_string(), sha256_hex(text.as_bytes())),
+        ("robotid.robot_file".to_string(), name(&cfg.robot)),
+        ("robotid.robot_sha256".to_string(), sha256_hex(&robot_bytes)),
+    ]);
+    let sim = simulate(&cfg, &model, &provenance).with_context(|| format!("simulating {}", args.config.display()))?;
+    let out = args.out.unwrap_or_else(|| {
+        PathBuf::from("out").join(args.config.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
+    });
+    let written = write_simulation(&out, &cfg.output.name, &cfg.output.formats, &sim, &model)?;
+    let gt = &sim.ground_truth;
+    println!(
+        "simulated {} ({} joints): {} samples at {} Hz over {:.2} s, {} dropped, start phase {:.4} s, in {:.2} s",
+        model.name,
+        model.dof(),
+        gt.samples,
+        gt.log_rate_hz,
+        sim.raw.time.last().copied().unwrap_or(0.0),
+        gt.dropped_samples,
+        gt.start_phase_s,
+        started.elapsed().as_secs_f64()
+    );
+    for n in &sim.notes {
+        println!("note: {n}");
+    }
+    for f in &written.files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,270 @@
+//! The simulation file (`robotid simulate SIM.toml`); format documented in
+//! `docs/simulation-file.md`.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::signal::FilterSpec;
+use crate::trajectory::Trajectory;
+use crate::{Error, Result};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    /// Robot file (TOML or URDF), relative to the simulation file.
+    pub robot: PathBuf,
+    /// Seed of every random choice (start phase, noise, jitter, drops).
+    #[serde(default)]
+    pub seed: u64,
+    pub trajectory: Trajectory,
+    pub timing: Timing,
+    #[serde(default)]
+    pub controller: ControllerConfig,
+    #[serde(default)]
+    pub measurement: Measurement,
+    #[serde(default)]
+    pub disturbance: Disturbance,
+    #[serde(default)]
+    pub output: OutputConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Timing {
+    /// Rate of the log, Hz.
+    pub log_rate_hz: f64,
+    /// RK4 steps per log sample.
+    #[serde(default = "default_steps")]
+    pub steps_per_sample: u32,
+    /// Start-up: the reference fades in from rest over this time, s.
+    #[serde(default)]
+    pub transient_s: f64,
+    /// Periods logged after the transient (periodic trajectories).
+    pub periods: Option<u32>,
+    /// Phase of the periodic reference at the end of the fade-in, s into the
+    /// period; absent: drawn at random from the seed.
+    pub start_phase_s: Option<f64>,
+    /// Standard deviation of the sampling-time jitter, s (0: none).
+    #[serde(default)]
+    pub jitter_std_s: f64,
+    /// Probability that a sample is dropped from the log.
+    #[serde(default)]
+    pub drop_probability: f64,
+}
+
+fn default_steps() -> u32 {
+    8
+}
+
+/// Joint position controller. `pid` gains default from a closed-loop
+/// bandwidth and the mass matrix at the start position:
+/// kp = M_ii·ω², kd = 2ζω·M_ii, ki = kp·ω_i.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ControllerConfig {
+    Pid {
+        #[serde(default = "default_bandwidth")]
+        bandwidth_hz: f64,
+        #[serde(default = "default_damping")]
+        damping: f64,
+        #[serde(default = "default_integral")]
+        integral_hz: f64,
+        /// Explicit gains (N·m/rad, N·m·s/rad, N·m/(rad·s)) override the defaults.
+        kp: Option<PerJoint>,
+        kd: Option<PerJoint>,
+        ki: Option<PerJoint>,
+    },
+    /// No control: the robot moves freely (with gravity and friction).
+    Off,
+}
+
+fn default_bandwidth() -> f64 {
+    5.0
+}
+fn default_damping() -> f64 {
+    0.8
+}
+fn default_integral() -> f64 {
+    0.5
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        ControllerConfig::Pid {
+            bandwidth_hz: default_bandwidth(),
+            damping: default_damping(),
+            integral_hz: default_integral(),
+            kp: None,
+            kd: None,
+            ki: None,
+        }
+    }
+}
+
+/// The measurement chain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Measurement {
+    /// Analog anti-alias filter on the motor current; absent: none.
+    pub filter: Option<FilterSpec>,
+    /// White Gaussian noise on the sampled current, A.
+    #[serde(default)]
+    pub current_noise_std_a: PerJoint,
+    /// White Gaussian noise on the position before quantisation, rad.
+    #[serde(default)]
+    pub position_noise_std_rad: PerJoint,
+    /// Quantise positions to whole encoder counts.
+    #[serde(default = "yes")]
+    pub quantise: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for Measurement {
+    fn default() -> Self {
+        Measurement {
+            filter: None,
+            current_noise_std_a: PerJoint::default(),
+            position_noise_std_rad: PerJoint::default(),
+            quantise: true,
+        }
+    }
+}
+
+/// Process noise: a white torque disturbance acting on the joints, held
+/// over each log-sample interval. It enters the loop, so the commanded
+/// torque correlates with it (the closed-loop identification problem).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Disturbance {
+    #[serde(default)]
+    pub torque_std_nm: PerJoint,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OutputFormat {
+    Mcap,
+    Csv,
+    Parquet,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputConfig {
+    #[serde(default = "all_formats")]
+    pub formats: Vec<OutputFormat>,
+    /// Base name of the recording files.
+    #[serde(default = "default_name")]
+    pub name: String,
+}
+
+fn all_formats() -> Vec<OutputFormat> {
+    vec![OutputFormat::Mcap, OutputFormat::Csv, OutputFormat::Parquet]
+}
+fn default_name() -> String {
+    "recording".into()
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        OutputConfig {
+            formats: all_formats(),
+            name: default_name(),
+        }
+    }
+}
+
+/// A value for every joint, or one list with a value per joint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum PerJoint {
+    All(f64),
+    Each(Vec<f64>),
+}
+
+impl Default for PerJoint {
+    fn default() -> Self {
+        PerJoint::All(0.0)
+    }
+}
+
+impl PerJoint {
+    pub fn resolve(&self, n: usize, key: &str) -> std::result::Result<Vec<f64>, String> {
+        match self {
+            PerJoint::All(v) => Ok(vec![*v; n]),
+            PerJoint::Each(v) if v.len() == n => Ok(v.clone()),
+            PerJoint::Each(v) => Err(format!("`{key}` lists {} values for {n} joints", v.len())),
+        }
+    }
+}
+
+impl SimConfig {
+    /// Reads and checks a simulation file; the robot path is made absolute
+    /// against the file's folder.
+    pub fn load(path: &Path) -> Result<(SimConfig, String)> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Ok((SimConfig::parse(&text, path)?, text))
+    }
+
+    /// Parses simulation-file text; `path` names it in errors and anchors
+    /// the robot path.
+    pub fn parse(text: &str, path: &Path) -> Result<SimConfig> {
+        let mut cfg: SimConfig = toml::from_str(&text).map_err(|e| Error::Config {
+            path: path.to_path_buf(),
+            msg: crate::error::toml_message(text, &e),
+        })?;
+        cfg.robot = path.parent().unwrap_or(Path::new(".")).join(&cfg.robot);
+        cfg.check().map_err(|msg| Error::Config {
+            path: path.to_path_buf(),
+            msg,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Structural checks that need no robot (all problems, one per line).
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let mut errs = Vec::new();
+        if let Err(e) = self.trajectory.check() {
+            errs.push(format!("trajectory: {e}"));
+        }
+        let t = &self.timing;
+        if !(t.log_rate_hz > 0.0 && t.log_rate_hz.is_finite()) {
+            errs.push(format!("timing.log_rate_hz must be > 0, found {}", t.log_rate_hz));
+        }
+        if t.steps_per_sample == 0 {
+            errs.push("timing.steps_per_sample must be ≥ 1".into());
+        }
+        if !(t.transient_s >= 0.0) {
+            errs.push("timing.transient_s must be ≥ 0".into());
+        }
+        match (&self.trajectory, t.periods) {
+            (Trajectory::Fourier(_), None) | (Trajectory::Fourier(_), Some(0)) => {
+                errs.push("timing.periods (≥ 1) is required for a periodic trajectory".into())
+            }
+            (Trajectory::Waypoints(_), Some(_)) => {
+                errs.push("timing.periods applies to periodic trajectories only".into())
+            }
+            _ => {}
+        }
+        if !(t.jitter_std_s >= 0.0) || !(0.0..1.0).contains(&t.drop_probability) {
+            errs.push("timing.jitter_std_s must be ≥ 0 and drop_probability in [0, 1)".into());
+        }
+        if let Some(f) = &self.measurement.filter {
+            if let Err(e) = f.check() {
+                errs.push(format!("measurement.filter: {e}"));
+            }
+        }
+        if self.output.formats.is_empty() {
+            errs.push("output.formats is empty".into());
+        }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(errs.join("\n"))
+        }
+    }
+}

@@ -1,0 +1,61 @@
+//! Reference trajectories: the periodic finite Fourier series of Swevers
+//! eq. 5 (excitation) and rest-to-rest quintic moves through waypoints
+//! (non-periodic validation). Both serialise to the `[trajectory]` table
+//! of simulation and excitation files.
+
+mod fourier;
+mod waypoints;
+
+pub use fourier::FourierSeries;
+pub use waypoints::{Durations, Waypoints};
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Trajectory {
+    Fourier(FourierSeries),
+    Waypoints(Waypoints),
+}
+
+impl Trajectory {
+    /// Number of joints the trajectory drives.
+    pub fn dof(&self) -> usize {
+        match self {
+            Trajectory::Fourier(f) => f.q0.len(),
+            Trajectory::Waypoints(w) => w.points.first().map_or(0, Vec::len),
+        }
+    }
+
+    /// Period in s for periodic trajectories.
+    pub fn period(&self) -> Option<f64> {
+        match self {
+            Trajectory::Fourier(f) => Some(f.period()),
+            Trajectory::Waypoints(_) => None,
+        }
+    }
+
+    /// Positions (rad), velocities (rad/s), accelerations (rad/s²) at `t` s.
+    pub fn eval(&self, t: f64, q: &mut [f64], qd: &mut [f64], qdd: &mut [f64]) {
+        match self {
+            Trajectory::Fourier(f) => f.eval(t, q, qd, qdd),
+            Trajectory::Waypoints(w) => w.eval(t, q, qd, qdd),
+        }
+    }
+
+    /// The position at which the trajectory is at rest before it starts
+    /// (the Fourier offsets q0, or the first waypoint).
+    pub fn rest_position(&self) -> Vec<f64> {
+        match self {
+            Trajectory::Fourier(f) => f.q0.clone(),
+            Trajectory::Waypoints(w) => w.points[0].clone(),
+        }
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        match self {
+            Trajectory::Fourier(f) => f.check(),
+            Trajectory::Waypoints(w) => w.check(),
+        }
+    }
+}
