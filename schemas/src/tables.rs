@@ -612,7 +612,7 @@ mod tests {
         let mut fields: Vec<Field> = s.fields().iter().map(|f| f.as_ref().clone()).collect();
         let i = fields.iter().position(|f| f.name() == "q_j2").unwrap();
         let mut md = fields[i].metadata().clone();
-        md.insert("unit".into(), "deg".into());
+        md.insert("unit", "deg");
         fields[i] = fields[i].clone().with_metadata(md);
         let bad = Schema::new(fields.clone()).with_metadata(s.metadata().clone());
         assert_eq!(

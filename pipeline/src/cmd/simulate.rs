@@ -1,12 +1,9 @@
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use robotid_schemas::metadata;
 use robotid_stages::dynamics::load_robot;
-use robotid_stages::formats::sha256_hex;
-use robotid_stages::simulate::{simulate, write_simulation, SimConfig};
+use robotid_stages::simulate::{provenance, simulate, write_simulation, SimConfig};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -24,19 +21,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for w in &model.warnings {
         eprintln!("warning: {}: {w}", cfg.robot.display());
     }
-    let robot_bytes = std::fs::read(&cfg.robot).with_context(|| format!("reading {}", cfg.robot.display()))?;
-    let name = |p: &PathBuf| {
-        p.file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let provenance = BTreeMap::from([
-        (metadata::SOURCE_FILE.to_string(), name(&args.config)),
-        (metadata::SOURCE_SHA256.to_string(), sha256_hex(text.as_bytes())),
-        (metadata::CONFIG_SHA256.to_string(), sha256_hex(text.as_bytes())),
-        ("robotid.robot_file".to_string(), name(&cfg.robot)),
-        ("robotid.robot_sha256".to_string(), sha256_hex(&robot_bytes)),
-    ]);
+    let provenance = provenance(&args.config, &text, &cfg.robot)?;
     let sim = simulate(&cfg, &model, &provenance).with_context(|| format!("simulating {}", args.config.display()))?;
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from("out").join(args.config.file_stem().map(|s| s.to_os_string()).unwrap_or_default())

@@ -62,7 +62,7 @@ struct Writer<'a> {
 
 impl Writer<'_> {
     fn align(&mut self, n: usize) {
-        while (self.out.len() - 4) % n != 0 {
+        while !(self.out.len() - 4).is_multiple_of(n) {
             self.out.push(0);
         }
     }
@@ -131,7 +131,7 @@ struct Reader<'a> {
 
 impl Reader<'_> {
     fn align(&mut self, n: usize) {
-        while (self.pos - 4) % n != 0 {
+        while !(self.pos - 4).is_multiple_of(n) {
             self.pos += 1;
         }
     }

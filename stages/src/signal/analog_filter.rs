@@ -101,7 +101,7 @@ impl AnalogFilter {
                         Complex64::new(-mu.sinh() * th.sin(), mu.cosh() * th.cos()) * wc
                     })
                     .collect::<Vec<_>>();
-                let dc = if n % 2 == 0 {
+                let dc = if n.is_multiple_of(2) {
                     1.0 / (1.0 + eps * eps).sqrt()
                 } else {
                     1.0

@@ -213,7 +213,7 @@ impl SimConfig {
     /// Parses simulation-file text; `path` names it in errors and anchors
     /// the robot path.
     pub fn parse(text: &str, path: &Path) -> Result<SimConfig> {
-        let mut cfg: SimConfig = toml::from_str(&text).map_err(|e| Error::Config {
+        let mut cfg: SimConfig = toml::from_str(text).map_err(|e| Error::Config {
             path: path.to_path_buf(),
             msg: crate::error::toml_message(text, &e),
         })?;

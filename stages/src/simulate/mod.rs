@@ -16,7 +16,7 @@ mod run;
 mod truth;
 
 pub use config::{ControllerConfig, Disturbance, Measurement, OutputConfig, OutputFormat, PerJoint, SimConfig, Timing};
-pub use output::{write_simulation, WrittenFiles};
+pub use output::{provenance, write_simulation, WrittenFiles};
 pub use plant::{Gains, Plant, Reference};
 pub use run::{simulate, Simulation};
 pub use truth::{GroundTruth, JointTruth, TruthSamples};

@@ -2,13 +2,37 @@
 //! formats, `truth.parquet` and `truth.toml`. Each file is written
 //! atomically.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+
+use robotid_schemas::metadata;
 
 use super::config::OutputFormat;
 use super::run::Simulation;
 use crate::dynamics::Model;
-use crate::formats::{csv::write_raw_csv, mcap::write_recording_mcap, parquet::write_parquet, write_atomic};
+use crate::formats::{
+    csv::write_raw_csv, mcap::write_recording_mcap, parquet::write_parquet, sha256_hex, write_atomic,
+};
 use crate::{Error, Result};
+
+/// Provenance of a simulated recording: the simulation file's name and
+/// hash, and the robot file's.
+pub fn provenance(config_path: &Path, config_text: &str, robot_path: &Path) -> Result<BTreeMap<String, String>> {
+    let robot_bytes = std::fs::read(robot_path).map_err(|e| Error::io(robot_path, e))?;
+    let name = |p: &Path| {
+        p.file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let hash = sha256_hex(config_text.as_bytes());
+    Ok(BTreeMap::from([
+        (metadata::SOURCE_FILE.to_string(), name(config_path)),
+        (metadata::SOURCE_SHA256.to_string(), hash.clone()),
+        (metadata::CONFIG_SHA256.to_string(), hash),
+        ("robotid.robot_file".to_string(), name(robot_path)),
+        ("robotid.robot_sha256".to_string(), sha256_hex(&robot_bytes)),
+    ]))
+}
 
 #[derive(Debug, Clone, Default)]
 pub struct WrittenFiles {

@@ -200,7 +200,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
     let mut step = 0usize;
     for &idx in &schedule {
         while step < idx {
-            if step % steps == 0 {
+            if step.is_multiple_of(steps) {
                 for i in 0..n {
                     let z: f64 = rng_dist.sample(StandardNormal);
                     plant.disturbance[i] = dist_std[i] * z;

@@ -81,7 +81,7 @@ impl FourierSeries {
                     self.harmonics.len()
                 ));
             }
-            if self.harmonics.iter().any(|&h| h == 0) || self.harmonics.windows(2).any(|w| w[0] >= w[1]) {
+            if self.harmonics.contains(&0) || self.harmonics.windows(2).any(|w| w[0] >= w[1]) {
                 return Err("harmonics must be distinct positive integers in increasing order".into());
             }
         }

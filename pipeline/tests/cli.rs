@@ -1,0 +1,71 @@
+//! The `robotid` binary as a user meets it: help, exit codes, one-line errors.
+
+use std::path::Path;
+use std::process::Command;
+
+fn robotid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_robotid"))
+}
+
+fn root() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+#[test]
+fn every_subcommand_has_help() {
+    for sub in [&["--help"][..], &["simulate", "--help"], &["schema", "--help"]] {
+        let out = robotid().args(sub).output().unwrap();
+        assert!(out.status.success(), "{sub:?}");
+        assert!(String::from_utf8_lossy(&out.stdout).contains("Usage"), "{sub:?}");
+    }
+}
+
+#[test]
+fn errors_are_one_line_and_exit_non_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "robot = \"nowhere.toml\"\nseed = \"x\"\n").unwrap();
+    let out = robotid()
+        .arg("simulate")
+        .arg(&bad)
+        .arg("--out")
+        .arg(dir.path().join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with("error: ") && err.contains("bad.toml") && err.contains("line 2"),
+        "{err}"
+    );
+    assert!(!dir.path().join("o").exists(), "nothing is written on error");
+
+    let out = robotid().args(["schema", "nonsense"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown table kind `nonsense`"));
+}
+
+#[test]
+fn simulate_writes_the_recording_and_its_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = robotid()
+        .arg("simulate")
+        .arg(root().join("fixtures/sims/kuka_axis3_validation.toml"))
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("4950 samples at 150 Hz"), "{stdout}");
+    for ext in ["mcap", "csv", "parquet", "truth.parquet", "truth.toml"] {
+        let f = dir.path().join(format!("kuka_axis3_validation.{ext}"));
+        assert!(f.metadata().unwrap().len() > 0, "{}", f.display());
+    }
+    let truth = std::fs::read_to_string(dir.path().join("kuka_axis3_validation.truth.toml")).unwrap();
+    assert!(
+        truth.contains("viscous_pos = 3.676") && truth.contains("family = \"chebyshev1\""),
+        "{truth}"
+    );
+}

@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The test command: formatting, lints with warnings denied, and every test.
+# The cross-checks against independent Python implementations need the
+# packages in tests/python/requirements.txt; they are installed into a venv
+# inside the cargo target folder (so CI's reused target keeps them).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+target="${CARGO_TARGET_DIR:-$PWD/target}"
+venv="$target/pyenv"
+if ! "$venv/bin/python" -c "import mcap, mcap_ros2" 2>/dev/null; then
+  echo "setting up $venv (tests/python/requirements.txt)"
+  rm -rf "$venv"
+  python3 -m venv "$venv"
+  "$venv/bin/pip" install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+fi
+export ROBOTID_PYTHON="$venv/bin/python"
+cargo fmt --all --check
+cargo clippy --workspace --all-targets --locked -- -D warnings
+cargo test --workspace --locked

@@ -1,0 +1,51 @@
+//! Simulator throughput (logged samples per second) and the dynamics it
+//! spends its time in. Named by operation and size.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use robotid_stages::dynamics::{self, Data};
+use robotid_stages::simulate::{simulate, SimConfig};
+
+fn fixture(rel: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+fn bench_simulate(c: &mut Criterion) {
+    let mut g = c.benchmark_group("simulate");
+    g.sample_size(10);
+    for (name, sim) in [
+        ("ur5_6dof_250Hz", "sims/ur5.toml"),
+        ("kuka_1dof_150Hz", "sims/kuka_axis3.toml"),
+    ] {
+        let (cfg, _) = SimConfig::load(&fixture(sim)).unwrap();
+        let model = dynamics::load_robot(&cfg.robot).unwrap();
+        let samples = simulate(&cfg, &model, &BTreeMap::new()).unwrap().raw.len();
+        g.throughput(Throughput::Elements(samples as u64));
+        g.bench_function(BenchmarkId::new(name, samples), |b| {
+            b.iter(|| simulate(&cfg, &model, &BTreeMap::new()).unwrap())
+        });
+    }
+    g.finish();
+}
+
+fn bench_dynamics(c: &mut Criterion) {
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let mut data = Data::new(&model);
+    let q = [0.1, -1.2, 1.0, -1.4, -1.5, 0.3];
+    let qd = [0.5, -0.3, 0.2, 0.6, -0.4, 0.1];
+    let mut g = c.benchmark_group("dynamics_ur5");
+    g.throughput(Throughput::Elements(1));
+    g.bench_function("rnea", |b| {
+        b.iter(|| dynamics::rnea(&model, &mut data, &q, &qd, &qd)[0])
+    });
+    let mut qdd = [0.0; 6];
+    g.bench_function("forward_dynamics", |b| {
+        b.iter(|| dynamics::forward_dynamics(&model, &mut data, &q, &qd, &qd, &mut qdd))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_simulate, bench_dynamics);
+criterion_main!(benches);
