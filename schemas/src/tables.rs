@@ -83,270 +83,81 @@ macro_rules! col {
 
 use Presence::{OneOf, Optional, Required};
 
+// One line per column: prefix, quantity, unit, type, per joint, presence, doc.
+const TIME: ColumnSpec = col!("time", "time", Second, F64, false, Required, "sample time");
+const SAMPLE: ColumnSpec = col!(
+    "sample",
+    "sample_index",
+    Dimensionless,
+    I64,
+    false,
+    Required,
+    "index of the sample within one period"
+);
+const Q: ColumnSpec = col!(
+    "q",
+    "position",
+    Radian,
+    F64,
+    true,
+    Required,
+    "joint (link-side) position"
+);
+
+#[rustfmt::skip]
 const RAW_SAMPLES: &[ColumnSpec] = &[
-    col!(
-        "time",
-        "time",
-        Second,
-        F64,
-        false,
-        Required,
-        "sample time since the start of the log"
-    ),
-    col!(
-        "q",
-        "position",
-        Radian,
-        F64,
-        true,
-        Required,
-        "joint (link-side) position"
-    ),
-    col!(
-        "current",
-        "motor_current",
-        Ampere,
-        F64,
-        true,
-        OneOf("effort"),
-        "motor current as sampled (after the analog anti-alias filter)"
-    ),
-    col!(
-        "torque",
-        "torque",
-        NewtonMetre,
-        F64,
-        true,
-        OneOf("effort"),
-        "joint torque (link side)"
-    ),
-    col!(
-        "ref",
-        "reference_position",
-        Radian,
-        F64,
-        true,
-        Optional,
-        "reference (commanded) joint position"
-    ),
-    col!(
-        "counts",
-        "encoder_counts",
-        Count,
-        I64,
-        true,
-        Optional,
-        "raw motor encoder counts"
-    ),
+    TIME,
+    Q,
+    col!("current", "motor_current", Ampere, F64, true, OneOf("effort"), "motor current as sampled (after the analog anti-alias filter)"),
+    col!("torque", "torque", NewtonMetre, F64, true, OneOf("effort"), "joint torque (link side)"),
+    col!("ref", "reference_position", Radian, F64, true, Optional, "reference (commanded) joint position"),
+    col!("counts", "encoder_counts", Count, I64, true, Optional, "raw motor encoder counts"),
 ];
 
+#[rustfmt::skip]
 const KINEMATICS: &[ColumnSpec] = &[
-    col!("time", "time", Second, F64, false, Required, "sample time"),
-    col!("q", "position", Radian, F64, true, Required, "joint position"),
+    TIME,
+    Q,
     col!("qd", "velocity", RadianPerSecond, F64, true, Required, "joint velocity"),
-    col!(
-        "qdd",
-        "acceleration",
-        RadianPerSecond2,
-        F64,
-        true,
-        Required,
-        "joint acceleration"
-    ),
-    col!(
-        "torque",
-        "torque",
-        NewtonMetre,
-        F64,
-        true,
-        Optional,
-        "joint torque (link side)"
-    ),
+    col!("qdd", "acceleration", RadianPerSecond2, F64, true, Required, "joint acceleration"),
+    col!("torque", "torque", NewtonMetre, F64, true, Optional, "joint torque (link side)"),
 ];
 
+#[rustfmt::skip]
 const PERIOD_MEAN: &[ColumnSpec] = &[
-    col!(
-        "sample",
-        "sample_index",
-        Dimensionless,
-        I64,
-        false,
-        Required,
-        "index of the sample within one period"
-    ),
-    col!("time", "time", Second, F64, false, Required, "time within the period"),
-    col!(
-        "q",
-        "position",
-        Radian,
-        F64,
-        true,
-        Required,
-        "position averaged over periods"
-    ),
-    col!(
-        "q_spread",
-        "position_std",
-        Radian,
-        F64,
-        true,
-        Required,
-        "standard deviation of the position across periods"
-    ),
-    col!(
-        "torque",
-        "torque",
-        NewtonMetre,
-        F64,
-        true,
-        Required,
-        "torque averaged over periods"
-    ),
-    col!(
-        "torque_spread",
-        "torque_std",
-        NewtonMetre,
-        F64,
-        true,
-        Required,
-        "standard deviation of the torque across periods"
-    ),
+    SAMPLE,
+    TIME,
+    col!("q", "position", Radian, F64, true, Required, "position averaged over periods"),
+    col!("q_spread", "position_std", Radian, F64, true, Required, "standard deviation of the position across periods"),
+    col!("torque", "torque", NewtonMetre, F64, true, Required, "torque averaged over periods"),
+    col!("torque_spread", "torque_std", NewtonMetre, F64, true, Required, "standard deviation of the torque across periods"),
 ];
 
+#[rustfmt::skip]
 const NOISE: &[ColumnSpec] = &[
-    col!(
-        "sample",
-        "sample_index",
-        Dimensionless,
-        I64,
-        false,
-        Required,
-        "index of the sample within one period"
-    ),
-    col!(
-        "var_q",
-        "position_noise_variance",
-        Radian2,
-        F64,
-        true,
-        Required,
-        "noise variance of the averaged position"
-    ),
-    col!(
-        "var_torque",
-        "torque_noise_variance",
-        NewtonMetre2,
-        F64,
-        true,
-        Required,
-        "noise variance of the averaged torque"
-    ),
+    SAMPLE,
+    col!("var_q", "position_noise_variance", Radian2, F64, true, Required, "noise variance of the averaged position"),
+    col!("var_torque", "torque_noise_variance", NewtonMetre2, F64, true, Required, "noise variance of the averaged torque"),
 ];
 
+#[rustfmt::skip]
 const REGRESSOR: &[ColumnSpec] = &[
-    col!(
-        "recording",
-        "recording_id",
-        Dimensionless,
-        Utf8,
-        false,
-        Required,
-        "recording the row comes from"
-    ),
-    col!(
-        "sample",
-        "sample_index",
-        Dimensionless,
-        I64,
-        false,
-        Required,
-        "sample index within the recording"
-    ),
-    col!(
-        "joint",
-        "joint_name",
-        Dimensionless,
-        Utf8,
-        false,
-        Required,
-        "joint whose torque the row explains"
-    ),
-    col!("time", "time", Second, F64, false, Required, "sample time"),
-    col!(
-        "torque",
-        "torque",
-        NewtonMetre,
-        F64,
-        false,
-        Required,
-        "measured torque (right-hand side b)"
-    ),
-    col!(
-        "torque_var",
-        "torque_noise_variance",
-        NewtonMetre2,
-        F64,
-        false,
-        Required,
-        "noise variance of that torque"
-    ),
+    col!("recording", "recording_id", Dimensionless, Utf8, false, Required, "recording the row comes from"),
+    col!("sample", "sample_index", Dimensionless, I64, false, Required, "sample index within the recording"),
+    col!("joint", "joint_name", Dimensionless, Utf8, false, Required, "joint whose torque the row explains"),
+    TIME,
+    col!("torque", "torque", NewtonMetre, F64, false, Required, "measured torque (right-hand side b)"),
+    col!("torque_var", "torque_noise_variance", NewtonMetre2, F64, false, Required, "noise variance of that torque"),
 ];
 
+#[rustfmt::skip]
 const PARAMETERS: &[ColumnSpec] = &[
-    col!(
-        "name",
-        "parameter_name",
-        Dimensionless,
-        Utf8,
-        false,
-        Required,
-        "parameter name"
-    ),
-    col!(
-        "unit",
-        "parameter_unit",
-        Dimensionless,
-        Utf8,
-        false,
-        Required,
-        "unit of the value"
-    ),
-    col!(
-        "value",
-        "estimate",
-        Dimensionless,
-        F64,
-        false,
-        Required,
-        "estimated value"
-    ),
-    col!(
-        "std",
-        "standard_deviation",
-        Dimensionless,
-        F64,
-        false,
-        Required,
-        "standard deviation of the estimate"
-    ),
-    col!(
-        "ci_low",
-        "confidence_low",
-        Dimensionless,
-        F64,
-        false,
-        Required,
-        "lower end of the confidence interval"
-    ),
-    col!(
-        "ci_high",
-        "confidence_high",
-        Dimensionless,
-        F64,
-        false,
-        Required,
-        "upper end of the confidence interval"
-    ),
+    col!("name", "parameter_name", Dimensionless, Utf8, false, Required, "parameter name"),
+    col!("unit", "parameter_unit", Dimensionless, Utf8, false, Required, "unit of the value"),
+    col!("value", "estimate", Dimensionless, F64, false, Required, "estimated value"),
+    col!("std", "standard_deviation", Dimensionless, F64, false, Required, "standard deviation of the estimate"),
+    col!("ci_low", "confidence_low", Dimensionless, F64, false, Required, "lower end of the confidence interval"),
+    col!("ci_high", "confidence_high", Dimensionless, F64, false, Required, "upper end of the confidence interval"),
 ];
 
 /// The kinds of table robotid reads and writes. Each has a name and a

@@ -183,6 +183,21 @@ pub struct Model {
 }
 
 impl Model {
+    /// A model with no joints yet, for loaders to fill.
+    pub fn empty(name: &str, gravity: Vector3<f64>) -> Model {
+        Model {
+            name: name.to_string(),
+            gravity,
+            joints: Vec::new(),
+            links: Vec::new(),
+            drives: Vec::new(),
+            friction: Vec::new(),
+            limits: Vec::new(),
+            end_effector: Vector3::zeros(),
+            warnings: Vec::new(),
+        }
+    }
+
     /// Number of joints (degrees of freedom).
     pub fn dof(&self) -> usize {
         self.joints.len()

@@ -161,17 +161,7 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
             if file.joints.is_empty() {
                 return Err(err("no [[joint]] entries and no `urdf`".into()));
             }
-            let mut m = Model {
-                name: file.name.clone(),
-                gravity,
-                joints: Vec::new(),
-                links: Vec::new(),
-                drives: Vec::new(),
-                friction: Vec::new(),
-                limits: Vec::new(),
-                end_effector: Vector3::zeros(),
-                warnings: Vec::new(),
-            };
+            let mut m = Model::empty(&file.name, gravity);
             for entry in &file.joints {
                 let ctx = |msg: String| err(format!("joint `{}`: {msg}", entry.name));
                 let (origin_rot, origin_xyz) = match (&entry.origin, &entry.dh) {

@@ -71,17 +71,7 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
         }
     };
 
-    let mut model = Model {
-        name: robot.name.clone(),
-        gravity: Vector3::new(0.0, 0.0, -9.81),
-        joints: Vec::new(),
-        links: Vec::new(),
-        drives: Vec::new(),
-        friction: Vec::new(),
-        limits: Vec::new(),
-        end_effector: Vector3::zeros(),
-        warnings: Vec::new(),
-    };
+    let mut model = Model::empty(&robot.name, Vector3::new(0.0, 0.0, -9.81));
     // `frame`: the current URDF link's frame in the current moving link's
     // frame (or the base frame before the first moving joint).
     let mut frame: Frame = (Matrix3::identity(), Vector3::zeros());
