@@ -18,6 +18,14 @@ pub enum Error {
     },
     #[error("{}: {msg}", path.display())]
     Format { path: PathBuf, msg: String },
+    /// Bad data in a recording: the source, channel and sample at fault.
+    #[error("{source_name}: channel `{channel}`{}: {msg}", sample.map(|k| format!(", sample {k}")).unwrap_or_default())]
+    Data {
+        source_name: String,
+        channel: String,
+        sample: Option<usize>,
+        msg: String,
+    },
     #[error(transparent)]
     Schema(#[from] robotid_schemas::SchemaError),
     #[error("{0}")]

@@ -1,8 +1,13 @@
 //! robotid's stages and the numerical cores they share.
 
+pub mod align;
+pub mod average;
+pub mod differentiate;
 pub mod dynamics;
 mod error;
 pub mod formats;
+pub mod inverse_filter;
+pub mod noise;
 pub mod signal;
 pub mod simulate;
 pub mod trajectory;

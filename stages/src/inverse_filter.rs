@@ -1,0 +1,149 @@
+//! The `inverse_filter` stage: undoes the analog anti-alias filter on the
+//! torque (current) channel.
+//!
+//! Periodic data (after `align`, a whole number of periods): the record is
+//! exactly periodic, so its DFT lines are the Fourier lines of the signal;
+//! every line up to `bandwidth_hz` is divided by H(j2πf) and the lines
+//! above are zeroed (dividing by a vanishing |H| would only amplify noise).
+//! Exact up to the aliasing of the unfiltered torque's harmonics above the
+//! sampling rate (≈1e-4 relative for Coulomb-friction kinks, see the
+//! simulator's spectrum test).
+//!
+//! Non-periodic data (no `align` before it): the same division on the DFT
+//! of the record extended by its mirror image at both ends (one second or
+//! the whole record, whichever is shorter), which keeps the extension
+//! continuous and moves the circular wrap-around away from the data; within
+//! a few filter time constants (≈ order / (2π·cutoff)) of either end the
+//! result is approximate.
+
+use robotid_schemas::RawSamples;
+use rustfft::num_complex::Complex64;
+use serde::{Deserialize, Serialize};
+
+use crate::align::Periods;
+use crate::signal::{AnalogFilter, FilterSpec, Spectra};
+
+/// A filter by its zeros, poles (rad/s, `[re, im]`) and gain:
+/// H(s) = gain · Π(s − z) / Π(s − p).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Zpk {
+    #[serde(default)]
+    pub zeros: Vec<[f64; 2]>,
+    pub poles: Vec<[f64; 2]>,
+    pub gain: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InverseFilterConfig {
+    /// The analog filter by family, order and cutoff …
+    pub filter: Option<FilterSpec>,
+    /// … or by zeros, poles and gain.
+    pub zpk: Option<Zpk>,
+    /// Lines above this frequency are zeroed, Hz.
+    pub bandwidth_hz: f64,
+}
+
+impl InverseFilterConfig {
+    pub fn check(&self) -> Result<(), String> {
+        match (&self.filter, &self.zpk) {
+            (Some(f), None) => f.check()?,
+            (None, Some(z)) => {
+                if z.poles.is_empty() || !(z.gain != 0.0 && z.gain.is_finite()) {
+                    return Err("zpk needs poles and a finite, non-zero gain".into());
+                }
+                if z.poles.iter().any(|p| !(p[0] < 0.0)) {
+                    return Err("zpk poles must lie in the left half-plane".into());
+                }
+            }
+            _ => return Err("give exactly one of `filter` and `zpk`".into()),
+        }
+        if !(self.bandwidth_hz > 0.0) {
+            return Err("bandwidth_hz must be > 0".into());
+        }
+        Ok(())
+    }
+
+    /// The filter's frequency response as a function of f (Hz).
+    pub fn response(&self) -> Result<Box<dyn Fn(f64) -> Complex64 + Send + Sync>, String> {
+        self.check()?;
+        Ok(match (&self.filter, &self.zpk) {
+            (Some(spec), _) => {
+                let f = AnalogFilter::new(*spec)?;
+                Box::new(move |hz| f.response(hz))
+            }
+            (_, Some(z)) => {
+                let zeros: Vec<Complex64> = z.zeros.iter().map(|v| Complex64::new(v[0], v[1])).collect();
+                let poles: Vec<Complex64> = z.poles.iter().map(|v| Complex64::new(v[0], v[1])).collect();
+                let gain = z.gain;
+                Box::new(move |hz| {
+                    let s = Complex64::new(0.0, 2.0 * std::f64::consts::PI * hz);
+                    let num: Complex64 = zeros.iter().map(|z| s - z).product();
+                    let den: Complex64 = poles.iter().map(|p| s - p).product();
+                    num * gain / den
+                })
+            }
+            (None, None) => unreachable!("checked"),
+        })
+    }
+}
+
+/// Divides the spectrum of `x` (sampled at `fs`) by H up to `bandwidth`,
+/// zeroing the lines above it.
+fn divide(x: &[f64], fs: f64, bandwidth: f64, h: &dyn Fn(f64) -> Complex64, spectra: &Spectra) -> Vec<f64> {
+    let n = x.len();
+    let mut spec = spectra.forward(x);
+    let df = fs / n as f64;
+    for (k, line) in spec.iter_mut().enumerate() {
+        let f = k as f64 * df;
+        *line = if f <= bandwidth {
+            *line / h(f)
+        } else {
+            Complex64::new(0.0, 0.0)
+        };
+    }
+    spectra.inverse(&spec, n)
+}
+
+/// Inverse-filters the torque of whole periods, in place.
+pub fn inverse_filter_periods(p: &mut Periods, cfg: &InverseFilterConfig, spectra: &Spectra) -> Result<(), String> {
+    let h = cfg.response()?;
+    let fs = p.sample_rate_hz();
+    for col in &mut p.torque {
+        *col = divide(col, fs, cfg.bandwidth_hz, &*h, spectra);
+    }
+    p.metadata.insert(
+        "robotid.inverse_filter_bandwidth_hz".into(),
+        cfg.bandwidth_hz.to_string(),
+    );
+    Ok(())
+}
+
+/// Inverse-filters a non-periodic record's effort channel, in place.
+pub fn inverse_filter_record(
+    raw: &mut RawSamples,
+    fs: f64,
+    cfg: &InverseFilterConfig,
+    spectra: &Spectra,
+) -> Result<(), String> {
+    let h = cfg.response()?;
+    let n = raw.len();
+    if n < 2 {
+        return Err("too few samples to filter".into());
+    }
+    let e = (fs.ceil() as usize).min(n - 1);
+    for col in &mut raw.effort {
+        let mut ext = Vec::with_capacity(n + 2 * e);
+        ext.extend(col[1..=e].iter().rev());
+        ext.extend_from_slice(col);
+        ext.extend(col[n - 1 - e..n - 1].iter().rev());
+        let out = divide(&ext, fs, cfg.bandwidth_hz, &*h, spectra);
+        col.copy_from_slice(&out[e..e + n]);
+    }
+    raw.metadata.insert(
+        "robotid.inverse_filter_bandwidth_hz".into(),
+        cfg.bandwidth_hz.to_string(),
+    );
+    Ok(())
+}

@@ -1,0 +1,323 @@
+//! The preprocessing stages on simulated recordings, against the
+//! simulator's truth: transient dropped, inverse-filtered averaged torque,
+//! noise variance, derivatives by both approaches.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use robotid_schemas::TorqueChannel;
+use robotid_stages::align::{align, AlignConfig};
+use robotid_stages::average::average;
+use robotid_stages::differentiate::{differentiate, fit_reference, Method};
+use robotid_stages::dynamics::{self, Model};
+use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::noise::noise;
+use robotid_stages::signal::{AnalogFilter, Spectra};
+use robotid_stages::simulate::{simulate, SimConfig, Simulation};
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+fn sim(name: &str, edit: impl FnOnce(&mut SimConfig)) -> (SimConfig, Model, Simulation) {
+    let (mut cfg, _) = SimConfig::load(&fixture(name)).unwrap();
+    edit(&mut cfg);
+    let model = dynamics::load_robot(&cfg.robot).unwrap();
+    let s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
+    (cfg, model, s)
+}
+
+/// Current → joint torque, as the read stage does with the robot's drives.
+fn to_torque(s: &mut Simulation, model: &Model) {
+    for (j, col) in s.raw.effort.iter_mut().enumerate() {
+        let k = model.drives[j].joint_torque_per_amp();
+        col.iter_mut().for_each(|v| *v *= k);
+    }
+    s.raw.effort_kind = TorqueChannel::Torque;
+}
+
+fn rms(a: &[f64], b: &[f64]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+#[test]
+fn kuka_axis3_chain_recovers_the_truth() {
+    // A 12 s fade-in and 5 periods: 62 s, six whole periods counted from the
+    // end, the first of them inside the fade-in.
+    let (cfg, model, mut s) = sim("sims/kuka_axis3.toml", |c| {
+        c.timing.transient_s = 12.0;
+        c.timing.periods = Some(5);
+    });
+    to_torque(&mut s, &model);
+    let spectra = Spectra::new();
+    let mut p = align(&s.raw, &AlignConfig::default(), "kuka_axis3").unwrap();
+    let n = p.samples_per_period;
+    assert_eq!(n, 1500);
+    assert!(!p.report.resampled);
+    println!(
+        "periods found {}, kept {}, start {:.3} s, changes {:?}",
+        p.report.periods_found, p.periods, p.start_s, p.report.period_change
+    );
+    assert_eq!(p.report.periods_found, 6);
+    assert_eq!(p.report.transient_periods, 1, "{:?}", p.report);
+    assert_eq!(p.periods, 5);
+    assert!((p.start_s - 12.0).abs() < 1e-9, "{}", p.start_s);
+    let bw = 20.0;
+    let ifc = InverseFilterConfig {
+        filter: cfg.measurement.filter,
+        zpk: None,
+        bandwidth_hz: bw,
+    };
+    inverse_filter_periods(&mut p, &ifc, &spectra).unwrap();
+    let (mean, _drift) = average(&p);
+    let np = p.periods as f64;
+
+    // Truth over the last kept period, sample for sample.
+    let first = s
+        .truth
+        .time
+        .iter()
+        .position(|&t| (t - (p.start_s + (p.periods - 1) as f64 * cfg.trajectory.period().unwrap())).abs() < 1e-9)
+        .unwrap();
+    let truth = |v: &Vec<f64>| v[first..first + n].to_vec();
+    let (tq, tqd, tqdd, ttau) = (
+        truth(&s.truth.q[0]),
+        truth(&s.truth.qd[0]),
+        truth(&s.truth.qdd[0]),
+        truth(&s.truth.torque[0]),
+    );
+
+    // Torque: white current noise σ_i·k on each sample, averaged over P
+    // periods, then divided by H and band-limited: its variance per sample
+    // is σ²/P · (1/N)·Σ_{|f_k| ≤ bw} |1/H(f_k)|² over the record's lines.
+    let filter = AnalogFilter::new(cfg.measurement.filter.unwrap()).unwrap();
+    let sigma = 0.05 * model.drives[0].joint_torque_per_amp();
+    let m = n * p.periods;
+    let df = 1.0 / (np * cfg.trajectory.period().unwrap());
+    let kmax = (bw / df).floor() as usize;
+    let gain2: f64 = (0..=kmax)
+        .map(|k| (if k == 0 { 1.0 } else { 2.0 }) / filter.response(k as f64 * df).norm_sqr())
+        .sum();
+    let expected_var = sigma * sigma / np * gain2 / m as f64;
+    let tau_err = rms(&mean.torque[0], &ttau);
+    println!(
+        "torque: RMS error {tau_err:.4} N*m, noise floor {:.4} N*m",
+        expected_var.sqrt()
+    );
+    assert!(tau_err < 1.5 * expected_var.sqrt(), "{tau_err}");
+
+    // Noise: the time-domain variance of the averaged torque within 10 % of
+    // the expected one (≈ 7500 degrees of freedom: 1.6 % standard error).
+    let (table, summary) = noise(&p, &mean, &[1, 2, 3, 4, 5], &spectra);
+    let t_noise = summary.iter().find(|c| c.channel == "torque").unwrap();
+    let q_noise = summary.iter().find(|c| c.channel == "q").unwrap();
+    println!(
+        "torque noise var: time {:.4}, freq {:.4}, expected {:.4}; KS p {:.3}, skew {:.3}, kurt {:.3}",
+        t_noise.var_time, t_noise.var_freq, expected_var, t_noise.ks_p_value, t_noise.skewness, t_noise.excess_kurtosis
+    );
+    assert!((t_noise.var_time / expected_var - 1.0).abs() < 0.10);
+    assert!((t_noise.var_freq / expected_var - 1.0).abs() < 0.10);
+    let quantum = model.drives[0].radians_per_count();
+    let q_expected = (1e-10 + quantum * quantum / 12.0) / np;
+    println!(
+        "position noise var: time {:.3e}, freq {:.3e}, expected {:.3e}",
+        q_noise.var_time, q_noise.var_freq, q_expected
+    );
+    assert!((q_noise.var_time / q_expected - 1.0).abs() < 0.10);
+    assert!((q_noise.var_freq / q_expected - 1.0).abs() < 0.10);
+    assert!(t_noise.ks_p_value > 1e-3, "Gaussian noise passes the KS test");
+    assert_eq!(table.var_q[0].len(), n);
+
+    // Derivatives. Against the raw truth the error is dominated by what the
+    // truth holds outside the fitted lines (Coulomb friction makes q̈ jump
+    // at every velocity reversal); so each estimate is compared with the
+    // truth projected onto the same lines, where only noise is left. The
+    // averaged position noise (variance σ², white) puts a share (1/N)·Σ_k
+    // ω_k^{2d} σ² of its power into the d-th derivative through the kept
+    // lines k (both halves of the spectrum): the RMS error must stay within
+    // 3× that.
+    let harmonics = [1u32, 2, 3, 4, 5];
+    let period = 10.0;
+    let fit = differentiate(&mean, period, Method::FourierFit, &harmonics, None, &spectra);
+    let dft = differentiate(&mean, period, Method::Dft, &harmonics, Some(2.0), &spectra);
+    let (rq, rqd, rqdd) = fit_reference(&mean.time, &mean.q[0], period, &harmonics);
+    assert!(
+        rms(&fit.q[0], &rq) < 1e-12 && rms(&fit.qd[0], &rqd) < 1e-12 && rms(&fit.qdd[0], &rqdd) < 1e-11,
+        "DFT fit = least squares"
+    );
+    let sigma2 = q_expected;
+    let w0 = 2.0 * std::f64::consts::PI / period;
+    let fit_lines: Vec<usize> = harmonics.iter().map(|&h| h as usize).collect();
+    let dft_lines: Vec<usize> = (1..=20).collect();
+    for (name, k, lines) in [("fourier_fit", &fit, &fit_lines), ("dft", &dft, &dft_lines)] {
+        let project = |v: &Vec<f64>| {
+            let spec = spectra.forward(v);
+            let kept: Vec<_> = spec
+                .iter()
+                .enumerate()
+                .map(|(i, x)| {
+                    if i == 0 || lines.contains(&i) {
+                        *x
+                    } else {
+                        Default::default()
+                    }
+                })
+                .collect();
+            spectra.inverse(&kept, n)
+        };
+        let bound = |d: i32| {
+            3.0 * (sigma2
+                * (if d == 0 { 1.0 } else { 0.0 }
+                    + lines.iter().map(|&l| 2.0 * (w0 * l as f64).powi(2 * d)).sum::<f64>())
+                / n as f64)
+                .sqrt()
+        };
+        let e = [
+            rms(&k.q[0], &project(&tq)),
+            rms(&k.qd[0], &project(&tqd)),
+            rms(&k.qdd[0], &project(&tqdd)),
+        ];
+        let raw = [rms(&k.q[0], &tq), rms(&k.qd[0], &tqd), rms(&k.qdd[0], &tqdd)];
+        println!("{name}: vs truth on the same lines q {:.2e} rad, qd {:.2e} rad/s, qdd {:.2e} rad/s^2 (bounds {:.1e}, {:.1e}, {:.1e}); vs raw truth {:.1e}, {:.1e}, {:.1e}", e[0], e[1], e[2], bound(0), bound(1), bound(2), raw[0], raw[1], raw[2]);
+        // Positions: noise only. Velocities: the sampled truth q̇ also carries
+        // aliased harmonics of the friction kinks (measured ≈ 2× the noise
+        // bound), hence 10×. Accelerations: the aliased q̈ jumps dominate the
+        // projected truth (≈2 % of the signal); the stage's exactness for q̈
+        // is shown on closed-form signals below.
+        assert!(e[0] < bound(0), "{name}: q {:e} vs {:e}", e[0], bound(0));
+        assert!(e[1] < 10.0 * bound(1), "{name}: qd {:e} vs {:e}", e[1], bound(1));
+        assert!(e[2] < 0.05 * rms(&tqdd, &vec![0.0; n]), "{name}: qdd {:e}", e[2]);
+        // Against the raw truth, the tracking error outside the lines.
+        assert!(raw[0] < 1e-3 && raw[1] < 1.5e-2, "{name}: {raw:?}");
+    }
+    // Approaches I and II agree on the excited lines; they differ by the
+    // tracking error's content on the other lines below 2 Hz.
+    let on_harmonics = |v: &Vec<f64>| {
+        let spec = spectra.forward(v);
+        let kept: Vec<_> = spec
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                if i == 0 || fit_lines.contains(&i) {
+                    *x
+                } else {
+                    Default::default()
+                }
+            })
+            .collect();
+        spectra.inverse(&kept, n)
+    };
+    let agree = rms(&on_harmonics(&dft.qdd[0]), &fit.qdd[0]);
+    println!(
+        "approach I vs II on the excited lines: qdd {agree:.2e}; overall qd {:.2e}, qdd {:.2e}",
+        rms(&fit.qd[0], &dft.qd[0]),
+        rms(&fit.qdd[0], &dft.qdd[0])
+    );
+    assert!(agree < 1e-12);
+}
+
+/// Differentiation on closed-form signals: a known Fourier series plus
+/// white noise of variance σ² averaged over P periods. Both approaches must
+/// return the analytic derivatives within 3× the noise that passes their
+/// lines: RMS error of the d-th derivative = σ_avg·√((1/N)·Σ_k ω_k^{2d})
+/// over the kept lines k of both halves of the spectrum.
+#[test]
+fn derivatives_of_closed_form_signals() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (n, period, np) = (1500usize, 10.0, 8usize);
+    let w0 = 2.0 * std::f64::consts::PI / period;
+    let coef = [
+        (1u32, 0.5, -0.2),
+        (2, 0.3, 0.1),
+        (3, -0.1, 0.2),
+        (4, 0.05, 0.05),
+        (5, 0.02, -0.04),
+    ];
+    let eval = |t: f64, d: i32| -> f64 {
+        coef.iter()
+            .map(|&(h, a, b)| {
+                let w = w0 * h as f64;
+                // q = a sin + b cos; derivatives by the chain rule.
+                let (s, c) = (w * t).sin_cos();
+                match d {
+                    0 => a * s + b * c,
+                    1 => w * (a * c - b * s),
+                    _ => -w * w * (a * s + b * c),
+                }
+            })
+            .sum::<f64>()
+            + if d == 0 { 0.3 } else { 0.0 }
+    };
+    let sigma = 1e-4;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let noise = Normal::new(0.0, sigma).unwrap();
+    let time: Vec<f64> = (0..n).map(|i| i as f64 * period / n as f64).collect();
+    let mut q = vec![0.0; n];
+    for _ in 0..np {
+        for (i, t) in time.iter().enumerate() {
+            q[i] += (eval(*t, 0) + noise.sample(&mut rng)) / np as f64;
+        }
+    }
+    let mean = robotid_schemas::PeriodMean {
+        joints: vec!["j".into()],
+        time: time.clone(),
+        q: vec![q],
+        q_spread: vec![vec![0.0; n]],
+        torque: vec![vec![0.0; n]],
+        torque_spread: vec![vec![0.0; n]],
+        metadata: BTreeMap::new(),
+    };
+    let spectra = Spectra::new();
+    let s2 = sigma * sigma / np as f64;
+    for (method, lines) in [
+        (Method::FourierFit, (1..=5).collect::<Vec<usize>>()),
+        (Method::Dft, (1..=30).collect()),
+    ] {
+        let k = differentiate(&mean, period, method, &[1, 2, 3, 4, 5], Some(3.0), &spectra);
+        for (d, est) in [(0, &k.q[0]), (1, &k.qd[0]), (2, &k.qdd[0])] {
+            let truth: Vec<f64> = time.iter().map(|t| eval(*t, d)).collect();
+            let e = rms(est, &truth);
+            let dc = if d == 0 { 1.0 } else { 0.0 };
+            let bound = 3.0
+                * (s2 * (dc + lines.iter().map(|&l| 2.0 * (w0 * l as f64).powi(2 * d)).sum::<f64>()) / n as f64).sqrt();
+            println!("{method:?} derivative {d}: RMS error {e:.2e}, bound {bound:.2e}");
+            assert!(e < bound, "{method:?} d={d}: {e:e} vs {bound:e}");
+        }
+    }
+}
+
+/// Without friction the tracking error is smooth and small, and the
+/// Fourier fit recovers the raw truth itself, not only its projection.
+#[test]
+fn frictionless_axis_derivatives_match_the_raw_truth() {
+    let (cfg, mut model, _) = sim("sims/kuka_axis3.toml", |_| {});
+    model.friction = vec![Default::default(); 1];
+    let mut s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
+    to_torque(&mut s, &model);
+    let spectra = Spectra::new();
+    let p = align(&s.raw, &AlignConfig::default(), "kuka").unwrap();
+    let (mean, _) = average(&p);
+    let k = differentiate(&mean, 10.0, Method::FourierFit, &[1, 2, 3, 4, 5], None, &spectra);
+    let first = s
+        .truth
+        .time
+        .iter()
+        .position(|&t| (t - (p.start_s + (p.periods - 1) as f64 * 10.0)).abs() < 1e-9)
+        .unwrap();
+    let n = p.samples_per_period;
+    let e = [
+        rms(&k.q[0], &s.truth.q[0][first..first + n]),
+        rms(&k.qd[0], &s.truth.qd[0][first..first + n]),
+        rms(&k.qdd[0], &s.truth.qdd[0][first..first + n]),
+    ];
+    println!(
+        "frictionless fourier_fit vs raw truth: q {:.2e} rad, qd {:.2e} rad/s, qdd {:.2e} rad/s^2",
+        e[0], e[1], e[2]
+    );
+    // The loop's tracking error (gravity is nonlinear in q) leaves content
+    // outside the five harmonics: ≈5e-4 of the signals' RMS (0.75 rad,
+    // 0.59 rad/s, 0.79 rad/s²), against 1 % and 32 % for q̇ and q̈ with
+    // friction.
+    assert!(e[0] < 1e-3 && e[1] < 5e-3 && e[2] < 2e-2, "{e:?}");
+}
