@@ -8,6 +8,7 @@ mod error;
 pub mod formats;
 pub mod inverse_filter;
 pub mod noise;
+pub mod read;
 pub mod signal;
 pub mod simulate;
 pub mod trajectory;

@@ -1,6 +1,6 @@
 use std::path::Path;
 
-use arrow::array::{RecordBatch, RecordBatchReader};
+use arrow::array::RecordBatch;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::properties::WriterProperties;
@@ -33,12 +33,11 @@ pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
         path: path.to_path_buf(),
         msg,
     };
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| fmt(e.to_string()))?
-        .with_batch_size(usize::MAX >> 8)
-        .build()
-        .map_err(|e| fmt(e.to_string()))?;
-    let schema = reader.schema();
+    let builder =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| fmt(e.to_string()))?;
+    // The builder's schema carries the stored Arrow metadata.
+    let schema = builder.schema().clone();
+    let reader = builder.with_batch_size(65536).build().map_err(|e| fmt(e.to_string()))?;
     let batches = reader.collect::<Result<Vec<_>, _>>().map_err(|e| fmt(e.to_string()))?;
     arrow::compute::concat_batches(&schema, &batches).map_err(|e| fmt(e.to_string()))
 }

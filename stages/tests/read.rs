@@ -1,0 +1,231 @@
+//! The read stage on the simulator's three formats, and every class of bad
+//! input with the error it must give.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use robotid_stages::align::{align, AlignConfig};
+use robotid_stages::dynamics::{self, Model};
+use robotid_stages::read::{read, Channel, ReadConfig};
+use robotid_stages::simulate::{simulate, write_simulation, SimConfig, Simulation};
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+fn recording(dir: &Path) -> (Model, Simulation) {
+    let (cfg, _) = SimConfig::load(&fixture("sims/arm3.toml")).unwrap();
+    let model = dynamics::load_robot(&cfg.robot).unwrap();
+    let s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
+    write_simulation(dir, "rec", &cfg.output.formats, &s, &model).unwrap();
+    (model, s)
+}
+
+fn err_of(r: robotid_stages::Result<impl std::fmt::Debug>) -> String {
+    r.unwrap_err().to_string()
+}
+
+#[test]
+fn three_formats_read_the_same_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    let csv = read(&dir.path().join("rec.csv"), &cfg, Some(&model)).unwrap();
+    let pq = read(&dir.path().join("rec.parquet"), &cfg, Some(&model)).unwrap();
+    let mc = read(&dir.path().join("rec.mcap"), &cfg, Some(&model)).unwrap();
+    for (j, drive) in model.drives.iter().enumerate() {
+        let torque: Vec<f64> = s.raw.effort[j]
+            .iter()
+            .map(|i| i * drive.joint_torque_per_amp())
+            .collect();
+        for r in [&csv, &pq, &mc] {
+            assert_eq!(r.q[j], s.raw.q[j]);
+            assert_eq!(r.effort[j], torque);
+        }
+        assert_eq!(csv.reference.as_ref().unwrap()[j], s.raw.reference.as_ref().unwrap()[j]);
+    }
+    assert_eq!(csv.time, s.raw.time);
+    assert_eq!(pq.time, s.raw.time);
+    // MCAP stamps are whole nanoseconds.
+    assert!(mc.time.iter().zip(&s.raw.time).all(|(a, b)| (a - b).abs() < 1e-9));
+    // Provenance travels with Parquet and MCAP.
+    assert_eq!(pq.metadata["robotid.period_s"], "10");
+    assert_eq!(mc.metadata["robotid.harmonics"], "1,2,3,4,5");
+    assert_eq!(mc.metadata["robotid.source_file"], "rec.mcap");
+}
+
+#[test]
+fn counts_and_degrees_are_converted() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let cfg = ReadConfig {
+        position: Some(Channel {
+            column: Some("counts_{joint}".into()),
+            topic: None,
+            field: None,
+            unit: "count".into(),
+        }),
+        ..Default::default()
+    };
+    let r = read(&dir.path().join("rec.parquet"), &cfg, Some(&model)).unwrap();
+    for j in 0..3 {
+        let expect: Vec<f64> = s.raw.counts.as_ref().unwrap()[j]
+            .iter()
+            .map(|c| *c as f64 * model.drives[j].radians_per_count())
+            .collect();
+        assert_eq!(r.q[j], expect);
+    }
+    // Without a robot, counts need their constants.
+    let e = err_of(read(
+        &dir.path().join("rec.parquet"),
+        &ReadConfig {
+            joints: Some(vec!["j1".into(), "j2".into(), "j3".into()]),
+            ..cfg
+        },
+        None,
+    ));
+    assert!(e.contains("radians_per_count"), "{e}");
+}
+
+#[test]
+fn bad_inputs_name_file_channel_and_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    let csv = std::fs::read_to_string(dir.path().join("rec.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+
+    // NaN in a value.
+    let mut bad: Vec<String> = lines.iter().map(|s| s.to_string()).collect();
+    let mut f: Vec<&str> = lines[101].split(',').collect();
+    f[2] = "NaN";
+    bad[101] = f.join(",");
+    let p = dir.path().join("nan.csv");
+    std::fs::write(&p, bad.join("\n")).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(
+        e.contains("nan.csv") && e.contains("q_j2") && e.contains("sample 100") && e.contains("NaN"),
+        "{e}"
+    );
+
+    // Not a number.
+    let p = dir.path().join("text.csv");
+    std::fs::write(
+        &p,
+        csv.replacen(&lines[5].split(',').nth(1).unwrap().to_string(), "abc", 1),
+    )
+    .unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(e.contains("`abc` is not a number"), "{e}");
+
+    // Truncated file: the last line is cut.
+    let p = dir.path().join("cut.csv");
+    std::fs::write(&p, &csv[..csv.len() - 40]).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(
+        e.contains("cut.csv") && e.contains("fields") && e.contains("truncated"),
+        "{e}"
+    );
+
+    // Missing channel.
+    let p = dir.path().join("missing.csv");
+    std::fs::write(&p, csv.replacen("current_j3", "curent_j3", 1)).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(
+        e.contains("missing.csv") && e.contains("current_j3") && e.contains("missing column"),
+        "{e}"
+    );
+
+    // Unknown unit: refused when the pipeline is checked.
+    let c = ReadConfig {
+        effort: Some(Channel {
+            column: Some("current_{joint}".into()),
+            topic: None,
+            field: None,
+            unit: "furlong".into(),
+        }),
+        ..Default::default()
+    };
+    let e = c.check().unwrap_err().join("; ");
+    assert!(e.contains("unknown effort unit `furlong`"), "{e}");
+
+    // Truncated MCAP.
+    let mcap = std::fs::read(dir.path().join("rec.mcap")).unwrap();
+    let p = dir.path().join("cut.mcap");
+    std::fs::write(&p, &mcap[..mcap.len() / 2]).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(
+        e.contains("cut.mcap") && (e.contains("truncated") || e.contains("corrupt")),
+        "{e}"
+    );
+
+    // Corrupt chunk: bytes flipped inside the compressed data.
+    let mut bad = mcap.clone();
+    for b in &mut bad[mcap.len() / 3..mcap.len() / 3 + 64] {
+        *b ^= 0x5a;
+    }
+    let p = dir.path().join("flipped.mcap");
+    std::fs::write(&p, &bad).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(e.contains("flipped.mcap") && e.contains("corrupt"), "{e}");
+
+    // Missing MCAP topic.
+    let c = ReadConfig {
+        effort: Some(Channel {
+            column: None,
+            topic: Some("/torques".into()),
+            field: Some("effort".into()),
+            unit: "N*m".into(),
+        }),
+        ..Default::default()
+    };
+    let e = err_of(read(&dir.path().join("rec.mcap"), &c, Some(&model)));
+    assert!(
+        e.contains("/torques") && e.contains("missing channel") && e.contains("/joint_states"),
+        "{e}"
+    );
+
+    // Timestamps that go backwards, a gap, less than one period: align says
+    // so. A CSV carries no period: the pipeline gives it.
+    let raw = read(&dir.path().join("rec.csv"), &cfg, Some(&model)).unwrap();
+    let ten = AlignConfig {
+        period_s: Some(10.0),
+        ..Default::default()
+    };
+    let e = err_of(align(&raw, &AlignConfig::default(), "rec.csv"));
+    assert!(e.contains("no excitation period"), "{e}");
+    let mut back = raw.clone();
+    back.time.swap(500, 501);
+    let e = err_of(align(&back, &ten, "rec.csv"));
+    assert!(
+        e.contains("rec.csv") && e.contains("channel `time`") && e.contains("sample 501") && e.contains("increase"),
+        "{e}"
+    );
+    let mut gap = raw.clone();
+    gap.time.iter_mut().skip(3000).for_each(|t| *t += 0.5);
+    let e = err_of(align(&gap, &ten, "rec.csv"));
+    assert!(e.contains("sample 3000") && e.contains("gap"), "{e}");
+    let mut short = raw.clone();
+    let keep = 1500;
+    short.time.truncate(keep);
+    for c in short
+        .q
+        .iter_mut()
+        .chain(short.effort.iter_mut())
+        .chain(short.reference.iter_mut().flatten())
+    {
+        c.truncate(keep);
+    }
+    let e = err_of(align(&short, &ten, "rec.csv"));
+    assert!(e.contains("less than one full period"), "{e}");
+    // A wrong period: the data does not repeat.
+    let e = err_of(align(
+        &raw,
+        &AlignConfig {
+            period_s: Some(9.0),
+            ..Default::default()
+        },
+        "rec.csv",
+    ));
+    assert!(e.contains("do not repeat with period 9 s"), "{e}");
+}
