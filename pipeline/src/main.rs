@@ -23,6 +23,12 @@ enum Command {
     /// Simulate a robot under closed-loop control and write a raw recording
     /// (MCAP, CSV, Parquet) with its ground truth.
     Simulate(cmd::simulate::Args),
+    /// Run a preprocessing pipeline on its recordings and write its tables.
+    Run(cmd::run::Args),
+    /// Check a pipeline file without running it; report every problem.
+    Validate(cmd::validate::Args),
+    /// Compare a run's tables with golden tables, column by column.
+    Check(cmd::check::Args),
     /// Print the Arrow schema of a robotid table kind.
     Schema(cmd::schema::Args),
 }
@@ -31,6 +37,9 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
+        Command::Run(a) => cmd::run::run(a),
+        Command::Validate(a) => cmd::validate::run(a),
+        Command::Check(a) => cmd::check::run(a),
         Command::Schema(a) => cmd::schema::run(a),
     };
     match result {

@@ -8,13 +8,13 @@
 //!    t_j = t_end − (M−1−j)·T/N by cubic Hermite interpolation, and the
 //!    leave-one-out interpolation error of the positions is reported as a
 //!    bound on the resampling error.
-//! 3. Whole periods are counted back from the end of the record; the last
-//!    one is the reference. Going backwards, a period belongs to the steady
-//!    part while its positions differ from the reference by less than
-//!    `steady_tolerance` (RMS, relative to the positions' RMS variation):
-//!    the start-up transient is found from the data, not from a count.
-//!    If even the second-to-last period fails, the data does not repeat with
-//!    the declared period: an error.
+//! 3. The start-up transient is found from the data, not from a count: the
+//!    record is compared with itself one period later, q(t) − q(t+T), as an
+//!    RMS over a window of a tenth of a period, relative to the positions'
+//!    RMS variation. Walking back from the end, the steady part lasts while
+//!    that stays below `steady_tolerance`; the whole periods inside it, end
+//!    aligned, are kept. If even the end of the record fails, the data does
+//!    not repeat with the declared period: an error.
 //! 4. One full period: go on, say that there is no averaging. Less: error.
 
 use std::collections::BTreeMap;
@@ -37,8 +37,8 @@ pub struct AlignConfig {
     /// Longest tolerated step between samples, in nominal steps.
     #[serde(default = "default_gap")]
     pub max_gap_steps: f64,
-    /// Relative RMS position change from the last period below which a
-    /// period counts as steady.
+    /// Relative RMS change of the positions from one period to the next
+    /// below which the motion counts as steady.
     #[serde(default = "default_steady")]
     pub steady_tolerance: f64,
 }
@@ -107,7 +107,7 @@ pub struct AlignReport {
     pub transient_periods: usize,
     /// Time from the first sample to the first steady one, s.
     pub dropped_s: f64,
-    /// Relative RMS change of each kept period's positions from the last.
+    /// Relative RMS change of each kept period's positions from the last one.
     pub period_change: Vec<f64>,
     pub notes: Vec<String>,
 }
@@ -207,14 +207,12 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     let dt = period / n as f64;
     // Deviation of the stamps from a uniform grid of step dt through the first sample.
     let k0 = t[0];
-    let jitter_rms = (t
-        .iter()
-        .map(|&ti| (ti - k0) - ((ti - k0) / dt).round() * dt)
-        .map(|d| d * d)
-        .sum::<f64>()
-        / t.len() as f64)
-        .sqrt();
-    let on_grid = (max_step - min_step) < 1e-9 * dt && (med - dt).abs() < 1e-9 * dt;
+    let deviation = |ti: f64| (ti - k0) - ((ti - k0) / dt).round() * dt;
+    let jitter_rms = (t.iter().map(|&ti| deviation(ti).powi(2)).sum::<f64>() / t.len() as f64).sqrt();
+    // On the grid: every step one grid step (no drops) and every stamp
+    // within 1e-6 of a step of its grid point (nanosecond stamps are).
+    let on_grid = t.windows(2).all(|w| ((w[1] - w[0]) / dt - 1.0).abs() < 1e-3)
+        && t.iter().all(|&ti| deviation(ti).abs() < 1e-6 * dt);
     let mut report = AlignReport {
         nominal_rate_hz: fs,
         median_step_s: med,
@@ -224,26 +222,24 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         ..Default::default()
     };
 
-    // The uniform grid, end-aligned.
+    // The whole record on a uniform grid, end-aligned.
     let span = t[t.len() - 1] - t[0];
     let m = (span / dt + 1e-9).floor() as usize + 1;
-    let whole = m / n;
-    if whole < 1 {
+    if m < n {
         return Err(data_err(
             "time",
             None,
             format!("less than one full period: {span:.3} s of data, the period is {period} s"),
         ));
     }
-    let used = whole * n;
-    let (q, torque, reference, start_s) = if on_grid {
-        let first = t.len() - used;
+    let (q, torque, reference, grid0) = if on_grid {
+        let first = t.len() - m;
         let cut = |c: &Vec<Vec<f64>>| c.iter().map(|v| v[first..].to_vec()).collect::<Vec<_>>();
         (cut(&raw.q), cut(&raw.effort), raw.reference.as_ref().map(cut), t[first])
     } else {
         report.resampled = true;
         let t_end = t[t.len() - 1];
-        let grid: Vec<f64> = (0..used).map(|j| t_end - (used - 1 - j) as f64 * dt).collect();
+        let grid: Vec<f64> = (0..m).map(|j| t_end - (m - 1 - j) as f64 * dt).collect();
         let res = |c: &Vec<Vec<f64>>| c.iter().map(|v| resample(t, v, &grid)).collect::<Vec<_>>();
         report.resample_error_rad = Some(leave_one_out_error(t, &raw.q));
         report.notes.push(format!(
@@ -252,55 +248,100 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         ));
         (res(&raw.q), res(&raw.effort), raw.reference.as_ref().map(res), grid[0])
     };
+    let whole = m / n;
+    report.periods_found = whole;
 
-    // Steady periods, counted back from the last.
+    // The steady part: where the positions repeat one period later. r(i) is
+    // the RMS over a window of N/10 samples of q(i) − q(i+N), relative to the
+    // positions' RMS variation over the last period; the steady part starts
+    // where r stays below `steady_tolerance` for good.
     let nj = raw.joints.len();
-    let last = |j: usize| &q[j][(whole - 1) * n..];
     let scale: f64 = (0..nj)
         .map(|j| {
-            let l = last(j);
+            let l = &q[j][m - n..];
             let mean = l.iter().sum::<f64>() / n as f64;
-            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>()
+            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64
         })
         .sum::<f64>()
         .sqrt()
         .max(1e-300);
-    let change = |p: usize| -> f64 {
-        (0..nj)
-            .map(|j| {
-                let a = &q[j][p * n..(p + 1) * n];
-                a.iter().zip(last(j)).map(|(x, y)| (x - y) * (x - y)).sum::<f64>()
-            })
-            .sum::<f64>()
-            .sqrt()
-            / scale
-    };
-    let mut first_steady = whole - 1;
-    while first_steady > 0 {
-        let c = change(first_steady - 1);
-        if c > cfg.steady_tolerance {
-            break;
+    let steady_from = if m >= n + 1 {
+        let lags = m - n;
+        let d2: Vec<f64> = (0..lags)
+            .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
+            .collect();
+        let w = (n / 10).clamp(1, lags);
+        let mut sum: f64 = d2[lags - w..].iter().sum();
+        let mut start = None;
+        // Walk the window back from the end while it stays steady.
+        let mut i = lags - w;
+        loop {
+            let r = (sum.max(0.0) / w as f64).sqrt() / scale;
+            if r > cfg.steady_tolerance {
+                break;
+            }
+            start = Some(i);
+            if i == 0 {
+                break;
+            }
+            i -= 1;
+            sum += d2[i] - d2[i + w];
         }
-        first_steady -= 1;
-    }
-    if whole >= 2 && first_steady == whole - 1 {
+        match start {
+            Some(s) => s,
+            None => {
+                let r = (d2[lags - w..].iter().sum::<f64>() / w as f64).sqrt() / scale;
+                return Err(data_err(
+                    "q_*",
+                    None,
+                    format!(
+                        "the positions do not repeat with period {period} s: at the end of the record they differ from one period earlier by {:.2} % (tolerance {:.2} %); check the period",
+                        100.0 * r,
+                        100.0 * cfg.steady_tolerance
+                    ),
+                ));
+            }
+        }
+    } else {
+        report
+            .notes
+            .push("exactly one period recorded: the period could not be checked against the data".into());
+        0
+    };
+    let kept = (m - steady_from) / n;
+    if kept == 0 {
         return Err(data_err(
-            "q_*",
+            "time",
             None,
             format!(
-                "the positions do not repeat with period {period} s: the last two periods differ by {:.2} % (tolerance {:.2} %); check the period",
-                100.0 * change(whole - 2),
-                100.0 * cfg.steady_tolerance
+                "less than one full steady period: the start-up transient lasts until {:.3} s, leaving {:.3} s of the {period} s period",
+                grid0 + steady_from as f64 * dt - t[0],
+                (m - steady_from) as f64 * dt
             ),
         ));
     }
-    let kept = whole - first_steady;
-    report.periods_found = whole;
-    report.transient_periods = first_steady;
-    report.period_change = (first_steady..whole).map(change).collect();
-    let from = first_steady * n;
+    let from = m - kept * n;
+    report.transient_periods = whole - kept;
+    let last = |j: usize| &q[j][m - n..];
+    report.period_change = (0..kept)
+        .map(|k| {
+            let p0 = from + k * n;
+            (0..nj)
+                .map(|j| {
+                    q[j][p0..p0 + n]
+                        .iter()
+                        .zip(last(j))
+                        .map(|(x, y)| (x - y) * (x - y))
+                        .sum::<f64>()
+                        / n as f64
+                })
+                .sum::<f64>()
+                .sqrt()
+                / scale
+        })
+        .collect();
     let keep = |c: Vec<Vec<f64>>| c.into_iter().map(|v| v[from..].to_vec()).collect::<Vec<_>>();
-    let start = start_s + from as f64 * dt;
+    let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
     if kept == 1 {
         report.notes.push(

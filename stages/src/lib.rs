@@ -13,4 +13,4 @@ pub mod signal;
 pub mod simulate;
 pub mod trajectory;
 
-pub use error::{Error, Result};
+pub use error::{toml_message as error_message_of_toml, Error, Result};

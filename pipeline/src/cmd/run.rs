@@ -1,0 +1,100 @@
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::bail;
+use robotid::plan;
+use robotid::run::{run as run_plan, RunOptions};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Pipeline file (TOML), see docs/pipeline-file.md.
+    pub pipeline: PathBuf,
+    /// Output folder; each recording gets a subfolder (default: out/<pipeline name>).
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Worker threads (default: one per core). Outputs do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Print each stage's time per recording.
+    #[arg(long)]
+    pub timings: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let text =
+        std::fs::read_to_string(&args.pipeline).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
+    let p = plan::parse(&text, &args.pipeline)?;
+    let (model, logs, start) = plan::resolve(&p)?;
+    for w in model.iter().flat_map(|m| &m.warnings) {
+        eprintln!("warning: robot: {w}");
+    }
+    let out = args.out.unwrap_or_else(|| {
+        PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
+    });
+    let opts = RunOptions {
+        out: out.clone(),
+        threads: args.threads,
+        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    };
+    let results = run_plan(&p, model.as_ref(), &logs, start, &opts);
+    println!(
+        "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
+        "recording", "samples", "periods", "dropped s", "jitter s", "var tau time", "var tau freq"
+    );
+    let mut failed = 0;
+    for r in &results {
+        match &r.outcome {
+            Ok(o) => {
+                let torque: Vec<&robotid_stages::noise::ChannelNoise> =
+                    o.noise.iter().filter(|c| c.channel == "torque").collect();
+                let mean = |f: &dyn Fn(&robotid_stages::noise::ChannelNoise) -> f64| {
+                    if torque.is_empty() {
+                        "-".to_string()
+                    } else {
+                        format!("{:.3e}", torque.iter().map(|c| f(c)).sum::<f64>() / torque.len() as f64)
+                    }
+                };
+                println!(
+                    "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  ok",
+                    r.name,
+                    o.samples,
+                    match (o.periods_kept, o.periods_found) {
+                        (Some(k), Some(f)) => format!("{k}/{f}"),
+                        _ => "-".into(),
+                    },
+                    o.dropped_s.map_or("-".into(), |d| format!("{d:.3}")),
+                    o.jitter_rms_s.map_or("-".into(), |d| format!("{d:.1e}")),
+                    mean(&|c| c.var_time),
+                    mean(&|c| c.var_freq),
+                );
+                for n in &o.notes {
+                    println!("    note: {n}");
+                }
+                if args.timings {
+                    let t: Vec<String> = o
+                        .timings
+                        .iter()
+                        .map(|(s, d)| format!("{s} {:.1} ms", d * 1e3))
+                        .collect();
+                    println!("    timings: {}", t.join(", "));
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                println!("{:<28} failed: {e}", r.name);
+            }
+        }
+    }
+    println!(
+        "{} of {} recording(s) done in {:.2} s; tables in {}",
+        results.len() - failed,
+        results.len(),
+        started.elapsed().as_secs_f64(),
+        out.display()
+    );
+    if failed > 0 {
+        bail!("{failed} recording(s) failed (see above); their tables were not written");
+    }
+    Ok(())
+}

@@ -1,0 +1,294 @@
+//! Executes a validated plan over its recordings, in parallel (rayon), one
+//! progress bar each. A recording's tables are written, atomically, only
+//! after its whole chain succeeded; a failing recording leaves no file.
+//! Every recording is processed on its own, so the output bytes do not
+//! depend on the number of threads.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use robotid_schemas::{metadata, Kinematics, NoiseTable, PeriodMean, RawSamples, TableKind};
+use robotid_stages::align::{align, Periods};
+use robotid_stages::average::average;
+use robotid_stages::differentiate::{differentiate, Method};
+use robotid_stages::dynamics::Model;
+use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::inverse_filter::{inverse_filter_periods, inverse_filter_record};
+use robotid_stages::noise::{noise, ChannelNoise};
+use robotid_stages::read::read;
+use robotid_stages::signal::Spectra;
+
+use crate::plan::{Data, Plan, StageConfig};
+
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    pub out: PathBuf,
+    /// Worker threads (default: one per core).
+    pub threads: Option<usize>,
+    pub progress: bool,
+}
+
+/// What one recording gave.
+#[derive(Debug, Clone, Default)]
+pub struct Outcome {
+    pub samples: usize,
+    pub periods_kept: Option<usize>,
+    pub periods_found: Option<usize>,
+    pub dropped_s: Option<f64>,
+    pub jitter_rms_s: Option<f64>,
+    pub noise: Vec<ChannelNoise>,
+    pub notes: Vec<String>,
+    /// (stage, seconds)
+    pub timings: Vec<(String, f64)>,
+    pub files: Vec<PathBuf>,
+}
+
+#[derive(Debug, Clone)]
+pub struct RecordingResult {
+    pub source: PathBuf,
+    pub name: String,
+    pub outcome: Result<Outcome, String>,
+}
+
+/// The tables of one recording as they come out of the chain.
+#[derive(Default)]
+struct State {
+    raw: Option<RawSamples>,
+    periods: Option<Periods>,
+    mean: Option<PeriodMean>,
+    noise: Option<NoiseTable>,
+    kinematics: Option<Kinematics>,
+}
+
+/// Output folder names: the file stem, or stem and extension where two
+/// logs share a stem.
+pub fn recording_names(logs: &[PathBuf]) -> Vec<String> {
+    let stem = |p: &PathBuf| {
+        p.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    logs.iter()
+        .map(|p| {
+            let clash = logs.iter().filter(|q| stem(q) == stem(p)).count() > 1;
+            let ext = p
+                .extension()
+                .map(|e| e.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            if clash {
+                format!("{}_{ext}", stem(p))
+            } else {
+                stem(p)
+            }
+        })
+        .collect()
+}
+
+pub fn run(
+    plan: &Plan,
+    model: Option<&Model>,
+    logs: &[PathBuf],
+    start: Data,
+    opts: &RunOptions,
+) -> Vec<RecordingResult> {
+    let names = recording_names(logs);
+    let spectra = Spectra::new();
+    let bars = MultiProgress::new();
+    if !opts.progress {
+        bars.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let style = ProgressStyle::with_template("{prefix:>24} [{bar:24}] {pos}/{len} {msg}").expect("valid template");
+    let work = || {
+        logs.par_iter()
+            .zip(names.par_iter())
+            .map(|(log, name)| {
+                let bar = bars.add(ProgressBar::new(plan.stages.len() as u64 + 2));
+                bar.set_style(style.clone());
+                bar.set_prefix(name.clone());
+                let outcome = run_one(plan, model, log, name, start, &opts.out, &spectra, &bar);
+                bar.finish_with_message(if outcome.is_ok() { "done" } else { "failed" });
+                RecordingResult {
+                    source: log.clone(),
+                    name: name.clone(),
+                    outcome,
+                }
+            })
+            .collect::<Vec<_>>()
+    };
+    match opts.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .expect("thread pool")
+            .install(work),
+        None => work(),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_one(
+    plan: &Plan,
+    model: Option<&Model>,
+    log: &Path,
+    name: &str,
+    start: Data,
+    out: &Path,
+    spectra: &Spectra,
+    bar: &ProgressBar,
+) -> Result<Outcome, String> {
+    let mut outcome = Outcome::default();
+    let mut st = State::default();
+    let source = log.display().to_string();
+    let timed = |stage: &str, outcome: &mut Outcome, t: Instant| {
+        outcome.timings.push((stage.to_string(), t.elapsed().as_secs_f64()));
+        bar.inc(1);
+    };
+    let t = Instant::now();
+    bar.set_message("read");
+    match start {
+        Data::Raw => {
+            let raw = read(log, &plan.read, model).map_err(|e| e.to_string())?;
+            outcome.samples = raw.len();
+            st.raw = Some(raw);
+        }
+        Data::PeriodMean => {
+            let b = read_parquet(log).map_err(|e| e.to_string())?;
+            st.mean = Some(PeriodMean::from_record_batch(&b).map_err(|e| format!("{source}: {e}"))?);
+        }
+        Data::Kinematics => {
+            let b = read_parquet(log).map_err(|e| e.to_string())?;
+            st.kinematics = Some(Kinematics::from_record_batch(&b).map_err(|e| format!("{source}: {e}"))?);
+        }
+        other => return Err(format!("{source}: cannot start from {other:?}")),
+    }
+    timed("read", &mut outcome, t);
+    for stage in &plan.stages {
+        let t = Instant::now();
+        bar.set_message(stage.name());
+        let fail = |e: String| format!("{source}: stage `{}`: {e}", stage.name());
+        match stage {
+            StageConfig::Align(c) => {
+                let raw = st.raw.as_ref().expect("chain checked");
+                let p = align(raw, c, &source).map_err(|e| e.to_string())?;
+                outcome.periods_kept = Some(p.periods);
+                outcome.periods_found = Some(p.report.periods_found);
+                outcome.dropped_s = Some(p.report.dropped_s);
+                outcome.jitter_rms_s = Some(p.report.jitter_rms_s);
+                outcome.notes.extend(p.report.notes.iter().cloned());
+                st.periods = Some(p);
+            }
+            StageConfig::InverseFilter(c) => match (&mut st.periods, &mut st.raw) {
+                (Some(p), _) => inverse_filter_periods(p, c, spectra).map_err(fail)?,
+                (None, Some(raw)) => {
+                    let fs = raw
+                        .metadata
+                        .get(metadata::SAMPLE_RATE_HZ)
+                        .and_then(|v| v.parse().ok())
+                        .unwrap_or_else(|| (raw.len() - 1) as f64 / (raw.time[raw.len() - 1] - raw.time[0]));
+                    inverse_filter_record(raw, fs, c, spectra).map_err(fail)?;
+                    outcome.notes.push(
+                        "inverse filter on a non-periodic record: approximate within a few filter time constants of both ends".into(),
+                    );
+                }
+                (None, None) => return Err(fail("no samples to filter".into())),
+            },
+            StageConfig::Average(_) => {
+                let p = st.periods.as_ref().expect("chain checked");
+                let (mean, _drift) = average(p);
+                st.mean = Some(mean);
+            }
+            StageConfig::Noise(c) => {
+                let p = st.periods.as_ref().expect("chain checked");
+                let mean = st.mean.as_ref().expect("chain checked");
+                let h = harmonics(c.harmonics.as_ref(), &p.metadata).map_err(fail)?;
+                let (table, summary) = noise(p, mean, &h, spectra);
+                outcome.noise = summary;
+                st.noise = Some(table);
+            }
+            StageConfig::Differentiate(c) => {
+                let mean = st.mean.as_ref().expect("chain checked");
+                let h = match c.method {
+                    Method::FourierFit => harmonics(c.harmonics.as_ref(), &mean.metadata).map_err(fail)?,
+                    Method::Dft => Vec::new(),
+                };
+                let period = mean
+                    .metadata
+                    .get(metadata::PERIOD_S)
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .ok_or_else(|| fail("the averaged period does not say its period".into()))?;
+                st.kinematics = Some(differentiate(mean, period, c.method, &h, c.bandwidth_hz, spectra));
+            }
+        }
+        timed(stage.name(), &mut outcome, t);
+    }
+    // Sinks: only now, with every stage done.
+    let t = Instant::now();
+    bar.set_message("write");
+    let dir = out.join(name);
+    let mut batches = Vec::new();
+    let provenance = |md: &mut BTreeMap<String, String>| {
+        md.insert(metadata::CONFIG_SHA256.into(), plan.hash.clone());
+        md.insert(
+            "robotid.pipeline_file".into(),
+            plan.file
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        );
+    };
+    for kind in &plan.tables {
+        let batch = match kind {
+            TableKind::RawSamples => {
+                let mut raw = st.raw.clone().expect("chain checked");
+                provenance(&mut raw.metadata);
+                raw.to_record_batch()
+            }
+            TableKind::PeriodMean => {
+                let mut m = st.mean.clone().expect("chain checked");
+                provenance(&mut m.metadata);
+                m.to_record_batch()
+            }
+            TableKind::Noise => {
+                let mut m = st.noise.clone().expect("chain checked");
+                provenance(&mut m.metadata);
+                m.to_record_batch()
+            }
+            _ => {
+                let mut m = st.kinematics.clone().expect("chain checked");
+                provenance(&mut m.metadata);
+                m.to_record_batch()
+            }
+        }
+        .map_err(|e| format!("{source}: {e}"))?;
+        batches.push((dir.join(format!("{}.parquet", kind.name())), batch));
+    }
+    if !batches.is_empty() {
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    for (path, batch) in batches {
+        write_parquet(&path, &batch).map_err(|e| e.to_string())?;
+        outcome.files.push(path);
+    }
+    timed("write", &mut outcome, t);
+    Ok(outcome)
+}
+
+/// Harmonic numbers from the stage, else from the table's metadata.
+fn harmonics(given: Option<&Vec<u32>>, md: &BTreeMap<String, String>) -> Result<Vec<u32>, String> {
+    if let Some(h) = given {
+        return Ok(h.clone());
+    }
+    let text = md
+        .get(metadata::HARMONICS)
+        .ok_or("no excited harmonics: give `harmonics` (the recording does not say)")?;
+    text.split(',')
+        .map(|s| {
+            s.trim()
+                .parse::<u32>()
+                .map_err(|_| format!("bad harmonics `{text}` in the recording's metadata"))
+        })
+        .collect()
+}
