@@ -265,7 +265,7 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         .sum::<f64>()
         .sqrt()
         .max(1e-300);
-    let steady_from = if m >= n + 1 {
+    let steady_from = if m > n {
         let lags = m - n;
         let d2: Vec<f64> = (0..lags)
             .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
