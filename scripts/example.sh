@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The main job on the bundled examples: builds robotid and simulates every
-# example in fixtures/sims into fixtures/recordings (deterministic: the
-# files match fixtures/recordings.sha256).
+# The main job on the bundled examples: builds robotid, simulates every
+# example in fixtures/sims into fixtures/recordings (bit-identical to
+# fixtures/recordings.sha256), then runs the preprocessing pipelines of
+# fixtures/pipelines on them, and on the real KUKA LWR4+ recordings in
+# ../shared/realdata when they are there, into out/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --locked -p robotid
@@ -10,3 +12,9 @@ for sim in fixtures/sims/*.toml; do
   name=$(basename "$sim" .toml)
   "$bin" simulate "$sim" --out "fixtures/recordings/$name"
 done
+for p in kuka_axis3 arm3 ur5 validation; do
+  "$bin" run "fixtures/pipelines/$p.toml" --out "out/$p" --timings
+done
+if [ -d ../shared/realdata/kuka_lwr4 ]; then
+  "$bin" run fixtures/pipelines/kuka_lwr4.toml --out out/kuka_lwr4 --timings
+fi

@@ -1,0 +1,250 @@
+//! Pipelines end to end on freshly simulated recordings, laid out as in
+//! fixtures/ (robots/, pipelines/, recordings/) inside a temporary folder.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use robotid::check::{check, Tolerances};
+use robotid::plan::{parse, resolve};
+use robotid::run::{run, RunOptions};
+use robotid_schemas::{Kinematics, PeriodMean};
+use robotid_stages::dynamics::load_robot;
+use robotid_stages::formats::parquet::read_parquet;
+use robotid_stages::simulate::{provenance, simulate, write_simulation, SimConfig};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures")
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
+    }
+}
+
+/// robots/ and pipelines/ copied, the named simulations run into recordings/.
+fn workspace(sims: &[&str]) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&fixtures().join("robots"), &dir.path().join("robots"));
+    copy_dir(&fixtures().join("pipelines"), &dir.path().join("pipelines"));
+    copy_dir(&fixtures().join("sims"), &dir.path().join("sims"));
+    for s in sims {
+        let path = dir.path().join("sims").join(format!("{s}.toml"));
+        let (cfg, text) = SimConfig::load(&path).unwrap();
+        let model = load_robot(&cfg.robot).unwrap();
+        let sim = simulate(&cfg, &model, &provenance(&path, &text, &cfg.robot).unwrap()).unwrap();
+        write_simulation(
+            &dir.path().join("recordings").join(s),
+            &cfg.output.name,
+            &cfg.output.formats,
+            &sim,
+            &model,
+        )
+        .unwrap();
+    }
+    dir
+}
+
+fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<robotid::run::RecordingResult> {
+    let text = std::fs::read_to_string(file).unwrap();
+    let plan = parse(&text, file).unwrap();
+    let (model, logs, start) = resolve(&plan).unwrap();
+    run(
+        &plan,
+        model.as_ref(),
+        &logs,
+        start,
+        &RunOptions {
+            out: out.to_path_buf(),
+            threads,
+            progress: false,
+        },
+    )
+}
+
+fn bytes_of(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().display().to_string(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn example_pipelines_run_and_are_thread_count_independent() {
+    let ws = workspace(&["kuka_axis3", "arm3", "ur5", "kuka_axis3_validation"]);
+    for name in ["kuka_axis3", "arm3", "ur5", "validation"] {
+        let file = ws.path().join("pipelines").join(format!("{name}.toml"));
+        let one = ws.path().join("out1").join(name);
+        let two = ws.path().join("out2").join(name);
+        for (out, threads) in [(&one, 1), (&two, 2)] {
+            let results = run_pipeline(&file, out, Some(threads));
+            for r in &results {
+                assert!(r.outcome.is_ok(), "{name}: {:?}", r.outcome);
+            }
+        }
+        let (a, b) = (bytes_of(&one), bytes_of(&two));
+        assert!(!a.is_empty());
+        assert_eq!(a, b, "{name}: outputs differ between 1 and 2 threads");
+        // Against the pinned golden tables (`fixtures/regenerate.sh`): the
+        // run is deterministic, so only float-library differences between
+        // machines may show; 1e-9 relative leaves room for those alone.
+        let report = check(&one, &fixtures().join("golden").join(name), &Tolerances::default());
+        assert!(
+            report.passed(),
+            "{name}: differs from fixtures/golden (run `bash fixtures/regenerate.sh` after an intended change): {:?} {:?}",
+            report.problems,
+            report.columns.iter().take(3).collect::<Vec<_>>()
+        );
+        assert!(
+            report.columns.len() >= 3,
+            "{name}: {} columns compared",
+            report.columns.len()
+        );
+    }
+    // The KUKA run: steady periods, provenance in the metadata.
+    let pm = read_parquet(&ws.path().join("out1/kuka_axis3/kuka_axis3/period_mean.parquet")).unwrap();
+    let md = pm.schema().metadata().clone();
+    assert_eq!(md.get("robotid.periods").map(String::as_str), Some("6"));
+    assert_eq!(md.get("robotid.period_s").map(String::as_str), Some("10"));
+    assert_eq!(md.get("robotid.harmonics").map(String::as_str), Some("1,2,3,4,5"));
+    assert_eq!(
+        md.get("robotid.source_file").map(String::as_str),
+        Some("kuka_axis3.mcap")
+    );
+    assert_eq!(md.get("robotid.config_sha256").map(String::len), Some(64));
+    assert_eq!(pm.num_rows(), 1500);
+    let f = pm.schema().field_with_name("torque_a3").unwrap().clone();
+    assert_eq!(f.metadata().get("unit").map(String::as_str), Some("N*m"));
+}
+
+#[test]
+fn a_failing_recording_writes_nothing_and_others_go_on() {
+    let ws = workspace(&["kuka_axis3"]);
+    let rec = ws.path().join("recordings/kuka_axis3");
+    // A second log beside the good one, truncated.
+    let bytes = std::fs::read(rec.join("kuka_axis3.mcap")).unwrap();
+    std::fs::write(rec.join("broken.mcap"), &bytes[..bytes.len() / 3]).unwrap();
+    let file = ws.path().join("pipelines/kuka_axis3.toml");
+    let text = std::fs::read_to_string(&file)
+        .unwrap()
+        .replace("kuka_axis3/kuka_axis3.mcap", "kuka_axis3/*.mcap");
+    std::fs::write(&file, text).unwrap();
+    let out = ws.path().join("out");
+    let results = run_pipeline(&file, &out, None);
+    assert_eq!(results.len(), 2);
+    let broken = results.iter().find(|r| r.name == "broken").unwrap();
+    let err = broken.outcome.as_ref().unwrap_err();
+    assert!(
+        err.contains("broken.mcap") && (err.contains("truncated") || err.contains("corrupt")),
+        "{err}"
+    );
+    assert!(!out.join("broken").exists(), "no output for a failed recording");
+    assert!(out.join("kuka_axis3/kinematics.parquet").exists());
+    // Inputs are untouched.
+    assert_eq!(std::fs::read(rec.join("kuka_axis3.mcap")).unwrap(), bytes);
+}
+
+#[test]
+fn a_pipeline_can_start_from_an_averaged_table() {
+    let ws = workspace(&["kuka_axis3"]);
+    let out = ws.path().join("out");
+    run_pipeline(&ws.path().join("pipelines/kuka_axis3.toml"), &out, None);
+    let chained = ws.path().join("pipelines/chained.toml");
+    std::fs::write(
+        &chained,
+        "version = 1\n[read]\njoints = [\"a3\"]\n[source]\npath = \"../out/kuka_axis3/period_mean.parquet\"\n[[stage]]\nkind = \"differentiate\"\nmethod = \"fourier_fit\"\n[output]\ntables = [\"kinematics\"]\n",
+    )
+    .unwrap();
+    let out2 = ws.path().join("out2");
+    let r = run_pipeline(&chained, &out2, None);
+    assert!(r[0].outcome.is_ok(), "{:?}", r[0].outcome);
+    let a = Kinematics::from_record_batch(&read_parquet(&out.join("kuka_axis3/kinematics.parquet")).unwrap()).unwrap();
+    let b =
+        Kinematics::from_record_batch(&read_parquet(&out2.join("period_mean/kinematics.parquet")).unwrap()).unwrap();
+    assert_eq!(a.qdd, b.qdd);
+    let pm =
+        PeriodMean::from_record_batch(&read_parquet(&out.join("kuka_axis3/period_mean.parquet")).unwrap()).unwrap();
+    assert_eq!(pm.torque, b.torque.unwrap());
+}
+
+#[test]
+fn validate_reports_every_problem_with_its_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "version = 2\n[source]\npath = \"x.mcap\"\n[read]\neffort = { column = \"c\", unit = \"furlong\" }\n[[stage]]\nkind = \"alin\"\n[[stage]]\nkind = \"align\"\ncolour = 1\n[[stage]]\nkind = \"differentiate\"\nmethod = \"fourier_fit\"\nbandwidth_hz = 2.0\n[output]\ntables = [\"bogus\"]\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_robotid"))
+        .arg("validate")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    for needle in [
+        "6 problem(s)",
+        "version 2",
+        "unknown effort unit `furlong`",
+        "stage 1 (`alin`, line 6): unknown variant `alin`",
+        "stage 2 (`align`, line 8): unknown field `colour`",
+        "stage 3 (`differentiate`, line 11): bandwidth_hz applies to method = \"dft\"",
+        "unknown table `bogus`",
+    ] {
+        assert!(err.contains(needle), "missing `{needle}` in {err}");
+    }
+    // Context: a chain that does not fit, a missing source.
+    std::fs::write(
+        &bad,
+        "version = 1\n[read]\njoints = [\"a\"]\n[source]\npath = \"none/*.csv\"\n[[stage]]\nkind = \"average\"\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_robotid"))
+        .arg("validate")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("names no log file") && err.contains("stage 1 (`average`) needs Periods"),
+        "{err}"
+    );
+}
+
+#[test]
+fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
+    let file = fixtures().join("pipelines/kuka_lwr4.toml");
+    let out = tempfile::tempdir().unwrap();
+    let results = run_pipeline(&file, out.path(), None);
+    assert_eq!(results.len(), 3);
+    for r in &results {
+        let o = r.outcome.as_ref().unwrap_or_else(|e| panic!("{}: {e}", r.name));
+        assert_eq!(o.periods_found, Some(2), "{}", r.name);
+        assert_eq!(
+            o.periods_kept,
+            Some(1),
+            "{}: the first period holds the start-up transient",
+            r.name
+        );
+        assert!(o.notes.iter().any(|n| n.contains("only one full steady period")));
+        assert!(o.notes.iter().any(|n| n.contains("resampled")));
+        let t = o.noise.iter().find(|c| c.channel == "torque").unwrap();
+        assert!(t.var_time.is_nan() && t.var_freq > 0.0);
+    }
+}
