@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use robotid_schemas::TableKind;
 use robotid_stages::align::AlignConfig;
+use robotid_stages::decimate::DecimateConfig;
 use robotid_stages::differentiate::{DifferentiateConfig, Method};
 use robotid_stages::dynamics::{load_robot, Model};
 use robotid_stages::inverse_filter::InverseFilterConfig;
@@ -51,6 +52,7 @@ pub struct OutputConfig {
 pub enum StageConfig {
     Align(AlignConfig),
     InverseFilter(InverseFilterConfig),
+    Decimate(DecimateConfig),
     Average(NoOptions),
     Noise(NoiseConfig),
     Differentiate(DifferentiateConfig),
@@ -82,6 +84,7 @@ impl StageConfig {
         match self {
             StageConfig::Align(_) => "align",
             StageConfig::InverseFilter(_) => "inverse_filter",
+            StageConfig::Decimate(_) => "decimate",
             StageConfig::Average(_) => "average",
             StageConfig::Noise(_) => "noise",
             StageConfig::Differentiate(_) => "differentiate",
@@ -93,9 +96,10 @@ impl StageConfig {
         match self {
             StageConfig::Align(_) => (&[Data::Raw], Some(Data::Periods)),
             // Periodic (after align) or record mode (before it): either input.
-            StageConfig::InverseFilter(_) => (&[], None),
+            StageConfig::InverseFilter(_) | StageConfig::Decimate(_) => (&[], None),
             StageConfig::Average(_) => (&[Data::Periods], Some(Data::PeriodMean)),
             StageConfig::Noise(_) => (&[Data::Periods, Data::PeriodMean], Some(Data::Noise)),
+            StageConfig::Differentiate(c) if c.method == Method::Filtered => (&[Data::Raw], Some(Data::Kinematics)),
             StageConfig::Differentiate(_) => (&[Data::PeriodMean], Some(Data::Kinematics)),
         }
     }
@@ -104,12 +108,9 @@ impl StageConfig {
         match self {
             StageConfig::Align(c) => c.check(),
             StageConfig::InverseFilter(c) => c.check(),
+            StageConfig::Decimate(c) => c.check(),
             StageConfig::Average(_) | StageConfig::Noise(_) => Ok(()),
-            StageConfig::Differentiate(c) => match (c.method, c.bandwidth_hz) {
-                (Method::FourierFit, Some(_)) => Err("bandwidth_hz applies to method = \"dft\"".into()),
-                (_, Some(b)) if !(b > 0.0) => Err("bandwidth_hz must be > 0".into()),
-                _ => Ok(()),
-            },
+            StageConfig::Differentiate(c) => c.check(),
         }
     }
 }
@@ -209,7 +210,7 @@ pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) ->
         for need in needs {
             if !have.contains(need) {
                 problems.push(format!(
-                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, average, noise, differentiate)",
+                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate)",
                     i + 1,
                     s.name(),
                     need

@@ -13,7 +13,8 @@ use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, PeriodMean, RawSamples, TableKind};
 use robotid_stages::align::{align, Periods};
 use robotid_stages::average::average;
-use robotid_stages::differentiate::{differentiate, Method};
+use robotid_stages::decimate::{decimate_periods, decimate_record};
+use robotid_stages::differentiate::{differentiate, differentiate_record, Method};
 use robotid_stages::dynamics::Model;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::inverse_filter::{inverse_filter_periods, inverse_filter_record};
@@ -183,18 +184,28 @@ fn run_one(
             StageConfig::InverseFilter(c) => match (&mut st.periods, &mut st.raw) {
                 (Some(p), _) => inverse_filter_periods(p, c, spectra).map_err(fail)?,
                 (None, Some(raw)) => {
-                    let fs = raw
-                        .metadata
-                        .get(metadata::SAMPLE_RATE_HZ)
-                        .and_then(|v| v.parse().ok())
-                        .unwrap_or_else(|| (raw.len() - 1) as f64 / (raw.time[raw.len() - 1] - raw.time[0]));
-                    inverse_filter_record(raw, fs, c, spectra).map_err(fail)?;
+                    inverse_filter_record(raw, record_rate(raw), c, spectra).map_err(fail)?;
                     outcome.notes.push(
                         "inverse filter on a non-periodic record: approximate within a few filter time constants of both ends".into(),
                     );
                 }
                 (None, None) => return Err(fail("no samples to filter".into())),
             },
+            StageConfig::Decimate(c) => match (&mut st.periods, &mut st.raw) {
+                (Some(p), _) => decimate_periods(p, c, spectra).map_err(fail)?,
+                (None, Some(raw)) => {
+                    decimate_record(raw, record_rate(raw), c, spectra).map_err(fail)?;
+                    outcome
+                        .notes
+                        .push("decimated a non-periodic record: approximate near both ends".into());
+                }
+                (None, None) => return Err(fail("no samples to decimate".into())),
+            },
+            StageConfig::Differentiate(c) if c.method == Method::Filtered => {
+                let raw = st.raw.as_ref().expect("chain checked");
+                let filter = c.filter.as_ref().expect("checked");
+                st.kinematics = Some(differentiate_record(raw, record_rate(raw), filter, spectra).map_err(fail)?);
+            }
             StageConfig::Average(_) => {
                 let p = st.periods.as_ref().expect("chain checked");
                 let (mean, _drift) = average(p);
@@ -212,7 +223,7 @@ fn run_one(
                 let mean = st.mean.as_ref().expect("chain checked");
                 let h = match c.method {
                     Method::FourierFit => harmonics(c.harmonics.as_ref(), &mean.metadata).map_err(fail)?,
-                    Method::Dft => Vec::new(),
+                    Method::Dft | Method::Filtered => Vec::new(),
                 };
                 let period = mean
                     .metadata
@@ -291,4 +302,12 @@ fn harmonics(given: Option<&Vec<u32>>, md: &BTreeMap<String, String>) -> Result<
                 .map_err(|_| format!("bad harmonics `{text}` in the recording's metadata"))
         })
         .collect()
+}
+
+/// A record's sample rate: its metadata's, else from its span.
+fn record_rate(raw: &RawSamples) -> f64 {
+    raw.metadata
+        .get(metadata::SAMPLE_RATE_HZ)
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| (raw.len() - 1) as f64 / (raw.time[raw.len() - 1] - raw.time[0]))
 }

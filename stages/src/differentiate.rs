@@ -25,6 +25,8 @@ use crate::signal::Spectra;
 pub enum Method {
     FourierFit,
     Dft,
+    /// Non-periodic records: zero-phase low-pass and differentiation.
+    Filtered,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,6 +37,24 @@ pub struct DifferentiateConfig {
     pub harmonics: Option<Vec<u32>>,
     /// Band limit of the `dft` method, Hz.
     pub bandwidth_hz: Option<f64>,
+    /// Low-pass of the `filtered` method, applied forward and backward
+    /// (|H|², zero phase) to positions and torques alike, so that the
+    /// regressor's columns and its right-hand side see the same filter.
+    pub filter: Option<crate::signal::FilterSpec>,
+}
+
+impl DifferentiateConfig {
+    pub fn check(&self) -> Result<(), String> {
+        match (self.method, self.bandwidth_hz, &self.filter) {
+            (Method::Dft, Some(b), None) if !(b > 0.0) => Err("bandwidth_hz must be > 0".into()),
+            (Method::Dft, _, None) => Ok(()),
+            (Method::FourierFit, None, None) => Ok(()),
+            (Method::Filtered, None, Some(f)) => f.check(),
+            (Method::Filtered, _, _) => Err("method = \"filtered\" needs `filter` (and no bandwidth_hz)".into()),
+            (_, _, Some(_)) => Err("`filter` applies to method = \"filtered\"".into()),
+            (Method::FourierFit, Some(_), _) => Err("bandwidth_hz applies to method = \"dft\"".into()),
+        }
+    }
 }
 
 /// Differentiates the averaged positions. `harmonics` are used by
@@ -56,6 +76,7 @@ pub fn differentiate(
                 let nyquist = n.is_multiple_of(2) && k == n / 2;
                 !nyquist && bandwidth_hz.is_none_or(|b| k as f64 / period_s <= b)
             }
+            Method::Filtered => unreachable!("non-periodic: differentiate_record"),
         }
     };
     let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
@@ -82,6 +103,7 @@ pub fn differentiate(
         match method {
             Method::FourierFit => "fourier_fit",
             Method::Dft => "dft",
+            Method::Filtered => "filtered",
         }
         .into(),
     );
@@ -132,4 +154,35 @@ pub fn fit_reference(time: &[f64], q: &[f64], period_s: f64, harmonics: &[u32]) 
         }
     }
     (p, v, acc)
+}
+
+/// Non-periodic records (Swevers' validation data): positions and torques
+/// through the zero-phase low-pass |H|², velocities and accelerations as
+/// its product with jω and −ω², all on the mirror-extended record
+/// (approximate near ends that are not at rest).
+pub fn differentiate_record(
+    raw: &robotid_schemas::RawSamples,
+    fs: f64,
+    filter: &crate::signal::FilterSpec,
+    spectra: &Spectra,
+) -> Result<Kinematics, String> {
+    use crate::signal::{apply_spectral, derivative_gain, AnalogFilter};
+    let f = AnalogFilter::new(*filter)?;
+    let low = |hz: f64| Complex64::new(f.response(hz).norm_sqr(), 0.0);
+    let d1 = |hz: f64| low(hz) * derivative_gain(hz);
+    let d2 = |hz: f64| low(hz) * derivative_gain(hz) * derivative_gain(hz);
+    let run = |g: &dyn Fn(f64) -> Complex64, cols: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        cols.iter().map(|c| apply_spectral(c, fs, false, g, spectra)).collect()
+    };
+    let mut md = raw.metadata.clone();
+    md.insert("robotid.differentiation".into(), "filtered".into());
+    Ok(Kinematics {
+        joints: raw.joints.clone(),
+        time: raw.time.clone(),
+        q: run(&low, &raw.q),
+        qd: run(&d1, &raw.q),
+        qdd: run(&d2, &raw.q),
+        torque: Some(run(&low, &raw.effort)),
+        metadata: md,
+    })
 }

@@ -9,19 +9,17 @@
 //! sampling rate (≈1e-4 relative for Coulomb-friction kinks, see the
 //! simulator's spectrum test).
 //!
-//! Non-periodic data (no `align` before it): the same division on the DFT
-//! of the record extended by its mirror image at both ends (one second or
-//! the whole record, whichever is shorter), which keeps the extension
-//! continuous and moves the circular wrap-around away from the data; within
-//! a few filter time constants (≈ order / (2π·cutoff)) of either end the
-//! result is approximate.
+//! Non-periodic data (no `align` before it): the same division on the
+//! mirror-extended record (`signal::apply_spectral`); within a few filter
+//! time constants (≈ order / (2π·cutoff)) of either end the result is
+//! approximate.
 
 use robotid_schemas::RawSamples;
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use crate::align::Periods;
-use crate::signal::{AnalogFilter, FilterSpec, Spectra};
+use crate::signal::{apply_spectral, AnalogFilter, FilterSpec, Spectra};
 
 /// A filter by its zeros, poles (rad/s, `[re, im]`) and gain:
 /// H(s) = gain · Π(s − z) / Π(s − p).
@@ -89,29 +87,24 @@ impl InverseFilterConfig {
     }
 }
 
-/// Divides the spectrum of `x` (sampled at `fs`) by H up to `bandwidth`,
-/// zeroing the lines above it.
-fn divide(x: &[f64], fs: f64, bandwidth: f64, h: &dyn Fn(f64) -> Complex64, spectra: &Spectra) -> Vec<f64> {
-    let n = x.len();
-    let mut spec = spectra.forward(x);
-    let df = fs / n as f64;
-    for (k, line) in spec.iter_mut().enumerate() {
-        let f = k as f64 * df;
-        *line = if f <= bandwidth {
-            *line / h(f)
+/// 1/H up to `bandwidth`, 0 above.
+fn inverse_gain(h: &dyn Fn(f64) -> Complex64, bandwidth: f64) -> impl Fn(f64) -> Complex64 + '_ {
+    move |f| {
+        if f <= bandwidth {
+            Complex64::new(1.0, 0.0) / h(f)
         } else {
             Complex64::new(0.0, 0.0)
-        };
+        }
     }
-    spectra.inverse(&spec, n)
 }
 
 /// Inverse-filters the torque of whole periods, in place.
 pub fn inverse_filter_periods(p: &mut Periods, cfg: &InverseFilterConfig, spectra: &Spectra) -> Result<(), String> {
     let h = cfg.response()?;
     let fs = p.sample_rate_hz();
+    let gain = inverse_gain(&*h, cfg.bandwidth_hz);
     for col in &mut p.torque {
-        *col = divide(col, fs, cfg.bandwidth_hz, &*h, spectra);
+        *col = apply_spectral(col, fs, true, &gain, spectra);
     }
     p.metadata.insert(
         "robotid.inverse_filter_bandwidth_hz".into(),
@@ -128,18 +121,12 @@ pub fn inverse_filter_record(
     spectra: &Spectra,
 ) -> Result<(), String> {
     let h = cfg.response()?;
-    let n = raw.len();
-    if n < 2 {
+    if raw.len() < 2 {
         return Err("too few samples to filter".into());
     }
-    let e = (fs.ceil() as usize).min(n - 1);
+    let gain = inverse_gain(&*h, cfg.bandwidth_hz);
     for col in &mut raw.effort {
-        let mut ext = Vec::with_capacity(n + 2 * e);
-        ext.extend(col[1..=e].iter().rev());
-        ext.extend_from_slice(col);
-        ext.extend(col[n - 1 - e..n - 1].iter().rev());
-        let out = divide(&ext, fs, cfg.bandwidth_hz, &*h, spectra);
-        col.copy_from_slice(&out[e..e + n]);
+        *col = apply_spectral(col, fs, false, &gain, spectra);
     }
     raw.metadata.insert(
         "robotid.inverse_filter_bandwidth_hz".into(),

@@ -2,6 +2,7 @@
 
 pub mod align;
 pub mod average;
+pub mod decimate;
 pub mod differentiate;
 pub mod dynamics;
 mod error;
@@ -11,6 +12,7 @@ pub mod noise;
 pub mod read;
 pub mod signal;
 pub mod simulate;
+pub mod synthetic;
 pub mod trajectory;
 
 pub use error::{toml_message as error_message_of_toml, Error, Result};

@@ -179,14 +179,17 @@ fn kuka_axis3_chain_recovers_the_truth() {
         ];
         let raw = [rms(&k.q[0], &tq), rms(&k.qd[0], &tqd), rms(&k.qdd[0], &tqdd)];
         println!("{name}: vs truth on the same lines q {:.2e} rad, qd {:.2e} rad/s, qdd {:.2e} rad/s^2 (bounds {:.1e}, {:.1e}, {:.1e}); vs raw truth {:.1e}, {:.1e}, {:.1e}", e[0], e[1], e[2], bound(0), bound(1), bound(2), raw[0], raw[1], raw[2]);
-        // Positions: noise only. Velocities: the sampled truth q̇ also carries
-        // aliased harmonics of the friction kinks (measured ≈ 2× the noise
-        // bound), hence 10×. Accelerations: the aliased q̈ jumps dominate the
-        // projected truth (≈2 % of the signal); the stage's exactness for q̈
-        // is shown on closed-form signals below.
-        assert!(e[0] < bound(0), "{name}: q {:e} vs {:e}", e[0], bound(0));
-        assert!(e[1] < 10.0 * bound(1), "{name}: qd {:e} vs {:e}", e[1], bound(1));
-        assert!(e[2] < 0.05 * rms(&tqdd, &vec![0.0; n]), "{name}: qdd {:e}", e[2]);
+        // Noise only: the simulated plant's Coulomb term is smooth
+        // (tanh, 0.01 rad/s), so the sampled truth carries no aliased
+        // friction chatter.
+        for d in 0..3 {
+            assert!(
+                e[d] < bound(d as i32),
+                "{name}: derivative {d}: {:e} vs {:e}",
+                e[d],
+                bound(d as i32)
+            );
+        }
         // Against the raw truth, the tracking error outside the lines.
         assert!(raw[0] < 1e-3 && raw[1] < 1.5e-2, "{name}: {raw:?}");
     }
@@ -320,4 +323,102 @@ fn frictionless_axis_derivatives_match_the_raw_truth() {
     // 0.59 rad/s, 0.79 rad/s²), against 1 % and 32 % for q̇ and q̈ with
     // friction.
     assert!(e[0] < 1e-3 && e[1] < 5e-3 && e[2] < 2e-2, "{e:?}");
+}
+
+/// Decimation of whole periods keeps content well below the cutoff: a sum
+/// of sines at ≤ 0.5 Hz through |H|² of a 4th-order Butterworth at 20 Hz
+/// loses at most 1 − 1/(1 + (0.5/20)⁸) ≈ 2e-13, so the decimated samples
+/// equal the sines at the coarse instants to round-off.
+#[test]
+fn decimating_whole_periods_keeps_the_band() {
+    use robotid_stages::decimate::{decimate_periods, DecimateConfig};
+    use robotid_stages::signal::{FilterFamily, FilterSpec};
+    let (mut cfg, model, mut s) = sim("sims/kuka_axis3.toml", |c| {
+        c.measurement.position_noise_std_rad = Default::default()
+    });
+    cfg.measurement.quantise = false;
+    let _ = &cfg;
+    to_torque(&mut s, &model);
+    let spectra = Spectra::new();
+    let n = 1500;
+    let f = |t: f64| (0.2 * std::f64::consts::PI * t).sin() + 0.3 * (std::f64::consts::PI * t).cos();
+    let mut p = align(&s.raw, &AlignConfig::default(), "k").unwrap();
+    let dt = 10.0 / n as f64;
+    p.q[0] = (0..p.q[0].len()).map(|i| f(i as f64 * dt)).collect();
+    let dc = DecimateConfig {
+        filter: FilterSpec {
+            family: FilterFamily::Butterworth,
+            order: 4,
+            cutoff_hz: 20.0,
+            ripple_db: None,
+        },
+        factor: 3,
+    };
+    decimate_periods(&mut p, &dc, &spectra).unwrap();
+    assert_eq!(p.samples_per_period, 500);
+    let worst = p.q[0]
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v - f(i as f64 * 3.0 * dt)).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-12, "{worst}");
+    // A cutoff above the new Nyquist frequency is refused.
+    let bad = DecimateConfig { factor: 5, ..dc };
+    let e = decimate_periods(&mut p, &bad, &spectra).unwrap_err();
+    assert!(e.contains("Nyquist") || e.contains("divide"), "{e}");
+}
+
+/// Non-periodic differentiation (Swevers' Approach II for validation data)
+/// on the simulator's waypoint run, noise-free: a 2nd-order Butterworth at
+/// 5 Hz applied forward and backward attenuates the motion's content
+/// (mostly below 1 Hz) by at most 1 − 1/(1 + (1/5)⁴) ≈ 1.6e-3. The Coulomb
+/// jumps of q̈ at every start and stop (C/J ≈ 1.9 rad/s², as large as the
+/// motion's own q̈) are what the filter removes on purpose, so q̈ is
+/// compared with the truth through the same zero-phase filter: the
+/// derivative of the filtered position equals the filtered derivative.
+#[test]
+fn filtered_differentiation_of_a_validation_run() {
+    use robotid_stages::differentiate::differentiate_record;
+    use robotid_stages::signal::{FilterFamily, FilterSpec};
+    let (_, _, s) = sim("sims/kuka_axis3_validation.toml", |_| {});
+    // Holding still, the smooth Coulomb term keeps the plant from chattering.
+    let rest: Vec<f64> = s.truth.qd[0]
+        .iter()
+        .zip(&s.truth.qdd[0])
+        .filter(|(v, _)| v.abs() < 1e-3)
+        .map(|(_, a)| a.abs())
+        .collect();
+    let mean_rest = rest.iter().sum::<f64>() / rest.len().max(1) as f64;
+    assert!(
+        rest.len() > 100 && mean_rest < 0.05,
+        "{} samples at rest, mean |qdd| {mean_rest}",
+        rest.len()
+    );
+    let mut raw = s.raw.clone();
+    raw.q = s.truth.q.clone();
+    raw.effort = s.truth.torque.clone();
+    let spec = FilterSpec {
+        family: FilterFamily::Butterworth,
+        order: 2,
+        cutoff_hz: 5.0,
+        ripple_db: None,
+    };
+    let k = differentiate_record(&raw, 150.0, &spec, &Spectra::new()).unwrap();
+    let rel = |a: &[f64], b: &[f64]| rms(a, b) / rms(b, &vec![0.0; b.len()]);
+    let e = [
+        rel(&k.q[0], &s.truth.q[0]),
+        rel(&k.qd[0], &s.truth.qd[0]),
+        rel(&k.qdd[0], &s.truth.qdd[0]),
+    ];
+    let f = robotid_stages::signal::AnalogFilter::new(spec).unwrap();
+    let low = |hz: f64| rustfft::num_complex::Complex64::new(f.response(hz).norm_sqr(), 0.0);
+    let filtered_truth = robotid_stages::signal::apply_spectral(&s.truth.qdd[0], 150.0, false, &low, &Spectra::new());
+    let e_f = rel(&k.qdd[0], &filtered_truth);
+    println!(
+        "filtered differentiation, relative RMS error: q {:.1e}, qd {:.1e}, qdd {:.1e} (vs the filtered truth {e_f:.1e})",
+        e[0], e[1], e[2]
+    );
+    // What is left against the filtered truth is the sampled truth's own
+    // aliasing of the fast friction transitions.
+    assert!(e[0] < 1e-4 && e[1] < 2e-3 && e_f < 1e-2, "{e:?} {e_f}");
 }

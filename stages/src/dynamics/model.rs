@@ -53,6 +53,9 @@ impl Inertial {
 /// Joint friction, joint side (Bona eq. 2): for q̇ > 0 the torque is
 /// `viscous_pos·q̇ + coulomb_pos`, for q̇ < 0 `viscous_neg·q̇ − coulomb_neg`,
 /// zero at rest; `offset` is added always. Coulomb values are magnitudes (≥ 0).
+/// With `transition` > 0 the Coulomb term is smooth: it follows
+/// tanh(q̇ / transition) instead of sign(q̇) (simulation, prediction near
+/// zero velocity).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Friction {
     /// N·m·s/rad
@@ -65,6 +68,8 @@ pub struct Friction {
     pub coulomb_neg: f64,
     /// N·m
     pub offset: f64,
+    /// Coulomb transition velocity, rad/s (0: exact sign).
+    pub transition: f64,
 }
 
 impl Friction {
@@ -75,12 +80,22 @@ impl Friction {
             coulomb_pos: coulomb,
             coulomb_neg: coulomb,
             offset: 0.0,
+            transition: 0.0,
         }
     }
 
     /// Friction torque at joint velocity `qd` (rad/s), N·m.
     #[inline]
     pub fn torque(&self, qd: f64) -> f64 {
+        if self.transition > 0.0 {
+            let s = (qd / self.transition).tanh();
+            let (viscous, coulomb) = if qd >= 0.0 {
+                (self.viscous_pos, self.coulomb_pos)
+            } else {
+                (self.viscous_neg, self.coulomb_neg)
+            };
+            return self.offset + viscous * qd + coulomb * s;
+        }
         self.offset
             + if qd > 0.0 {
                 self.viscous_pos * qd + self.coulomb_pos

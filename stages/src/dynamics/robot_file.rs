@@ -54,6 +54,7 @@ struct JointEntry {
     coulomb_pos: Option<f64>,
     coulomb_neg: Option<f64>,
     offset: Option<f64>,
+    coulomb_transition: Option<f64>,
     limits: Option<LimitsEntry>,
 }
 
@@ -259,6 +260,12 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     f.coulomb_neg = pick(e.coulomb, e.coulomb_neg, "coulomb", f.coulomb_neg)?;
     if let Some(v) = e.offset {
         f.offset = v;
+    }
+    if let Some(v) = e.coulomb_transition {
+        if !(v >= 0.0) {
+            return Err("coulomb_transition must be ≥ 0".into());
+        }
+        f.transition = v;
     }
     if let Some(lim) = &e.limits {
         if let Some([lo, hi]) = lim.position {

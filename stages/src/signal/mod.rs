@@ -1,7 +1,9 @@
 //! Signal-processing cores shared by the stages and the simulator.
 
 pub mod analog_filter;
+pub mod spectral_filter;
 pub mod spectrum;
 
 pub use analog_filter::{AnalogFilter, FilterFamily, FilterSpec};
+pub use spectral_filter::{apply_spectral, derivative_gain};
 pub use spectrum::{naive_dft, Spectra};

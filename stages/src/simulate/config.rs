@@ -26,7 +26,33 @@ pub struct SimConfig {
     #[serde(default)]
     pub disturbance: Disturbance,
     #[serde(default)]
+    pub plant: PlantConfig,
+    #[serde(default)]
     pub output: OutputConfig,
+}
+
+/// How the simulated robot differs from its description.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantConfig {
+    /// Coulomb transition velocity, rad/s, for joints whose robot file sets
+    /// none: exact sign(q̇) friction chatters at the integration rate
+    /// whenever the controller holds a joint still; tanh(q̇/v) with v ≳
+    /// C·h/J does not. 0 keeps the exact sign.
+    #[serde(default = "default_transition")]
+    pub coulomb_transition_rad_s: f64,
+}
+
+fn default_transition() -> f64 {
+    0.01
+}
+
+impl Default for PlantConfig {
+    fn default() -> Self {
+        PlantConfig {
+            coulomb_transition_rad_s: default_transition(),
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -257,6 +283,9 @@ impl SimConfig {
             if let Err(e) = f.check() {
                 errs.push(format!("measurement.filter: {e}"));
             }
+        }
+        if !(self.plant.coulomb_transition_rad_s >= 0.0) {
+            errs.push("plant.coulomb_transition_rad_s must be ≥ 0".into());
         }
         if self.output.formats.is_empty() {
             errs.push("output.formats is empty".into());

@@ -15,7 +15,9 @@ mod plant;
 mod run;
 mod truth;
 
-pub use config::{ControllerConfig, Disturbance, Measurement, OutputConfig, OutputFormat, PerJoint, SimConfig, Timing};
+pub use config::{
+    ControllerConfig, Disturbance, Measurement, OutputConfig, OutputFormat, PerJoint, PlantConfig, SimConfig, Timing,
+};
 pub use output::{provenance, write_simulation, WrittenFiles};
 pub use plant::{Gains, Plant, Reference};
 pub use run::{simulate, Simulation};

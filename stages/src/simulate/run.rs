@@ -40,6 +40,13 @@ fn stream(seed: u64, id: u64) -> ChaCha8Rng {
 /// schema metadata (config file name and hash, …).
 pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, String>) -> Result<Simulation> {
     let n = model.dof();
+    let mut plant_model = model.clone();
+    for f in &mut plant_model.friction {
+        if f.transition == 0.0 {
+            f.transition = cfg.plant.coulomb_transition_rad_s;
+        }
+    }
+    let model = &plant_model;
     let invalid = |msg: String| Error::Invalid(msg);
     if cfg.trajectory.dof() != n {
         return Err(invalid(format!(

@@ -101,6 +101,8 @@ pub struct JointTruth {
     pub coulomb_pos: f64,
     pub coulomb_neg: f64,
     pub offset: f64,
+    /// Coulomb transition velocity of the simulated plant, rad/s (0: sign)
+    pub coulomb_transition_rad_s: f64,
     /// std of the Gaussian noise added before quantisation, rad
     pub position_noise_std_rad: f64,
     /// one encoder count at the joint, rad (0: not quantised)
@@ -183,6 +185,7 @@ pub(crate) fn joint_truths(
                 coulomb_pos: f.coulomb_pos,
                 coulomb_neg: f.coulomb_neg,
                 offset: f.offset,
+                coulomb_transition_rad_s: f.transition,
                 position_noise_std_rad: pos_std[i],
                 position_quantum_rad: if quantise { d.radians_per_count() } else { 0.0 },
                 current_noise_std_a: cur_std[i],

@@ -1,0 +1,51 @@
+//! Each preprocessing stage on a synthetic 10-minute, 6-joint, 1 kHz
+//! recording (600 k samples per channel); throughput in samples per second.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use robotid_stages::align::{align, AlignConfig};
+use robotid_stages::average::average;
+use robotid_stages::differentiate::{differentiate, Method};
+use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::noise::noise;
+use robotid_stages::signal::{FilterFamily, FilterSpec, Spectra};
+use robotid_stages::synthetic::synthetic_recording;
+
+fn stages(c: &mut Criterion) {
+    let raw = synthetic_recording(6, 1000.0, 600.0, 10.0, 1);
+    let samples = raw.len() as u64;
+    let spectra = Spectra::new();
+    let cfg = AlignConfig::default();
+    let periods = align(&raw, &cfg, "bench").unwrap();
+    let ifc = InverseFilterConfig {
+        filter: Some(FilterSpec {
+            family: FilterFamily::Chebyshev1,
+            order: 8,
+            cutoff_hz: 100.0,
+            ripple_db: Some(0.5),
+        }),
+        zpk: None,
+        bandwidth_hz: 100.0,
+    };
+    let (mean, _) = average(&periods);
+    let h = [1, 2, 3, 4, 5];
+    let mut g = c.benchmark_group("stages_6joints_600k");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(samples));
+    g.bench_function("align", |b| b.iter(|| align(&raw, &cfg, "bench").unwrap()));
+    g.bench_function("inverse_filter", |b| {
+        b.iter_batched(
+            || periods.clone(),
+            |mut p| inverse_filter_periods(&mut p, &ifc, &spectra).unwrap(),
+            criterion::BatchSize::LargeInput,
+        )
+    });
+    g.bench_function("average", |b| b.iter(|| average(&periods)));
+    g.bench_function("noise", |b| b.iter(|| noise(&periods, &mean, &h, &spectra)));
+    g.bench_function("differentiate_fourier_fit", |b| {
+        b.iter(|| differentiate(&mean, 10.0, Method::FourierFit, &h, None, &spectra))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, stages);
+criterion_main!(benches);
