@@ -19,6 +19,7 @@
 
 use std::collections::BTreeMap;
 
+use rayon::prelude::*;
 use robotid_schemas::{metadata, RawSamples, TorqueChannel};
 use serde::{Deserialize, Serialize};
 
@@ -136,8 +137,8 @@ impl Periods {
 }
 
 fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Aligns `raw` (from `source`, named in errors).
@@ -232,22 +233,37 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             format!("less than one full period: {span:.3} s of data, the period is {period} s"),
         ));
     }
-    let (q, torque, reference, grid0) = if on_grid {
-        let first = t.len() - m;
-        let cut = |c: &Vec<Vec<f64>>| c.iter().map(|v| v[first..].to_vec()).collect::<Vec<_>>();
-        (cut(&raw.q), cut(&raw.effort), raw.reference.as_ref().map(cut), t[first])
+    // On the grid the samples are used in place, from `first` on; off it
+    // they are resampled into owned columns. Either way only the kept
+    // periods are copied, once, at the end.
+    let mut owned: Option<(Vec<Vec<f64>>, Vec<Vec<f64>>, Option<Vec<Vec<f64>>>)> = None;
+    let (first, grid0) = if on_grid {
+        (t.len() - m, t[t.len() - m])
     } else {
         report.resampled = true;
         let t_end = t[t.len() - 1];
         let grid: Vec<f64> = (0..m).map(|j| t_end - (m - 1 - j) as f64 * dt).collect();
-        let res = |c: &Vec<Vec<f64>>| c.iter().map(|v| resample(t, v, &grid)).collect::<Vec<_>>();
+        let res = |c: &Vec<Vec<f64>>| c.par_iter().map(|v| resample(t, v, &grid)).collect::<Vec<_>>();
         report.resample_error_rad = Some(leave_one_out_error(t, &raw.q));
         report.notes.push(format!(
             "stamps jitter (steps {:.6}..{:.6} s, RMS {:.2e} s off a uniform grid): resampled onto {n} samples per period by cubic Hermite interpolation, leave-one-out position error {:.2e} rad; interpolation also lowers white-noise variance",
             min_step, max_step, jitter_rms, report.resample_error_rad.unwrap_or(0.0)
         ));
-        (res(&raw.q), res(&raw.effort), raw.reference.as_ref().map(res), grid[0])
+        owned = Some((res(&raw.q), res(&raw.effort), raw.reference.as_ref().map(res)));
+        (0, grid[0])
     };
+    fn view<'a>(resampled: Option<&'a Vec<Vec<f64>>>, src: &'a [Vec<f64>], first: usize) -> Vec<&'a [f64]> {
+        match resampled {
+            Some(cols) => cols.iter().map(Vec::as_slice).collect(),
+            None => src.iter().map(|v| &v[first..]).collect(),
+        }
+    }
+    let q = view(owned.as_ref().map(|o| &o.0), &raw.q, first);
+    let torque = view(owned.as_ref().map(|o| &o.1), &raw.effort, first);
+    let reference = raw
+        .reference
+        .as_ref()
+        .map(|r| view(owned.as_ref().and_then(|o| o.2.as_ref()), r, first));
     let whole = m / n;
     report.periods_found = whole;
 
@@ -340,7 +356,7 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
                 / scale
         })
         .collect();
-    let keep = |c: Vec<Vec<f64>>| c.into_iter().map(|v| v[from..].to_vec()).collect::<Vec<_>>();
+    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..].to_vec()).collect::<Vec<_>>();
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
     if kept == 1 {

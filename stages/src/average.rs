@@ -2,6 +2,7 @@
 //! the standard deviation across periods, and the drift between the first
 //! and last periods.
 
+use rayon::prelude::*;
 use robotid_schemas::PeriodMean;
 
 use crate::align::Periods;
@@ -41,8 +42,8 @@ pub fn average(p: &Periods) -> (PeriodMean, Drift) {
         let drift = (0..n).map(|i| (col[i] - col[(np - 1) * n + i]).powi(2)).sum::<f64>() / n as f64;
         (mean, spread, drift.sqrt())
     };
-    let q: Vec<_> = p.q.iter().map(stats).collect();
-    let t: Vec<_> = p.torque.iter().map(stats).collect();
+    let q: Vec<_> = p.q.par_iter().map(stats).collect();
+    let t: Vec<_> = p.torque.par_iter().map(stats).collect();
     let drift = Drift {
         q_rad: q.iter().map(|s| s.2).collect(),
         torque_nm: t.iter().map(|s| s.2).collect(),

@@ -14,12 +14,13 @@
 //! time constants (≈ order / (2π·cutoff)) of either end the result is
 //! approximate.
 
+use rayon::prelude::*;
 use robotid_schemas::RawSamples;
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use crate::align::Periods;
-use crate::signal::{apply_spectral, AnalogFilter, FilterSpec, Spectra};
+use crate::signal::{apply_table, extended_len, gain_table, AnalogFilter, FilterSpec, Spectra};
 
 /// A filter by its zeros, poles (rad/s, `[re, im]`) and gain:
 /// H(s) = gain · Π(s − z) / Π(s − p).
@@ -103,9 +104,11 @@ pub fn inverse_filter_periods(p: &mut Periods, cfg: &InverseFilterConfig, spectr
     let h = cfg.response()?;
     let fs = p.sample_rate_hz();
     let gain = inverse_gain(&*h, cfg.bandwidth_hz);
-    for col in &mut p.torque {
-        *col = apply_spectral(col, fs, true, &gain, spectra);
-    }
+    let len = p.torque.first().map_or(0, Vec::len);
+    let table = gain_table(extended_len(len, fs, true), fs, &gain);
+    p.torque
+        .par_iter_mut()
+        .for_each(|col| *col = apply_table(col, fs, true, &table, spectra));
     p.metadata.insert(
         "robotid.inverse_filter_bandwidth_hz".into(),
         cfg.bandwidth_hz.to_string(),
@@ -125,9 +128,10 @@ pub fn inverse_filter_record(
         return Err("too few samples to filter".into());
     }
     let gain = inverse_gain(&*h, cfg.bandwidth_hz);
-    for col in &mut raw.effort {
-        *col = apply_spectral(col, fs, false, &gain, spectra);
-    }
+    let table = gain_table(extended_len(raw.len(), fs, false), fs, &gain);
+    raw.effort
+        .par_iter_mut()
+        .for_each(|col| *col = apply_table(col, fs, false, &table, spectra));
     raw.metadata.insert(
         "robotid.inverse_filter_bandwidth_hz".into(),
         cfg.bandwidth_hz.to_string(),

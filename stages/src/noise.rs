@@ -17,6 +17,8 @@
 use robotid_schemas::{NoiseTable, PeriodMean};
 
 use crate::align::Periods;
+use rayon::prelude::*;
+
 use crate::signal::Spectra;
 
 /// Noise statistics of one channel (positions in rad², torques in N²m²).
@@ -42,22 +44,23 @@ pub fn noise(p: &Periods, mean: &PeriodMean, harmonics: &[u32], spectra: &Spectr
         .metadata
         .get("robotid.inverse_filter_bandwidth_hz")
         .and_then(|v| v.parse::<f64>().ok());
-    let mut summary = Vec::new();
-    let mut var_q = Vec::new();
-    let mut var_t = Vec::new();
-    for j in 0..p.joints.len() {
-        for (channel, col, spread, out) in [
-            ("q", &p.q[j], &mean.q_spread[j], &mut var_q),
-            ("torque", &p.torque[j], &mean.torque_spread[j], &mut var_t),
-        ] {
+    // One task per (joint, channel), in parallel; results in a fixed order.
+    let tasks: Vec<(usize, &'static str)> = (0..p.joints.len()).flat_map(|j| [(j, "q"), (j, "torque")]).collect();
+    let results: Vec<(ChannelNoise, Vec<f64>)> = tasks
+        .par_iter()
+        .map(|&(j, channel)| {
+            let (col, spread, mean_col) = if channel == "q" {
+                (&p.q[j], &mean.q_spread[j], &mean.q[j])
+            } else {
+                (&p.torque[j], &mean.torque_spread[j], &mean.torque[j])
+            };
             let per_sample: Vec<f64> = spread.iter().map(|s| s * s / np as f64).collect();
             let var_time = per_sample.iter().sum::<f64>() / n as f64;
-            // Only the position channel is never band-limited by the inverse filter.
+            // Only the torque is band-limited by the inverse filter.
             let bw = if channel == "torque" { bandwidth } else { None };
             let var_freq = frequency_variance(col, np, p.period_s, harmonics, bw, spectra);
-            let mean_col = if channel == "q" { &mean.q[j] } else { &mean.torque[j] };
             let (skewness, excess_kurtosis, ks_distance, ks_p_value) = normality(col, mean_col, np);
-            summary.push(ChannelNoise {
+            let stats = ChannelNoise {
                 joint: p.joints[j].clone(),
                 channel,
                 var_time,
@@ -66,9 +69,19 @@ pub fn noise(p: &Periods, mean: &PeriodMean, harmonics: &[u32], spectra: &Spectr
                 excess_kurtosis,
                 ks_distance,
                 ks_p_value,
-            });
-            out.push(if np > 1 { per_sample } else { vec![var_freq; n] });
+            };
+            (stats, if np > 1 { per_sample } else { vec![var_freq; n] })
+        })
+        .collect();
+    let mut summary = Vec::new();
+    let (mut var_q, mut var_t) = (Vec::new(), Vec::new());
+    for ((stats, per_sample), (_, channel)) in results.into_iter().zip(&tasks) {
+        if *channel == "q" {
+            var_q.push(per_sample);
+        } else {
+            var_t.push(per_sample);
         }
+        summary.push(stats);
     }
     let mut md = mean.metadata.clone();
     for s in &summary {
@@ -140,16 +153,22 @@ fn normality(col: &[f64], mean: &[f64], np: usize) -> (f64, f64, f64, f64) {
         return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
     }
     let n = mean.len();
-    let mut r: Vec<f64> = (0..np * n).map(|i| col[i] - mean[i % n]).collect();
-    let len = r.len() as f64;
-    let var = r.iter().map(|v| v * v).sum::<f64>() / len;
+    // The moments use every residual; the Kolmogorov–Smirnov distance (a
+    // sort) uses an even, deterministic subsample of at most KS_SAMPLES,
+    // which resolves distances far below any that matter here.
+    let all: Vec<f64> = (0..np * n).map(|i| col[i] - mean[i % n]).collect();
+    let len = all.len() as f64;
+    let var = all.iter().map(|v| v * v).sum::<f64>() / len;
     if !(var > 0.0) {
         return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
     }
     let sd = var.sqrt();
-    let skew = r.iter().map(|v| (v / sd).powi(3)).sum::<f64>() / len;
-    let kurt = r.iter().map(|v| (v / sd).powi(4)).sum::<f64>() / len - 3.0;
-    r.sort_by(f64::total_cmp);
+    let skew = all.iter().map(|v| (v / sd).powi(3)).sum::<f64>() / len;
+    let kurt = all.iter().map(|v| (v / sd).powi(4)).sum::<f64>() / len - 3.0;
+    let stride = all.len().div_ceil(KS_SAMPLES);
+    let mut r: Vec<f64> = all.iter().step_by(stride).copied().collect();
+    let len = r.len() as f64;
+    r.sort_unstable_by(f64::total_cmp);
     let mut d = 0.0f64;
     for (i, v) in r.iter().enumerate() {
         let c = normal_cdf(v / sd);
@@ -157,6 +176,9 @@ fn normality(col: &[f64], mean: &[f64], np: usize) -> (f64, f64, f64, f64) {
     }
     (skew, kurt, d, ks_p_value(d, len))
 }
+
+/// Largest number of residuals the Kolmogorov–Smirnov test sorts.
+const KS_SAMPLES: usize = 200_000;
 
 fn normal_cdf(x: f64) -> f64 {
     0.5 * erfc(-x / std::f64::consts::SQRT_2)

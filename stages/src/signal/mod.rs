@@ -5,5 +5,5 @@ pub mod spectral_filter;
 pub mod spectrum;
 
 pub use analog_filter::{AnalogFilter, FilterFamily, FilterSpec};
-pub use spectral_filter::{apply_spectral, derivative_gain};
+pub use spectral_filter::{apply_spectral, apply_table, derivative_gain, extended_len, gain_table};
 pub use spectrum::{naive_dft, Spectra};
