@@ -180,6 +180,15 @@ fn run_one(
                 outcome.jitter_rms_s = Some(p.report.jitter_rms_s);
                 outcome.notes.extend(p.report.notes.iter().cloned());
                 st.periods = Some(p);
+                // Free the raw samples early unless a table or stage still needs them.
+                let raw_needed = plan.tables.contains(&TableKind::RawSamples)
+                    || plan
+                        .stages
+                        .iter()
+                        .any(|s| matches!(s, StageConfig::Differentiate(c) if c.method == Method::Filtered));
+                if !raw_needed {
+                    st.raw = None;
+                }
             }
             StageConfig::InverseFilter(c) => match (&mut st.periods, &mut st.raw) {
                 (Some(p), _) => inverse_filter_periods(p, c, spectra).map_err(fail)?,

@@ -236,7 +236,7 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     // On the grid the samples are used in place, from `first` on; off it
     // they are resampled into owned columns. Either way only the kept
     // periods are copied, once, at the end.
-    let mut owned: Option<(Vec<Vec<f64>>, Vec<Vec<f64>>, Option<Vec<Vec<f64>>>)> = None;
+    let mut owned: Option<Resampled> = None;
     let (first, grid0) = if on_grid {
         (t.len() - m, t[t.len() - m])
     } else {
@@ -382,6 +382,9 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         metadata: md,
     })
 }
+
+/// Positions, torques and references resampled onto the period grid.
+type Resampled = (Vec<Vec<f64>>, Vec<Vec<f64>>, Option<Vec<Vec<f64>>>);
 
 /// Three-point derivative estimates at every stamp (second order on
 /// non-uniform grids).
