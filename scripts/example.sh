@@ -13,8 +13,8 @@ for sim in fixtures/sims/*.toml; do
   "$bin" simulate "$sim" --out "fixtures/recordings/$name"
 done
 for p in kuka_axis3 arm3 ur5 validation; do
-  "$bin" run "fixtures/pipelines/$p.toml" --out "out/$p" --timings
+  "$bin" run "fixtures/pipelines/$p.toml" --out "out/$p" --timings --plot "out/$p/plots"
 done
 if [ -d ../shared/realdata/kuka_lwr4 ]; then
-  "$bin" run fixtures/pipelines/kuka_lwr4.toml --out out/kuka_lwr4 --timings
+  "$bin" run fixtures/pipelines/kuka_lwr4.toml --out out/kuka_lwr4 --timings --plot out/kuka_lwr4/plots
 fi

@@ -4,4 +4,5 @@
 
 pub mod check;
 pub mod plan;
+pub mod plot;
 pub mod run;

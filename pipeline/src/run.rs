@@ -30,6 +30,8 @@ pub struct RunOptions {
     /// Worker threads (default: one per core).
     pub threads: Option<usize>,
     pub progress: bool,
+    /// Write pictures and a report per recording into this folder.
+    pub plot: Option<PathBuf>,
 }
 
 /// What one recording gave.
@@ -109,7 +111,17 @@ pub fn run(
                 let bar = bars.add(ProgressBar::new(plan.stages.len() as u64 + 2));
                 bar.set_style(style.clone());
                 bar.set_prefix(name.clone());
-                let outcome = run_one(plan, model, log, name, start, &opts.out, &spectra, &bar);
+                let outcome = run_one(
+                    plan,
+                    model,
+                    log,
+                    name,
+                    start,
+                    &opts.out,
+                    opts.plot.as_deref(),
+                    &spectra,
+                    &bar,
+                );
                 bar.finish_with_message(if outcome.is_ok() { "done" } else { "failed" });
                 RecordingResult {
                     source: log.clone(),
@@ -137,6 +149,7 @@ fn run_one(
     name: &str,
     start: Data,
     out: &Path,
+    plot: Option<&Path>,
     spectra: &Spectra,
     bar: &ProgressBar,
 ) -> Result<Outcome, String> {
@@ -293,6 +306,26 @@ fn run_one(
         outcome.files.push(path);
     }
     timed("write", &mut outcome, t);
+    if let Some(plot_dir) = plot {
+        let t = Instant::now();
+        let dir = plot_dir.join(name);
+        let h = harmonics(None, &st.mean.as_ref().map(|m| m.metadata.clone()).unwrap_or_default()).unwrap_or_default();
+        let inputs = crate::plot::Inputs {
+            name,
+            periods: st.periods.as_ref(),
+            mean: st.mean.as_ref(),
+            noise: st.noise.as_ref(),
+            kinematics: st.kinematics.as_ref(),
+            harmonics: &h,
+            spectra,
+        };
+        let pictures = crate::plot::plot_recording(&dir, &inputs).map_err(|e| format!("{source}: plots: {e}"))?;
+        let report =
+            crate::plot::write_report(&dir, name, &outcome, &pictures).map_err(|e| format!("{source}: report: {e}"))?;
+        outcome.files.extend(pictures);
+        outcome.files.push(report);
+        outcome.timings.push(("plot".into(), t.elapsed().as_secs_f64()));
+    }
     Ok(outcome)
 }
 

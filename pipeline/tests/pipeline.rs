@@ -248,3 +248,31 @@ fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
         assert!(t.var_time.is_nan() && t.var_freq > 0.0);
     }
 }
+
+#[test]
+fn plots_and_report_are_written() {
+    let ws = workspace(&["kuka_axis3"]);
+    let file = ws.path().join("pipelines/kuka_axis3.toml");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let plan = parse(&text, &file).unwrap();
+    let (model, logs, start) = resolve(&plan).unwrap();
+    let plots = ws.path().join("plots");
+    let opts = RunOptions {
+        out: ws.path().join("out"),
+        threads: None,
+        progress: false,
+        plot: Some(plots.clone()),
+    };
+    let r = run(&plan, model.as_ref(), &logs, start, &opts);
+    assert!(r[0].outcome.is_ok(), "{:?}", r[0].outcome);
+    for (f, needle) in [
+        ("signals.svg", "a3 torque"),
+        ("spectrum.svg", "excited harmonics"),
+        ("noise.svg", "noise std of the average"),
+        ("derivatives.svg", "a3 acceleration"),
+        ("report.md", "steady periods kept: 6 of 6"),
+    ] {
+        let text = std::fs::read_to_string(plots.join("kuka_axis3").join(f)).unwrap();
+        assert!(text.contains(needle), "{f} lacks `{needle}`");
+    }
+}

@@ -18,6 +18,9 @@ pub struct Args {
     /// Print each stage's time per recording.
     #[arg(long)]
     pub timings: bool,
+    /// Write pictures (SVG) and a short report per recording into this folder.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -36,6 +39,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out: out.clone(),
         threads: args.threads,
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+        plot: args.plot.clone(),
     };
     let results = run_plan(&p, model.as_ref(), &logs, start, &opts);
     println!(

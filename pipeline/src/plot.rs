@@ -1,0 +1,325 @@
+//! Pictures of one recording's run (`robotid run --plot DIR`), as SVG:
+//! - `signals.svg`: positions and torques, a few recorded periods (grey)
+//!   under their average (black);
+//! - `spectrum.svg`: torque and position spectra of the whole record, the
+//!   excited harmonics marked;
+//! - `noise.svg`: noise standard deviation of the averaged torque per sample;
+//! - `derivatives.svg`: velocities and accelerations;
+//!
+//! and `report.md`, a short summary with links to them.
+
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+use robotid_schemas::{Kinematics, NoiseTable, PeriodMean};
+use robotid_stages::align::Periods;
+use robotid_stages::formats::write_atomic;
+use robotid_stages::noise::ChannelNoise;
+use robotid_stages::signal::Spectra;
+
+use crate::run::Outcome;
+
+/// What a run produced for one recording.
+pub struct Inputs<'a> {
+    pub name: &'a str,
+    pub periods: Option<&'a Periods>,
+    pub mean: Option<&'a PeriodMean>,
+    pub noise: Option<&'a NoiseTable>,
+    pub kinematics: Option<&'a Kinematics>,
+    pub harmonics: &'a [u32],
+    pub spectra: &'a Spectra,
+}
+
+type Series<'a> = (Vec<(f64, f64)>, RGBColor, &'a str);
+
+const GREY: RGBColor = RGBColor(170, 170, 170);
+const BLUE_: RGBColor = RGBColor(31, 119, 180);
+const ORANGE: RGBColor = RGBColor(255, 127, 14);
+
+fn range(series: &[Series]) -> (f64, f64, f64, f64) {
+    let mut r = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for (pts, _, _) in series {
+        for &(x, y) in pts.iter().filter(|p| p.1.is_finite()) {
+            r = (r.0.min(x), r.1.max(x), r.2.min(y), r.3.max(y));
+        }
+    }
+    if r.0 >= r.1 {
+        r.1 = r.0 + 1.0;
+    }
+    let pad = ((r.3 - r.2) * 0.05).max(1e-12);
+    (r.0, r.1, r.2 - pad, r.3 + pad)
+}
+
+/// One chart of line series (and optional red markers) in `area`.
+fn chart(
+    area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    series: &[Series],
+    markers: &[(f64, f64)],
+) -> Result<(), String> {
+    let (x0, x1, y0, y1) = range(series);
+    let e = |e: &dyn std::fmt::Display| e.to_string();
+    let mut c = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 16))
+        .margin(8)
+        .x_label_area_size(32)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|x| e(&x))?;
+    // Scientific labels where plain ones would round to 0.0 or run long.
+    let big = y0.abs().max(y1.abs());
+    let sci = big < 1e-2 || big >= 1e5;
+    let fmt = move |v: &f64| if sci { format!("{v:.2e}") } else { format!("{v:.3}") };
+    c.configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .y_label_formatter(&fmt)
+        .draw()
+        .map_err(|x| e(&x))?;
+    let mut labelled = false;
+    for (pts, color, label) in series {
+        let s = c
+            .draw_series(LineSeries::new(pts.iter().copied(), color))
+            .map_err(|x| e(&x))?;
+        if !label.is_empty() {
+            let col = *color;
+            s.label(*label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
+            labelled = true;
+        }
+    }
+    if !markers.is_empty() {
+        c.draw_series(markers.iter().map(|&(x, y)| Circle::new((x, y), 3, RED.filled())))
+            .map_err(|x| e(&x))?
+            .label("excited harmonics")
+            .legend(|(x, y)| Circle::new((x + 8, y), 3, RED.filled()));
+        labelled = true;
+    }
+    if labelled {
+        c.configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
+    Ok(())
+}
+
+/// Renders a figure of `rows × cols` charts into `path`, atomically.
+fn figure(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<(), String>,
+) -> Result<(), String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (520 * cols as u32, 260 * rows as u32)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let areas = root.split_evenly((rows, cols));
+        draw(&areas)?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(svg.as_bytes())
+            .map_err(|e| robotid_stages::Error::io(path, e))
+    })
+    .map_err(|e| e.to_string())
+}
+
+/// Writes the pictures of one recording into `dir`; returns the files.
+pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut files = Vec::new();
+    if let (Some(p), Some(m)) = (inp.periods, inp.mean) {
+        let n = p.samples_per_period;
+        let nj = p.joints.len();
+        let t: Vec<f64> = m.time.clone();
+        let path = dir.join("signals.svg");
+        figure(&path, nj, 2, |areas| {
+            for j in 0..nj {
+                for (k, (col, avg, what, unit)) in [
+                    (&p.q[j], &m.q[j], "position", "rad"),
+                    (&p.torque[j], &m.torque[j], "torque", "N·m"),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let mut series: Vec<Series> = (0..p.periods.min(8))
+                        .map(|r| {
+                            (
+                                t.iter().zip(&col[r * n..(r + 1) * n]).map(|(a, b)| (*a, *b)).collect(),
+                                GREY,
+                                "",
+                            )
+                        })
+                        .collect();
+                    series.push((t.iter().zip(avg).map(|(a, b)| (*a, *b)).collect(), BLACK, "average"));
+                    if let Some(l) = series.first_mut() {
+                        l.2 = "recorded periods";
+                    }
+                    chart(
+                        &areas[2 * j + k],
+                        &format!("{} {what}", p.joints[j]),
+                        "time in period [s]",
+                        unit,
+                        &series,
+                        &[],
+                    )?;
+                }
+            }
+            Ok(())
+        })?;
+        files.push(path);
+
+        let path = dir.join("spectrum.svg");
+        let df = 1.0 / (p.periods as f64 * p.period_s);
+        let top = inp.harmonics.iter().copied().max().unwrap_or(5) as f64 * 4.0 / p.period_s;
+        figure(&path, nj, 2, |areas| {
+            for j in 0..nj {
+                for (k, (col, what)) in [(&p.q[j], "position"), (&p.torque[j], "torque")]
+                    .into_iter()
+                    .enumerate()
+                {
+                    let spec = inp.spectra.forward(col);
+                    let scale = 2.0 / col.len() as f64;
+                    let level = |i: usize| (spec[i].norm() * scale).max(1e-300).log10();
+                    let kmax = ((top / df) as usize).min(spec.len() - 1);
+                    let pts: Vec<(f64, f64)> = (1..=kmax).map(|i| (i as f64 * df, level(i))).collect();
+                    let marks: Vec<(f64, f64)> = inp
+                        .harmonics
+                        .iter()
+                        .map(|&h| h as usize * p.periods)
+                        .filter(|&i| i <= kmax)
+                        .map(|i| (i as f64 * df, level(i)))
+                        .collect();
+                    chart(
+                        &areas[2 * j + k],
+                        &format!("{} {what} spectrum", p.joints[j]),
+                        "frequency [Hz]",
+                        "log10 amplitude",
+                        &[(pts, BLUE_, "")],
+                        &marks,
+                    )?;
+                }
+            }
+            Ok(())
+        })?;
+        files.push(path);
+    }
+    if let (Some(noise), Some(m)) = (inp.noise, inp.mean) {
+        let nj = noise.joints.len();
+        let path = dir.join("noise.svg");
+        figure(&path, nj, 2, |areas| {
+            for j in 0..nj {
+                for (k, (v, what, unit)) in [
+                    (&noise.var_q[j], "position", "rad"),
+                    (&noise.var_torque[j], "torque", "N·m"),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let pts = m.time.iter().zip(v.iter()).map(|(t, v)| (*t, v.sqrt())).collect();
+                    chart(
+                        &areas[2 * j + k],
+                        &format!("{} {what}: noise std of the average", noise.joints[j]),
+                        "time in period [s]",
+                        unit,
+                        &[(pts, ORANGE, "")],
+                        &[],
+                    )?;
+                }
+            }
+            Ok(())
+        })?;
+        files.push(path);
+    }
+    if let Some(kin) = inp.kinematics {
+        let nj = kin.joints.len();
+        let path = dir.join("derivatives.svg");
+        figure(&path, nj, 2, |areas| {
+            for j in 0..nj {
+                for (k, (v, what, unit)) in [
+                    (&kin.qd[j], "velocity", "rad/s"),
+                    (&kin.qdd[j], "acceleration", "rad/s²"),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let pts = kin.time.iter().zip(v.iter()).map(|(t, v)| (*t, *v)).collect();
+                    chart(
+                        &areas[2 * j + k],
+                        &format!("{} {what}", kin.joints[j]),
+                        "time [s]",
+                        unit,
+                        &[(pts, BLUE_, "")],
+                        &[],
+                    )?;
+                }
+            }
+            Ok(())
+        })?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// `report.md`: what the run found, what it could not do, the pictures.
+pub fn write_report(dir: &Path, name: &str, o: &Outcome, pictures: &[PathBuf]) -> Result<PathBuf, String> {
+    let mut r = format!("# {name}\n\n");
+    r.push_str(&format!("- samples read: {}\n", o.samples));
+    if let (Some(k), Some(f)) = (o.periods_kept, o.periods_found) {
+        r.push_str(&format!("- steady periods kept: {k} of {f} whole periods\n"));
+    }
+    if let Some(d) = o.dropped_s {
+        r.push_str(&format!("- dropped as start-up transient: {d:.3} s\n"));
+    }
+    if let Some(j) = o.jitter_rms_s {
+        r.push_str(&format!("- timestamp jitter (RMS off a uniform grid): {j:.2e} s\n"));
+    }
+    if !o.noise.is_empty() {
+        r.push_str("\n| joint | channel | variance, time domain | variance, frequency domain | skewness | excess kurtosis | KS p-value |\n|---|---|---|---|---|---|---|\n");
+        for c in &o.noise {
+            let ChannelNoise {
+                joint,
+                channel,
+                var_time,
+                var_freq,
+                skewness,
+                excess_kurtosis,
+                ks_p_value,
+                ..
+            } = c;
+            r.push_str(&format!(
+                "| {joint} | {channel} | {var_time:.3e} | {var_freq:.3e} | {skewness:.3} | {excess_kurtosis:.3} | {ks_p_value:.3} |\n"
+            ));
+        }
+    }
+    if !o.notes.is_empty() {
+        r.push_str("\n## Notes\n\n");
+        for n in &o.notes {
+            r.push_str(&format!("- {n}\n"));
+        }
+    }
+    if !pictures.is_empty() {
+        r.push_str("\n## Pictures\n\n");
+        for p in pictures {
+            let f = p
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            r.push_str(&format!("![{f}]({f})\n\n"));
+        }
+    }
+    let path = dir.join("report.md");
+    write_atomic(&path, |w| {
+        use std::io::Write;
+        w.write_all(r.as_bytes())
+            .map_err(|e| robotid_stages::Error::io(&path, e))
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(path)
+}
