@@ -70,7 +70,7 @@ fn chart(
         .map_err(|x| e(&x))?;
     // Scientific labels where plain ones would round to 0.0 or run long.
     let big = y0.abs().max(y1.abs());
-    let sci = big < 1e-2 || big >= 1e5;
+    let sci = !(1e-2..1e5).contains(&big);
     let fmt = move |v: &f64| if sci { format!("{v:.2e}") } else { format!("{v:.3}") };
     c.configure_mesh()
         .x_desc(x_desc)
