@@ -47,6 +47,7 @@ fn whole(c: &mut Criterion) {
         out: out.clone(),
         threads: None,
         progress: false,
+        plot: None,
     };
     // The result tables the floor writes: the pipeline's own, once.
     let results = run(&plan, model.as_ref(), &logs, start, &opts);

@@ -61,6 +61,7 @@ fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<robotid:
             out: out.to_path_buf(),
             threads,
             progress: false,
+            plot: None,
         },
     )
 }
