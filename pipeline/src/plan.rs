@@ -312,6 +312,15 @@ pub fn resolve(plan: &Plan) -> Result<(Option<Model>, Vec<PathBuf>, Data), Probl
         }
     }
     problems.extend(check_chain(&plan.stages, &plan.tables, start).into_iter().map(at));
+    for (i, s) in plan.stages.iter().enumerate() {
+        if let StageConfig::Align(c) = s {
+            if let Some(rel) = &c.reference_trajectory {
+                if let Err(e) = reference_trajectory(plan, rel) {
+                    problems.push(at(format!("stage {} (`align`): reference_trajectory: {e}", i + 1)));
+                }
+            }
+        }
+    }
     if problems.is_empty() {
         Ok((model, logs, start))
     } else {
@@ -355,4 +364,17 @@ pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
         return Err(format!("path `{}` names no log file", full.display()));
     }
     Ok(files)
+}
+
+/// The periodic trajectory an `align` stage registers against, relative to
+/// the pipeline file.
+pub fn reference_trajectory(plan: &Plan, rel: &Path) -> Result<robotid_stages::trajectory::FourierSeries, String> {
+    let path = plan.file.parent().unwrap_or(Path::new(".")).join(rel);
+    match robotid_stages::trajectory::load_trajectory(&path).map_err(|e| e.to_string())? {
+        robotid_stages::trajectory::Trajectory::Fourier(f) => Ok(f),
+        _ => Err(format!(
+            "{}: the trajectory is not periodic (kind = \"fourier\" needed)",
+            path.display()
+        )),
+    }
 }

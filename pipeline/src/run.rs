@@ -11,7 +11,7 @@ use std::time::Instant;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, PeriodMean, RawSamples, TableKind};
-use robotid_stages::align::{align, Periods};
+use robotid_stages::align::{align, register_phase, Periods};
 use robotid_stages::average::average;
 use robotid_stages::decimate::{decimate_periods, decimate_record};
 use robotid_stages::differentiate::{differentiate, differentiate_record, Method};
@@ -186,7 +186,17 @@ fn run_one(
         match stage {
             StageConfig::Align(c) => {
                 let raw = st.raw.as_ref().expect("chain checked");
-                let p = align(raw, c, &source).map_err(|e| e.to_string())?;
+                let mut p = align(raw, c, &source).map_err(|e| e.to_string())?;
+                if let Some(rel) = &c.reference_trajectory {
+                    let traj = crate::plan::reference_trajectory(plan, rel).map_err(fail)?;
+                    register_phase(&mut p, &traj, &source).map_err(|e| e.to_string())?;
+                    outcome.notes.push(format!(
+                        "phase registered against {} (shift {} samples, correlation {:.4})",
+                        rel.display(),
+                        p.report.phase_shift_samples.unwrap_or(0),
+                        p.report.phase_correlation.unwrap_or(0.0)
+                    ));
+                }
                 outcome.periods_kept = Some(p.periods);
                 outcome.periods_found = Some(p.report.periods_found);
                 outcome.dropped_s = Some(p.report.dropped_s);

@@ -422,3 +422,43 @@ fn filtered_differentiation_of_a_validation_run() {
     // aliasing of the fast friction transitions.
     assert!(e[0] < 1e-4 && e[1] < 2e-3 && e_f < 1e-2, "{e:?} {e_f}");
 }
+
+/// Phase registration: the simulator starts the periodic reference at a
+/// random phase; after registration sample 0 of the averaged reference is
+/// the trajectory at time 0, to within half a sample of motion
+/// (max|ṙ|·dt/2 ≈ 1.45 rad/s · 3.3 ms ≈ 5e-3 rad).
+#[test]
+fn phase_is_registered_against_the_trajectory() {
+    use robotid_stages::align::register_phase;
+    use robotid_stages::trajectory::Trajectory;
+    let (cfg, model, mut s) = sim("sims/kuka_axis3.toml", |_| {});
+    to_torque(&mut s, &model);
+    let Trajectory::Fourier(f) = &cfg.trajectory else {
+        panic!("periodic")
+    };
+    let mut p = align(&s.raw, &AlignConfig::default(), "k").unwrap();
+    register_phase(&mut p, f, "k").unwrap();
+    let (mean_q, _) = average(&p);
+    let n = p.samples_per_period;
+    let dt = 10.0 / n as f64;
+    let reference = &p.reference.as_ref().unwrap()[0];
+    let (mut r, mut rd, mut rdd) = ([0.0], [0.0], [0.0]);
+    let mut worst = 0.0f64;
+    for i in 0..n {
+        f.eval(i as f64 * dt, &mut r, &mut rd, &mut rdd);
+        worst = worst.max((reference[i] - r[0]).abs());
+    }
+    println!(
+        "registered reference vs trajectory: worst {worst:.2e} rad, correlation {:?}",
+        p.report.phase_correlation
+    );
+    assert!(worst < 5e-3, "{worst}");
+    assert!(p.report.phase_correlation.unwrap() > 0.999);
+    assert_eq!(mean_q.metadata["robotid.phase_registered"], "true");
+    // A trajectory the robot did not follow is refused.
+    let mut other = f.clone();
+    other.a[0].iter_mut().for_each(|v| *v = -*v);
+    other.b[0].rotate_left(1);
+    let e = register_phase(&mut p, &other, "k").unwrap_err().to_string();
+    assert!(e.contains("does not follow"), "{e}");
+}

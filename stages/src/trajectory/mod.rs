@@ -59,3 +59,22 @@ impl Trajectory {
         }
     }
 }
+
+/// The `[trajectory]` table of a TOML file (a simulation or excitation file).
+pub fn load_trajectory(path: &std::path::Path) -> crate::Result<Trajectory> {
+    let err = |msg: String| crate::Error::Config {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| crate::Error::io(path, e))?;
+    let table: toml::Table = toml::from_str(&text).map_err(|e| err(crate::error::toml_message(&text, &e)))?;
+    let t = table
+        .get("trajectory")
+        .cloned()
+        .ok_or_else(|| err("no [trajectory] table".into()))?;
+    let t: Trajectory = t
+        .try_into()
+        .map_err(|e: toml::de::Error| err(format!("[trajectory]: {}", e.message())))?;
+    t.check().map_err(|e| err(format!("[trajectory]: {e}")))?;
+    Ok(t)
+}
