@@ -192,13 +192,16 @@ fn validate_reports_every_problem_with_its_place() {
         "version = 2\n[source]\npath = \"x.mcap\"\n[read]\neffort = { column = \"c\", unit = \"furlong\" }\n[[stage]]\nkind = \"alin\"\n[[stage]]\nkind = \"align\"\ncolour = 1\n[[stage]]\nkind = \"differentiate\"\nmethod = \"fourier_fit\"\nbandwidth_hz = 2.0\n[output]\ntables = [\"bogus\"]\n",
     )
     .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_robotid"))
-        .arg("validate")
-        .arg(&bad)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(1));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let validate = |file: &Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .arg("validate")
+            .arg(file)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = validate(&bad);
     for needle in [
         "6 problem(s)",
         "version 2",
@@ -216,12 +219,7 @@ fn validate_reports_every_problem_with_its_place() {
         "version = 1\n[read]\njoints = [\"a\"]\n[source]\npath = \"none/*.csv\"\n[[stage]]\nkind = \"average\"\n",
     )
     .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_robotid"))
-        .arg("validate")
-        .arg(&bad)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = validate(&bad);
     assert!(
         err.contains("names no log file") && err.contains("stage 1 (`average`) needs Periods"),
         "{err}"

@@ -31,6 +31,15 @@ impl BatchBuilder {
         self
     }
 
+    /// One Int64 column per joint, named `{prefix}_{joint}`.
+    pub fn per_joint_i64(mut self, prefix: &'static str, joints: &[String], values: &[Vec<i64>]) -> Self {
+        for (j, v) in joints.iter().zip(values) {
+            self = self.i64(format!("{prefix}_{j}"), v.clone());
+        }
+        self.with.push(prefix);
+        self
+    }
+
     /// One Float64 column per joint, named `{prefix}_{joint}`; `prefix` is
     /// included even if optional in the kind.
     pub fn per_joint(mut self, prefix: &'static str, joints: &[String], values: &[Vec<f64>]) -> Self {
@@ -85,6 +94,24 @@ pub fn f64_column(batch: &RecordBatch, name: &str) -> Result<Vec<f64>, SchemaErr
             found: format!("{} nulls", a.null_count()),
         });
     }
+    Ok(a.values().to_vec())
+}
+
+/// A non-null Int64 column by name.
+pub fn i64_column(batch: &RecordBatch, name: &str) -> Result<Vec<i64>, SchemaError> {
+    let i = batch.schema().index_of(name).map_err(|_| SchemaError::MissingColumn {
+        column: name.into(),
+        why: "not in the table".into(),
+    })?;
+    let a = batch
+        .column(i)
+        .as_any()
+        .downcast_ref::<Int64Array>()
+        .ok_or_else(|| SchemaError::WrongType {
+            column: name.into(),
+            expected: "Int64".into(),
+            found: batch.column(i).data_type().to_string(),
+        })?;
     Ok(a.values().to_vec())
 }
 

@@ -1,8 +1,8 @@
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
-use arrow::array::{Array, ArrayRef, Float64Array, Int64Array, RecordBatch};
+use arrow::array::RecordBatch;
 
+use crate::columns::{f64_column, i64_column, per_joint_columns, BatchBuilder};
 use crate::{SchemaError, TableKind};
 
 /// Which effort channel a recording carries.
@@ -83,104 +83,48 @@ impl RawSamples {
     /// The Arrow record batch of this table, schema and metadata included.
     pub fn to_record_batch(&self) -> Result<RecordBatch, SchemaError> {
         self.check_shape()?;
-        let mut with = vec![self.effort_kind.prefix()];
-        if self.reference.is_some() {
-            with.push("ref");
-        }
-        if self.counts.is_some() {
-            with.push("counts");
-        }
-        let schema = TableKind::RawSamples.schema(&self.joints, &with, &self.metadata);
-        let f64s = |cols: &Vec<Vec<f64>>| -> Vec<ArrayRef> {
-            cols.iter()
-                .map(|c| Arc::new(Float64Array::from(c.clone())) as ArrayRef)
-                .collect()
-        };
-        let mut columns: Vec<ArrayRef> = vec![Arc::new(Float64Array::from(self.time.clone()))];
-        columns.extend(f64s(&self.q));
-        // Column order follows the kind's spec order: current before torque.
-        columns.extend(f64s(&self.effort));
+        let mut b = BatchBuilder::new()
+            .f64("time", &self.time)
+            .per_joint("q", &self.joints, &self.q)
+            .per_joint(self.effort_kind.prefix(), &self.joints, &self.effort);
         if let Some(r) = &self.reference {
-            columns.extend(f64s(r));
+            b = b.per_joint("ref", &self.joints, r);
         }
         if let Some(c) = &self.counts {
-            columns.extend(c.iter().map(|c| Arc::new(Int64Array::from(c.clone())) as ArrayRef));
+            b = b.per_joint_i64("counts", &self.joints, c);
         }
-        Ok(RecordBatch::try_new(Arc::new(schema), columns)?)
+        b.build(TableKind::RawSamples, &self.joints, &self.metadata)
     }
 
     /// Reads a `raw_samples` record batch, checking it against the kind.
     pub fn from_record_batch(batch: &RecordBatch) -> Result<RawSamples, SchemaError> {
         let schema = batch.schema();
         let joints = TableKind::RawSamples.check(&schema)?;
-        let f64col = |name: &str| -> Result<Option<Vec<f64>>, SchemaError> {
-            match schema.index_of(name) {
-                Ok(i) => {
-                    let a = batch.column(i).as_any().downcast_ref::<Float64Array>().ok_or_else(|| {
-                        SchemaError::WrongType {
-                            column: name.into(),
-                            expected: "Float64".into(),
-                            found: batch.column(i).data_type().to_string(),
-                        }
-                    })?;
-                    if a.null_count() > 0 {
-                        return Err(SchemaError::WrongType {
-                            column: name.into(),
-                            expected: "Float64 without nulls".into(),
-                            found: format!("{} nulls", a.null_count()),
-                        });
-                    }
-                    Ok(Some(a.values().to_vec()))
-                }
-                Err(_) => Ok(None),
-            }
+        let has = |prefix: &str| schema.index_of(&format!("{prefix}_{}", joints[0])).is_ok();
+        let (effort_kind, effort) = if has("current") {
+            (TorqueChannel::Current, per_joint_columns(batch, "current", &joints)?)
+        } else {
+            (TorqueChannel::Torque, per_joint_columns(batch, "torque", &joints)?)
         };
-        let per_joint = |prefix: &str| -> Result<Option<Vec<Vec<f64>>>, SchemaError> {
-            let cols: Vec<Option<Vec<f64>>> = joints
-                .iter()
-                .map(|j| f64col(&format!("{prefix}_{j}")))
-                .collect::<Result<_, _>>()?;
-            Ok(cols.into_iter().collect())
+        let reference = if has("ref") {
+            Some(per_joint_columns(batch, "ref", &joints)?)
+        } else {
+            None
         };
-        let time = f64col("time")?.expect("checked by the kind");
-        let q = per_joint("q")?.expect("checked by the kind");
-        let (effort_kind, effort) = match per_joint("current")? {
-            Some(c) => (crate::TorqueChannel::Current, c),
-            None => (
-                crate::TorqueChannel::Torque,
-                per_joint("torque")?.ok_or_else(|| SchemaError::MissingColumn {
-                    column: format!("torque_{}", joints[0]),
-                    why: "no current and no torque columns".into(),
-                })?,
-            ),
+        let counts = if has("counts") {
+            Some(
+                joints
+                    .iter()
+                    .map(|j| i64_column(batch, &format!("counts_{j}")))
+                    .collect::<Result<Vec<_>, _>>()?,
+            )
+        } else {
+            None
         };
-        let reference = per_joint("ref")?;
-        let counts =
-            if schema.index_of(&format!("counts_{}", joints[0])).is_ok() {
-                let mut all = Vec::new();
-                for j in &joints {
-                    let name = format!("counts_{j}");
-                    let i = schema.index_of(&name).map_err(|_| SchemaError::MissingColumn {
-                        column: name.clone(),
-                        why: "counts are given for some joints only".into(),
-                    })?;
-                    let a = batch.column(i).as_any().downcast_ref::<Int64Array>().ok_or_else(|| {
-                        SchemaError::WrongType {
-                            column: name.clone(),
-                            expected: "Int64".into(),
-                            found: batch.column(i).data_type().to_string(),
-                        }
-                    })?;
-                    all.push(a.values().to_vec());
-                }
-                Some(all)
-            } else {
-                None
-            };
         let raw = RawSamples {
+            time: f64_column(batch, "time")?,
+            q: per_joint_columns(batch, "q", &joints)?,
             joints,
-            time,
-            q,
             effort_kind,
             effort,
             reference,
