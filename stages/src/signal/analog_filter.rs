@@ -17,6 +17,9 @@ use serde::{Deserialize, Serialize};
 pub enum FilterFamily {
     Butterworth,
     Chebyshev1,
+    /// Maximally flat group delay; the cutoff is its −3 dB frequency
+    /// (scipy's `norm = "mag"`).
+    Bessel,
 }
 
 /// What a pipeline or simulation file says about an analog low-pass.
@@ -44,8 +47,8 @@ impl FilterSpec {
         match (self.family, self.ripple_db) {
             (FilterFamily::Chebyshev1, Some(r)) if r > 0.0 && r.is_finite() => Ok(()),
             (FilterFamily::Chebyshev1, _) => Err("a chebyshev1 filter needs `ripple_db` > 0".into()),
-            (FilterFamily::Butterworth, Some(_)) => Err("`ripple_db` applies to chebyshev1 filters only".into()),
-            (FilterFamily::Butterworth, None) => Ok(()),
+            (_, Some(_)) => Err("`ripple_db` applies to chebyshev1 filters only".into()),
+            (_, None) => Ok(()),
         }
     }
 }
@@ -107,6 +110,11 @@ impl AnalogFilter {
                     1.0
                 };
                 (poles, dc)
+            }
+            FilterFamily::Bessel => {
+                let unit = bessel_delay_poles(n);
+                let w3 = magnitude_cutoff(&unit);
+                (unit.iter().map(|p| p * (wc / w3)).collect(), 1.0)
             }
         };
         // Order the poles as conjugate pairs (upper half-plane member first)
@@ -194,6 +202,56 @@ impl AnalogFilter {
     }
 }
 
+/// Poles of the Bessel filter normalised to unit group delay at DC: the
+/// roots of the reverse Bessel polynomial θ_n(s) = Σ_k a_k s^k with
+/// a_k = (2n−k)! / (2^(n−k) k! (n−k)!), as eigenvalues of its companion matrix.
+pub fn bessel_delay_poles(n: usize) -> Vec<Complex64> {
+    let fact = |m: usize| (1..=m).map(|x| x as f64).product::<f64>();
+    let a: Vec<f64> = (0..=n)
+        .map(|k| fact(2 * n - k) / (2f64.powi((n - k) as i32) * fact(k) * fact(n - k)))
+        .collect();
+    // Monic: s^n + Σ_{k<n} (a_k/a_n) s^k.
+    let companion = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+        if i == 0 {
+            -a[n - 1 - j] / a[n]
+        } else if i == j + 1 {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let mut roots: Vec<Complex64> = companion
+        .complex_eigenvalues()
+        .iter()
+        .map(|z| Complex64::new(z.re, z.im))
+        .collect();
+    roots.sort_by(|x, y| x.im.total_cmp(&y.im).then(x.re.total_cmp(&y.re)));
+    roots
+}
+
+/// The angular frequency where the all-pole filter with DC gain 1 and the
+/// given poles falls to −3 dB (|H|² = ½), by bisection.
+fn magnitude_cutoff(poles: &[Complex64]) -> f64 {
+    let dc: Complex64 = poles.iter().map(|p| -p).product();
+    let mag2 = |w: f64| {
+        let s = Complex64::new(0.0, w);
+        (dc / poles.iter().map(|p| s - p).product::<Complex64>()).norm_sqr()
+    };
+    let (mut lo, mut hi) = (0.0, 1.0);
+    while mag2(hi) > 0.5 {
+        hi *= 2.0;
+    }
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if mag2(mid) > 0.5 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -272,6 +330,34 @@ mod tests {
         f.derivative(&x, 2.0, &mut dx);
         assert!(dx.iter().all(|d| d.abs() < 1e-9));
         assert!((f.output(&x) - 2.0 * f.response(0.0).re).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bessel_poles_and_cutoff() {
+        // Textbook roots: s² + 3s + 3 and s³ + 6s² + 15s + 15.
+        let p2 = bessel_delay_poles(2);
+        assert!((p2[0] - Complex64::new(-1.5, -0.75f64.sqrt())).norm() < 1e-12, "{p2:?}");
+        let p3 = bessel_delay_poles(3);
+        let real = p3.iter().find(|p| p.im.abs() < 1e-9).unwrap();
+        assert!((real.re + 2.322185354626086).abs() < 1e-9, "{p3:?}");
+        assert!(p3
+            .iter()
+            .any(|p| (p - Complex64::new(-1.838907322686957, 1.754380959783722)).norm() < 1e-9));
+        for n in 1..=8 {
+            let f = AnalogFilter::new(FilterSpec {
+                family: FilterFamily::Bessel,
+                order: n,
+                cutoff_hz: 30.0,
+                ripple_db: None,
+            })
+            .unwrap();
+            assert!((f.response(30.0).norm_sqr() - 0.5).abs() < 1e-9, "n={n}");
+            assert!((f.response(0.0).norm() - 1.0).abs() < 1e-12);
+            // Unit-delay poles sum to −a_{n−1}/a_n: the group delay at DC is 1 s before scaling.
+            let mut x = vec![0.0; f.states()];
+            f.steady_state(1.0, &mut x);
+            assert!((f.output(&x) - 1.0).abs() < 1e-12);
+        }
     }
 
     #[test]
