@@ -69,7 +69,7 @@ pub fn rnea_terms<'a>(
 
 /// Forward pass: link velocities and accelerations from the base outwards,
 /// then each link's own inertial wrench (stored in `force`/`moment`).
-fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
+pub(crate) fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
     let mut w_p = Vector3::zeros();
     let mut dw_p = Vector3::zeros();
     let mut a_p = if gravity { -model.gravity } else { Vector3::zeros() };

@@ -1,0 +1,188 @@
+//! The inverse-dynamics regressor Φ(q, q̇, q̈) with τ = Φ·θ (Swevers eq. 2,
+//! Bona eq. 9), by the Newton–Euler recursion written in its regressor form.
+//!
+//! Per link, the 10 standard inertial parameters about the link-frame
+//! origin, in this order: XX, XY, XZ, YY, YZ, ZZ (inertia), MX, MY, MZ
+//! (first moments m·c), M (mass). Per joint, optionally: Ia (rotor inertia
+//! seen at the joint), friction (Fv, Fc; or Fv+, Fv−, Fc+, Fc− as Bona eq.
+//! 2), Off (torque offset). The link's own wrench about its origin is linear
+//! in its parameters:
+//!   f = M·a + (S(ω̇) + S(ω)²)·h,
+//!   n = K(ω̇)·ι + S(ω)·K(ω)·ι − S(a)·h,
+//! with h the first moments, ι the inertia components, K(v)·ι = I·v, and a
+//! the link origin's acceleration with gravity; joint j's torque sums the
+//! wrenches of links i ≥ j carried back to frame j, projected on its axis.
+
+use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
+
+use super::rnea::forward_pass;
+use super::{Data, Model};
+
+/// Which joint terms the regressor carries besides the link inertials.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RegressorTerms {
+    pub rotor: bool,
+    pub friction: FrictionTerms,
+    pub offset: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrictionTerms {
+    None,
+    /// Fv·q̇ + Fc·sign(q̇).
+    Symmetric,
+    /// Bona eq. 2: separate coefficients for each sign of q̇.
+    Asymmetric,
+}
+
+impl RegressorTerms {
+    /// Rotor inertia and symmetric friction: Swevers' and Bona's models.
+    pub const DEFAULT: RegressorTerms = RegressorTerms {
+        rotor: true,
+        friction: FrictionTerms::Symmetric,
+        offset: false,
+    };
+
+    fn per_joint(&self) -> usize {
+        self.rotor as usize
+            + match self.friction {
+                FrictionTerms::None => 0,
+                FrictionTerms::Symmetric => 2,
+                FrictionTerms::Asymmetric => 4,
+            }
+            + self.offset as usize
+    }
+
+    /// Number of parameters for `n` joints.
+    pub fn count(&self, n: usize) -> usize {
+        n * (10 + self.per_joint())
+    }
+}
+
+const INERTIAL: [&str; 10] = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"];
+
+/// Parameter names (`ZZ_<joint>`, `Fv_<joint>`, …), in column order.
+pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
+    let mut names = Vec::with_capacity(terms.count(model.dof()));
+    for j in &model.joints {
+        names.extend(INERTIAL.iter().map(|p| format!("{p}_{}", j.name)));
+    }
+    for j in &model.joints {
+        let n = &j.name;
+        if terms.rotor {
+            names.push(format!("Ia_{n}"));
+        }
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => names.extend([format!("Fv_{n}"), format!("Fc_{n}")]),
+            FrictionTerms::Asymmetric => {
+                names.extend([format!("Fv+_{n}"), format!("Fv-_{n}"), format!("Fc+_{n}"), format!("Fc-_{n}")])
+            }
+        }
+        if terms.offset {
+            names.push(format!("Off_{n}"));
+        }
+    }
+    names
+}
+
+/// The model's own parameter values in [`parameter_names`] order. With
+/// symmetric terms, asymmetric friction is averaged.
+pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
+    let mut theta = Vec::with_capacity(terms.count(model.dof()));
+    for l in &model.links {
+        let i = l.inertia_origin();
+        let h = l.first_moment();
+        theta.extend([i[(0, 0)], i[(0, 1)], i[(0, 2)], i[(1, 1)], i[(1, 2)], i[(2, 2)], h.x, h.y, h.z, l.mass]);
+    }
+    for (d, f) in model.drives.iter().zip(&model.friction) {
+        if terms.rotor {
+            theta.push(d.reflected_inertia());
+        }
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => theta.extend([
+                0.5 * (f.viscous_pos + f.viscous_neg),
+                0.5 * (f.coulomb_pos + f.coulomb_neg),
+            ]),
+            FrictionTerms::Asymmetric => theta.extend([f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg]),
+        }
+        if terms.offset {
+            theta.push(f.offset);
+        }
+    }
+    theta
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// K(v) with I·v = K(v)·[XX, XY, XZ, YY, YZ, ZZ].
+fn k_of(v: &Vector3<f64>) -> SMatrix<f64, 3, 6> {
+    SMatrix::<f64, 3, 6>::new(v.x, v.y, v.z, 0.0, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z)
+}
+
+/// Fills `out` (n × terms.count(n)) with Φ(q, q̇, q̈). `transition` of each
+/// joint's friction shapes the Coulomb column as in the model (sign or tanh).
+pub fn regressor(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], terms: RegressorTerms, out: &mut DMatrix<f64>) {
+    let n = model.dof();
+    assert_eq!(out.shape(), (n, terms.count(n)), "regressor: output matrix has the wrong shape");
+    forward_pass(model, data, q, qd, qdd, true);
+    out.fill(0.0);
+    for i in 0..n {
+        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
+        // Link i's own wrench regressor, frame i: force rows F, moment rows M (3 × 10 each).
+        let mut f = SMatrix::<f64, 3, 10>::zeros();
+        let mut m = SMatrix::<f64, 3, 10>::zeros();
+        let sw = skew(&w);
+        f.fixed_view_mut::<3, 3>(0, 6).copy_from(&(skew(&dw) + sw * sw));
+        f.fixed_view_mut::<3, 1>(0, 9).copy_from(&a);
+        m.fixed_view_mut::<3, 6>(0, 0).copy_from(&(k_of(&dw) + sw * k_of(&w)));
+        m.fixed_view_mut::<3, 3>(0, 6).copy_from(&(-skew(&a)));
+        // Carry it back to every joint j ≤ i.
+        for j in (0..=i).rev() {
+            let z = model.joints[j].axis.into_inner();
+            let row = z.transpose() * m;
+            for c in 0..10 {
+                out[(j, 10 * i + c)] = row[c];
+            }
+            if j > 0 {
+                let r = data.rot[j];
+                let p = skew(&model.joints[j].origin_xyz);
+                let rf = r * f;
+                m = r * m + p * rf;
+                f = rf;
+            }
+        }
+    }
+    let per = terms.per_joint();
+    for j in 0..n {
+        let mut c = 10 * n + per * j;
+        if terms.rotor {
+            out[(j, c)] = qdd[j];
+            c += 1;
+        }
+        let fr = &model.friction[j];
+        let sign = if fr.transition > 0.0 { (qd[j] / fr.transition).tanh() } else { qd[j].signum() * (qd[j] != 0.0) as i32 as f64 };
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => {
+                out[(j, c)] = qd[j];
+                out[(j, c + 1)] = sign;
+                c += 2;
+            }
+            FrictionTerms::Asymmetric => {
+                let pos = qd[j] >= 0.0;
+                out[(j, c)] = if pos { qd[j] } else { 0.0 };
+                out[(j, c + 1)] = if pos { 0.0 } else { qd[j] };
+                out[(j, c + 2)] = if pos { sign.max(0.0) } else { 0.0 };
+                out[(j, c + 3)] = if pos { 0.0 } else { sign.min(0.0) };
+                c += 4;
+            }
+        }
+        if terms.offset {
+            out[(j, c)] = 1.0;
+        }
+    }
+}
