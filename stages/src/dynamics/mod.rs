@@ -3,6 +3,7 @@
 //! algorithm per file, each cross-checked against the Lagrangian twin in
 //! `lagrange.rs`.
 
+mod base_parameters;
 mod data;
 mod forward_dynamics;
 mod kinematics;
@@ -13,6 +14,7 @@ mod rnea;
 mod robot_file;
 mod urdf;
 
+pub use base_parameters::{base_parameters, BaseParameters};
 pub use data::Data;
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};

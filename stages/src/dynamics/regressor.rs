@@ -75,9 +75,12 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
         match terms.friction {
             FrictionTerms::None => {}
             FrictionTerms::Symmetric => names.extend([format!("Fv_{n}"), format!("Fc_{n}")]),
-            FrictionTerms::Asymmetric => {
-                names.extend([format!("Fv+_{n}"), format!("Fv-_{n}"), format!("Fc+_{n}"), format!("Fc-_{n}")])
-            }
+            FrictionTerms::Asymmetric => names.extend([
+                format!("Fv+_{n}"),
+                format!("Fv-_{n}"),
+                format!("Fc+_{n}"),
+                format!("Fc-_{n}"),
+            ]),
         }
         if terms.offset {
             names.push(format!("Off_{n}"));
@@ -93,7 +96,18 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
     for l in &model.links {
         let i = l.inertia_origin();
         let h = l.first_moment();
-        theta.extend([i[(0, 0)], i[(0, 1)], i[(0, 2)], i[(1, 1)], i[(1, 2)], i[(2, 2)], h.x, h.y, h.z, l.mass]);
+        theta.extend([
+            i[(0, 0)],
+            i[(0, 1)],
+            i[(0, 2)],
+            i[(1, 1)],
+            i[(1, 2)],
+            i[(2, 2)],
+            h.x,
+            h.y,
+            h.z,
+            l.mass,
+        ]);
     }
     for (d, f) in model.drives.iter().zip(&model.friction) {
         if terms.rotor {
@@ -120,14 +134,28 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 
 /// K(v) with I·v = K(v)·[XX, XY, XZ, YY, YZ, ZZ].
 fn k_of(v: &Vector3<f64>) -> SMatrix<f64, 3, 6> {
-    SMatrix::<f64, 3, 6>::new(v.x, v.y, v.z, 0.0, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z)
+    SMatrix::<f64, 3, 6>::new(
+        v.x, v.y, v.z, 0.0, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z,
+    )
 }
 
 /// Fills `out` (n × terms.count(n)) with Φ(q, q̇, q̈). `transition` of each
 /// joint's friction shapes the Coulomb column as in the model (sign or tanh).
-pub fn regressor(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], terms: RegressorTerms, out: &mut DMatrix<f64>) {
+pub fn regressor(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    qd: &[f64],
+    qdd: &[f64],
+    terms: RegressorTerms,
+    out: &mut DMatrix<f64>,
+) {
     let n = model.dof();
-    assert_eq!(out.shape(), (n, terms.count(n)), "regressor: output matrix has the wrong shape");
+    assert_eq!(
+        out.shape(),
+        (n, terms.count(n)),
+        "regressor: output matrix has the wrong shape"
+    );
     forward_pass(model, data, q, qd, qdd, true);
     out.fill(0.0);
     for i in 0..n {
@@ -164,7 +192,11 @@ pub fn regressor(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f
             c += 1;
         }
         let fr = &model.friction[j];
-        let sign = if fr.transition > 0.0 { (qd[j] / fr.transition).tanh() } else { qd[j].signum() * (qd[j] != 0.0) as i32 as f64 };
+        let sign = if fr.transition > 0.0 {
+            (qd[j] / fr.transition).tanh()
+        } else {
+            qd[j].signum() * (qd[j] != 0.0) as i32 as f64
+        };
         match terms.friction {
             FrictionTerms::None => {}
             FrictionTerms::Symmetric => {

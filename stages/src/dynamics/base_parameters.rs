@@ -1,0 +1,146 @@
+//! Base parameters (Gautier & Khalil, numerically): the regressor is
+//! stacked at random states, its columns scaled to unit norm, and a QR
+//! factorisation with a restricted pivot rule — the next column in the
+//! declared order whose residual against the columns already chosen exceeds
+//! the tolerance — picks the independent (base) columns. The others are
+//! exact combinations of them, W_D = W_B·K, found by least squares, so the
+//! base parameters are θ_B + K·θ_D. Keeping the declared order (links from
+//! the base outwards, each link's inertia before its first moments and mass,
+//! then rotors and friction) gives the usual regrouped sets, e.g.
+//! `ZZ_a3 + Ia_a3`. An SVD of the same matrix cross-checks the rank.
+
+use nalgebra::{DMatrix, DVector};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::{parameter_names, regressor, Data, Model, RegressorTerms};
+
+#[derive(Debug, Clone)]
+pub struct BaseParameters {
+    /// Names of all standard parameters, in regressor column order.
+    pub names: Vec<String>,
+    /// Columns kept as base parameters.
+    pub base: Vec<usize>,
+    /// Columns that do not affect the dynamics at all.
+    pub unidentifiable: Vec<usize>,
+    /// θ_base = map · θ_standard (rows: base parameters).
+    pub map: DMatrix<f64>,
+    /// Singular values of the scaled stacked regressor around the rank:
+    /// the smallest kept and the largest dropped.
+    pub gap: (f64, f64),
+}
+
+impl BaseParameters {
+    /// Base parameter values for standard ones.
+    pub fn base_values(&self, standard: &[f64]) -> DVector<f64> {
+        &self.map * DVector::from_column_slice(standard)
+    }
+
+    /// A base parameter as a readable combination, e.g. `ZZ_a3 + 1·Ia_a3`.
+    pub fn expression(&self, b: usize) -> String {
+        let mut s = self.names[self.base[b]].clone();
+        for (c, name) in self.names.iter().enumerate() {
+            let k = self.map[(b, c)];
+            if c == self.base[b] || k.abs() < 1e-10 {
+                continue;
+            }
+            let sign = if k < 0.0 { " - " } else { " + " };
+            let mag = k.abs();
+            if (mag - 1.0).abs() < 1e-10 {
+                s.push_str(&format!("{sign}{name}"));
+            } else {
+                s.push_str(&format!("{sign}{}·{name}", format_coefficient(mag)));
+            }
+        }
+        s
+    }
+}
+
+fn format_coefficient(x: f64) -> String {
+    let t = format!("{x:.6}");
+    t.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Base parameters of `model` with the regressor `terms`, from `samples`
+/// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
+/// accelerations in ±5 rad/s²).
+pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
+    let n = model.dof();
+    let p = terms.count(n);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut data = Data::new(model);
+    let mut w = DMatrix::zeros(samples * n, p);
+    let mut phi = DMatrix::zeros(n, p);
+    for s in 0..samples {
+        let mut v = |a: f64| (0..n).map(|_| rng.random_range(-a..a)).collect::<Vec<f64>>();
+        let (q, qd, qdd) = (v(std::f64::consts::PI), v(2.0), v(5.0));
+        regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+        w.rows_mut(s * n, n).copy_from(&phi);
+    }
+    let norms: Vec<f64> = (0..p).map(|c| w.column(c).norm()).collect();
+    let scale = norms.iter().copied().fold(0.0, f64::max);
+    let tol = 1e-8;
+    // Restricted pivoting: Gram–Schmidt (twice, for stability) in declared order.
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    let (mut base, mut dependent, mut unidentifiable) = (Vec::new(), Vec::new(), Vec::new());
+    for c in 0..p {
+        if norms[c] <= 1e-12 * scale {
+            unidentifiable.push(c);
+            continue;
+        }
+        let mut v = w.column(c) / norms[c];
+        for _ in 0..2 {
+            for b in &basis {
+                let d = b.dot(&v);
+                v -= b * d;
+            }
+        }
+        let r = v.norm();
+        if r > tol {
+            basis.push(v / r);
+            base.push(c);
+        } else {
+            dependent.push(c);
+        }
+    }
+    // K = W_B⁺ W_D by QR of W_B (full column rank).
+    let wb = DMatrix::from_fn(w.nrows(), base.len(), |i, j| w[(i, base[j])]);
+    let qr = wb.clone().qr();
+    let mut map = DMatrix::zeros(base.len(), p);
+    for (b, &c) in base.iter().enumerate() {
+        map[(b, c)] = 1.0;
+    }
+    for &d in &dependent {
+        let k = qr
+            .r()
+            .solve_upper_triangular(&(qr.q().transpose() * w.column(d)))
+            .expect("full column rank");
+        for b in 0..base.len() {
+            map[(b, d)] = k[b];
+        }
+    }
+    // Cross-check the rank with the singular values of the scaled matrix,
+    // leaving out the unidentifiable columns (round-off only: scaling them
+    // to unit norm would make noise look independent).
+    let scaled = DMatrix::from_fn(w.nrows(), p, |i, j| {
+        if unidentifiable.contains(&j) {
+            0.0
+        } else {
+            w[(i, j)] / norms[j]
+        }
+    });
+    let mut sv: Vec<f64> = scaled.singular_values().iter().copied().collect();
+    sv.sort_by(|a, b| b.total_cmp(a));
+    let r = base.len();
+    let gap = (
+        sv.get(r.wrapping_sub(1)).copied().unwrap_or(0.0),
+        sv.get(r).copied().unwrap_or(0.0),
+    );
+    BaseParameters {
+        names: parameter_names(model, terms),
+        base,
+        unidentifiable,
+        map,
+        gap,
+    }
+}
