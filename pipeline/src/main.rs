@@ -29,6 +29,8 @@ enum Command {
     Validate(cmd::validate::Args),
     /// Compare a run's tables with golden tables, column by column.
     Check(cmd::check::Args),
+    /// Inspect a robot model: parameters, base parameters, conditioning.
+    Model(cmd::model::Args),
     /// Print the Arrow schema of a robotid table kind.
     Schema(cmd::schema::Args),
 }
@@ -40,6 +42,7 @@ fn main() -> ExitCode {
         Command::Run(a) => cmd::run::run(a),
         Command::Validate(a) => cmd::validate::run(a),
         Command::Check(a) => cmd::check::run(a),
+        Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),
     };
     match result {

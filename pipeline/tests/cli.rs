@@ -69,3 +69,27 @@ fn simulate_writes_the_recording_and_its_truth() {
         "{truth}"
     );
 }
+
+#[test]
+fn model_inspect_prints_the_base_set_and_conditioning() {
+    let out = robotid()
+        .args(["model", "inspect"])
+        .arg(root().join("fixtures/robots/kuka_axis3.toml"))
+        .arg("--trajectory")
+        .arg(root().join("fixtures/sims/kuka_axis3.toml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = String::from_utf8_lossy(&out.stdout);
+    for needle in [
+        "13 standard parameters",
+        "5 base parameters",
+        "= ZZ_a3 + Ia_a3",
+        "= MX_a3",
+        "condition number",
+    ] {
+        assert!(s.contains(needle), "missing `{needle}` in {s}");
+    }
+    let out = robotid().args(["model", "inspect", "nowhere.toml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+}

@@ -1,4 +1,5 @@
 pub mod check;
+pub mod model;
 pub mod run;
 pub mod schema;
 pub mod simulate;

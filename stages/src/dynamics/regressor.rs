@@ -89,6 +89,17 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
     names
 }
 
+/// The unit of a parameter, from its name's prefix.
+pub fn parameter_unit(name: &str) -> &'static str {
+    match name.split('_').next().unwrap_or("") {
+        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "Ia" => "kg*m^2",
+        "MX" | "MY" | "MZ" => "kg*m",
+        "M" => "kg",
+        "Fv" | "Fv+" | "Fv-" => "N*m*s/rad",
+        _ => "N*m",
+    }
+}
+
 /// The model's own parameter values in [`parameter_names`] order. With
 /// symmetric terms, asymmetric friction is averaged.
 pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
