@@ -12,6 +12,7 @@ use robotid_stages::differentiate::{DifferentiateConfig, Method};
 use robotid_stages::dynamics::{load_robot, Model};
 use robotid_stages::inverse_filter::InverseFilterConfig;
 use robotid_stages::read::ReadConfig;
+use robotid_stages::regressor::RegressorConfig;
 use serde::Deserialize;
 
 pub const FORMAT_VERSION: u32 = 1;
@@ -56,6 +57,7 @@ pub enum StageConfig {
     Average(NoOptions),
     Noise(NoiseConfig),
     Differentiate(DifferentiateConfig),
+    Regressor(RegressorConfig),
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
@@ -77,6 +79,7 @@ pub enum Data {
     PeriodMean,
     Noise,
     Kinematics,
+    Regressor,
 }
 
 impl StageConfig {
@@ -88,6 +91,7 @@ impl StageConfig {
             StageConfig::Average(_) => "average",
             StageConfig::Noise(_) => "noise",
             StageConfig::Differentiate(_) => "differentiate",
+            StageConfig::Regressor(_) => "regressor",
         }
     }
 
@@ -101,6 +105,7 @@ impl StageConfig {
             StageConfig::Noise(_) => (&[Data::Periods, Data::PeriodMean], Some(Data::Noise)),
             StageConfig::Differentiate(c) if c.method == Method::Filtered => (&[Data::Raw], Some(Data::Kinematics)),
             StageConfig::Differentiate(_) => (&[Data::PeriodMean], Some(Data::Kinematics)),
+            StageConfig::Regressor(_) => (&[Data::Kinematics], Some(Data::Regressor)),
         }
     }
 
@@ -109,7 +114,7 @@ impl StageConfig {
             StageConfig::Align(c) => c.check(),
             StageConfig::InverseFilter(c) => c.check(),
             StageConfig::Decimate(c) => c.check(),
-            StageConfig::Average(_) | StageConfig::Noise(_) => Ok(()),
+            StageConfig::Average(_) | StageConfig::Noise(_) | StageConfig::Regressor(_) => Ok(()),
             StageConfig::Differentiate(c) => c.check(),
         }
     }
@@ -179,10 +184,10 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
     let mut tables = Vec::new();
     for t in &raw.output.tables {
         match t.parse::<TableKind>() {
-            Ok(k @ (TableKind::RawSamples | TableKind::PeriodMean | TableKind::Noise | TableKind::Kinematics)) => {
-                tables.push(k)
-            }
-            Ok(k) => problems.push(at(format!("[output] tables: `{k}` is not made by preprocessing"))),
+            Ok(TableKind::Parameters) => problems.push(at(
+                "[output] tables: `parameters` is made by estimation, not by a pipeline".into(),
+            )),
+            Ok(k) => tables.push(k),
             Err(_) => problems.push(at(format!("[output] tables: unknown table `{t}`"))),
         }
     }
@@ -210,7 +215,7 @@ pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) ->
         for need in needs {
             if !have.contains(need) {
                 problems.push(format!(
-                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate)",
+                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate, regressor)",
                     i + 1,
                     s.name(),
                     need
@@ -229,6 +234,7 @@ pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) ->
             TableKind::RawSamples => Data::Raw,
             TableKind::PeriodMean => Data::PeriodMean,
             TableKind::Noise => Data::Noise,
+            TableKind::Regressor => Data::Regressor,
             _ => Data::Kinematics,
         };
         if !have.contains(&need) {
@@ -286,6 +292,9 @@ pub fn resolve(plan: &Plan) -> Result<(Option<Model>, Vec<PathBuf>, Data), Probl
                 )));
             }
         }
+    }
+    if model.is_none() && plan.stages.iter().any(|s| matches!(s, StageConfig::Regressor(_))) {
+        problems.push(at("the regressor stage needs the robot: set `robot`".into()));
     }
     if model.is_none() && plan.read.joints.is_none() && problems.is_empty() {
         problems.push(at("no robot and no [read] joints: the joint names are unknown".into()));

@@ -64,6 +64,7 @@ struct State {
     mean: Option<PeriodMean>,
     noise: Option<NoiseTable>,
     kinematics: Option<Kinematics>,
+    regressor: Option<arrow::array::RecordBatch>,
 }
 
 /// Output folder names: the file stem, or stem and extension where two
@@ -238,6 +239,24 @@ fn run_one(
                 let filter = c.filter.as_ref().expect("checked");
                 st.kinematics = Some(differentiate_record(raw, record_rate(raw), filter, spectra).map_err(fail)?);
             }
+            StageConfig::Regressor(c) => {
+                let kin = st.kinematics.as_ref().expect("chain checked");
+                let model = model.expect("checked: the regressor stage needs the robot");
+                let batch =
+                    robotid_stages::regressor::regressor_table(kin, st.noise.as_ref(), model, c, name).map_err(fail)?;
+                let cond = batch
+                    .schema()
+                    .metadata()
+                    .get("robotid.condition_number")
+                    .cloned()
+                    .unwrap_or_default();
+                outcome.notes.push(format!(
+                    "regressor: {} rows, {} base parameters, condition number {cond} (column-normalised)",
+                    batch.num_rows(),
+                    batch.num_columns() - 6
+                ));
+                st.regressor = Some(batch);
+            }
             StageConfig::Average(_) => {
                 let p = st.periods.as_ref().expect("chain checked");
                 let (mean, _drift) = average(p);
@@ -298,6 +317,14 @@ fn run_one(
                 let mut m = st.noise.clone().expect("chain checked");
                 provenance(&mut m.metadata);
                 m.to_record_batch()
+            }
+            TableKind::Regressor => {
+                let b = st.regressor.clone().expect("chain checked");
+                let mut md: BTreeMap<String, String> = b.schema().metadata().clone().into();
+                provenance(&mut md);
+                let schema = arrow::datatypes::Schema::new(b.schema().fields().clone()).with_metadata(md);
+                arrow::array::RecordBatch::try_new(std::sync::Arc::new(schema), b.columns().to_vec())
+                    .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))
             }
             _ => {
                 let mut m = st.kinematics.clone().expect("chain checked");

@@ -10,6 +10,7 @@ pub mod formats;
 pub mod inverse_filter;
 pub mod noise;
 pub mod read;
+pub mod regressor;
 pub mod signal;
 pub mod simulate;
 pub mod synthetic;

@@ -108,8 +108,7 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
         for s in 0..samples {
             traj.eval(s as f64 / a.rate, &mut q, &mut qd, &mut qdd);
             regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
-            // Base regressor: Φ·mapᵀ gives the columns of the base parameters.
-            let base = &phi * bp.map.transpose();
+            let base = bp.base_regressor(&phi);
             w.rows_mut(s * n, n).copy_from(&base);
         }
         for mut c in w.column_iter_mut() {

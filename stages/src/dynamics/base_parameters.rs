@@ -36,6 +36,12 @@ impl BaseParameters {
         &self.map * DVector::from_column_slice(standard)
     }
 
+    /// The base regressor: the base columns of a full regressor Φ (since the
+    /// dependent columns are Φ_D = Φ_B·K, τ = Φ·θ = Φ_B·θ_base).
+    pub fn base_regressor(&self, phi: &DMatrix<f64>) -> DMatrix<f64> {
+        DMatrix::from_fn(phi.nrows(), self.base.len(), |i, j| phi[(i, self.base[j])])
+    }
+
     /// A base parameter as a readable combination, e.g. `ZZ_a3 + 1·Ia_a3`.
     pub fn expression(&self, b: usize) -> String {
         let mut s = self.names[self.base[b]].clone();
