@@ -72,21 +72,30 @@ impl BatchBuilder {
     }
 }
 
-/// A non-null Float64 column by name.
-pub fn f64_column(batch: &RecordBatch, name: &str) -> Result<Vec<f64>, SchemaError> {
+/// A column by name as the Arrow array type `A` (named `expected` in errors).
+fn typed_column<'a, A: Array + 'static>(
+    batch: &'a RecordBatch,
+    name: &str,
+    expected: &str,
+) -> Result<&'a A, SchemaError> {
     let i = batch.schema().index_of(name).map_err(|_| SchemaError::MissingColumn {
         column: name.into(),
         why: "not in the table".into(),
     })?;
-    let a = batch
+    batch
         .column(i)
         .as_any()
-        .downcast_ref::<Float64Array>()
+        .downcast_ref::<A>()
         .ok_or_else(|| SchemaError::WrongType {
             column: name.into(),
-            expected: "Float64".into(),
+            expected: expected.into(),
             found: batch.column(i).data_type().to_string(),
-        })?;
+        })
+}
+
+/// A non-null Float64 column by name.
+pub fn f64_column(batch: &RecordBatch, name: &str) -> Result<Vec<f64>, SchemaError> {
+    let a: &Float64Array = typed_column(batch, name, "Float64")?;
     if a.null_count() > 0 {
         return Err(SchemaError::WrongType {
             column: name.into(),
@@ -99,19 +108,7 @@ pub fn f64_column(batch: &RecordBatch, name: &str) -> Result<Vec<f64>, SchemaErr
 
 /// A non-null Int64 column by name.
 pub fn i64_column(batch: &RecordBatch, name: &str) -> Result<Vec<i64>, SchemaError> {
-    let i = batch.schema().index_of(name).map_err(|_| SchemaError::MissingColumn {
-        column: name.into(),
-        why: "not in the table".into(),
-    })?;
-    let a = batch
-        .column(i)
-        .as_any()
-        .downcast_ref::<Int64Array>()
-        .ok_or_else(|| SchemaError::WrongType {
-            column: name.into(),
-            expected: "Int64".into(),
-            found: batch.column(i).data_type().to_string(),
-        })?;
+    let a: &Int64Array = typed_column(batch, name, "Int64")?;
     Ok(a.values().to_vec())
 }
 
