@@ -256,11 +256,11 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             time.iter_mut().for_each(|v| *v -= t0);
         }
     }
-    check_finite(&source, "time", std::slice::from_ref(&time), &[String::from("time")])?;
-    check_finite(&source, "position", &position, &names[0])?;
-    check_finite(&source, "effort", &effort, &names[1])?;
+    check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
+    check_finite(&source, &position, &names[0])?;
+    check_finite(&source, &effort, &names[1])?;
     if let Some(r) = &reference {
-        check_finite(&source, "reference", r, &names[2])?;
+        check_finite(&source, r, &names[2])?;
     }
     md.insert(
         metadata::SOURCE_FILE.into(),
@@ -288,7 +288,8 @@ fn hash_file(path: &Path) -> Result<String> {
     Ok(sha256_hex(&bytes))
 }
 
-fn check_finite(source: &str, _kind: &str, cols: &[Vec<f64>], names: &[String]) -> Result<()> {
+/// The first NaN or infinity, named by channel and sample.
+fn check_finite(source: &str, cols: &[Vec<f64>], names: &[String]) -> Result<()> {
     for (c, name) in cols.iter().zip(names) {
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
             return Err(Error::Data {
