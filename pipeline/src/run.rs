@@ -346,7 +346,14 @@ fn run_one(
     if let Some(plot_dir) = plot {
         let t = Instant::now();
         let dir = plot_dir.join(name);
-        let h = harmonics(None, &st.mean.as_ref().map(|m| m.metadata.clone()).unwrap_or_default()).unwrap_or_default();
+        // Excited harmonics: the noise stage's, else the recording's.
+        let from_stage = plan.stages.iter().find_map(|s| match s {
+            StageConfig::Noise(c) => c.harmonics.clone(),
+            _ => None,
+        });
+        let h = from_stage.unwrap_or_else(|| {
+            harmonics(None, &st.mean.as_ref().map(|m| m.metadata.clone()).unwrap_or_default()).unwrap_or_default()
+        });
         let inputs = crate::plot::Inputs {
             name,
             periods: st.periods.as_ref(),

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, SchemaError, TableKind};
 use serde::{Deserialize, Serialize};
 
@@ -89,23 +90,42 @@ pub fn regressor_table(
     let terms = cfg.terms();
     let n = model.dof();
     let bp = base_parameters(model, terms, 40 + 6 * terms.count(n) / n, 7);
-    let rows = kin.time.len() * n;
+    let samples = kin.time.len();
+    let rows = samples * n;
     let nb = bp.base.len();
-    let mut a = DMatrix::zeros(rows, nb);
-    let mut data = Data::new(model);
-    let mut phi = DMatrix::zeros(n, terms.count(n));
-    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let (mut sample, mut joint, mut time, mut b, mut var) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for k in 0..kin.time.len() {
-        for j in 0..n {
-            q[j] = kin.q[j][k];
-            qd[j] = kin.qd[j][k];
-            qdd[j] = kin.qdd[j][k];
+    // Samples in parallel, in chunks with their own workspace; each sample's
+    // n rows land in place (row-major buffer), so no allocation per sample
+    // and the result does not depend on the thread count.
+    let mut buf = vec![0.0; rows * nb];
+    const CHUNK: usize = 256;
+    buf.par_chunks_mut(CHUNK * n * nb).enumerate().for_each(|(c, out)| {
+        let mut data = Data::new(model);
+        let mut phi = DMatrix::zeros(n, terms.count(n));
+        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
+            let k = c * CHUNK + local;
+            for j in 0..n {
+                q[j] = kin.q[j][k];
+                qd[j] = kin.qd[j][k];
+                qdd[j] = kin.qdd[j][k];
+            }
+            regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+            for j in 0..n {
+                for (bi, &col) in bp.base.iter().enumerate() {
+                    rows_out[j * nb + bi] = phi[(j, col)];
+                }
+            }
         }
-        regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
-        let base = bp.base_regressor(&phi);
-        a.rows_mut(k * n, n).copy_from(&base);
+    });
+    let a = DMatrix::from_row_slice(rows, nb, &buf);
+    let (mut sample, mut joint, mut time, mut b, mut var) = (
+        Vec::with_capacity(rows),
+        Vec::with_capacity(rows),
+        Vec::with_capacity(rows),
+        Vec::with_capacity(rows),
+        Vec::with_capacity(rows),
+    );
+    for k in 0..samples {
         for j in 0..n {
             sample.push(k as i64);
             joint.push(names[j].clone());
