@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/pyenv"
-if ! "$venv/bin/python" -c "import mcap, mcap_ros2" 2>/dev/null; then
+if ! "$venv/bin/python" -c "import mcap, mcap_ros2, pinocchio" 2>/dev/null; then
   echo "setting up $venv (tests/python/requirements.txt)"
   rm -rf "$venv"
   python3 -m venv "$venv"
