@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, SchemaError, TableKind};
 use serde::{Deserialize, Serialize};
 
-use crate::dynamics::{base_parameters, parameter_unit, regressor, Data, FrictionTerms, Model, RegressorTerms};
+use crate::dynamics::{base_parameters, parameter_unit, regressor, Data, FrictionTerms, Model, RegressorTerms, Spring};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -40,6 +40,16 @@ pub struct RegressorConfig {
     /// estimates (measured on the simulated KUKA axis: +32 % and −6 % with
     /// sign(q̇) against a plant with v = 0.01 rad/s).
     pub coulomb_transition_rad_s: Option<f64>,
+    /// Swevers eq. 9: gravity-spring terms on one joint as a Fourier series
+    /// in its angle.
+    pub spring: Option<SpringConfig>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringConfig {
+    pub joint: String,
+    pub harmonics: u32,
 }
 
 fn symmetric() -> FrictionModel {
@@ -50,8 +60,25 @@ fn yes() -> bool {
 }
 
 impl RegressorConfig {
-    pub fn terms(&self) -> RegressorTerms {
-        RegressorTerms {
+    pub fn terms(&self, model: &Model) -> Result<RegressorTerms, String> {
+        let spring = match &self.spring {
+            Some(sc) => {
+                let joint = model
+                    .joints
+                    .iter()
+                    .position(|j| j.name == sc.joint)
+                    .ok_or_else(|| format!("spring: `{}` is not a joint of `{}`", sc.joint, model.name))?;
+                if sc.harmonics == 0 {
+                    return Err("spring: harmonics must be ≥ 1".into());
+                }
+                Some(Spring {
+                    joint,
+                    harmonics: sc.harmonics,
+                })
+            }
+            None => None,
+        };
+        Ok(RegressorTerms {
             rotor: self.rotor,
             friction: match self.friction {
                 FrictionModel::None => FrictionTerms::None,
@@ -59,7 +86,8 @@ impl RegressorConfig {
                 FrictionModel::Asymmetric => FrictionTerms::Asymmetric,
             },
             offset: self.offset,
-        }
+            spring,
+        })
     }
 }
 
@@ -87,7 +115,7 @@ pub fn regressor_table(
         ));
     }
     let torque = kin.torque.as_ref().ok_or("the kinematics table has no torques")?;
-    let terms = cfg.terms();
+    let terms = cfg.terms(model)?;
     let n = model.dof();
     let bp = base_parameters(model, terms, 40 + 6 * terms.count(n) / n, 7);
     let samples = kin.time.len();

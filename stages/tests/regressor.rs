@@ -23,6 +23,7 @@ fn regressor_times_parameters_is_rnea() {
         rotor: true,
         friction: FrictionTerms::Asymmetric,
         offset: true,
+        spring: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(41);
     for path in robots {
@@ -158,6 +159,7 @@ fn truth_regression_recovers_the_axis() {
             rotor: true,
             offset: false,
             coulomb_transition_rad_s: None,
+            spring: None,
         };
         let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
         let col = |i: usize| {
@@ -186,4 +188,44 @@ fn truth_regression_recovers_the_axis() {
             assert!(worst > 0.1, "mismatch should show: {worst:e}");
         }
     }
+}
+
+/// Swevers eq. 9: the spring columns are cos(l·q), sin(l·q) on the chosen
+/// joint's row only, and a spring torque Σ A_l cos(l q) + B_l sin(l q) added
+/// to the model's is reproduced by Φ·θ with those coefficients.
+#[test]
+fn spring_terms_are_a_fourier_series_in_the_joint_angle() {
+    use robotid_stages::dynamics::Spring;
+    let model = dynamics::load_robot(&fixture("robots/arm3.toml")).unwrap();
+    let terms = RegressorTerms {
+        friction: FrictionTerms::Asymmetric,
+        spring: Some(Spring { joint: 1, harmonics: 3 }),
+        ..RegressorTerms::DEFAULT
+    };
+    let names = dynamics::parameter_names(&model, terms);
+    assert_eq!(
+        &names[names.len() - 6..],
+        ["SpA1_j2", "SpB1_j2", "SpA2_j2", "SpB2_j2", "SpA3_j2", "SpB3_j2"]
+    );
+    let mut theta = standard_parameters(&model, terms);
+    let coef = [-12.0, 3.0, 40.0, -5.0, 2.0, 0.5];
+    let k = theta.len() - 6;
+    theta[k..].copy_from_slice(&coef);
+    let theta = nalgebra::DVector::from_vec(theta);
+    let mut data = Data::new(&model);
+    let mut phi = DMatrix::zeros(3, terms.count(3));
+    let (q, qd, qdd) = ([0.3, -0.7, 1.1], [0.5, -0.2, 0.1], [1.0, 2.0, -1.5]);
+    regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+    let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).clone();
+    let spring: f64 = (1..=3)
+        .map(|l| coef[2 * (l - 1)] * (l as f64 * q[1]).cos() + coef[2 * l - 1] * (l as f64 * q[1]).sin())
+        .sum();
+    let pred = &phi * &theta;
+    assert!((pred[0] - tau[0]).abs() < 1e-10 && (pred[2] - tau[2]).abs() < 1e-10);
+    assert!(
+        (pred[1] - tau[1] - spring).abs() < 1e-10,
+        "{} vs {}",
+        pred[1] - tau[1],
+        spring
+    );
 }

@@ -64,6 +64,7 @@ fn rnea_and_regressor_match_pinocchio() {
             rotor: false,
             friction: FrictionTerms::None,
             offset: false,
+            spring: None,
         };
         let theta = DVector::from_vec(standard_parameters(&model, terms));
         let mut data = Data::new(&model);

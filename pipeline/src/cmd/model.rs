@@ -58,6 +58,7 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
         rotor: a.rotor,
         friction,
         offset: false,
+        spring: None,
     };
     let n = model.dof();
     let names = parameter_names(&model, terms);

@@ -19,7 +19,9 @@ pub use data::Data;
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
-pub use regressor::{parameter_names, parameter_unit, regressor, standard_parameters, FrictionTerms, RegressorTerms};
+pub use regressor::{
+    parameter_names, parameter_unit, regressor, standard_parameters, FrictionTerms, RegressorTerms, Spring,
+};
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, parse_robot_file};
 pub use urdf::{load_urdf, parse_urdf};

@@ -24,6 +24,16 @@ pub struct RegressorTerms {
     pub rotor: bool,
     pub friction: FrictionTerms,
     pub offset: bool,
+    /// Swevers eq. 9: a gravity-compensation spring (plus gravity) on one
+    /// joint as a finite Fourier series in its angle, Σ_l A_l cos(l·q) + B_l sin(l·q).
+    pub spring: Option<Spring>,
+}
+
+/// Which joint carries the spring terms and how many harmonics they have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Spring {
+    pub joint: usize,
+    pub harmonics: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,6 +51,7 @@ impl RegressorTerms {
         rotor: true,
         friction: FrictionTerms::Symmetric,
         offset: false,
+        spring: None,
     };
 
     fn per_joint(&self) -> usize {
@@ -55,10 +66,11 @@ impl RegressorTerms {
 
     /// Number of parameters for `n` joints.
     pub fn count(&self, n: usize) -> usize {
-        n * (10 + self.per_joint())
+        n * (10 + self.per_joint()) + self.spring.map_or(0, |s| 2 * s.harmonics as usize)
     }
 }
 
+/// Parameter name prefixes (before `_<joint>`).
 const INERTIAL: [&str; 10] = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"];
 
 /// Parameter names (`ZZ_<joint>`, `Fv_<joint>`, …), in column order.
@@ -86,6 +98,12 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
             names.push(format!("Off_{n}"));
         }
     }
+    if let Some(sp) = terms.spring {
+        let n = &model.joints[sp.joint].name;
+        for l in 1..=sp.harmonics {
+            names.extend([format!("SpA{l}_{n}"), format!("SpB{l}_{n}")]);
+        }
+    }
     names
 }
 
@@ -96,7 +114,7 @@ pub fn parameter_unit(name: &str) -> &'static str {
         "MX" | "MY" | "MZ" => "kg*m",
         "M" => "kg",
         "Fv" | "Fv+" | "Fv-" => "N*m*s/rad",
-        _ => "N*m",
+        _ => "N*m", // Fc, Off, spring coefficients
     }
 }
 
@@ -135,6 +153,10 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
         if terms.offset {
             theta.push(f.offset);
         }
+    }
+    // The model has no spring: its Fourier coefficients are zero.
+    if let Some(sp) = terms.spring {
+        theta.extend(std::iter::repeat_n(0.0, 2 * sp.harmonics as usize));
     }
     theta
 }
@@ -226,6 +248,14 @@ pub fn regressor(
         }
         if terms.offset {
             out[(j, c)] = 1.0;
+        }
+    }
+    if let Some(sp) = terms.spring {
+        let c0 = n * (10 + per);
+        for l in 1..=sp.harmonics as usize {
+            let (s, c) = (l as f64 * q[sp.joint]).sin_cos();
+            out[(sp.joint, c0 + 2 * (l - 1))] = c;
+            out[(sp.joint, c0 + 2 * (l - 1) + 1)] = s;
         }
     }
 }
