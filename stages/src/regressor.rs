@@ -15,7 +15,10 @@ use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, SchemaError, TableKind};
 use serde::{Deserialize, Serialize};
 
-use crate::dynamics::{base_parameters, parameter_unit, regressor, Data, FrictionTerms, Model, RegressorTerms, Spring};
+use crate::dynamics::{
+    base_parameters, decoupled_names, decoupled_regressor, parameter_unit, regressor, Data, FrictionTerms, Model,
+    RegressorTerms, Spring,
+};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -25,9 +28,22 @@ pub enum FrictionModel {
     Asymmetric,
 }
 
+/// Which dynamic model the regressor describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// The full serial chain of the robot file (base parameters).
+    #[default]
+    Chain,
+    /// Bona §3.1: joints moved one at a time, M·q̈ + k·sin(q + q_off) + friction.
+    Decoupled,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegressorConfig {
+    #[serde(default)]
+    pub model: ModelKind,
     #[serde(default = "symmetric")]
     pub friction: FrictionModel,
     #[serde(default = "yes")]
@@ -117,10 +133,39 @@ pub fn regressor_table(
     let torque = kin.torque.as_ref().ok_or("the kinematics table has no torques")?;
     let terms = cfg.terms(model)?;
     let n = model.dof();
-    let bp = base_parameters(model, terms, 40 + 6 * terms.count(n) / n, 7);
+    // Columns: (standard-column index into the full regressor, name, expression).
+    let (full_count, columns_of): (usize, Vec<(usize, String, String)>) = match cfg.model {
+        ModelKind::Chain => {
+            let bp = base_parameters(model, terms, 40 + 6 * terms.count(n) / n, 7);
+            let cols = bp
+                .base
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| (c, bp.names[c].clone(), bp.expression(i)))
+                .collect();
+            (terms.count(n), cols)
+        }
+        ModelKind::Decoupled => {
+            if terms.rotor || terms.offset || terms.spring.is_some() {
+                return Err(
+                    "the decoupled model takes no rotor, offset or spring terms (its M·q̈ holds the rotor)".into(),
+                );
+            }
+            let names = decoupled_names(model, terms.friction);
+            (
+                names.len(),
+                names
+                    .into_iter()
+                    .enumerate()
+                    .map(|(c, name)| (c, name.clone(), name))
+                    .collect(),
+            )
+        }
+    };
     let samples = kin.time.len();
     let rows = samples * n;
-    let nb = bp.base.len();
+    let nb = columns_of.len();
+    let kind = cfg.model;
     // Samples in parallel, in chunks with their own workspace; each sample's
     // n rows land in place (row-major buffer), so no allocation per sample
     // and the result does not depend on the thread count.
@@ -128,7 +173,7 @@ pub fn regressor_table(
     const CHUNK: usize = 256;
     buf.par_chunks_mut(CHUNK * n * nb).enumerate().for_each(|(c, out)| {
         let mut data = Data::new(model);
-        let mut phi = DMatrix::zeros(n, terms.count(n));
+        let mut phi = DMatrix::zeros(n, full_count);
         let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
         for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
             let k = c * CHUNK + local;
@@ -137,10 +182,13 @@ pub fn regressor_table(
                 qd[j] = kin.qd[j][k];
                 qdd[j] = kin.qdd[j][k];
             }
-            regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+            match kind {
+                ModelKind::Chain => regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi),
+                ModelKind::Decoupled => decoupled_regressor(model, &q, &qd, &qdd, terms.friction, &mut phi),
+            }
             for j in 0..n {
-                for (bi, &col) in bp.base.iter().enumerate() {
-                    rows_out[j * nb + bi] = phi[(j, col)];
+                for (bi, (col, _, _)) in columns_of.iter().enumerate() {
+                    rows_out[j * nb + bi] = phi[(j, *col)];
                 }
             }
         }
@@ -184,9 +232,16 @@ pub fn regressor_table(
     md.insert("robotid.condition_number".into(), cond.to_string());
     md.insert("robotid.base_parameters".into(), nb.to_string());
     md.insert("robotid.robot".into(), model.name.clone());
+    md.insert(
+        "robotid.model".into(),
+        match kind {
+            ModelKind::Chain => "chain",
+            ModelKind::Decoupled => "decoupled",
+        }
+        .into(),
+    );
     let base_schema = TableKind::Regressor.schema(&names, &[], &md);
     let mut fields: Vec<Field> = base_schema.fields().iter().map(|f| f.as_ref().clone()).collect();
-    let std_names = &bp.names;
     let mut columns: Vec<ArrayRef> = vec![
         Arc::new(StringArray::from(vec![recording; rows])),
         Arc::new(Int64Array::from(sample)),
@@ -195,13 +250,12 @@ pub fn regressor_table(
         Arc::new(Float64Array::from(b)),
         Arc::new(Float64Array::from(var)),
     ];
-    for (i, &c) in bp.base.iter().enumerate() {
-        let name = &std_names[c];
+    for (i, (_, name, expression)) in columns_of.iter().enumerate() {
         fields.push(
             Field::new(name, DataType::Float64, false).with_metadata(BTreeMap::from([
                 (metadata::UNIT.to_string(), parameter_unit(name).to_string()),
                 (metadata::QUANTITY.to_string(), "regressor_column".to_string()),
-                ("expression".to_string(), bp.expression(i)),
+                ("expression".to_string(), expression.clone()),
             ])),
         );
         columns.push(Arc::new(Float64Array::from(

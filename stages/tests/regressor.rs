@@ -155,6 +155,7 @@ fn truth_regression_recovers_the_axis() {
     for (transition, label) in [(0.01, "matched tanh"), (0.0, "sign")] {
         model.friction[0].transition = transition;
         let rc = RegressorConfig {
+            model: Default::default(),
             friction: FrictionModel::Symmetric,
             rotor: true,
             offset: false,
@@ -187,6 +188,39 @@ fn truth_regression_recovers_the_axis() {
             // The sharper model biases the friction estimates (documented on the stage).
             assert!(worst > 0.1, "mismatch should show: {worst:e}");
         }
+    }
+    // The decoupled model (Bona §3.1) is exact for one axis: M = 8.348,
+    // G_s = −g·m·l_x, G_c = −g·m·l_y (τ_g = −m g l_x sin q − m g l_y cos q here).
+    model.friction[0].transition = 0.01;
+    let rc = RegressorConfig {
+        model: robotid_stages::regressor::ModelKind::Decoupled,
+        friction: FrictionModel::Symmetric,
+        rotor: false,
+        offset: false,
+        coulomb_transition_rad_s: None,
+        spring: None,
+    };
+    let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
+    assert_eq!(batch.schema().field(6).name(), "Mi_a3");
+    let col = |i: usize| {
+        batch
+            .column(i)
+            .as_any()
+            .downcast_ref::<arrow::array::Float64Array>()
+            .unwrap()
+            .values()
+            .to_vec()
+    };
+    let b = nalgebra::DVector::from_vec(col(4));
+    let a = DMatrix::from_fn(b.len(), 5, |i, j| col(6 + j)[i]);
+    let theta = a.svd(true, true).solve(&b, 1e-12).unwrap();
+    let truth = [8.348, -9.81 * 26.2, -9.81 * 0.02349, 3.676, 15.8927];
+    for (e, t) in theta.iter().zip(truth) {
+        assert!(
+            (e - t).abs() < 1e-9 * t.abs().max(1.0),
+            "decoupled: {:?} vs {truth:?}",
+            theta.as_slice()
+        );
     }
 }
 
@@ -228,4 +262,57 @@ fn spring_terms_are_a_fourier_series_in_the_joint_angle() {
         pred[1] - tau[1],
         spring
     );
+}
+
+/// Bona's decoupled model is exact for a joint moved alone: with only j2 of
+/// the 3-dof arm moving, its gravity torque is a sinusoid in q2 and the
+/// Coriolis terms vanish (M22 does not depend on q2), so least squares on
+/// the decoupled columns reproduces RNEA's joint-2 torque to round-off, and
+/// the gravity amplitude and offset come from the fitted pair.
+#[test]
+fn decoupled_model_is_exact_for_one_joint_moving() {
+    use robotid_stages::dynamics::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
+    let model = dynamics::load_robot(&fixture("robots/arm3.toml")).unwrap();
+    let names = decoupled_names(&model, FrictionTerms::Asymmetric);
+    assert_eq!(&names[7..10], ["Mi_j2", "Gs_j2", "Gc_j2"]);
+    let mut data = Data::new(&model);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut phi = DMatrix::zeros(3, 21);
+    for _ in 0..200 {
+        let q = [0.4, rng.random_range(-1.2..1.2), -0.3];
+        let qd = [0.0, rng.random_range(-1.0..1.0), 0.0];
+        let qdd = [0.0, rng.random_range(-3.0..3.0), 0.0];
+        decoupled_regressor(&model, &q, &qd, &qdd, FrictionTerms::Asymmetric, &mut phi);
+        a.extend((7..14).map(|c| phi[(1, c)]));
+        b.push(dynamics::rnea(&model, &mut data, &q, &qd, &qdd)[1]);
+    }
+    let a = DMatrix::from_row_slice(b.len(), 7, &a);
+    let b = nalgebra::DVector::from_vec(b);
+    let theta = a.clone().svd(true, true).solve(&b, 1e-12).unwrap();
+    let residual = (&a * &theta - &b).amax() / b.amax();
+    let (k, off) = gravity_amplitude_offset(theta[1], theta[2]);
+    // Independent truth: gravity torque on j2 at q2 = 0 and at q2 = π/2 (no motion).
+    let mut g = |q2: f64| {
+        dynamics::rnea_terms(
+            &model,
+            &mut data,
+            &[0.4, q2, -0.3],
+            &[0.0; 3],
+            &[0.0; 3],
+            dynamics::Terms {
+                gravity: true,
+                friction: false,
+                rotor: false,
+            },
+        )[1]
+    };
+    let (g0, g90) = (g(0.0), g(std::f64::consts::FRAC_PI_2));
+    println!("decoupled j2: residual {residual:.1e}, M {:.4}, k {k:.4}, q_off {off:.4} rad; Fv+ {:.3} Fv- {:.3} Fc+ {:.3} Fc- {:.3}", theta[0], theta[3], theta[4], theta[5], theta[6]);
+    assert!(residual < 1e-10, "{residual:e}");
+    assert!(
+        (k * off.sin() - g0).abs() < 1e-9 && (k * off.cos() - g90).abs() < 1e-9,
+        "k {k} off {off} vs {g0} {g90}"
+    );
+    assert!((theta[3] - 15.0).abs() < 1e-9 && (theta[6] - 12.0).abs() < 1e-9);
 }

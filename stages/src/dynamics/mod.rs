@@ -5,6 +5,7 @@
 
 mod base_parameters;
 mod data;
+mod decoupled;
 mod forward_dynamics;
 mod kinematics;
 pub mod lagrange;
@@ -16,6 +17,7 @@ mod urdf;
 
 pub use base_parameters::{base_parameters, BaseParameters};
 pub use data::Data;
+pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};

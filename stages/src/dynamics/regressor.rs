@@ -110,7 +110,7 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
 /// The unit of a parameter, from its name's prefix.
 pub fn parameter_unit(name: &str) -> &'static str {
     match name.split('_').next().unwrap_or("") {
-        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "Ia" => "kg*m^2",
+        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "Ia" | "Mi" => "kg*m^2",
         "MX" | "MY" | "MZ" => "kg*m",
         "M" => "kg",
         "Fv" | "Fv+" | "Fv-" => "N*m*s/rad",

@@ -1,0 +1,91 @@
+//! The joint-decoupled model of Bona & Curatella §3.1: each joint moved on
+//! its own (the others held still), with an equivalent inertia, gravity as
+//! an inverted pendulum and friction:
+//!   τ_i = M_i·q̈_i + k_i·sin(q_i + q_off,i) + friction(q̇_i),
+//! linear in [M_i, G_s = k·cos(q_off), G_c = k·sin(q_off), friction…] with
+//! columns [q̈_i, sin q_i, cos q_i, …] on row i only.
+
+use nalgebra::DMatrix;
+
+use super::{FrictionTerms, Model};
+
+fn per_joint(friction: FrictionTerms) -> usize {
+    3 + match friction {
+        FrictionTerms::None => 0,
+        FrictionTerms::Symmetric => 2,
+        FrictionTerms::Asymmetric => 4,
+    }
+}
+
+/// Parameter names: `Mi_<joint>`, `Gs_<joint>`, `Gc_<joint>`, then friction.
+pub fn decoupled_names(model: &Model, friction: FrictionTerms) -> Vec<String> {
+    let mut names = Vec::new();
+    for j in &model.joints {
+        let n = &j.name;
+        names.extend([format!("Mi_{n}"), format!("Gs_{n}"), format!("Gc_{n}")]);
+        match friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => names.extend([format!("Fv_{n}"), format!("Fc_{n}")]),
+            FrictionTerms::Asymmetric => names.extend([
+                format!("Fv+_{n}"),
+                format!("Fv-_{n}"),
+                format!("Fc+_{n}"),
+                format!("Fc-_{n}"),
+            ]),
+        }
+    }
+    names
+}
+
+/// Fills `out` (n × n·per-joint) with the decoupled regressor at (q, q̇, q̈);
+/// the model gives the joints and their Coulomb transition velocities.
+pub fn decoupled_regressor(
+    model: &Model,
+    q: &[f64],
+    qd: &[f64],
+    qdd: &[f64],
+    friction: FrictionTerms,
+    out: &mut DMatrix<f64>,
+) {
+    let n = model.dof();
+    let per = per_joint(friction);
+    assert_eq!(
+        out.shape(),
+        (n, n * per),
+        "decoupled regressor: output matrix has the wrong shape"
+    );
+    out.fill(0.0);
+    for i in 0..n {
+        let c = i * per;
+        let (s, co) = q[i].sin_cos();
+        out[(i, c)] = qdd[i];
+        out[(i, c + 1)] = s;
+        out[(i, c + 2)] = co;
+        let tr = model.friction[i].transition;
+        let sign = if tr > 0.0 {
+            (qd[i] / tr).tanh()
+        } else {
+            qd[i].signum() * (qd[i] != 0.0) as i32 as f64
+        };
+        match friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => {
+                out[(i, c + 3)] = qd[i];
+                out[(i, c + 4)] = sign;
+            }
+            FrictionTerms::Asymmetric => {
+                let pos = qd[i] >= 0.0;
+                out[(i, c + 3)] = if pos { qd[i] } else { 0.0 };
+                out[(i, c + 4)] = if pos { 0.0 } else { qd[i] };
+                out[(i, c + 5)] = if pos { sign.max(0.0) } else { 0.0 };
+                out[(i, c + 6)] = if pos { 0.0 } else { sign.min(0.0) };
+            }
+        }
+    }
+}
+
+/// Bona eq. 23's amplitude k and offset q_off from G_s = k·cos(q_off) and
+/// G_c = k·sin(q_off).
+pub fn gravity_amplitude_offset(gs: f64, gc: f64) -> (f64, f64) {
+    (gs.hypot(gc), gc.atan2(gs))
+}
