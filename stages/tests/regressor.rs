@@ -316,3 +316,38 @@ fn decoupled_model_is_exact_for_one_joint_moving() {
     );
     assert!((theta[3] - 15.0).abs() < 1e-9 && (theta[6] - 12.0).abs() < 1e-9);
 }
+
+/// A running R factor, fed in blocks or merged from parts, gives the same
+/// least-squares solution and residual as one QR of the whole stack.
+#[test]
+fn r_factor_accumulates_like_the_stacked_system() {
+    use robotid_stages::dynamics::RFactor;
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let (rows, p) = (600, 7);
+    let a = DMatrix::from_fn(rows, p, |_, _| rng.random_range(-1.0..1.0));
+    let truth = nalgebra::DVector::from_fn(p, |i, _| i as f64 - 2.5);
+    let noise = nalgebra::DVector::from_fn(rows, |_, _| rng.random_range(-0.01..0.01));
+    let b = &a * &truth + noise;
+    let direct = a.clone().svd(true, true).solve(&b, 1e-14).unwrap();
+    let rss_direct = (&a * &direct - &b).norm_squared();
+    // In blocks of 50 rows.
+    let mut acc = RFactor::new(p);
+    for k in (0..rows).step_by(50) {
+        acc.add_rows(&a.rows(k, 50).clone_owned(), &b.rows(k, 50).clone_owned());
+    }
+    // As two recordings reduced apart and merged.
+    let (mut first, mut second) = (RFactor::new(p), RFactor::new(p));
+    first.add_rows(&a.rows(0, 250).clone_owned(), &b.rows(0, 250).clone_owned());
+    second.add_rows(&a.rows(250, 350).clone_owned(), &b.rows(250, 350).clone_owned());
+    first.merge(&second);
+    for f in [&acc, &first] {
+        let theta = f.solve().unwrap();
+        assert!((&theta - &direct).amax() < 1e-12, "{theta} vs {direct}");
+        assert!(
+            (f.rss - rss_direct).abs() < 1e-12 * rss_direct.max(1.0),
+            "{} vs {rss_direct}",
+            f.rss
+        );
+        assert_eq!(f.rows, rows);
+    }
+}

@@ -10,6 +10,7 @@ mod forward_dynamics;
 mod kinematics;
 pub mod lagrange;
 pub mod model;
+mod r_factor;
 mod regressor;
 mod rnea;
 mod robot_file;
@@ -21,6 +22,7 @@ pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offs
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
+pub use r_factor::RFactor;
 pub use regressor::{
     parameter_names, parameter_unit, regressor, standard_parameters, FrictionTerms, RegressorTerms, Spring,
 };
