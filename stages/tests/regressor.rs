@@ -351,3 +351,44 @@ fn r_factor_accumulates_like_the_stacked_system() {
         assert_eq!(f.rows, rows);
     }
 }
+
+/// The counts the literature gives: inertial parameters alone, 15 for a
+/// 3R anthropomorphic arm (Swevers §4.2.1 for the KUKA IR/361's first three
+/// axes) and 36 for a 6R industrial arm; rotors and friction add their own.
+#[test]
+fn base_parameter_counts_match_the_literature() {
+    use robotid_stages::dynamics::base_parameters;
+    let inertial = RegressorTerms {
+        rotor: false,
+        friction: FrictionTerms::None,
+        offset: false,
+        spring: None,
+    };
+    for (robot, terms, expected) in [
+        ("robots/arm3.toml", inertial, 15),
+        ("robots/ur5.toml", inertial, 36),
+        (
+            "robots/ur5.toml",
+            RegressorTerms {
+                rotor: true,
+                ..inertial
+            },
+            40,
+        ),
+        (
+            "robots/ur5.toml",
+            RegressorTerms {
+                rotor: true,
+                friction: FrictionTerms::Asymmetric,
+                ..inertial
+            },
+            64,
+        ),
+    ] {
+        let model = dynamics::load_robot(&fixture(robot)).unwrap();
+        let n = model.dof();
+        let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+        assert_eq!(bp.base.len(), expected, "{robot} {terms:?}");
+        assert!(bp.gap.1 < 1e-12 * bp.gap.0, "{robot}: rank gap {:?}", bp.gap);
+    }
+}
