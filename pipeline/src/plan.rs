@@ -234,7 +234,7 @@ pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) ->
             TableKind::RawSamples => Data::Raw,
             TableKind::PeriodMean => Data::PeriodMean,
             TableKind::Noise => Data::Noise,
-            TableKind::Regressor => Data::Regressor,
+            TableKind::Regressor | TableKind::RFactor => Data::Regressor,
             _ => Data::Kinematics,
         };
         if !have.contains(&need) {

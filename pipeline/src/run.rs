@@ -318,8 +318,13 @@ fn run_one(
                 provenance(&mut m.metadata);
                 m.to_record_batch()
             }
-            TableKind::Regressor => {
-                let b = st.regressor.clone().expect("chain checked");
+            TableKind::Regressor | TableKind::RFactor => {
+                let full = st.regressor.as_ref().expect("chain checked");
+                let b = if *kind == TableKind::RFactor {
+                    robotid_stages::regressor::r_factor_table(full).map_err(|e| format!("{source}: {e}"))?
+                } else {
+                    full.clone()
+                };
                 let mut md: BTreeMap<String, String> = b.schema().metadata().clone().into();
                 provenance(&mut md);
                 let schema = arrow::datatypes::Schema::new(b.schema().fields().clone()).with_metadata(md);

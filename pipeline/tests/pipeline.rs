@@ -318,6 +318,22 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
     let b = nalgebra::DVector::from_vec(col("torque"));
     let a = nalgebra::DMatrix::from_fn(b.len(), params.len(), |i, j| col(&params[j])[i]);
     let theta = a.svd(true, true).solve(&b, 1e-12).unwrap();
+    // The R-factor table, solved on its own, gives the same estimate.
+    let rf = read_parquet(&out.join("kuka_axis3/r_factor.parquet")).unwrap();
+    let rs = rf.schema();
+    assert_eq!(rs.metadata().get("robotid.table").map(String::as_str), Some("r_factor"));
+    let rcol = |name: &str| {
+        let a = rf.column(rs.index_of(name).unwrap());
+        a.as_any()
+            .downcast_ref::<arrow::array::Float64Array>()
+            .unwrap()
+            .values()
+            .to_vec()
+    };
+    let r = nalgebra::DMatrix::from_fn(5, 5, |i, j| rcol(&params[j])[i]);
+    let z = nalgebra::DVector::from_vec(rcol("z"));
+    let theta_r = r.solve_upper_triangular(&z).unwrap();
+    assert!((&theta_r - &theta).amax() < 1e-9 * theta.amax(), "{theta_r} vs {theta}");
     let truth = [8.348, 26.2, 0.02349, 3.676, 15.8927];
     println!(
         "least squares: {:?} (truth {truth:?}), condition {}",

@@ -151,6 +151,12 @@ const REGRESSOR: &[ColumnSpec] = &[
 ];
 
 #[rustfmt::skip]
+const R_FACTOR: &[ColumnSpec] = &[
+    col!("row", "r_row", Dimensionless, I64, false, Required, "row of the upper-triangular R (one per parameter)"),
+    col!("z", "qt_b", Dimensionless, F64, false, Required, "that row of Qᵀb"),
+];
+
+#[rustfmt::skip]
 const PARAMETERS: &[ColumnSpec] = &[
     col!("name", "parameter_name", Dimensionless, Utf8, false, Required, "parameter name"),
     col!("unit", "parameter_unit", Dimensionless, Utf8, false, Required, "unit of the value"),
@@ -174,17 +180,21 @@ pub enum TableKind {
     Noise,
     /// Stacked regressor rows A θ = b; parameter columns follow the fixed ones.
     Regressor,
+    /// A regressor reduced to its R factor (rows: R and Qᵀb); parameter
+    /// columns follow the fixed ones.
+    RFactor,
     /// Identified parameters with uncertainty.
     Parameters,
 }
 
 impl TableKind {
-    pub const ALL: [TableKind; 6] = [
+    pub const ALL: [TableKind; 7] = [
         TableKind::RawSamples,
         TableKind::Kinematics,
         TableKind::PeriodMean,
         TableKind::Noise,
         TableKind::Regressor,
+        TableKind::RFactor,
         TableKind::Parameters,
     ];
 
@@ -195,6 +205,7 @@ impl TableKind {
             TableKind::PeriodMean => "period_mean",
             TableKind::Noise => "noise",
             TableKind::Regressor => "regressor",
+            TableKind::RFactor => "r_factor",
             TableKind::Parameters => "parameters",
         }
     }
@@ -210,6 +221,7 @@ impl TableKind {
             TableKind::PeriodMean => PERIOD_MEAN,
             TableKind::Noise => NOISE,
             TableKind::Regressor => REGRESSOR,
+            TableKind::RFactor => R_FACTOR,
             TableKind::Parameters => PARAMETERS,
         }
     }

@@ -269,3 +269,57 @@ pub fn regressor_table(
         .map_err(|e: SchemaError| e.to_string())?;
     Ok(batch)
 }
+
+/// Reduces a `regressor` table to its R factor (`r_factor` table): one row
+/// per parameter with that row of R and of Qᵀb, folded in blocks of rows so
+/// the full system is never held twice. Its least-squares solution and
+/// residual are those of the table; factors of several recordings merge
+/// (`dynamics::RFactor::merge`).
+pub fn r_factor_table(regressor: &RecordBatch) -> Result<RecordBatch, String> {
+    use crate::dynamics::RFactor;
+    let schema = regressor.schema();
+    TableKind::Regressor.check(&schema).map_err(|e| e.to_string())?;
+    let fixed = TableKind::Regressor.columns().len();
+    let params: Vec<Field> = schema.fields().iter().skip(fixed).map(|f| f.as_ref().clone()).collect();
+    let p = params.len();
+    let f64s = |i: usize| -> Result<&Float64Array, String> {
+        regressor
+            .column(i)
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .ok_or_else(|| format!("column {i} is not Float64"))
+    };
+    let b = f64s(schema.index_of("torque").map_err(|e| e.to_string())?)?;
+    let cols: Vec<&Float64Array> = (fixed..fixed + p).map(f64s).collect::<Result<_, _>>()?;
+    let rows = regressor.num_rows();
+    let mut acc = RFactor::new(p);
+    const BLOCK: usize = 4096;
+    for start in (0..rows).step_by(BLOCK) {
+        let k = BLOCK.min(rows - start);
+        let a = DMatrix::from_fn(k, p, |i, j| cols[j].value(start + i));
+        let bb = nalgebra::DVector::from_fn(k, |i, _| b.value(start + i));
+        acc.add_rows(&a, &bb);
+    }
+    let mut md: BTreeMap<String, String> = schema.metadata().clone().into();
+    md.insert("robotid.rss".into(), acc.rss.to_string());
+    md.insert("robotid.rows".into(), acc.rows.to_string());
+    let base = TableKind::RFactor.schema(&[], &[], &md);
+    let mut fields: Vec<Field> = base.fields().iter().map(|f| f.as_ref().clone()).collect();
+    fields.extend(params);
+    let mut columns: Vec<ArrayRef> = vec![
+        Arc::new(Int64Array::from((0..p as i64).collect::<Vec<_>>())),
+        Arc::new(Float64Array::from(acc.z.iter().copied().collect::<Vec<f64>>())),
+    ];
+    for j in 0..p {
+        columns.push(Arc::new(Float64Array::from(
+            (0..p).map(|i| acc.r[(i, j)]).collect::<Vec<f64>>(),
+        )));
+    }
+    let out = RecordBatch::try_new(
+        Arc::new(Schema::new(fields).with_metadata(base.metadata().clone())),
+        columns,
+    )
+    .map_err(|e| e.to_string())?;
+    TableKind::RFactor.check(&out.schema()).map_err(|e| e.to_string())?;
+    Ok(out)
+}
