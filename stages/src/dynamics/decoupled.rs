@@ -7,6 +7,7 @@
 
 use nalgebra::DMatrix;
 
+use super::regressor::{friction_columns, friction_names};
 use super::{FrictionTerms, Model};
 
 fn per_joint(friction: FrictionTerms) -> usize {
@@ -23,16 +24,7 @@ pub fn decoupled_names(model: &Model, friction: FrictionTerms) -> Vec<String> {
     for j in &model.joints {
         let n = &j.name;
         names.extend([format!("Mi_{n}"), format!("Gs_{n}"), format!("Gc_{n}")]);
-        match friction {
-            FrictionTerms::None => {}
-            FrictionTerms::Symmetric => names.extend([format!("Fv_{n}"), format!("Fc_{n}")]),
-            FrictionTerms::Asymmetric => names.extend([
-                format!("Fv+_{n}"),
-                format!("Fv-_{n}"),
-                format!("Fc+_{n}"),
-                format!("Fc-_{n}"),
-            ]),
-        }
+        names.extend(friction_names(friction, n));
     }
     names
 }
@@ -61,26 +53,7 @@ pub fn decoupled_regressor(
         out[(i, c)] = qdd[i];
         out[(i, c + 1)] = s;
         out[(i, c + 2)] = co;
-        let tr = model.friction[i].transition;
-        let sign = if tr > 0.0 {
-            (qd[i] / tr).tanh()
-        } else {
-            qd[i].signum() * (qd[i] != 0.0) as i32 as f64
-        };
-        match friction {
-            FrictionTerms::None => {}
-            FrictionTerms::Symmetric => {
-                out[(i, c + 3)] = qd[i];
-                out[(i, c + 4)] = sign;
-            }
-            FrictionTerms::Asymmetric => {
-                let pos = qd[i] >= 0.0;
-                out[(i, c + 3)] = if pos { qd[i] } else { 0.0 };
-                out[(i, c + 4)] = if pos { 0.0 } else { qd[i] };
-                out[(i, c + 5)] = if pos { sign.max(0.0) } else { 0.0 };
-                out[(i, c + 6)] = if pos { 0.0 } else { sign.min(0.0) };
-            }
-        }
+        friction_columns(friction, &model.friction[i], qd[i], out, i, c + 3);
     }
 }
 

@@ -84,16 +84,7 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
         if terms.rotor {
             names.push(format!("Ia_{n}"));
         }
-        match terms.friction {
-            FrictionTerms::None => {}
-            FrictionTerms::Symmetric => names.extend([format!("Fv_{n}"), format!("Fc_{n}")]),
-            FrictionTerms::Asymmetric => names.extend([
-                format!("Fv+_{n}"),
-                format!("Fv-_{n}"),
-                format!("Fc+_{n}"),
-                format!("Fc-_{n}"),
-            ]),
-        }
+        names.extend(friction_names(terms.friction, n));
         if terms.offset {
             names.push(format!("Off_{n}"));
         }
@@ -224,28 +215,7 @@ pub fn regressor(
             out[(j, c)] = qdd[j];
             c += 1;
         }
-        let fr = &model.friction[j];
-        let sign = if fr.transition > 0.0 {
-            (qd[j] / fr.transition).tanh()
-        } else {
-            qd[j].signum() * (qd[j] != 0.0) as i32 as f64
-        };
-        match terms.friction {
-            FrictionTerms::None => {}
-            FrictionTerms::Symmetric => {
-                out[(j, c)] = qd[j];
-                out[(j, c + 1)] = sign;
-                c += 2;
-            }
-            FrictionTerms::Asymmetric => {
-                let pos = qd[j] >= 0.0;
-                out[(j, c)] = if pos { qd[j] } else { 0.0 };
-                out[(j, c + 1)] = if pos { 0.0 } else { qd[j] };
-                out[(j, c + 2)] = if pos { sign.max(0.0) } else { 0.0 };
-                out[(j, c + 3)] = if pos { 0.0 } else { sign.min(0.0) };
-                c += 4;
-            }
-        }
+        c += friction_columns(terms.friction, &model.friction[j], qd[j], out, j, c);
         if terms.offset {
             out[(j, c)] = 1.0;
         }
@@ -256,6 +226,56 @@ pub fn regressor(
             let (s, c) = (l as f64 * q[sp.joint]).sin_cos();
             out[(sp.joint, c0 + 2 * (l - 1))] = c;
             out[(sp.joint, c0 + 2 * (l - 1) + 1)] = s;
+        }
+    }
+}
+
+/// Names of one joint's friction parameters.
+pub(crate) fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
+    match friction {
+        FrictionTerms::None => Vec::new(),
+        FrictionTerms::Symmetric => vec![format!("Fv_{joint}"), format!("Fc_{joint}")],
+        FrictionTerms::Asymmetric => {
+            vec![
+                format!("Fv+_{joint}"),
+                format!("Fv-_{joint}"),
+                format!("Fc+_{joint}"),
+                format!("Fc-_{joint}"),
+            ]
+        }
+    }
+}
+
+/// Writes one joint's friction columns into `out[(row, col..)]` for joint
+/// velocity `qd`; the Coulomb shape (sign or tanh) is the joint's. Returns
+/// the number of columns written.
+pub(crate) fn friction_columns(
+    friction: FrictionTerms,
+    model: &super::Friction,
+    qd: f64,
+    out: &mut DMatrix<f64>,
+    row: usize,
+    col: usize,
+) -> usize {
+    let sign = if model.transition > 0.0 {
+        (qd / model.transition).tanh()
+    } else {
+        qd.signum() * (qd != 0.0) as i32 as f64
+    };
+    match friction {
+        FrictionTerms::None => 0,
+        FrictionTerms::Symmetric => {
+            out[(row, col)] = qd;
+            out[(row, col + 1)] = sign;
+            2
+        }
+        FrictionTerms::Asymmetric => {
+            let pos = qd >= 0.0;
+            out[(row, col)] = if pos { qd } else { 0.0 };
+            out[(row, col + 1)] = if pos { 0.0 } else { qd };
+            out[(row, col + 2)] = if pos { sign.max(0.0) } else { 0.0 };
+            out[(row, col + 3)] = if pos { 0.0 } else { sign.min(0.0) };
+            4
         }
     }
 }
