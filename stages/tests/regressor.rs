@@ -163,18 +163,7 @@ fn truth_regression_recovers_the_axis() {
             spring: None,
         };
         let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
-        let col = |i: usize| {
-            batch
-                .column(i)
-                .as_any()
-                .downcast_ref::<arrow::array::Float64Array>()
-                .unwrap()
-                .values()
-                .to_vec()
-        };
-        let b = nalgebra::DVector::from_vec(col(4));
-        let a = DMatrix::from_fn(b.len(), 5, |i, j| col(6 + j)[i]);
-        let theta = a.svd(true, true).solve(&b, 1e-12).unwrap();
+        let theta = least_squares(&batch);
         println!("truth regression ({label}): {:?}", theta.as_slice());
         let truth = [8.348, 26.2, 0.02349, 3.676, 15.8927];
         let worst = theta
@@ -202,18 +191,7 @@ fn truth_regression_recovers_the_axis() {
     };
     let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
     assert_eq!(batch.schema().field(6).name(), "Mi_a3");
-    let col = |i: usize| {
-        batch
-            .column(i)
-            .as_any()
-            .downcast_ref::<arrow::array::Float64Array>()
-            .unwrap()
-            .values()
-            .to_vec()
-    };
-    let b = nalgebra::DVector::from_vec(col(4));
-    let a = DMatrix::from_fn(b.len(), 5, |i, j| col(6 + j)[i]);
-    let theta = a.svd(true, true).solve(&b, 1e-12).unwrap();
+    let theta = least_squares(&batch);
     let truth = [8.348, -9.81 * 26.2, -9.81 * 0.02349, 3.676, 15.8927];
     for (e, t) in theta.iter().zip(truth) {
         assert!(
@@ -391,4 +369,22 @@ fn base_parameter_counts_match_the_literature() {
         assert_eq!(bp.base.len(), expected, "{robot} {terms:?}");
         assert!(bp.gap.1 < 1e-12 * bp.gap.0, "{robot}: rank gap {:?}", bp.gap);
     }
+}
+
+/// Least squares on a `regressor` table: its parameter columns (after the
+/// six fixed ones) against its torque column.
+fn least_squares(batch: &arrow::array::RecordBatch) -> nalgebra::DVector<f64> {
+    let col = |i: usize| {
+        batch
+            .column(i)
+            .as_any()
+            .downcast_ref::<arrow::array::Float64Array>()
+            .unwrap()
+            .values()
+            .to_vec()
+    };
+    let b = nalgebra::DVector::from_vec(col(4));
+    let p = batch.num_columns() - 6;
+    let a = DMatrix::from_fn(b.len(), p, |i, j| col(6 + j)[i]);
+    a.svd(true, true).solve(&b, 1e-12).unwrap()
 }
