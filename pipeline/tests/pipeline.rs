@@ -287,12 +287,6 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
     let ws = workspace(&["kuka_axis3"]);
     let out = ws.path().join("out");
     let file = ws.path().join("pipelines/kuka_axis3.toml");
-    if let Ok(m) = std::env::var("ROBOTID_EXPERIMENT") {
-        let t = std::fs::read_to_string(&file)
-            .unwrap()
-            .replace("method = \"fourier_fit\"", &m);
-        std::fs::write(&file, t).unwrap();
-    }
     let r = run_pipeline(&file, &out, None);
     assert!(r[0].outcome.is_ok(), "{:?}", r[0].outcome);
     let batch = read_parquet(&out.join("kuka_axis3/regressor.parquet")).unwrap();
