@@ -161,9 +161,11 @@ const PARAMETERS: &[ColumnSpec] = &[
     col!("name", "parameter_name", Dimensionless, Utf8, false, Required, "parameter name"),
     col!("unit", "parameter_unit", Dimensionless, Utf8, false, Required, "unit of the value"),
     col!("value", "estimate", Dimensionless, F64, false, Required, "estimated value"),
-    col!("std", "standard_deviation", Dimensionless, F64, false, Required, "standard deviation of the estimate"),
-    col!("ci_low", "confidence_low", Dimensionless, F64, false, Required, "lower end of the confidence interval"),
-    col!("ci_high", "confidence_high", Dimensionless, F64, false, Required, "upper end of the confidence interval"),
+    col!("std", "standard_deviation", Dimensionless, F64, false, Required, "standard deviation of the estimate (unit: the row's)"),
+    col!("rel_std", "relative_standard_deviation", Percent, F64, false, Required, "std / |value|, in percent"),
+    col!("ci_low", "confidence_low", Dimensionless, F64, false, Required, "lower end of the Student-t confidence interval (level and degrees of freedom in the schema metadata)"),
+    col!("ci_high", "confidence_high", Dimensionless, F64, false, Required, "upper end of that interval"),
+    col!("expression", "parameter_expression", Dimensionless, Utf8, false, Optional, "the standard parameters a base parameter regroups"),
 ];
 
 /// The kinds of table robotid reads and writes. Each has a name and a

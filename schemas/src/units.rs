@@ -17,10 +17,11 @@ pub enum Unit {
     NewtonMetre2,
     Ampere2,
     Dimensionless,
+    Percent,
 }
 
 impl Unit {
-    pub const ALL: [Unit; 12] = [
+    pub const ALL: [Unit; 13] = [
         Unit::Second,
         Unit::Hertz,
         Unit::Radian,
@@ -33,6 +34,7 @@ impl Unit {
         Unit::NewtonMetre2,
         Unit::Ampere2,
         Unit::Dimensionless,
+        Unit::Percent,
     ];
 
     pub fn symbol(self) -> &'static str {
@@ -49,6 +51,7 @@ impl Unit {
             Unit::NewtonMetre2 => "N^2*m^2",
             Unit::Ampere2 => "A^2",
             Unit::Dimensionless => "1",
+            Unit::Percent => "%",
         }
     }
 }
@@ -77,6 +80,7 @@ impl FromStr for Unit {
             "N^2*m^2" | "N2m2" | "(N*m)^2" | "N²m²" => Unit::NewtonMetre2,
             "A^2" | "A2" | "A²" => Unit::Ampere2,
             "1" | "" => Unit::Dimensionless,
+            "%" | "percent" => Unit::Percent,
             _ => return Err(format!("unknown unit `{t}`")),
         };
         Ok(u)

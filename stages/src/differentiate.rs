@@ -57,6 +57,40 @@ impl DifferentiateConfig {
     }
 }
 
+/// Whether DFT line `k` of an `n`-sample period is kept by `method`.
+fn kept_line(k: usize, n: usize, period_s: f64, method: Method, harmonics: &[u32], bandwidth_hz: Option<f64>) -> bool {
+    match method {
+        Method::FourierFit => k == 0 || harmonics.contains(&(k as u32)),
+        Method::Dft => {
+            let nyquist = n.is_multiple_of(2) && k == n / 2;
+            !nyquist && bandwidth_hz.is_none_or(|b| k as f64 / period_s <= b)
+        }
+        Method::Filtered => unreachable!("non-periodic: differentiate_record"),
+    }
+}
+
+/// Variance gains from white position noise on the averaged period (σ² per
+/// sample) to the noise on q, q̇ and q̈ as `differentiate` returns them:
+/// projecting white noise on the kept lines leaves σ²/n on the mean and
+/// 2σ²/n per line, and line k's derivatives multiply it by ω_k² and ω_k⁴.
+/// The three are treated as independent by maximum likelihood (they are
+/// not exactly: q and q̈ share each line's noise).
+pub fn noise_gains(n: usize, period_s: f64, method: Method, harmonics: &[u32], bandwidth_hz: Option<f64>) -> [f64; 3] {
+    let w0 = 2.0 * std::f64::consts::PI / period_s;
+    let mut g = [0.0; 3];
+    for k in 0..=n / 2 {
+        if !kept_line(k, n, period_s, method, harmonics, bandwidth_hz) {
+            continue;
+        }
+        let lines = if k == 0 { 1.0 } else { 2.0 };
+        let w2 = (w0 * k as f64).powi(2);
+        g[0] += lines / n as f64;
+        g[1] += lines * w2 / n as f64;
+        g[2] += lines * w2 * w2 / n as f64;
+    }
+    g
+}
+
 /// Differentiates the averaged positions. `harmonics` are used by
 /// `fourier_fit`.
 pub fn differentiate(
@@ -69,16 +103,7 @@ pub fn differentiate(
 ) -> Kinematics {
     let n = mean.time.len();
     let w0 = 2.0 * std::f64::consts::PI / period_s;
-    let keep = |k: usize| -> bool {
-        match method {
-            Method::FourierFit => k == 0 || harmonics.contains(&(k as u32)),
-            Method::Dft => {
-                let nyquist = n.is_multiple_of(2) && k == n / 2;
-                !nyquist && bandwidth_hz.is_none_or(|b| k as f64 / period_s <= b)
-            }
-            Method::Filtered => unreachable!("non-periodic: differentiate_record"),
-        }
-    };
+    let keep = |k: usize| kept_line(k, n, period_s, method, harmonics, bandwidth_hz);
     let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
     for col in &mean.q {
         let spec = spectra.forward(col);

@@ -6,6 +6,7 @@ pub mod decimate;
 pub mod differentiate;
 pub mod dynamics;
 mod error;
+pub mod estimate;
 pub mod formats;
 pub mod inverse_filter;
 pub mod noise;

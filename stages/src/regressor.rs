@@ -107,6 +107,187 @@ impl RegressorConfig {
     }
 }
 
+/// Schema key: the regressor configuration (JSON) a table was made with.
+pub const CONFIG_KEY: &str = "robotid.regressor_config";
+
+/// The base regressor of one model and configuration: which columns of the
+/// full regressor are kept, their names and expressions. Built once, then
+/// evaluated at any number of states (tables, predictions, ML Jacobians).
+#[derive(Debug, Clone)]
+pub struct BaseRegressor {
+    /// The model with the configuration's Coulomb transition applied.
+    pub model: Model,
+    pub kind: ModelKind,
+    pub terms: RegressorTerms,
+    full_count: usize,
+    /// (column of the full regressor, name, expression)
+    columns: Vec<(usize, String, String)>,
+}
+
+/// Preallocated buffers for [`BaseRegressor::rows`].
+pub struct Workspace {
+    data: Data,
+    phi: DMatrix<f64>,
+}
+
+impl BaseRegressor {
+    pub fn new(model: &Model, cfg: &RegressorConfig) -> Result<BaseRegressor, String> {
+        let mut model = model.clone();
+        if let Some(v) = cfg.coulomb_transition_rad_s {
+            if !(v >= 0.0) {
+                return Err("coulomb_transition_rad_s must be ≥ 0".into());
+            }
+            model.friction.iter_mut().for_each(|f| f.transition = v);
+        }
+        let terms = cfg.terms(&model)?;
+        let n = model.dof();
+        // Columns: (standard-column index into the full regressor, name, expression).
+        let (full_count, columns) = match cfg.model {
+            ModelKind::Chain => {
+                let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+                let cols = bp
+                    .base
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &c)| (c, bp.names[c].clone(), bp.expression(i)))
+                    .collect();
+                (terms.count(n), cols)
+            }
+            ModelKind::Decoupled => {
+                if terms.rotor || terms.offset || terms.spring.is_some() {
+                    return Err(
+                        "the decoupled model takes no rotor, offset or spring terms (its M·q̈ holds the rotor)".into(),
+                    );
+                }
+                let names = decoupled_names(&model, terms.friction);
+                (
+                    names.len(),
+                    names
+                        .into_iter()
+                        .enumerate()
+                        .map(|(c, name)| (c, name.clone(), name))
+                        .collect(),
+                )
+            }
+        };
+        Ok(BaseRegressor {
+            model,
+            kind: cfg.model,
+            terms,
+            full_count,
+            columns,
+        })
+    }
+
+    pub fn names(&self) -> Vec<String> {
+        self.columns.iter().map(|c| c.1.clone()).collect()
+    }
+
+    pub fn expressions(&self) -> Vec<String> {
+        self.columns.iter().map(|c| c.2.clone()).collect()
+    }
+
+    pub fn parameters(&self) -> usize {
+        self.columns.len()
+    }
+
+    pub fn workspace(&self) -> Workspace {
+        Workspace {
+            data: Data::new(&self.model),
+            phi: DMatrix::zeros(self.model.dof(), self.full_count),
+        }
+    }
+
+    /// The n rows of the base regressor at one state, row-major into `out`
+    /// (n × parameters). No allocation.
+    pub fn rows(&self, ws: &mut Workspace, q: &[f64], qd: &[f64], qdd: &[f64], out: &mut [f64]) {
+        let n = self.model.dof();
+        let nb = self.columns.len();
+        match self.kind {
+            ModelKind::Chain => regressor(&self.model, &mut ws.data, q, qd, qdd, self.terms, &mut ws.phi),
+            ModelKind::Decoupled => decoupled_regressor(&self.model, q, qd, qdd, self.terms.friction, &mut ws.phi),
+        }
+        for j in 0..n {
+            for (bi, (col, _, _)) in self.columns.iter().enumerate() {
+                out[j * nb + bi] = ws.phi[(j, *col)];
+            }
+        }
+    }
+
+    /// The stacked rows of a whole kinematics table (samples × n rows,
+    /// sample-major), samples in parallel chunks with their own workspace:
+    /// no allocation per sample, and the result does not depend on the
+    /// thread count.
+    pub fn matrix(&self, kin: &Kinematics) -> DMatrix<f64> {
+        let n = self.model.dof();
+        let nb = self.columns.len();
+        let samples = kin.time.len();
+        let mut buf = vec![0.0; samples * n * nb];
+        const CHUNK: usize = 256;
+        buf.par_chunks_mut(CHUNK * n * nb).enumerate().for_each(|(c, out)| {
+            let mut ws = self.workspace();
+            let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
+                let k = c * CHUNK + local;
+                for j in 0..n {
+                    q[j] = kin.q[j][k];
+                    qd[j] = kin.qd[j][k];
+                    qdd[j] = kin.qdd[j][k];
+                }
+                self.rows(&mut ws, &q, &qd, &qdd, rows_out);
+            }
+        });
+        DMatrix::from_row_slice(samples * n, nb, &buf)
+    }
+
+    /// ∂A/∂x for every sample of `kin` and each of its 3n inputs (q, q̇, q̈
+    /// of every joint, in that order), by central differences with steps
+    /// scaled to each input's spread: the Jacobians maximum likelihood
+    /// needs (`estimate::InputNoise`), samples × 3n × n × parameters.
+    pub fn input_jacobians(&self, kin: &Kinematics) -> Vec<f64> {
+        let n = self.model.dof();
+        let nb = self.columns.len();
+        let block = 3 * n * n * nb;
+        let samples = kin.time.len();
+        let rms = |v: &Vec<f64>| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let steps: Vec<f64> = (0..3 * n)
+            .map(|l| {
+                let col = match l / n {
+                    0 => &kin.q[l % n],
+                    1 => &kin.qd[l % n],
+                    _ => &kin.qdd[l % n],
+                };
+                1e-5 * rms(col).max(1e-3)
+            })
+            .collect();
+        let mut out = vec![0.0; samples * block];
+        out.par_chunks_mut(block).enumerate().for_each(|(k, jac)| {
+            let mut ws = self.workspace();
+            let mut x = vec![0.0; 3 * n];
+            for j in 0..n {
+                x[j] = kin.q[j][k];
+                x[n + j] = kin.qd[j][k];
+                x[2 * n + j] = kin.qdd[j][k];
+            }
+            let (mut plus, mut minus) = (vec![0.0; n * nb], vec![0.0; n * nb]);
+            for l in 0..3 * n {
+                let h = steps[l];
+                let x0 = x[l];
+                x[l] = x0 + h;
+                self.rows(&mut ws, &x[..n], &x[n..2 * n], &x[2 * n..], &mut plus);
+                x[l] = x0 - h;
+                self.rows(&mut ws, &x[..n], &x[n..2 * n], &x[2 * n..], &mut minus);
+                x[l] = x0;
+                let dst = &mut jac[l * n * nb..(l + 1) * n * nb];
+                for i in 0..n * nb {
+                    dst[i] = (plus[i] - minus[i]) / (2.0 * h);
+                }
+            }
+        });
+        out
+    }
+}
+
 /// The base regressor of `kin` for `model` as a `regressor` table.
 pub fn regressor_table(
     kin: &Kinematics,
@@ -115,14 +296,8 @@ pub fn regressor_table(
     cfg: &RegressorConfig,
     recording: &str,
 ) -> Result<RecordBatch, String> {
-    let mut model = model.clone();
-    if let Some(v) = cfg.coulomb_transition_rad_s {
-        if !(v >= 0.0) {
-            return Err("coulomb_transition_rad_s must be ≥ 0".into());
-        }
-        model.friction.iter_mut().for_each(|f| f.transition = v);
-    }
-    let model = &model;
+    let base = BaseRegressor::new(model, cfg)?;
+    let model = &base.model;
     let names = model.joint_names();
     if names != kin.joints {
         return Err(format!(
@@ -131,69 +306,12 @@ pub fn regressor_table(
         ));
     }
     let torque = kin.torque.as_ref().ok_or("the kinematics table has no torques")?;
-    let terms = cfg.terms(model)?;
     let n = model.dof();
-    // Columns: (standard-column index into the full regressor, name, expression).
-    let (full_count, columns_of): (usize, Vec<(usize, String, String)>) = match cfg.model {
-        ModelKind::Chain => {
-            let bp = base_parameters(model, terms, 40 + 6 * terms.count(n) / n, 7);
-            let cols = bp
-                .base
-                .iter()
-                .enumerate()
-                .map(|(i, &c)| (c, bp.names[c].clone(), bp.expression(i)))
-                .collect();
-            (terms.count(n), cols)
-        }
-        ModelKind::Decoupled => {
-            if terms.rotor || terms.offset || terms.spring.is_some() {
-                return Err(
-                    "the decoupled model takes no rotor, offset or spring terms (its M·q̈ holds the rotor)".into(),
-                );
-            }
-            let names = decoupled_names(model, terms.friction);
-            (
-                names.len(),
-                names
-                    .into_iter()
-                    .enumerate()
-                    .map(|(c, name)| (c, name.clone(), name))
-                    .collect(),
-            )
-        }
-    };
     let samples = kin.time.len();
     let rows = samples * n;
-    let nb = columns_of.len();
+    let columns_of = &base.columns;
     let kind = cfg.model;
-    // Samples in parallel, in chunks with their own workspace; each sample's
-    // n rows land in place (row-major buffer), so no allocation per sample
-    // and the result does not depend on the thread count.
-    let mut buf = vec![0.0; rows * nb];
-    const CHUNK: usize = 256;
-    buf.par_chunks_mut(CHUNK * n * nb).enumerate().for_each(|(c, out)| {
-        let mut data = Data::new(model);
-        let mut phi = DMatrix::zeros(n, full_count);
-        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
-            let k = c * CHUNK + local;
-            for j in 0..n {
-                q[j] = kin.q[j][k];
-                qd[j] = kin.qd[j][k];
-                qdd[j] = kin.qdd[j][k];
-            }
-            match kind {
-                ModelKind::Chain => regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi),
-                ModelKind::Decoupled => decoupled_regressor(model, &q, &qd, &qdd, terms.friction, &mut phi),
-            }
-            for j in 0..n {
-                for (bi, (col, _, _)) in columns_of.iter().enumerate() {
-                    rows_out[j * nb + bi] = phi[(j, *col)];
-                }
-            }
-        }
-    });
-    let a = DMatrix::from_row_slice(rows, nb, &buf);
+    let a = base.matrix(kin);
     let (mut sample, mut joint, mut time, mut b, mut var) = (
         Vec::with_capacity(rows),
         Vec::with_capacity(rows),
@@ -230,8 +348,12 @@ pub fn regressor_table(
     };
     let mut md: BTreeMap<String, String> = kin.metadata.clone();
     md.insert("robotid.condition_number".into(), cond.to_string());
-    md.insert("robotid.base_parameters".into(), nb.to_string());
+    md.insert("robotid.base_parameters".into(), base.parameters().to_string());
     md.insert("robotid.robot".into(), model.name.clone());
+    md.insert(
+        CONFIG_KEY.into(),
+        serde_json::to_string(cfg).map_err(|e| e.to_string())?,
+    );
     md.insert(
         "robotid.model".into(),
         match kind {

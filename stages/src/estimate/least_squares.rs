@@ -1,0 +1,107 @@
+//! Ordinary and weighted least squares (Swevers eq. 10–13), by Householder
+//! QR of the column-scaled system folded in blocks (`dynamics::RFactor`):
+//! AᵀA is never formed, so the condition number is not squared. The rank is
+//! judged on the singular values of R (those of the scaled A); a deficient
+//! system is refused with the parameters that cannot be told apart.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::{Estimate, Method, System};
+use crate::dynamics::RFactor;
+
+/// Above this condition number of the column-scaled system the parameters
+/// along the weakest direction are noise amplified by more than 1e10: that
+/// is not an identifiable model.
+const MAX_CONDITION: f64 = 1e10;
+
+/// The solution of a scaled least-squares problem.
+pub(super) struct Solution {
+    pub theta: DVector<f64>,
+    /// (AᵀA)⁻¹ of the (weighted) system, unscaled.
+    pub inverse_normal: DMatrix<f64>,
+    pub rss: f64,
+    pub condition: f64,
+}
+
+/// Solves min ‖diag(√w)·(A·θ − b)‖ (w = 1 when `weights` is None).
+pub(super) fn solve(sys: &System, weights: Option<&DVector<f64>>) -> Result<Solution, String> {
+    let (m, p) = (sys.rows(), sys.parameters());
+    let sw = |i: usize| weights.map_or(1.0, |w| w[i].sqrt());
+    let norms: Vec<f64> = (0..p)
+        .map(|j| (0..m).map(|i| (sw(i) * sys.a[(i, j)]).powi(2)).sum::<f64>().sqrt())
+        .collect();
+    let mut acc = RFactor::new(p);
+    const BLOCK: usize = 4096;
+    for start in (0..m).step_by(BLOCK) {
+        let k = BLOCK.min(m - start);
+        let a = DMatrix::from_fn(k, p, |i, j| sw(start + i) * sys.a[(start + i, j)] / norms[j]);
+        let b = DVector::from_fn(k, |i, _| sw(start + i) * sys.b[start + i]);
+        acc.add_rows(&a, &b);
+    }
+    let svd = acc.r.clone().svd(false, true);
+    let (imax, smax) = svd.singular_values.argmax();
+    let (imin, smin) = svd.singular_values.argmin();
+    let _ = imax;
+    let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+    if !(condition < MAX_CONDITION) {
+        let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();
+        let mut involved: Vec<(usize, f64)> = (0..p).filter(|&j| v[j].abs() > 0.05).map(|j| (j, v[j])).collect();
+        involved.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+        let combo: Vec<String> = involved
+            .iter()
+            .map(|(j, c)| format!("{c:+.2}·{}", sys.names[*j]))
+            .collect();
+        let names: Vec<String> = involved.iter().map(|(j, _)| format!("`{}`", sys.names[*j])).collect();
+        return Err(format!(
+            "the regressor is rank-deficient (condition number {condition:.3e} of the column-scaled system): parameters {} cannot be told apart; the data says nothing about {} (scaled). Excite them differently or drop one from the model",
+            names.join(", "),
+            combo.join(" ")
+        ));
+    }
+    let r_inv = acc
+        .r
+        .clone()
+        .try_inverse()
+        .ok_or("the R factor is singular although its condition number is finite")?;
+    let theta_s = &r_inv * &acc.z;
+    let inv_scaled = &r_inv * r_inv.transpose();
+    let theta = DVector::from_fn(p, |j, _| theta_s[j] / norms[j]);
+    let inverse_normal = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] / (norms[i] * norms[j]));
+    Ok(Solution {
+        theta,
+        inverse_normal,
+        rss: acc.rss,
+        condition,
+    })
+}
+
+fn finish(sys: &System, s: Solution, method: Method) -> Estimate {
+    let dof = sys.rows() - sys.parameters();
+    let residual_variance = s.rss / dof as f64;
+    Estimate {
+        names: sys.names.clone(),
+        units: sys.units.clone(),
+        method,
+        values: s.theta,
+        covariance: s.inverse_normal * residual_variance,
+        dof,
+        residual_variance,
+        condition: s.condition,
+        rows: sys.rows(),
+        iterations: 1,
+    }
+}
+
+/// Ordinary least squares: cov = σ̂²(AᵀA)⁻¹ with σ̂² = ‖r‖²/(m − p).
+pub fn least_squares(sys: &System) -> Result<Estimate, String> {
+    sys.check()?;
+    Ok(finish(sys, solve(sys, None)?, Method::Ols))
+}
+
+/// Weighted least squares with weights 1/σ²: cov = s²(AᵀWA)⁻¹, where the
+/// reduced χ² s² = rᵀWr/(m − p) is ≈ 1 when the variances are right and
+/// rescales the intervals when they are not.
+pub fn weighted_least_squares(sys: &System, weights: &DVector<f64>) -> Result<Estimate, String> {
+    sys.check()?;
+    Ok(finish(sys, solve(sys, Some(weights))?, Method::Wls))
+}

@@ -1,0 +1,155 @@
+//! Estimation: the stacked linear system A·θ = b of one or more `regressor`
+//! tables → parameters with covariance and Student-t confidence intervals.
+//!
+//! One estimator per file: `least_squares` (ordinary and weighted, by QR of
+//! the column-scaled system, never AᵀA), `ml` (Bona eq. 13–16: noise on
+//! positions and torques, iterated to convergence). `system` gathers and
+//! checks the input and names the parameter at fault; `table` writes and
+//! reads the `parameters` table.
+
+mod least_squares;
+mod ml;
+mod system;
+mod table;
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ContinuousCDF, StudentsT};
+
+pub use least_squares::{least_squares, weighted_least_squares};
+pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
+pub use system::{row_weights, System};
+pub use table::{parameters_from_table, parameters_table, Parameters};
+
+/// Which estimator, chosen in the pipeline's `estimate` stage or on the
+/// command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Ordinary least squares; σ² from the residual.
+    #[default]
+    Ols,
+    /// Rows weighted by the inverse torque-noise variance of the noise stage.
+    Wls,
+    /// Maximum likelihood with noise on positions, velocities, accelerations
+    /// and torques (Bona eq. 13–16, Olsen 2003).
+    Ml,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Ols => "ols",
+            Method::Wls => "wls",
+            Method::Ml => "ml",
+        }
+    }
+}
+
+/// How the weighted estimators use the noise stage's variances.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weights {
+    /// One variance per joint and recording: the mean over its samples.
+    /// Variances from a few periods scatter (P − 1 degrees of freedom each);
+    /// weighting by them row by row favours the rows whose spread happened
+    /// to come out small.
+    #[default]
+    PerJoint,
+    /// The variance of each sample as estimated (Swevers eq. 13).
+    PerSample,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimateConfig {
+    #[serde(default)]
+    pub method: Method,
+    /// Confidence level of the intervals, e.g. 0.95 or 0.999.
+    #[serde(default = "default_confidence")]
+    pub confidence: f64,
+    #[serde(default)]
+    pub weights: Weights,
+}
+
+fn default_confidence() -> f64 {
+    0.95
+}
+
+impl Default for EstimateConfig {
+    fn default() -> Self {
+        EstimateConfig {
+            method: Method::Ols,
+            confidence: default_confidence(),
+            weights: Weights::PerJoint,
+        }
+    }
+}
+
+impl EstimateConfig {
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return Err(format!("confidence must be in (0, 1), not {}", self.confidence));
+        }
+        Ok(())
+    }
+}
+
+/// An estimate: values, covariance and what the intervals need.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    pub names: Vec<String>,
+    pub units: Vec<String>,
+    pub method: Method,
+    pub values: DVector<f64>,
+    /// Covariance of `values`.
+    pub covariance: DMatrix<f64>,
+    /// Residual degrees of freedom (rows − parameters): Student t's.
+    pub dof: usize,
+    /// Residual variance per unit weight: σ̂² for OLS (N·m)², the reduced
+    /// χ² for WLS and ML (≈ 1 when the noise model is right).
+    pub residual_variance: f64,
+    /// Condition number of the column-scaled (weighted) system.
+    pub condition: f64,
+    pub rows: usize,
+    /// Iterations to convergence (ML), 1 otherwise.
+    pub iterations: usize,
+}
+
+impl Estimate {
+    pub fn std(&self) -> DVector<f64> {
+        DVector::from_fn(self.values.len(), |i, _| self.covariance[(i, i)].max(0.0).sqrt())
+    }
+
+    /// Half-width of the two-sided interval at `level`: t_{(1+level)/2, dof}·std.
+    pub fn half_width(&self, level: f64) -> DVector<f64> {
+        let t = student_t_quantile(0.5 + level / 2.0, self.dof);
+        self.std() * t
+    }
+}
+
+/// The quantile of Student's t with `dof` degrees of freedom (the normal
+/// quantile for very many, where the two agree to 1e-6).
+pub fn student_t_quantile(p: f64, dof: usize) -> f64 {
+    let nu = dof.max(1) as f64;
+    if nu > 1e7 {
+        return statrs::distribution::Normal::standard().inverse_cdf(p);
+    }
+    StudentsT::new(0.0, 1.0, nu).expect("ν > 0").inverse_cdf(p)
+}
+
+/// Runs the configured estimator on a system.
+pub fn estimate(sys: &System, cfg: &EstimateConfig, noise: Option<&InputNoise>) -> Result<Estimate, String> {
+    cfg.check()?;
+    sys.check()?;
+    match cfg.method {
+        Method::Ols => least_squares(sys),
+        Method::Wls => weighted_least_squares(sys, &row_weights(sys, cfg.weights)?),
+        Method::Ml => {
+            let noise = noise.ok_or(
+                "ml needs the noise on positions: run it in a pipeline with `noise` and `differentiate` stages",
+            )?;
+            maximum_likelihood(sys, &row_weights(sys, cfg.weights)?, noise, &MlOptions::default())
+        }
+    }
+}

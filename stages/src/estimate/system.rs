@@ -1,0 +1,237 @@
+//! The stacked system of one or more `regressor` tables, checked before any
+//! estimator runs: every error names the parameter (column), recording,
+//! sample and joint it is about.
+
+use std::collections::BTreeMap;
+
+use arrow::array::{Array, Float64Array, Int64Array, RecordBatch, StringArray};
+use nalgebra::{DMatrix, DVector};
+use robotid_schemas::{metadata, TableKind};
+
+use super::Weights;
+
+/// A·θ = b with the bookkeeping to name rows.
+#[derive(Debug, Clone)]
+pub struct System {
+    pub names: Vec<String>,
+    pub units: Vec<String>,
+    /// Full expression of each base parameter (regrouped standard ones).
+    pub expressions: Vec<String>,
+    pub a: DMatrix<f64>,
+    pub b: DVector<f64>,
+    /// Torque noise variance per row (NaN when no noise stage ran).
+    pub var: DVector<f64>,
+    /// Per row: recording index, sample, joint index.
+    pub recording: Vec<usize>,
+    pub sample: Vec<i64>,
+    pub joint: Vec<usize>,
+    pub recordings: Vec<String>,
+    pub joints: Vec<String>,
+    /// Schema metadata of the first table (provenance, regressor config).
+    pub metadata: BTreeMap<String, String>,
+}
+
+fn f64_col<'a>(batch: &'a RecordBatch, name: &str) -> Result<&'a Float64Array, String> {
+    batch
+        .column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<Float64Array>())
+        .ok_or_else(|| format!("column `{name}` is missing or not Float64"))
+}
+
+fn str_col<'a>(batch: &'a RecordBatch, name: &str) -> Result<&'a StringArray, String> {
+    batch
+        .column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+        .ok_or_else(|| format!("column `{name}` is missing or not Utf8"))
+}
+
+impl System {
+    /// Stacks `regressor` tables (one per recording) with the same
+    /// parameter columns.
+    pub fn from_tables(tables: &[(String, RecordBatch)]) -> Result<System, String> {
+        let first = &tables.first().ok_or("no regressor table to estimate from")?.1;
+        let fixed = TableKind::Regressor.columns().len();
+        let schema = first.schema();
+        let params: Vec<_> = schema.fields().iter().skip(fixed).cloned().collect();
+        if params.is_empty() {
+            return Err("the regressor table has no parameter columns".into());
+        }
+        let names: Vec<String> = params.iter().map(|f| f.name().clone()).collect();
+        let md = |f: &arrow::datatypes::Field, k: &str| f.metadata().get(k).cloned().unwrap_or_default();
+        let units = params.iter().map(|f| md(f, metadata::UNIT)).collect();
+        let expressions = params.iter().map(|f| md(f, "expression")).collect();
+        let rows: usize = tables.iter().map(|(_, t)| t.num_rows()).sum();
+        let p = names.len();
+        let mut sys = System {
+            names,
+            units,
+            expressions,
+            a: DMatrix::zeros(rows, p),
+            b: DVector::zeros(rows),
+            var: DVector::zeros(rows),
+            recording: Vec::with_capacity(rows),
+            sample: Vec::with_capacity(rows),
+            joint: Vec::with_capacity(rows),
+            recordings: Vec::new(),
+            joints: Vec::new(),
+            metadata: schema.metadata().clone().into_iter().collect(),
+        };
+        let mut at = 0;
+        for (r, (label, t)) in tables.iter().enumerate() {
+            let s = t.schema();
+            TableKind::Regressor.check(&s).map_err(|e| format!("{label}: {e}"))?;
+            let theirs: Vec<&String> = s.fields().iter().skip(fixed).map(|f| f.name()).collect();
+            if theirs.len() != p || theirs.iter().zip(&sys.names).any(|(a, b)| *a != b) {
+                return Err(format!(
+                    "{label}: its parameters {theirs:?} differ from the first table's {:?}: the recordings were not made with one regressor configuration",
+                    sys.names
+                ));
+            }
+            sys.recordings.push(label.clone());
+            let b = f64_col(t, "torque").map_err(|e| format!("{label}: {e}"))?;
+            let var = f64_col(t, "torque_var").map_err(|e| format!("{label}: {e}"))?;
+            let joint = str_col(t, "joint").map_err(|e| format!("{label}: {e}"))?;
+            let sample = t
+                .column_by_name("sample")
+                .and_then(|c| c.as_any().downcast_ref::<Int64Array>())
+                .ok_or_else(|| format!("{label}: column `sample` is missing or not Int64"))?;
+            for (j, name) in sys.names.clone().iter().enumerate() {
+                let c = f64_col(t, name).map_err(|e| format!("{label}: {e}"))?;
+                for i in 0..t.num_rows() {
+                    sys.a[(at + i, j)] = c.value(i);
+                }
+            }
+            for i in 0..t.num_rows() {
+                sys.b[at + i] = b.value(i);
+                sys.var[at + i] = if var.is_null(i) { f64::NAN } else { var.value(i) };
+                sys.recording.push(r);
+                sys.sample.push(sample.value(i));
+                let jn = joint.value(i);
+                let ji = match sys.joints.iter().position(|x| x == jn) {
+                    Some(k) => k,
+                    None => {
+                        sys.joints.push(jn.to_string());
+                        sys.joints.len() - 1
+                    }
+                };
+                sys.joint.push(ji);
+            }
+            at += t.num_rows();
+        }
+        Ok(sys)
+    }
+
+    /// A system from matrices: rows in groups of `joints.len()` (one
+    /// sample: one row per joint), one recording.
+    pub fn from_matrices(
+        names: Vec<String>,
+        units: Vec<String>,
+        joints: Vec<String>,
+        a: DMatrix<f64>,
+        b: DVector<f64>,
+        var: DVector<f64>,
+    ) -> System {
+        let m = b.len();
+        let n = joints.len().max(1);
+        System {
+            expressions: names.clone(),
+            names,
+            units,
+            a,
+            b,
+            var,
+            recording: vec![0; m],
+            sample: (0..m).map(|i| (i / n) as i64).collect(),
+            joint: (0..m).map(|i| i % n).collect(),
+            recordings: vec!["(matrices)".into()],
+            joints,
+            metadata: BTreeMap::new(),
+        }
+    }
+
+    pub fn rows(&self) -> usize {
+        self.b.len()
+    }
+
+    pub fn parameters(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Names a row: recording, sample and joint.
+    pub fn row_label(&self, i: usize) -> String {
+        format!(
+            "{}, sample {}, joint `{}`",
+            self.recordings.get(self.recording[i]).map(String::as_str).unwrap_or("?"),
+            self.sample[i],
+            self.joints.get(self.joint[i]).map(String::as_str).unwrap_or("?")
+        )
+    }
+
+    /// What no estimator can work with: non-finite values, too few rows,
+    /// a parameter with an all-zero column.
+    pub fn check(&self) -> Result<(), String> {
+        let (m, p) = (self.rows(), self.parameters());
+        for j in 0..p {
+            if let Some(i) = (0..m).find(|&i| !self.a[(i, j)].is_finite()) {
+                return Err(format!(
+                    "parameter `{}`: its regressor column holds {} at row {} ({})",
+                    self.names[j],
+                    self.a[(i, j)],
+                    i,
+                    self.row_label(i)
+                ));
+            }
+        }
+        if let Some(i) = (0..m).find(|&i| !self.b[i].is_finite()) {
+            return Err(format!(
+                "the torque holds {} at row {} ({})",
+                self.b[i],
+                i,
+                self.row_label(i)
+            ));
+        }
+        if m <= p {
+            return Err(format!(
+                "too few samples: {m} rows for {p} parameters; least squares needs more rows than parameters (and many more for useful intervals)"
+            ));
+        }
+        let scale = (0..p).map(|j| self.a.column(j).amax()).fold(0.0, f64::max);
+        for j in 0..p {
+            if self.a.column(j).amax() <= 1e-14 * scale {
+                return Err(format!(
+                    "parameter `{}` is not excited: its regressor column is zero on all {m} rows; drop it from the model or excite it",
+                    self.names[j]
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Row weights 1/σ² from the noise stage's torque variances, per sample or
+/// pooled per (recording, joint).
+pub fn row_weights(sys: &System, how: Weights) -> Result<DVector<f64>, String> {
+    let m = sys.rows();
+    if let Some(i) = (0..m).find(|&i| !(sys.var[i] > 0.0) || !sys.var[i].is_finite()) {
+        return Err(format!(
+            "weighted estimation needs the torque noise variance, but `torque_var` is {} at row {i} ({}): add a `noise` stage before `regressor`",
+            sys.var[i],
+            sys.row_label(i)
+        ));
+    }
+    Ok(match how {
+        Weights::PerSample => sys.var.map(|v| 1.0 / v),
+        Weights::PerJoint => {
+            let mut sum: BTreeMap<(usize, usize), (f64, usize)> = BTreeMap::new();
+            for i in 0..m {
+                let e = sum.entry((sys.recording[i], sys.joint[i])).or_insert((0.0, 0));
+                e.0 += sys.var[i];
+                e.1 += 1;
+            }
+            DVector::from_fn(m, |i, _| {
+                let (s, n) = sum[&(sys.recording[i], sys.joint[i])];
+                n as f64 / s
+            })
+        }
+    })
+}
