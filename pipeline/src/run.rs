@@ -243,7 +243,7 @@ fn run_one(
                 let kin = st.kinematics.as_ref().expect("chain checked");
                 let model = model.expect("checked: the regressor stage needs the robot");
                 let batch =
-                    robotid_stages::regressor::regressor_table(kin, st.noise.as_ref(), model, c, name).map_err(fail)?;
+                    robotid_stages::regressor::regressor_table(kin, st.noise.as_ref(), st.periods.as_ref(), model, c, name).map_err(fail)?;
                 let cond = batch
                     .schema()
                     .metadata()
@@ -253,7 +253,7 @@ fn run_one(
                 outcome.notes.push(format!(
                     "regressor: {} rows, {} base parameters, condition number {cond} (column-normalised)",
                     batch.num_rows(),
-                    batch.num_columns() - 6
+                    robotid_stages::regressor::columns_of(&batch.schema(), robotid_stages::regressor::PARAMETER_COLUMN).len()
                 ));
                 st.regressor = Some(batch);
             }

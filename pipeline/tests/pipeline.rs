@@ -295,7 +295,10 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
         schema.metadata().get("robotid.base_parameters").map(String::as_str),
         Some("5")
     );
-    let params: Vec<String> = schema.fields().iter().skip(6).map(|f| f.name().clone()).collect();
+    let params: Vec<String> = robotid_stages::regressor::columns_of(&schema, robotid_stages::regressor::PARAMETER_COLUMN)
+        .into_iter()
+        .map(|i| schema.field(i).name().clone())
+        .collect();
     assert_eq!(params, ["ZZ_a3", "MX_a3", "MY_a3", "Fv_a3", "Fc_a3"]);
     assert_eq!(
         schema.field(6).metadata().get("expression").map(String::as_str),

@@ -31,6 +31,7 @@ fn config() -> RegressorConfig {
         offset: false,
         coulomb_transition_rad_s: Some(0.01),
         spring: None,
+        band_limit_hz: None,
     }
 }
 

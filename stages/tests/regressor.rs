@@ -24,6 +24,7 @@ fn regressor_times_parameters_is_rnea() {
         friction: FrictionTerms::Asymmetric,
         offset: true,
         spring: None,
+        band_limit_hz: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(41);
     for path in robots {
@@ -161,8 +162,9 @@ fn truth_regression_recovers_the_axis() {
             offset: false,
             coulomb_transition_rad_s: None,
             spring: None,
+            band_limit_hz: None,
         };
-        let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
+        let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
         let theta = least_squares(&batch);
         println!("truth regression ({label}): {:?}", theta.as_slice());
         let truth = [8.348, 26.2, 0.02349, 3.676, 15.8927];
@@ -188,8 +190,9 @@ fn truth_regression_recovers_the_axis() {
         offset: false,
         coulomb_transition_rad_s: None,
         spring: None,
+        band_limit_hz: None,
     };
-    let batch = regressor_table(&kin, None, &model, &rc, "truth").unwrap();
+    let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
     assert_eq!(batch.schema().field(6).name(), "Mi_a3");
     let theta = least_squares(&batch);
     let truth = [8.348, -9.81 * 26.2, -9.81 * 0.02349, 3.676, 15.8927];
@@ -341,6 +344,7 @@ fn base_parameter_counts_match_the_literature() {
         friction: FrictionTerms::None,
         offset: false,
         spring: None,
+        band_limit_hz: None,
     };
     for (robot, terms, expected) in [
         ("robots/arm3.toml", inertial, 15),

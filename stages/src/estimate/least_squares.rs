@@ -6,7 +6,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::{Estimate, Method, System};
+use super::{Covariance, Estimate, Method, System};
 use crate::dynamics::RFactor;
 
 /// Above this condition number of the column-scaled system the parameters
@@ -75,33 +75,94 @@ pub(super) fn solve(sys: &System, weights: Option<&DVector<f64>>) -> Result<Solu
     })
 }
 
-fn finish(sys: &System, s: Solution, method: Method) -> Estimate {
-    let dof = sys.rows() - sys.parameters();
+/// Least squares with optional weights and the chosen covariance.
+pub fn solve_least_squares(
+    sys: &System,
+    weights: Option<&DVector<f64>>,
+    covariance: Covariance,
+) -> Result<Estimate, String> {
+    sys.check()?;
+    let s = solve(sys, weights)?;
+    let method = if weights.is_some() { Method::Wls } else { Method::Ols };
+    let (m, p) = (sys.rows(), sys.parameters());
+    let dof = m - p;
     let residual_variance = s.rss / dof as f64;
-    Estimate {
+    let have_periods = sys.periods.iter().all(Option::is_some);
+    let use_periods = match covariance {
+        Covariance::Periods if !have_periods => {
+            return Err(
+                "covariance = \"periods\" needs the torque of every period in the regressor tables (an `align` stage with at least two periods before `regressor`)".into(),
+            )
+        }
+        Covariance::Periods => true,
+        Covariance::Residual => false,
+        Covariance::Auto => have_periods,
+    };
+    let (cov, dof) = if use_periods {
+        period_covariance(sys, weights, &s.inverse_normal)
+    } else {
+        (&s.inverse_normal * residual_variance, dof)
+    };
+    Ok(Estimate {
         names: sys.names.clone(),
         units: sys.units.clone(),
         method,
         values: s.theta,
-        covariance: s.inverse_normal * residual_variance,
+        covariance: cov,
         dof,
         residual_variance,
         condition: s.condition,
-        rows: sys.rows(),
+        rows: m,
         iterations: 1,
+        covariance_from: if use_periods { Covariance::Periods } else { Covariance::Residual },
+    })
+}
+
+/// The estimate is linear in the torque, θ = G·b̄ with b̄ the mean of P
+/// periods, so Cov θ = G·Cov(b̄)·Gᵀ, and Cov(b̄) is estimated from the
+/// periods' deviations d_p = b_p − b̄: Σ_p (G d_p)(G d_p)ᵀ / (P(P − 1)),
+/// summed over recordings, with Σ(P − 1) degrees of freedom. No assumption
+/// on the noise's colour or on its distribution over samples is needed.
+fn period_covariance(
+    sys: &System,
+    weights: Option<&DVector<f64>>,
+    inverse_normal: &DMatrix<f64>,
+) -> (DMatrix<f64>, usize) {
+    let p = sys.parameters();
+    let mut cov = DMatrix::zeros(p, p);
+    let mut dof = 0;
+    for (r, periods) in sys.periods.iter().enumerate() {
+        let Some(tp) = periods else { continue };
+        let start = sys.offsets[r];
+        let rows = tp.nrows();
+        let np = tp.ncols();
+        let mean: Vec<f64> = (0..rows).map(|i| tp.row(i).sum() / np as f64).collect();
+        for k in 0..np {
+            let mut atd = DVector::zeros(p);
+            for i in 0..rows {
+                let w = weights.map_or(1.0, |w| w[start + i]);
+                let d = w * (tp[(i, k)] - mean[i]);
+                for j in 0..p {
+                    atd[j] += sys.a[(start + i, j)] * d;
+                }
+            }
+            let dtheta = inverse_normal * atd;
+            cov.ger(1.0 / (np * (np - 1)) as f64, &dtheta, &dtheta, 1.0);
+        }
+        dof += np - 1;
     }
+    (cov, dof)
 }
 
-/// Ordinary least squares: cov = σ̂²(AᵀA)⁻¹ with σ̂² = ‖r‖²/(m − p).
+/// Ordinary least squares: covariance from the periods' spread when the
+/// table carries them, else σ̂²(AᵀA)⁻¹ with σ̂² = ‖r‖²/(m − p).
 pub fn least_squares(sys: &System) -> Result<Estimate, String> {
-    sys.check()?;
-    Ok(finish(sys, solve(sys, None)?, Method::Ols))
+    solve_least_squares(sys, None, Covariance::Auto)
 }
 
-/// Weighted least squares with weights 1/σ²: cov = s²(AᵀWA)⁻¹, where the
-/// reduced χ² s² = rᵀWr/(m − p) is ≈ 1 when the variances are right and
-/// rescales the intervals when they are not.
+/// Weighted least squares with weights 1/σ². Without periods the
+/// covariance is s²(AᵀWA)⁻¹, where the reduced χ² s² = rᵀWr/(m − p) is ≈ 1
+/// when the variances are right and rescales the intervals when not.
 pub fn weighted_least_squares(sys: &System, weights: &DVector<f64>) -> Result<Estimate, String> {
-    sys.check()?;
-    Ok(finish(sys, solve(sys, Some(weights))?, Method::Wls))
+    solve_least_squares(sys, Some(weights), Covariance::Auto)
 }

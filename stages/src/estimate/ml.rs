@@ -179,6 +179,7 @@ pub fn maximum_likelihood(
         condition: start.condition,
         rows,
         iterations,
+        covariance_from: super::Covariance::Residual,
     })
 }
 

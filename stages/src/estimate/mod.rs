@@ -16,7 +16,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
-pub use least_squares::{least_squares, weighted_least_squares};
+pub use least_squares::{least_squares, solve_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
 pub use system::{row_weights, System};
 pub use table::{parameters_from_table, parameters_table, Parameters};
@@ -60,6 +60,31 @@ pub enum Weights {
     PerSample,
 }
 
+/// Where the covariance of a least-squares estimate comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Covariance {
+    /// `periods` when every table carries its periods' torques, else `residual`.
+    #[default]
+    Auto,
+    /// The spread of the estimate across periods: right for coloured noise
+    /// (the inverse filter and the band limit colour it), P − 1 degrees of
+    /// freedom per recording.
+    Periods,
+    /// σ̂²(AᵀA)⁻¹ from the residual: assumes white noise, m − p degrees of freedom.
+    Residual,
+}
+
+impl Covariance {
+    pub fn name(self) -> &'static str {
+        match self {
+            Covariance::Auto => "auto",
+            Covariance::Periods => "periods",
+            Covariance::Residual => "residual",
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EstimateConfig {
@@ -70,6 +95,8 @@ pub struct EstimateConfig {
     pub confidence: f64,
     #[serde(default)]
     pub weights: Weights,
+    #[serde(default)]
+    pub covariance: Covariance,
 }
 
 fn default_confidence() -> f64 {
@@ -82,6 +109,7 @@ impl Default for EstimateConfig {
             method: Method::Ols,
             confidence: default_confidence(),
             weights: Weights::PerJoint,
+            covariance: Covariance::Auto,
         }
     }
 }
@@ -114,6 +142,8 @@ pub struct Estimate {
     pub rows: usize,
     /// Iterations to convergence (ML), 1 otherwise.
     pub iterations: usize,
+    /// How the covariance was obtained (`periods` or `residual`).
+    pub covariance_from: Covariance,
 }
 
 impl Estimate {
@@ -143,8 +173,8 @@ pub fn estimate(sys: &System, cfg: &EstimateConfig, noise: Option<&InputNoise>) 
     cfg.check()?;
     sys.check()?;
     match cfg.method {
-        Method::Ols => least_squares(sys),
-        Method::Wls => weighted_least_squares(sys, &row_weights(sys, cfg.weights)?),
+        Method::Ols => solve_least_squares(sys, None, cfg.covariance),
+        Method::Wls => solve_least_squares(sys, Some(&row_weights(sys, cfg.weights)?), cfg.covariance),
         Method::Ml => {
             let noise = noise.ok_or(
                 "ml needs the noise on positions: run it in a pipeline with `noise` and `differentiate` stages",

@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, DVector};
 use robotid_schemas::{metadata, TableKind};
 
 use super::Weights;
+use crate::regressor::{columns_of, PARAMETER_COLUMN, PERIOD_TORQUE};
 
 /// A·θ = b with the bookkeeping to name rows.
 #[derive(Debug, Clone)]
@@ -27,6 +28,11 @@ pub struct System {
     pub joint: Vec<usize>,
     pub recordings: Vec<String>,
     pub joints: Vec<String>,
+    /// Per recording: its first row and, when the table carries them, the
+    /// torque of each period (rows × periods) — the periods' spread gives
+    /// the covariance.
+    pub offsets: Vec<usize>,
+    pub periods: Vec<Option<DMatrix<f64>>>,
     /// Schema metadata of the first table (provenance, regressor config).
     pub metadata: BTreeMap<String, String>,
 }
@@ -50,9 +56,11 @@ impl System {
     /// parameter columns.
     pub fn from_tables(tables: &[(String, RecordBatch)]) -> Result<System, String> {
         let first = &tables.first().ok_or("no regressor table to estimate from")?.1;
-        let fixed = TableKind::Regressor.columns().len();
         let schema = first.schema();
-        let params: Vec<_> = schema.fields().iter().skip(fixed).cloned().collect();
+        let params: Vec<_> = columns_of(&schema, PARAMETER_COLUMN)
+            .into_iter()
+            .map(|i| schema.field(i).clone())
+            .collect();
         if params.is_empty() {
             return Err("the regressor table has no parameter columns".into());
         }
@@ -74,13 +82,18 @@ impl System {
             joint: Vec::with_capacity(rows),
             recordings: Vec::new(),
             joints: Vec::new(),
+            offsets: Vec::new(),
+            periods: Vec::new(),
             metadata: schema.metadata().clone().into_iter().collect(),
         };
         let mut at = 0;
         for (r, (label, t)) in tables.iter().enumerate() {
             let s = t.schema();
             TableKind::Regressor.check(&s).map_err(|e| format!("{label}: {e}"))?;
-            let theirs: Vec<&String> = s.fields().iter().skip(fixed).map(|f| f.name()).collect();
+            let theirs: Vec<&String> = columns_of(&s, PARAMETER_COLUMN)
+                .into_iter()
+                .map(|i| s.field(i).name())
+                .collect();
             if theirs.len() != p || theirs.iter().zip(&sys.names).any(|(a, b)| *a != b) {
                 return Err(format!(
                     "{label}: its parameters {theirs:?} differ from the first table's {:?}: the recordings were not made with one regressor configuration",
@@ -88,6 +101,24 @@ impl System {
                 ));
             }
             sys.recordings.push(label.clone());
+            sys.offsets.push(at);
+            let pcols = columns_of(&s, PERIOD_TORQUE);
+            sys.periods.push(if pcols.len() >= 2 {
+                let mut m = DMatrix::zeros(t.num_rows(), pcols.len());
+                for (k, &c) in pcols.iter().enumerate() {
+                    let col = t
+                        .column(c)
+                        .as_any()
+                        .downcast_ref::<Float64Array>()
+                        .ok_or_else(|| format!("{label}: period torque column {c} is not Float64"))?;
+                    for i in 0..t.num_rows() {
+                        m[(i, k)] = col.value(i);
+                    }
+                }
+                Some(m)
+            } else {
+                None
+            });
             let b = f64_col(t, "torque").map_err(|e| format!("{label}: {e}"))?;
             let var = f64_col(t, "torque_var").map_err(|e| format!("{label}: {e}"))?;
             let joint = str_col(t, "joint").map_err(|e| format!("{label}: {e}"))?;
@@ -145,6 +176,8 @@ impl System {
             joint: (0..m).map(|i| i % n).collect(),
             recordings: vec!["(matrices)".into()],
             joints,
+            offsets: vec![0],
+            periods: vec![None],
             metadata: BTreeMap::new(),
         }
     }

@@ -49,6 +49,7 @@ pub fn parameters_table(
     md.insert(METHOD.into(), est.method.name().into());
     md.insert(CONFIDENCE.into(), level.to_string());
     md.insert(DOF.into(), est.dof.to_string());
+    md.insert("robotid.estimate.covariance".into(), est.covariance_from.name().into());
     md.insert("robotid.estimate.rows".into(), est.rows.to_string());
     md.insert(
         "robotid.estimate.residual_variance".into(),

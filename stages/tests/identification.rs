@@ -1,0 +1,205 @@
+//! Identification end to end on the simulator, Monte Carlo over noise
+//! seeds: simulate (closed loop, anti-alias filter, noise) → align →
+//! inverse filter → average → noise → differentiate → regressor →
+//! estimate, and compare with the simulated robot's base parameters.
+//! The intervals must contain the truth at close to their nominal rate,
+//! and each estimator's bias is printed (and bounded).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::DVector;
+use robotid_schemas::TorqueChannel;
+use robotid_stages::align::{align, AlignConfig};
+use robotid_stages::average::average;
+use robotid_stages::differentiate::{differentiate, Method as Diff};
+use robotid_stages::dynamics::{self, Model};
+use robotid_stages::estimate::{estimate, Estimate, EstimateConfig, Method, System};
+use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::noise::noise;
+use robotid_stages::regressor::{regressor_table, BaseRegressor, FrictionModel, RegressorConfig};
+use robotid_stages::signal::Spectra;
+use robotid_stages::simulate::{simulate, SimConfig};
+
+fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+struct Case {
+    sim: &'static str,
+    /// Keep the simulation's torque disturbance inside the loop.
+    disturbance: bool,
+    bandwidth_hz: f64,
+    dft_hz: f64,
+}
+
+/// One simulated recording through the whole chain; returns the system and
+/// the simulated robot's base parameters.
+fn run(case: &Case, seed: u64, rc: &RegressorConfig) -> (System, DVector<f64>, Model) {
+    let (mut cfg, _) = SimConfig::load(&fixture(case.sim)).unwrap();
+    cfg.seed = seed;
+    if !case.disturbance {
+        cfg.disturbance = Default::default();
+    }
+    let model = dynamics::load_robot(&cfg.robot).unwrap();
+    let mut s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
+    for (j, col) in s.raw.effort.iter_mut().enumerate() {
+        let k = model.drives[j].joint_torque_per_amp();
+        col.iter_mut().for_each(|v| *v *= k);
+    }
+    s.raw.effort_kind = TorqueChannel::Torque;
+    let spectra = Spectra::new();
+    let mut p = align(&s.raw, &AlignConfig::default(), case.sim).unwrap();
+    let ifc = InverseFilterConfig {
+        filter: cfg.measurement.filter,
+        zpk: None,
+        bandwidth_hz: case.bandwidth_hz,
+    };
+    inverse_filter_periods(&mut p, &ifc, &spectra).unwrap();
+    let (mean, _) = average(&p);
+    let robotid_stages::trajectory::Trajectory::Fourier(f) = &cfg.trajectory else {
+        panic!("periodic excitation")
+    };
+    let h = f.harmonic_numbers();
+    let (nt, _) = noise(&p, &mean, &h, &spectra);
+    let kin = differentiate(&mean, p.period_s, Diff::Dft, &h, Some(case.dft_hz), &spectra);
+    let table = regressor_table(&kin, Some(&nt), Some(&p), &model, rc, "sim").unwrap();
+    let sys = System::from_tables(&[("sim".into(), table)]).unwrap();
+    let truth = BaseRegressor::new(&model, rc).unwrap().base_values(&model).unwrap();
+    (sys, truth, model)
+}
+
+struct Tally {
+    inside95: usize,
+    inside999: usize,
+    count: usize,
+    /// Mean of (estimate − truth)/std per parameter.
+    bias: DVector<f64>,
+}
+
+fn tally(estimates: &[(Estimate, DVector<f64>)]) -> Tally {
+    let p = estimates[0].1.len();
+    let mut t = Tally {
+        inside95: 0,
+        inside999: 0,
+        count: 0,
+        bias: DVector::zeros(p),
+    };
+    for (e, truth) in estimates {
+        let (h95, h999, std) = (e.half_width(0.95), e.half_width(0.999), e.std());
+        for i in 0..p {
+            let d = (e.values[i] - truth[i]).abs();
+            t.inside95 += (d <= h95[i]) as usize;
+            t.inside999 += (d <= h999[i]) as usize;
+            t.count += 1;
+            t.bias[i] += (e.values[i] - truth[i]) / std[i] / estimates.len() as f64;
+        }
+    }
+    t
+}
+
+fn monte_carlo(case: &Case, rc: &RegressorConfig, trials: u64) -> Vec<(Method, Tally, Vec<String>)> {
+    let runs: Vec<(System, DVector<f64>)> = (0..trials)
+        .map(|seed| {
+            let (s, t, _) = run(case, 1000 + seed, rc);
+            (s, t)
+        })
+        .collect();
+    [Method::Ols, Method::Wls]
+        .into_iter()
+        .map(|method| {
+            let cfg = EstimateConfig {
+                method,
+                ..Default::default()
+            };
+            let est: Vec<(Estimate, DVector<f64>)> = runs
+                .iter()
+                .map(|(s, t)| (estimate(s, &cfg, None).unwrap(), t.clone()))
+                .collect();
+            (method, tally(&est), runs[0].0.names.clone())
+        })
+        .collect()
+}
+
+fn report(label: &str, results: &[(Method, Tally, Vec<String>)]) {
+    for (m, t, names) in results {
+        let c95 = t.inside95 as f64 / t.count as f64;
+        let c999 = t.inside999 as f64 / t.count as f64;
+        println!("{label} {}: coverage 95 % → {c95:.3}, 99.9 % → {c999:.4} ({} intervals)", m.name(), t.count);
+        let biased: Vec<String> = names
+            .iter()
+            .zip(t.bias.iter())
+            .filter(|(_, b)| b.abs() > 0.5)
+            .map(|(n, b)| format!("{n} {b:+.2}σ"))
+            .collect();
+        println!("  mean error / std: {:?}; beyond 0.5σ: {biased:?}", t.bias.as_slice());
+    }
+}
+
+/// KUKA IR/361 axis 3 (Swevers' Table 1 values): 1-dof, 5 base parameters.
+#[test]
+fn kuka_axis3_intervals_cover_the_truth() {
+    // Derivatives up to 15 Hz keep the tracking error's harmonics, which
+    // the torque answers to; at 8 Hz MX, MY, Fv and Fc came out biased by
+    // 0.3–0.5 Monte Carlo standard deviations (0.1–0.2 at 15 Hz, within the
+    // Monte Carlo's own error).
+    let case = Case {
+        sim: "sims/kuka_axis3.toml",
+        disturbance: true,
+        bandwidth_hz: 20.0,
+        dft_hz: 15.0,
+    };
+    let rc = RegressorConfig {
+        model: Default::default(),
+        friction: FrictionModel::Symmetric,
+        rotor: true,
+        offset: false,
+        coulomb_transition_rad_s: Some(0.01),
+        spring: None,
+        band_limit_hz: Some(20.0),
+    };
+    let results = monte_carlo(&case, &rc, 40);
+    report("KUKA axis 3", &results);
+    for (m, t, _) in &results {
+        let c95 = t.inside95 as f64 / t.count as f64;
+        let c999 = t.inside999 as f64 / t.count as f64;
+        assert!(c95 > 0.88, "{}: 95 % coverage {c95}", m.name());
+        assert!(c999 > 0.98, "{}: 99.9 % coverage {c999}", m.name());
+        assert!(t.bias.amax() < 1.0, "{}: bias/std {:?}", m.name(), t.bias.as_slice());
+    }
+}
+
+
+/// The 3-dof arm (asymmetric friction on joint 2, so the model is
+/// asymmetric): 28 base parameters. Without the in-loop torque disturbance
+/// (closed-loop data is the Projection Method's subject). The derivative
+/// band is a trade-off: at 20 Hz the position noise in q̈ biases the
+/// inertias through the regressor's columns (errors in variables: YY_j2,
+/// MX_j3, MZ_j3 off by ~5σ, 95 % coverage 0.79; at 30 Hz 0.25); at 6 Hz
+/// the tracking error's harmonics are lost (0.90); 10 Hz gives 0.94.
+#[test]
+fn arm3_intervals_cover_the_truth() {
+    let case = Case {
+        sim: "sims/arm3.toml",
+        disturbance: false,
+        bandwidth_hz: 30.0,
+        dft_hz: 10.0,
+    };
+    let rc = RegressorConfig {
+        model: Default::default(),
+        friction: FrictionModel::Asymmetric,
+        rotor: true,
+        offset: false,
+        coulomb_transition_rad_s: Some(0.01),
+        spring: None,
+        band_limit_hz: Some(30.0),
+    };
+    let results = monte_carlo(&case, &rc, 16);
+    report("arm3", &results);
+    for (m, t, _) in &results {
+        let c95 = t.inside95 as f64 / t.count as f64;
+        let c999 = t.inside999 as f64 / t.count as f64;
+        assert!(c95 > 0.90, "{}: 95 % coverage {c95}", m.name());
+        assert!(c999 > 0.99, "{}: 99.9 % coverage {c999}", m.name());
+    }
+}
