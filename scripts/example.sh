@@ -18,3 +18,8 @@ done
 if [ -d ../shared/realdata/kuka_lwr4 ]; then
   "$bin" run fixtures/pipelines/kuka_lwr4.toml --out out/kuka_lwr4 --timings --plot out/kuka_lwr4/plots
 fi
+# The KUKA estimate (kuka_axis3.toml ends with an `estimate` stage), checked
+# on the non-periodic validation run it never saw, and on its own data.
+"$bin" validate -p out/kuka_axis3/parameters.parquet \
+  out/validation/kuka_axis3_validation/regressor.parquet --plot out/validation/plots
+"$bin" validate -p out/kuka_axis3/parameters.parquet out/kuka_axis3/kuka_axis3/regressor.parquet

@@ -6,3 +6,4 @@ pub mod check;
 pub mod plan;
 pub mod plot;
 pub mod run;
+pub mod validation;

@@ -26,7 +26,15 @@ enum Command {
     /// Run a preprocessing pipeline on its recordings and write its tables.
     Run(cmd::run::Args),
     /// Check a pipeline file without running it; report every problem.
+    Lint(cmd::lint::Args),
+    /// Estimate parameters (OLS, WLS) with intervals from regressor tables.
+    Estimate(cmd::estimate::Args),
+    /// Validate identified parameters on recordings they were not estimated
+    /// from: predicted vs measured torque, residues, their distribution.
     Validate(cmd::validate::Args),
+    /// Torques of an identified model for a kinematics table (q, q̇, q̈):
+    /// the feed-forward of a computed-torque controller.
+    Predict(cmd::predict::Args),
     /// Compare a run's tables with golden tables, column by column.
     Check(cmd::check::Args),
     /// Inspect a robot model: parameters, base parameters, conditioning.
@@ -40,7 +48,10 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Run(a) => cmd::run::run(a),
+        Command::Lint(a) => cmd::lint::run(a),
+        Command::Estimate(a) => cmd::estimate::run(a),
         Command::Validate(a) => cmd::validate::run(a),
+        Command::Predict(a) => cmd::predict::run(a),
         Command::Check(a) => cmd::check::run(a),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),

@@ -10,6 +10,7 @@ use robotid_stages::align::AlignConfig;
 use robotid_stages::decimate::DecimateConfig;
 use robotid_stages::differentiate::{DifferentiateConfig, Method};
 use robotid_stages::dynamics::{load_robot, Model};
+use robotid_stages::estimate::EstimateConfig;
 use robotid_stages::inverse_filter::InverseFilterConfig;
 use robotid_stages::read::ReadConfig;
 use robotid_stages::regressor::RegressorConfig;
@@ -58,6 +59,9 @@ pub enum StageConfig {
     Noise(NoiseConfig),
     Differentiate(DifferentiateConfig),
     Regressor(RegressorConfig),
+    /// A reduce over all recordings: their regressor tables stacked, one
+    /// `parameters.parquet` in the output folder.
+    Estimate(EstimateConfig),
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Deserialize)]
@@ -92,6 +96,7 @@ impl StageConfig {
             StageConfig::Noise(_) => "noise",
             StageConfig::Differentiate(_) => "differentiate",
             StageConfig::Regressor(_) => "regressor",
+            StageConfig::Estimate(_) => "estimate",
         }
     }
 
@@ -106,6 +111,7 @@ impl StageConfig {
             StageConfig::Differentiate(c) if c.method == Method::Filtered => (&[Data::Raw], Some(Data::Kinematics)),
             StageConfig::Differentiate(_) => (&[Data::PeriodMean], Some(Data::Kinematics)),
             StageConfig::Regressor(_) => (&[Data::Kinematics], Some(Data::Regressor)),
+            StageConfig::Estimate(_) => (&[Data::Regressor], None),
         }
     }
 
@@ -116,6 +122,7 @@ impl StageConfig {
             StageConfig::Decimate(c) => c.check(),
             StageConfig::Average(_) | StageConfig::Noise(_) | StageConfig::Regressor(_) => Ok(()),
             StageConfig::Differentiate(c) => c.check(),
+            StageConfig::Estimate(c) => c.check(),
         }
     }
 }
@@ -215,12 +222,18 @@ pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) ->
         for need in needs {
             if !have.contains(need) {
                 problems.push(format!(
-                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate, regressor)",
+                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate, regressor, estimate)",
                     i + 1,
                     s.name(),
                     need
                 ));
             }
+        }
+        if matches!(s, StageConfig::Estimate(_)) && i + 1 != stages.len() {
+            problems.push(format!(
+                "stage {} (`estimate`): it must be the last stage (it runs once, over all recordings)",
+                i + 1
+            ));
         }
         if matches!(s, StageConfig::Align(_)) && have.contains(&Data::Periods) {
             problems.push(format!("stage {} (`align`): the data is already aligned", i + 1));

@@ -30,11 +30,11 @@ pub struct Inputs<'a> {
     pub spectra: &'a Spectra,
 }
 
-type Series<'a> = (Vec<(f64, f64)>, RGBColor, &'a str);
+pub(crate) type Series<'a> = (Vec<(f64, f64)>, RGBColor, &'a str);
 
-const GREY: RGBColor = RGBColor(170, 170, 170);
-const BLUE_: RGBColor = RGBColor(31, 119, 180);
-const ORANGE: RGBColor = RGBColor(255, 127, 14);
+pub(crate) const GREY: RGBColor = RGBColor(170, 170, 170);
+pub(crate) const BLUE_: RGBColor = RGBColor(31, 119, 180);
+pub(crate) const ORANGE: RGBColor = RGBColor(255, 127, 14);
 
 fn range(series: &[Series]) -> (f64, f64, f64, f64) {
     let mut r = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -51,7 +51,7 @@ fn range(series: &[Series]) -> (f64, f64, f64, f64) {
 }
 
 /// One chart of line series (and optional red markers) in `area`.
-fn chart(
+pub(crate) fn chart(
     area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
     title: &str,
     x_desc: &str,
@@ -108,7 +108,7 @@ fn chart(
 }
 
 /// Renders a figure of `rows × cols` charts into `path`, atomically.
-fn figure(
+pub(crate) fn figure(
     path: &Path,
     rows: usize,
     cols: usize,
@@ -322,4 +322,95 @@ pub fn write_report(dir: &Path, name: &str, o: &Outcome, pictures: &[PathBuf]) -
     })
     .map_err(|e| e.to_string())?;
     Ok(path)
+}
+
+/// Pictures of a validation (`robotid validate --plot DIR`):
+/// `validation_torques.svg` (measured in grey, predicted in blue, per
+/// joint, row by row), `validation_residues.svg` (residue histogram as a
+/// density against the Gaussian of the same mean and spread) and
+/// `validation.md`.
+pub fn plot_validation(
+    dir: &Path,
+    sys: &robotid_stages::estimate::System,
+    predicted: &nalgebra::DVector<f64>,
+    stats: &[crate::validation::JointResidue],
+) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let nj = sys.joints.len();
+    let rows_of = |j: usize| (0..sys.rows()).filter(move |&i| sys.joint[i] == j);
+    let torques = dir.join("validation_torques.svg");
+    figure(&torques, nj, 1, |areas| {
+        for j in 0..nj {
+            let measured: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, sys.b[i])).collect();
+            let pred: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, predicted[i])).collect();
+            chart(
+                &areas[j],
+                &format!("{}: measured and predicted torque", sys.joints[j]),
+                "sample",
+                "N·m",
+                &[(measured, GREY, "measured"), (pred, BLUE_, "predicted")],
+                &[],
+            )?;
+        }
+        Ok(())
+    })?;
+    let residues = dir.join("validation_residues.svg");
+    figure(&residues, nj, 1, |areas| {
+        for j in 0..nj {
+            let r: Vec<f64> = rows_of(j).map(|i| sys.b[i] - predicted[i]).collect();
+            let n = r.len() as f64;
+            let mean = r.iter().sum::<f64>() / n;
+            let sd = (r.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n)
+                .sqrt()
+                .max(1e-300);
+            let bins = 40usize;
+            let (lo, hi) = (mean - 4.0 * sd, mean + 4.0 * sd);
+            let w = (hi - lo) / bins as f64;
+            let mut count = vec![0usize; bins];
+            for x in &r {
+                let b = ((x - lo) / w).floor();
+                if b >= 0.0 && (b as usize) < bins {
+                    count[b as usize] += 1;
+                }
+            }
+            let mut hist = Vec::with_capacity(2 * bins);
+            for (b, c) in count.iter().enumerate() {
+                let d = *c as f64 / (n * w);
+                hist.push((lo + b as f64 * w, d));
+                hist.push((lo + (b + 1) as f64 * w, d));
+            }
+            let gauss: Vec<(f64, f64)> = (0..=200)
+                .map(|k| {
+                    let x = lo + (hi - lo) * k as f64 / 200.0;
+                    let z = (x - mean) / sd;
+                    (x, (-0.5 * z * z).exp() / (sd * (2.0 * std::f64::consts::PI).sqrt()))
+                })
+                .collect();
+            chart(
+                &areas[j],
+                &format!("{}: residue density", sys.joints[j]),
+                "residue [N·m]",
+                "1/(N·m)",
+                &[
+                    (hist, BLUE_, "residues"),
+                    (gauss, ORANGE, "Gaussian, same mean and std"),
+                ],
+                &[],
+            )?;
+        }
+        Ok(())
+    })?;
+    let report = dir.join("validation.md");
+    let text = format!(
+        "# Validation\n\nRecordings: {}\n\n```\n{}```\n\nMSR: mean squared residue (Swevers' figure); noise floor: mean torque noise variance from the noise stage (an MSR at the floor means the model explains all but the noise). KS: Kolmogorov–Smirnov distance of the standardised residue to a Gaussian.\n\n![torques](validation_torques.svg)\n\n![residues](validation_residues.svg)\n",
+        sys.recordings.join(", "),
+        crate::validation::table(stats)
+    );
+    write_atomic(&report, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())
+            .map_err(|e| robotid_stages::Error::io(&report, e))
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(vec![torques, residues, report])
 }

@@ -16,6 +16,7 @@ use robotid_stages::average::average;
 use robotid_stages::decimate::{decimate_periods, decimate_record};
 use robotid_stages::differentiate::{differentiate, differentiate_record, Method};
 use robotid_stages::dynamics::Model;
+use robotid_stages::estimate::{estimate, parameters_table, Estimate, InputNoise, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::inverse_filter::{inverse_filter_periods, inverse_filter_record};
 use robotid_stages::noise::{noise, ChannelNoise};
@@ -47,6 +48,10 @@ pub struct Outcome {
     /// (stage, seconds)
     pub timings: Vec<(String, f64)>,
     pub files: Vec<PathBuf>,
+    /// Kept for the `estimate` stage: the regressor table and, for maximum
+    /// likelihood, the noise on its inputs.
+    pub regressor: Option<arrow::array::RecordBatch>,
+    pub input_noise: Option<robotid_stages::estimate::InputNoise>,
 }
 
 #[derive(Debug, Clone)]
@@ -242,8 +247,15 @@ fn run_one(
             StageConfig::Regressor(c) => {
                 let kin = st.kinematics.as_ref().expect("chain checked");
                 let model = model.expect("checked: the regressor stage needs the robot");
-                let batch =
-                    robotid_stages::regressor::regressor_table(kin, st.noise.as_ref(), st.periods.as_ref(), model, c, name).map_err(fail)?;
+                let batch = robotid_stages::regressor::regressor_table(
+                    kin,
+                    st.noise.as_ref(),
+                    st.periods.as_ref(),
+                    model,
+                    c,
+                    name,
+                )
+                .map_err(fail)?;
                 let cond = batch
                     .schema()
                     .metadata()
@@ -253,9 +265,18 @@ fn run_one(
                 outcome.notes.push(format!(
                     "regressor: {} rows, {} base parameters, condition number {cond} (column-normalised)",
                     batch.num_rows(),
-                    robotid_stages::regressor::columns_of(&batch.schema(), robotid_stages::regressor::PARAMETER_COLUMN).len()
+                    robotid_stages::regressor::columns_of(&batch.schema(), robotid_stages::regressor::PARAMETER_COLUMN)
+                        .len()
                 ));
                 st.regressor = Some(batch);
+            }
+            StageConfig::Estimate(c) => {
+                // The reduce runs after all recordings (`estimate_all`);
+                // here each recording hands over what it needs.
+                outcome.regressor = st.regressor.clone();
+                if c.method == robotid_stages::estimate::Method::Ml {
+                    outcome.input_noise = Some(ml_input_noise(plan, model, &st).map_err(fail)?);
+                }
             }
             StageConfig::Average(_) => {
                 let p = st.periods.as_ref().expect("chain checked");
@@ -376,6 +397,98 @@ fn run_one(
         outcome.timings.push(("plot".into(), t.elapsed().as_secs_f64()));
     }
     Ok(outcome)
+}
+
+/// The noise on the regressor's inputs for maximum likelihood: the noise
+/// stage's position variance (mean over the period, per joint) through the
+/// differentiation's gains, with the regressor's Jacobians.
+fn ml_input_noise(
+    plan: &Plan,
+    model: Option<&Model>,
+    st: &State,
+) -> Result<robotid_stages::estimate::InputNoise, String> {
+    let kin = st.kinematics.as_ref().expect("chain checked");
+    let noise = st
+        .noise
+        .as_ref()
+        .ok_or("method = \"ml\" needs the position noise: add a `noise` stage")?;
+    let (rc, dc) = plan.stages.iter().fold((None, None), |(r, d), s| match s {
+        StageConfig::Regressor(c) => (Some(c), d),
+        StageConfig::Differentiate(c) => (r, Some(c)),
+        _ => (r, d),
+    });
+    let (rc, dc) = (rc.expect("chain checked"), dc.expect("chain checked"));
+    if dc.method == Method::Filtered {
+        return Err("method = \"ml\" needs periodic data (differentiate by `dft` or `fourier_fit`)".into());
+    }
+    let period = kin
+        .metadata
+        .get(metadata::PERIOD_S)
+        .and_then(|v| v.parse::<f64>().ok())
+        .ok_or("the kinematics does not say its period")?;
+    let h = harmonics(dc.harmonics.as_ref(), &kin.metadata).unwrap_or_default();
+    let gains = robotid_stages::differentiate::noise_gains(kin.time.len(), period, dc.method, &h, dc.bandwidth_hz);
+    let var_q: Vec<f64> = noise
+        .var_q
+        .iter()
+        .map(|v| v.iter().sum::<f64>() / v.len().max(1) as f64)
+        .collect();
+    let base = robotid_stages::regressor::BaseRegressor::new(model.expect("checked"), rc)?;
+    Ok(robotid_stages::estimate::input_noise(&base, kin, &var_q, gains))
+}
+
+/// The `estimate` stage, once all recordings are through: their regressor
+/// tables stacked, estimated, written as `<out>/parameters.parquet`. Refused
+/// when a recording failed (an estimate silently missing data is worse than
+/// none).
+pub fn estimate_all(
+    plan: &Plan,
+    results: &[RecordingResult],
+    out: &Path,
+) -> Result<Option<(PathBuf, Estimate)>, String> {
+    let Some(cfg) = plan.stages.iter().find_map(|s| match s {
+        StageConfig::Estimate(c) => Some(c),
+        _ => None,
+    }) else {
+        return Ok(None);
+    };
+    let mut tables = Vec::new();
+    let mut noises = Vec::new();
+    for r in results {
+        let o = r.outcome.as_ref().map_err(|_| {
+            format!(
+                "estimate: recording `{}` failed, so no parameters were estimated (fix it or leave it out of the source)",
+                r.name
+            )
+        })?;
+        tables.push((r.name.clone(), o.regressor.clone().expect("estimate stage ran")));
+        noises.extend(o.input_noise.clone());
+    }
+    let sys = System::from_tables(&tables)?;
+    let noise = merge_noise(noises);
+    let est = estimate(&sys, cfg, noise.as_ref()).map_err(|e| format!("estimate: {e}"))?;
+    let mut md = sys.metadata.clone();
+    for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
+        md.remove(k);
+    }
+    md.insert("robotid.recordings".into(), sys.recordings.join(","));
+    md.insert(metadata::CONFIG_SHA256.into(), plan.hash.clone());
+    let batch = parameters_table(&est, cfg.confidence, &sys.expressions, &md)?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let path = out.join("parameters.parquet");
+    write_parquet(&path, &batch).map_err(|e| e.to_string())?;
+    Ok(Some((path, est)))
+}
+
+/// Input noise of several recordings, in the order their rows are stacked.
+fn merge_noise(parts: Vec<InputNoise>) -> Option<InputNoise> {
+    let mut it = parts.into_iter();
+    let mut all = it.next()?;
+    for p in it {
+        all.var.extend(p.var);
+        all.jacobian.extend(p.jacobian);
+    }
+    Some(all)
 }
 
 /// Harmonic numbers from the stage, else from the table's metadata.

@@ -12,8 +12,8 @@ use rand_distr::{Distribution, Normal};
 use robotid_schemas::Kinematics;
 use robotid_stages::dynamics::{self, base_parameters, standard_parameters, Model};
 use robotid_stages::estimate::{
-    estimate, least_squares, maximum_likelihood, weighted_least_squares, EstimateConfig, InputNoise, Method,
-    MlOptions, System,
+    estimate, least_squares, maximum_likelihood, weighted_least_squares, EstimateConfig, InputNoise, Method, MlOptions,
+    System,
 };
 use robotid_stages::regressor::{BaseRegressor, FrictionModel, RegressorConfig};
 use robotid_stages::simulate::SimConfig;
@@ -74,7 +74,10 @@ fn system(base: &BaseRegressor, kin: &Kinematics, b: DVector<f64>, var: f64) -> 
     let m = b.len();
     System::from_matrices(
         base.names(),
-        base.names().iter().map(|n| dynamics::parameter_unit(n).to_string()).collect(),
+        base.names()
+            .iter()
+            .map(|n| dynamics::parameter_unit(n).to_string())
+            .collect(),
         kin.joints.clone(),
         a,
         b,
@@ -173,7 +176,9 @@ fn maximum_likelihood_beats_least_squares_when_positions_are_noisy() {
         let input = InputNoise {
             n: 1,
             inputs: 3,
-            var: (0..kin.time.len()).flat_map(|_| [sq * sq, sqd * sqd, sqdd * sqdd]).collect(),
+            var: (0..kin.time.len())
+                .flat_map(|_| [sq * sq, sqd * sqd, sqdd * sqdd])
+                .collect(),
             jacobian: base.input_jacobians(&noisy),
         };
         let w = DVector::from_element(sys.rows(), 1.0 / (st * st));
@@ -228,7 +233,9 @@ fn bad_systems_are_refused_by_name() {
     bad.set_column(4, &c1);
     let e = least_squares(&mk(bad, b.clone())).unwrap_err();
     assert!(
-        e.contains("rank-deficient") && e.contains(&format!("`{}`", names[1])) && e.contains(&format!("`{}`", names[4])),
+        e.contains("rank-deficient")
+            && e.contains(&format!("`{}`", names[1]))
+            && e.contains(&format!("`{}`", names[4])),
         "{e}"
     );
     // Too few samples.

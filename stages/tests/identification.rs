@@ -125,7 +125,11 @@ fn report(label: &str, results: &[(Method, Tally, Vec<String>)]) {
     for (m, t, names) in results {
         let c95 = t.inside95 as f64 / t.count as f64;
         let c999 = t.inside999 as f64 / t.count as f64;
-        println!("{label} {}: coverage 95 % → {c95:.3}, 99.9 % → {c999:.4} ({} intervals)", m.name(), t.count);
+        println!(
+            "{label} {}: coverage 95 % → {c95:.3}, 99.9 % → {c999:.4} ({} intervals)",
+            m.name(),
+            t.count
+        );
         let biased: Vec<String> = names
             .iter()
             .zip(t.bias.iter())
@@ -168,7 +172,6 @@ fn kuka_axis3_intervals_cover_the_truth() {
         assert!(t.bias.amax() < 1.0, "{}: bias/std {:?}", m.name(), t.bias.as_slice());
     }
 }
-
 
 /// The 3-dof arm (asymmetric friction on joint 2, so the model is
 /// asymmetric): 28 base parameters. Without the in-loop torque disturbance

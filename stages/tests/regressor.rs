@@ -24,7 +24,6 @@ fn regressor_times_parameters_is_rnea() {
         friction: FrictionTerms::Asymmetric,
         offset: true,
         spring: None,
-        band_limit_hz: None,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(41);
     for path in robots {
@@ -344,7 +343,6 @@ fn base_parameter_counts_match_the_literature() {
         friction: FrictionTerms::None,
         offset: false,
         spring: None,
-        band_limit_hz: None,
     };
     for (robot, terms, expected) in [
         ("robots/arm3.toml", inertial, 15),

@@ -65,7 +65,6 @@ fn rnea_and_regressor_match_pinocchio() {
             friction: FrictionTerms::None,
             offset: false,
             spring: None,
-            band_limit_hz: None,
         };
         let theta = DVector::from_vec(standard_parameters(&model, terms));
         let mut data = Data::new(&model);

@@ -1,5 +1,8 @@
 pub mod check;
+pub mod estimate;
+pub mod lint;
 pub mod model;
+pub mod predict;
 pub mod run;
 pub mod schema;
 pub mod simulate;

@@ -59,7 +59,6 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
         friction,
         offset: false,
         spring: None,
-        band_limit_hz: None,
     };
     let n = model.dof();
     let names = parameter_names(&model, terms);

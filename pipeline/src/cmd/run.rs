@@ -100,5 +100,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); their tables were not written");
     }
+    if let Some((path, est)) = robotid::run::estimate_all(&p, &results, &out).map_err(anyhow::Error::msg)? {
+        let level = p
+            .stages
+            .iter()
+            .find_map(|s| match s {
+                plan::StageConfig::Estimate(c) => Some(c.confidence),
+                _ => None,
+            })
+            .unwrap_or(0.95);
+        print!("{}", super::estimate::summary(&est, level));
+        println!("parameters in {}", path.display());
+    }
     Ok(())
 }

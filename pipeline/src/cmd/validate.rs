@@ -1,28 +1,61 @@
 use std::path::PathBuf;
 
-use robotid::plan;
+use anyhow::bail;
+use robotid_stages::estimate::parameters_from_table;
+use robotid_stages::formats::parquet::read_parquet;
+
+use super::estimate::load_system;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Pipeline file (TOML), see docs/pipeline-file.md.
-    pub pipeline: PathBuf,
+    /// Identified parameters (`parameters.parquet`).
+    #[arg(long, short)]
+    pub parameters: PathBuf,
+    /// Regressor tables of the recordings to validate on (a non-periodic
+    /// validation run, or the excitation data itself), made with the same
+    /// regressor configuration as the estimate.
+    #[arg(required = true)]
+    pub regressors: Vec<PathBuf>,
+    /// Write measured-vs-predicted torques and residue histograms (SVG) and
+    /// a report into this folder.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
 }
 
-/// Checks a pipeline file without running it: every problem at once.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let text =
-        std::fs::read_to_string(&args.pipeline).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
-    let p = plan::parse(&text, &args.pipeline)?;
-    let (model, logs, start) = plan::resolve(&p)?;
+    let params = parameters_from_table(&read_parquet(&args.parameters).map_err(anyhow::Error::msg)?)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
+    let sys = load_system(&args.regressors)?;
+    if sys.names != params.names {
+        bail!(
+            "the regressor tables' parameters {:?} are not the estimate's {:?}: make them with the same regressor configuration",
+            sys.names,
+            params.names
+        );
+    }
+    let predicted = &sys.a * &params.values;
+    let stats = robotid::validation::residues(&sys, &predicted);
     println!(
-        "{}: valid; {} stage(s) on {} log(s) starting from {:?} data{}",
-        args.pipeline.display(),
-        p.stages.len(),
-        logs.len(),
-        start,
-        model
-            .map(|m| format!(", robot `{}` ({} joints)", m.name, m.dof()))
-            .unwrap_or_default()
+        "validation of {} ({} method) on {}",
+        args.parameters.display(),
+        params
+            .metadata
+            .get("robotid.estimate.method")
+            .map(String::as_str)
+            .unwrap_or("?"),
+        sys.recordings.join(", ")
     );
+    print!("{}", robotid::validation::table(&stats));
+    if let Some(dir) = &args.plot {
+        let files = robotid::plot::plot_validation(dir, &sys, &predicted, &stats).map_err(anyhow::Error::msg)?;
+        println!(
+            "pictures and report: {}",
+            files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     Ok(())
 }

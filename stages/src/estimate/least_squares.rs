@@ -114,7 +114,11 @@ pub fn solve_least_squares(
         condition: s.condition,
         rows: m,
         iterations: 1,
-        covariance_from: if use_periods { Covariance::Periods } else { Covariance::Residual },
+        covariance_from: if use_periods {
+            Covariance::Periods
+        } else {
+            Covariance::Residual
+        },
     })
 }
 

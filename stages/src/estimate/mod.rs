@@ -183,3 +183,8 @@ pub fn estimate(sys: &System, cfg: &EstimateConfig, noise: Option<&InputNoise>) 
         }
     }
 }
+
+/// The standard normal CDF, for tests of residues against a Gaussian.
+pub fn normal_cdf(x: f64) -> f64 {
+    statrs::distribution::Normal::standard().cdf(x)
+}

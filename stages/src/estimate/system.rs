@@ -194,7 +194,10 @@ impl System {
     pub fn row_label(&self, i: usize) -> String {
         format!(
             "{}, sample {}, joint `{}`",
-            self.recordings.get(self.recording[i]).map(String::as_str).unwrap_or("?"),
+            self.recordings
+                .get(self.recording[i])
+                .map(String::as_str)
+                .unwrap_or("?"),
             self.sample[i],
             self.joints.get(self.joint[i]).map(String::as_str).unwrap_or("?")
         )

@@ -66,12 +66,14 @@ pub fn parameters_table(
         Arc::new(Float64Array::from(values.clone())),
         Arc::new(Float64Array::from(std.iter().copied().collect::<Vec<_>>())),
         Arc::new(Float64Array::from(
-            (0..p)
-                .map(|i| 100.0 * std[i] / values[i].abs())
-                .collect::<Vec<_>>(),
+            (0..p).map(|i| 100.0 * std[i] / values[i].abs()).collect::<Vec<_>>(),
         )),
-        Arc::new(Float64Array::from((0..p).map(|i| values[i] - half[i]).collect::<Vec<_>>())),
-        Arc::new(Float64Array::from((0..p).map(|i| values[i] + half[i]).collect::<Vec<_>>())),
+        Arc::new(Float64Array::from(
+            (0..p).map(|i| values[i] - half[i]).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float64Array::from(
+            (0..p).map(|i| values[i] + half[i]).collect::<Vec<_>>(),
+        )),
         Arc::new(StringArray::from(
             (0..p)
                 .map(|i| expressions.get(i).cloned().unwrap_or_else(|| est.names[i].clone()))
@@ -80,13 +82,11 @@ pub fn parameters_table(
     ];
     for (j, name) in est.names.iter().enumerate() {
         fields.push(
-            Field::new(format!("cov_{name}"), DataType::Float64, false).with_metadata(BTreeMap::from(
-                [
-                    (metadata::UNIT.to_string(), "1".to_string()),
-                    (metadata::QUANTITY.to_string(), "covariance".to_string()),
-                    ("parameter".to_string(), name.clone()),
-                ],
-            )),
+            Field::new(format!("cov_{name}"), DataType::Float64, false).with_metadata(BTreeMap::from([
+                (metadata::UNIT.to_string(), "1".to_string()),
+                (metadata::QUANTITY.to_string(), "covariance".to_string()),
+                ("parameter".to_string(), name.clone()),
+            ])),
         );
         columns.push(Arc::new(Float64Array::from(
             (0..p).map(|i| est.covariance[(i, j)]).collect::<Vec<_>>(),
@@ -94,7 +94,9 @@ pub fn parameters_table(
     }
     let schema = Schema::new(fields).with_metadata(base.metadata().clone());
     let batch = RecordBatch::try_new(Arc::new(schema), columns).map_err(|e| e.to_string())?;
-    TableKind::Parameters.check(&batch.schema()).map_err(|e| e.to_string())?;
+    TableKind::Parameters
+        .check(&batch.schema())
+        .map_err(|e| e.to_string())?;
     Ok(batch)
 }
 

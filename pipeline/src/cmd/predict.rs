@@ -1,0 +1,69 @@
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use robotid_schemas::Kinematics;
+use robotid_stages::dynamics::load_robot;
+use robotid_stages::estimate::parameters_from_table;
+use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::regressor::{BaseRegressor, RegressorConfig, CONFIG_KEY};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The robot file the parameters were identified for.
+    #[arg(long)]
+    pub robot: PathBuf,
+    /// Identified parameters (`parameters.parquet`).
+    #[arg(long, short)]
+    pub parameters: PathBuf,
+    /// A `kinematics` table: q, q̇, q̈ per joint and sample.
+    pub kinematics: PathBuf,
+    /// Output: the kinematics table with the predicted torques.
+    #[arg(long, short, default_value = "predicted.parquet")]
+    pub out: PathBuf,
+}
+
+/// τ = Φ_base(q, q̇, q̈)·θ̂, the base regressor rebuilt from the robot and
+/// the regressor configuration the parameters carry.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let params = parameters_from_table(&read_parquet(&args.parameters).map_err(anyhow::Error::msg)?)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
+    let cfg_text = params.metadata.get(CONFIG_KEY).with_context(|| {
+        format!(
+            "{}: no regressor configuration in its metadata (`{CONFIG_KEY}`)",
+            args.parameters.display()
+        )
+    })?;
+    let cfg: RegressorConfig =
+        serde_json::from_str(cfg_text).with_context(|| format!("{}: `{CONFIG_KEY}`", args.parameters.display()))?;
+    let model = load_robot(&args.robot).map_err(anyhow::Error::msg)?;
+    let base = BaseRegressor::new(&model, &cfg).map_err(anyhow::Error::msg)?;
+    if base.names() != params.names {
+        bail!(
+            "robot `{}` with the parameters' regressor configuration has base parameters {:?}, not the table's {:?}: is it the robot they were identified for?",
+            model.name,
+            base.names(),
+            params.names
+        );
+    }
+    let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
+    let mut kin =
+        Kinematics::from_record_batch(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.kinematics.display()))?;
+    if kin.joints != model.joint_names() {
+        bail!(
+            "{}: joints {:?} are not the robot's {:?}",
+            args.kinematics.display(),
+            kin.joints,
+            model.joint_names()
+        );
+    }
+    let n = model.dof();
+    let tau = base.matrix(&kin) * &params.values;
+    let samples = kin.time.len();
+    kin.torque = Some((0..n).map(|j| (0..samples).map(|k| tau[k * n + j]).collect()).collect());
+    kin.metadata.insert("robotid.torque".into(), "predicted".into());
+    kin.metadata
+        .insert("robotid.parameters_file".into(), args.parameters.display().to_string());
+    write_parquet(&args.out, &kin.to_record_batch().map_err(anyhow::Error::msg)?).map_err(anyhow::Error::msg)?;
+    println!("{} samples × {n} joints predicted into {}", samples, args.out.display());
+    Ok(())
+}

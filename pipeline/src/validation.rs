@@ -1,0 +1,87 @@
+//! Validation of identified parameters on recordings: per-joint residue
+//! statistics (mean squared residue, its ratio to the noise floor, shape
+//! against a Gaussian).
+
+use nalgebra::DVector;
+use robotid_stages::estimate::System;
+
+/// Residue statistics of one joint.
+pub struct JointResidue {
+    pub joint: String,
+    pub rows: usize,
+    pub measured_rms: f64,
+    /// Mean squared residue, (N·m)² — the figure Swevers reports.
+    pub msr: f64,
+    pub mean: f64,
+    /// Mean noise variance of the measured torque (noise stage), if known.
+    pub noise_floor: Option<f64>,
+    pub skewness: f64,
+    pub excess_kurtosis: f64,
+    /// Kolmogorov–Smirnov distance of the standardised residue to N(0, 1).
+    pub ks: f64,
+}
+
+/// Residue statistics per joint of `sys` for torques `predicted`.
+pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
+    let residue = &sys.b - predicted;
+    let mut stats = Vec::new();
+    for (j, joint) in sys.joints.iter().enumerate() {
+        let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == j).collect();
+        let r: Vec<f64> = rows.iter().map(|&i| residue[i]).collect();
+        let n = r.len() as f64;
+        let mean = r.iter().sum::<f64>() / n;
+        let msr = r.iter().map(|x| x * x).sum::<f64>() / n;
+        let var = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let sd = var.sqrt();
+        let m3 = r.iter().map(|x| ((x - mean) / sd).powi(3)).sum::<f64>() / n;
+        let m4 = r.iter().map(|x| ((x - mean) / sd).powi(4)).sum::<f64>() / n;
+        let mut z: Vec<f64> = r.iter().map(|x| (x - mean) / sd).collect();
+        z.sort_by(f64::total_cmp);
+        let normal = robotid_stages::estimate::normal_cdf;
+        let ks = z
+            .iter()
+            .enumerate()
+            .map(|(k, &v)| {
+                let f = normal(v);
+                (f - k as f64 / n).abs().max(((k + 1) as f64 / n - f).abs())
+            })
+            .fold(0.0, f64::max);
+        let floor: Vec<f64> = rows.iter().map(|&i| sys.var[i]).filter(|v| v.is_finite()).collect();
+        stats.push(JointResidue {
+            joint: joint.clone(),
+            rows: rows.len(),
+            measured_rms: (rows.iter().map(|&i| sys.b[i].powi(2)).sum::<f64>() / n).sqrt(),
+            msr,
+            mean,
+            noise_floor: (floor.len() == rows.len()).then(|| floor.iter().sum::<f64>() / n),
+            skewness: m3,
+            excess_kurtosis: m4 - 3.0,
+            ks,
+        });
+    }
+    stats
+}
+
+/// The residue table as text.
+pub fn table(stats: &[JointResidue]) -> String {
+    let mut s = format!(
+        "{:<10} {:>7} {:>12} {:>14} {:>10} {:>12} {:>14} {:>9} {:>9} {:>7}\n",
+        "joint", "rows", "rms τ N·m", "MSR (N·m)²", "rel. %", "mean N·m", "noise floor", "skew", "kurt-3", "KS"
+    );
+    for r in stats {
+        s.push_str(&format!(
+            "{:<10} {:>7} {:>12.4} {:>14.4e} {:>10.3} {:>12.3e} {:>14} {:>9.3} {:>9.3} {:>7.4}\n",
+            r.joint,
+            r.rows,
+            r.measured_rms,
+            r.msr,
+            100.0 * r.msr.sqrt() / r.measured_rms,
+            r.mean,
+            r.noise_floor.map_or("-".into(), |f| format!("{f:.4e}")),
+            r.skewness,
+            r.excess_kurtosis,
+            r.ks
+        ));
+    }
+    s
+}
