@@ -427,4 +427,24 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let (est, floor) = (msr(&params.values), msr(&true_base));
     println!("validation MSR {est:.4} (N·m)², floor (true parameters) {floor:.4}");
     assert!(est < 1.05 * floor, "validation MSR {est} above the floor {floor}");
+    // `robotid predict` on the validation kinematics gives the same torques
+    // as the estimate applied to the regressor rows.
+    let pred = out.join("predicted.parquet");
+    run_cli(&[
+        "predict",
+        "--robot",
+        &p("robots/kuka_axis3.toml"),
+        "-p",
+        &params_path.display().to_string(),
+        &out.join("va/kuka_axis3_validation/kinematics.parquet")
+            .display()
+            .to_string(),
+        "-o",
+        &pred.display().to_string(),
+    ]);
+    let k = Kinematics::from_record_batch(&read_parquet(&pred).unwrap()).unwrap();
+    let tau = &k.torque.unwrap()[0];
+    let rows = &sys.a * &params.values;
+    let worst = (0..tau.len()).map(|i| (tau[i] - rows[i]).abs()).fold(0.0, f64::max);
+    assert!(worst < 1e-9 * rows.amax(), "predict differs by {worst}");
 }
