@@ -10,6 +10,7 @@ pub mod estimate;
 pub mod formats;
 pub mod inverse_filter;
 pub mod noise;
+pub mod projection;
 pub mod read;
 pub mod regressor;
 pub mod signal;

@@ -67,6 +67,11 @@ pub struct RegressorConfig {
     /// Periodic kinematics only.
     #[serde(default)]
     pub band_limit_hz: Option<f64>,
+    /// Closed-loop data: the Projection Method (`projection.rs`) with a
+    /// non-causal FIR of taps −m1..m2 from the references to the command;
+    /// torque and columns are projected on the references' span.
+    #[serde(default)]
+    pub projection: Option<crate::projection::ProjectionConfig>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -362,6 +367,49 @@ pub fn regressor_table(
     if let Some(band) = cfg.band_limit_hz {
         band_limit(&mut a, n, kin, band)?;
     }
+    let mut b_torque: Vec<Vec<f64>> = torque.clone();
+    let mut projection_md = Vec::new();
+    if let Some(pc) = &cfg.projection {
+        let p = periods
+            .filter(|p| p.samples_per_period == samples)
+            .ok_or("projection needs the aligned periods of this table (an `align` stage, no resampling after it)")?;
+        let proj = crate::projection::sensitivity(p, pc)?;
+        let equations = n * proj.rank();
+        if equations <= a.ncols() {
+            return Err(format!(
+                "projection: the references span {} dimensions per joint ({} equations for {} parameters); excite more harmonics or use a smaller model",
+                proj.rank(),
+                equations,
+                a.ncols()
+            ));
+        }
+        let mut series = vec![0.0; samples];
+        for j in 0..n {
+            b_torque[j] = proj.apply(&torque[j]);
+            for c in 0..a.ncols() {
+                for k in 0..samples {
+                    series[k] = a[(k * n + j, c)];
+                }
+                let back = proj.apply(&series);
+                for k in 0..samples {
+                    a[(k * n + j, c)] = back[k];
+                }
+            }
+        }
+        projection_md.push((
+            "robotid.projection".to_string(),
+            format!(
+                "m1 = {}, m2 = {}, rank {} per joint, explained {:?}, corr(û, u − û) {:?}",
+                proj.m1,
+                proj.m2,
+                proj.rank(),
+                proj.explained,
+                proj.correlation
+            ),
+        ));
+        projection_md.push(("robotid.projection.equations".to_string(), equations.to_string()));
+    }
+    let torque = &b_torque;
     let (mut sample, mut joint, mut time, mut b, mut var) = (
         Vec::with_capacity(rows),
         Vec::with_capacity(rows),
@@ -400,6 +448,7 @@ pub fn regressor_table(
     md.insert("robotid.condition_number".into(), cond.to_string());
     md.insert("robotid.base_parameters".into(), base.parameters().to_string());
     md.insert("robotid.robot".into(), model.name.clone());
+    md.extend(projection_md);
     md.insert(
         CONFIG_KEY.into(),
         serde_json::to_string(cfg).map_err(|e| e.to_string())?,

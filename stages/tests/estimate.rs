@@ -32,6 +32,7 @@ fn config() -> RegressorConfig {
         coulomb_transition_rad_s: Some(0.01),
         spring: None,
         band_limit_hz: None,
+        projection: None,
     }
 }
 

@@ -162,6 +162,7 @@ fn truth_regression_recovers_the_axis() {
             coulomb_transition_rad_s: None,
             spring: None,
             band_limit_hz: None,
+            projection: None,
         };
         let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
         let theta = least_squares(&batch);
@@ -190,6 +191,7 @@ fn truth_regression_recovers_the_axis() {
         coulomb_transition_rad_s: None,
         spring: None,
         band_limit_hz: None,
+        projection: None,
     };
     let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
     assert_eq!(batch.schema().field(6).name(), "Mi_a3");

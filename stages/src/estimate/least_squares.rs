@@ -85,7 +85,7 @@ pub fn solve_least_squares(
     let s = solve(sys, weights)?;
     let method = if weights.is_some() { Method::Wls } else { Method::Ols };
     let (m, p) = (sys.rows(), sys.parameters());
-    let dof = m - p;
+    let dof = sys.equations().saturating_sub(p).max(1);
     let residual_variance = s.rss / dof as f64;
     let have_periods = sys.periods.iter().all(Option::is_some);
     let use_periods = match covariance {

@@ -149,6 +149,22 @@ impl System {
             }
             at += t.num_rows();
         }
+        // Projected tables (closed-loop Projection Method) hold fewer
+        // independent equations than rows.
+        let equations: Option<usize> = tables
+            .iter()
+            .map(|(_, t)| {
+                t.schema()
+                    .metadata()
+                    .get("robotid.projection.equations")
+                    .and_then(|v| v.parse::<usize>().ok())
+            })
+            .sum();
+        sys.metadata.remove("robotid.projection.equations");
+        if let Some(e) = equations {
+            sys.metadata
+                .insert("robotid.projection.equations".into(), e.to_string());
+        }
         Ok(sys)
     }
 
@@ -180,6 +196,14 @@ impl System {
             periods: vec![None],
             metadata: BTreeMap::new(),
         }
+    }
+
+    /// Independent equations: the rows, or fewer for projected tables.
+    pub fn equations(&self) -> usize {
+        self.metadata
+            .get("robotid.projection.equations")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(self.rows())
     }
 
     pub fn rows(&self) -> usize {
