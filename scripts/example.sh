@@ -12,7 +12,7 @@ for sim in fixtures/sims/*.toml; do
   name=$(basename "$sim" .toml)
   "$bin" simulate "$sim" --out "fixtures/recordings/$name"
 done
-for p in kuka_axis3 arm3 ur5 validation; do
+for p in kuka_axis3 arm3 ur5 validation kuka_axis3_sweeps; do
   "$bin" run "fixtures/pipelines/$p.toml" --out "out/$p" --timings --plot "out/$p/plots"
 done
 if [ -d ../shared/realdata/kuka_lwr4 ]; then
@@ -23,3 +23,9 @@ fi
 "$bin" validate -p out/kuka_axis3/parameters.parquet \
   out/validation/kuka_axis3_validation/regressor.parquet --plot out/validation/plots
 "$bin" validate -p out/kuka_axis3/parameters.parquet out/kuka_axis3/kuka_axis3/regressor.parquet
+# Dedicated experiment: gravity and friction from the sweeps, then the
+# inertial parameters with that friction compensated (taken as known).
+"$bin" sweeps out/kuka_axis3_sweeps/kuka_axis3_sweeps/kinematics.parquet --joint a3 --friction symmetric \
+  -o out/kuka_axis3_sweeps/gravity_friction.parquet
+"$bin" estimate out/kuka_axis3/kuka_axis3/regressor.parquet \
+  --known out/kuka_axis3_sweeps/gravity_friction.parquet -o out/kuka_axis3/parameters_friction_known.parquet

@@ -32,6 +32,9 @@ enum Command {
     /// Validate identified parameters on recordings they were not estimated
     /// from: predicted vs measured torque, residues, their distribution.
     Validate(cmd::validate::Args),
+    /// Gravity and friction of one joint from constant-velocity sweeps
+    /// (dedicated experiments, Bona §3.2).
+    Sweeps(cmd::sweeps::Args),
     /// Torques of an identified model for a kinematics table (q, q̇, q̈):
     /// the feed-forward of a computed-torque controller.
     Predict(cmd::predict::Args),
@@ -52,6 +55,7 @@ fn main() -> ExitCode {
         Command::Estimate(a) => cmd::estimate::run(a),
         Command::Validate(a) => cmd::validate::run(a),
         Command::Predict(a) => cmd::predict::run(a),
+        Command::Sweeps(a) => cmd::sweeps::run(a),
         Command::Check(a) => cmd::check::run(a),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),

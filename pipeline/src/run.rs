@@ -464,7 +464,18 @@ pub fn estimate_all(
         tables.push((r.name.clone(), o.regressor.clone().expect("estimate stage ran")));
         noises.extend(o.input_noise.clone());
     }
-    let sys = System::from_tables(&tables)?;
+    let mut sys = System::from_tables(&tables)?;
+    if let Some(rel) = &cfg.known {
+        let path = plan.file.parent().unwrap_or(Path::new(".")).join(rel);
+        let known = load_known(&path)?;
+        let fixed = sys.fix(&known)?;
+        if fixed.is_empty() {
+            return Err(format!(
+                "estimate: known = {}: none of its parameters is in the model",
+                path.display()
+            ));
+        }
+    }
     let noise = merge_noise(noises);
     let est = estimate(&sys, cfg, noise.as_ref()).map_err(|e| format!("estimate: {e}"))?;
     let mut md = sys.metadata.clone();
@@ -478,6 +489,17 @@ pub fn estimate_all(
     let path = out.join("parameters.parquet");
     write_parquet(&path, &batch).map_err(|e| e.to_string())?;
     Ok(Some((path, est)))
+}
+
+/// A `parameters` table's values and covariance, to be taken as known.
+pub fn load_known(path: &Path) -> Result<robotid_stages::estimate::Known, String> {
+    let batch = read_parquet(path).map_err(|e| e.to_string())?;
+    let p = robotid_stages::estimate::parameters_from_table(&batch).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(robotid_stages::estimate::Known {
+        names: p.names,
+        values: p.values,
+        covariance: p.covariance,
+    })
 }
 
 /// Input noise of several recordings, in the order their rows are stacked.

@@ -93,8 +93,14 @@ fn bytes_of(dir: &Path) -> BTreeMap<String, Vec<u8>> {
 
 #[test]
 fn example_pipelines_run_and_are_thread_count_independent() {
-    let ws = workspace(&["kuka_axis3", "arm3", "ur5", "kuka_axis3_validation"]);
-    for name in ["kuka_axis3", "arm3", "ur5", "validation"] {
+    let ws = workspace(&[
+        "kuka_axis3",
+        "arm3",
+        "ur5",
+        "kuka_axis3_validation",
+        "kuka_axis3_sweeps",
+    ]);
+    for name in ["kuka_axis3", "arm3", "ur5", "validation", "kuka_axis3_sweeps"] {
         let file = ws.path().join("pipelines").join(format!("{name}.toml"));
         let one = ws.path().join("out1").join(name);
         let two = ws.path().join("out2").join(name);
@@ -447,4 +453,53 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let rows = &sys.a * &params.values;
     let worst = (0..tau.len()).map(|i| (tau[i] - rows[i]).abs()).fold(0.0, f64::max);
     assert!(worst < 1e-9 * rows.amax(), "predict differs by {worst}");
+}
+
+/// Dedicated experiments from the command line: the sweeps pipeline, then
+/// `robotid sweeps` (gravity and friction), then `robotid estimate --known`
+/// (friction compensated): the inertial parameters come back and the
+/// friction columns are gone.
+#[test]
+fn sweeps_then_estimate_with_known_friction() {
+    use robotid_stages::estimate::parameters_from_table;
+    let ws = workspace(&["kuka_axis3", "kuka_axis3_sweeps"]);
+    let out = ws.path().join("out");
+    let cli = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let p = |rel: &str| ws.path().join(rel).display().to_string();
+    let o = |rel: &str| out.join(rel).display().to_string();
+    cli(&["run", &p("pipelines/kuka_axis3.toml"), "--out", &o("ex")]);
+    cli(&["run", &p("pipelines/kuka_axis3_sweeps.toml"), "--out", &o("sw")]);
+    let text = cli(&[
+        "sweeps",
+        &o("sw/kuka_axis3_sweeps/kinematics.parquet"),
+        "--joint",
+        "a3",
+        "--friction",
+        "symmetric",
+        "-o",
+        &o("gf.parquet"),
+    ]);
+    println!("{text}");
+    let gf = parameters_from_table(&read_parquet(&out.join("gf.parquet")).unwrap()).unwrap();
+    assert_eq!(gf.names, ["Gs_a3", "Gc_a3", "Fv_a3", "Fc_a3"]);
+    assert!((gf.values[3] - 15.8927).abs() < 3.0 * gf.std[3], "Fc {}", gf.values[3]);
+    cli(&[
+        "estimate",
+        &o("ex/kuka_axis3/regressor.parquet"),
+        "--known",
+        &o("gf.parquet"),
+        "-o",
+        &o("p.parquet"),
+    ]);
+    let est = parameters_from_table(&read_parquet(&out.join("p.parquet")).unwrap()).unwrap();
+    assert_eq!(est.names, ["ZZ_a3", "MX_a3", "MY_a3"]);
+    assert!((est.values[0] - 8.348).abs() < 4.0 * est.std[0], "ZZ {}", est.values[0]);
+    assert_eq!(
+        est.metadata.get("robotid.known").map(String::as_str),
+        Some("Fv_a3,Fc_a3")
+    );
 }

@@ -3,6 +3,7 @@
 pub mod align;
 pub mod average;
 pub mod decimate;
+pub mod dedicated;
 pub mod differentiate;
 pub mod dynamics;
 mod error;

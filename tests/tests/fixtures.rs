@@ -28,7 +28,11 @@ fn fixtures_are_reproducible() {
         .map(|e| e.unwrap().path())
         .collect();
     sims.sort();
-    assert_eq!(sims.len(), 6, "three robots, an excitation and a validation run each");
+    assert_eq!(
+        sims.len(),
+        7,
+        "three robots, an excitation and a validation run each, and the KUKA sweeps"
+    );
     for sim in sims {
         let (cfg, text) = SimConfig::load(&sim).unwrap();
         let model = load_robot(&cfg.robot).unwrap();

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use anyhow::Context;
+use anyhow::{bail, Context};
 use robotid_stages::estimate::{estimate, parameters_table, Covariance, Estimate, EstimateConfig, Method, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 
@@ -20,6 +20,10 @@ pub struct Args {
     /// Covariance: auto (periods when the tables carry them), periods or residual.
     #[arg(long, default_value = "auto")]
     pub covariance: String,
+    /// A parameters table whose parameters are taken as known (friction
+    /// from `robotid sweeps`): compensated before estimating the rest.
+    #[arg(long)]
+    pub known: Option<PathBuf>,
     /// Output parameters table.
     #[arg(long, short, default_value = "parameters.parquet")]
     pub out: PathBuf,
@@ -47,7 +51,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     cfg.check().map_err(anyhow::Error::msg).context("--confidence")?;
-    let sys = load_system(&args.regressors)?;
+    let mut sys = load_system(&args.regressors)?;
+    if let Some(k) = &args.known {
+        let fixed = sys
+            .fix(&robotid::run::load_known(k).map_err(anyhow::Error::msg)?)
+            .map_err(anyhow::Error::msg)?;
+        if fixed.is_empty() {
+            bail!("--known {}: none of its parameters is in the model", k.display());
+        }
+        println!("known ({}): {}", k.display(), fixed.join(", "));
+    }
     let est = estimate(&sys, &cfg, None).map_err(anyhow::Error::msg)?;
     let mut md = sys.metadata.clone();
     md.insert("robotid.recordings".into(), sys.recordings.join(","));

@@ -6,4 +6,5 @@ pub mod predict;
 pub mod run;
 pub mod schema;
 pub mod simulate;
+pub mod sweeps;
 pub mod validate;

@@ -100,6 +100,7 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
         let duration = match &traj {
             Trajectory::Fourier(f) => f.period(),
             Trajectory::Waypoints(w) => w.duration(),
+            Trajectory::Sweeps(s) => s.duration(),
         };
         let samples = (duration * a.rate).round().max(1.0) as usize;
         let mut data = Data::new(&model);

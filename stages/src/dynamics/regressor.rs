@@ -231,7 +231,7 @@ pub fn regressor(
 }
 
 /// Names of one joint's friction parameters.
-pub(crate) fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
+pub fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
     match friction {
         FrictionTerms::None => Vec::new(),
         FrictionTerms::Symmetric => vec![format!("Fv_{joint}"), format!("Fc_{joint}")],

@@ -98,11 +98,20 @@ pub fn solve_least_squares(
         Covariance::Residual => false,
         Covariance::Auto => have_periods,
     };
-    let (cov, dof) = if use_periods {
+    let (mut cov, dof) = if use_periods {
         period_covariance(sys, weights, &s.inverse_normal)
     } else {
         (&s.inverse_normal * residual_variance, dof)
     };
+    // Known parameters' uncertainty: θ = G·(b − A_k θ_k), so G·A_k·C_k·A_kᵀ·Gᵀ adds.
+    if let Some((ak, ck)) = &sys.known {
+        let wak = match weights {
+            Some(w) => DMatrix::from_fn(ak.nrows(), ak.ncols(), |i, j| w[i] * ak[(i, j)]),
+            None => ak.clone(),
+        };
+        let g_ak = &s.inverse_normal * (sys.a.transpose() * wak);
+        cov += &g_ak * ck * g_ak.transpose();
+    }
     Ok(Estimate {
         names: sys.names.clone(),
         units: sys.units.clone(),

@@ -18,7 +18,7 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 
 pub use least_squares::{least_squares, solve_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
-pub use system::{row_weights, System};
+pub use system::{row_weights, Known, System};
 pub use table::{parameters_from_table, parameters_table, Parameters};
 
 /// Which estimator, chosen in the pipeline's `estimate` stage or on the
@@ -97,6 +97,12 @@ pub struct EstimateConfig {
     pub weights: Weights,
     #[serde(default)]
     pub covariance: Covariance,
+    /// A `parameters` table (e.g. friction from dedicated experiments,
+    /// `robotid sweeps`) whose parameters are taken as known: moved to the
+    /// right-hand side before estimating the rest. Relative to the
+    /// pipeline file.
+    #[serde(default)]
+    pub known: Option<std::path::PathBuf>,
 }
 
 fn default_confidence() -> f64 {
@@ -110,6 +116,7 @@ impl Default for EstimateConfig {
             confidence: default_confidence(),
             weights: Weights::PerJoint,
             covariance: Covariance::Auto,
+            known: None,
         }
     }
 }
@@ -187,4 +194,35 @@ pub fn estimate(sys: &System, cfg: &EstimateConfig, noise: Option<&InputNoise>) 
 /// The standard normal CDF, for tests of residues against a Gaussian.
 pub fn normal_cdf(x: f64) -> f64 {
     statrs::distribution::Normal::standard().cdf(x)
+}
+
+/// Least-squares covariance robust to correlated residuals (Newey–West,
+/// Bartlett weights): (AᵀA)⁻¹·(Σ_{|l|≤L} w_l Σ_t a_t r_t r_{t+l} a_{t+l}ᵀ)·(AᵀA)⁻¹.
+/// Low-passed records have strongly correlated noise, which the white
+/// σ̂²(AᵀA)⁻¹ would report as m-fold independent. The lag L is twice the
+/// first lag where the residual's autocorrelation falls under 0.05 (at
+/// most m/10). Rows must be in time order. Returns (covariance, L).
+pub fn newey_west(a: &DMatrix<f64>, r: &DVector<f64>, ata_inv: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let m = r.len();
+    let p = a.ncols();
+    let r0 = r.norm_squared();
+    let mut first = m / 20;
+    for l in 1..m / 20 {
+        let c: f64 = (0..m - l).map(|t| r[t] * r[t + l]).sum();
+        if (c / r0).abs() < 0.05 {
+            first = l;
+            break;
+        }
+    }
+    let lag = (2 * first).min(m / 10).max(1);
+    let g = DMatrix::from_fn(m, p, |t, j| a[(t, j)] * r[t]);
+    let mut s = g.transpose() * &g;
+    for l in 1..=lag {
+        let w = 1.0 - l as f64 / (lag + 1) as f64;
+        let head = g.rows(0, m - l);
+        let tail = g.rows(l, m - l);
+        let c = head.transpose() * tail;
+        s += (&c + c.transpose()) * w;
+    }
+    (ata_inv * s * ata_inv, lag)
 }

@@ -33,6 +33,8 @@ pub struct System {
     /// the covariance.
     pub offsets: Vec<usize>,
     pub periods: Vec<Option<DMatrix<f64>>>,
+    /// Columns of the parameters taken as known, and their covariance.
+    pub known: Option<(DMatrix<f64>, DMatrix<f64>)>,
     /// Schema metadata of the first table (provenance, regressor config).
     pub metadata: BTreeMap<String, String>,
 }
@@ -84,6 +86,7 @@ impl System {
             joints: Vec::new(),
             offsets: Vec::new(),
             periods: Vec::new(),
+            known: None,
             metadata: schema.metadata().clone().into_iter().collect(),
         };
         let mut at = 0;
@@ -194,8 +197,55 @@ impl System {
             joints,
             offsets: vec![0],
             periods: vec![None],
+            known: None,
             metadata: BTreeMap::new(),
         }
+    }
+
+    /// Moves known parameters to the right-hand side (b − A_k·θ_k) and drops
+    /// their columns: friction from dedicated experiments, compensated
+    /// before the inertial estimation (Bona §3.4). Their covariance is kept
+    /// and propagated into the estimate's. Returns the names fixed; names
+    /// the system does not have are ignored.
+    pub fn fix(&mut self, known: &Known) -> Result<Vec<String>, String> {
+        let mut fixed = Vec::new();
+        let mut cols = Vec::new();
+        let mut idx = Vec::new();
+        for (ki, name) in known.names.iter().enumerate() {
+            let value = known.values[ki];
+            if !value.is_finite() {
+                return Err(format!("known parameter `{name}` is {value}"));
+            }
+            let Some(c) = self.names.iter().position(|n| n == name) else {
+                continue;
+            };
+            let col = self.a.column(c).clone_owned();
+            self.b -= &col * value;
+            for (r, p) in self.periods.iter_mut().enumerate() {
+                if let Some(p) = p {
+                    let start = self.offsets[r];
+                    for row in 0..p.nrows() {
+                        let d = col[start + row] * value;
+                        for k in 0..p.ncols() {
+                            p[(row, k)] -= d;
+                        }
+                    }
+                }
+            }
+            self.a = self.a.clone().remove_column(c);
+            self.names.remove(c);
+            self.units.remove(c);
+            self.expressions.remove(c);
+            fixed.push(name.clone());
+            cols.push(col);
+            idx.push(ki);
+        }
+        if !cols.is_empty() {
+            let cov = DMatrix::from_fn(idx.len(), idx.len(), |i, j| known.covariance[(idx[i], idx[j])]);
+            self.known = Some((DMatrix::from_columns(&cols), cov));
+        }
+        self.metadata.insert("robotid.known".into(), fixed.join(","));
+        Ok(fixed)
     }
 
     /// Independent equations: the rows, or fewer for projected tables.
@@ -266,6 +316,14 @@ impl System {
         }
         Ok(())
     }
+}
+
+/// Parameters taken as known, with their covariance.
+#[derive(Debug, Clone)]
+pub struct Known {
+    pub names: Vec<String>,
+    pub values: DVector<f64>,
+    pub covariance: DMatrix<f64>,
 }
 
 /// Row weights 1/σ² from the noise stage's torque variances, per sample or

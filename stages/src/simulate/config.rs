@@ -271,7 +271,7 @@ impl SimConfig {
             (Trajectory::Fourier(_), None) | (Trajectory::Fourier(_), Some(0)) => {
                 errs.push("timing.periods (≥ 1) is required for a periodic trajectory".into())
             }
-            (Trajectory::Waypoints(_), Some(_)) => {
+            (Trajectory::Waypoints(_) | Trajectory::Sweeps(_), Some(_)) => {
                 errs.push("timing.periods applies to periodic trajectories only".into())
             }
             _ => {}

@@ -41,7 +41,7 @@ impl Reference {
     pub fn trajectory_time(&self, t: f64) -> f64 {
         match self.trajectory {
             Trajectory::Fourier(_) => t - self.fade_s + self.phase_s,
-            Trajectory::Waypoints(_) => (t - self.fade_s).max(0.0),
+            Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => (t - self.fade_s).max(0.0),
         }
     }
 

@@ -85,6 +85,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
         + match &cfg.trajectory {
             Trajectory::Fourier(f) => f.period() * timing.periods.unwrap_or(1) as f64,
             Trajectory::Waypoints(w) => w.duration(),
+            Trajectory::Sweeps(s) => s.duration(),
         };
     let nominal = (duration * fs).round() as usize;
 
@@ -251,7 +252,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
     }
     let harmonics = match &cfg.trajectory {
         Trajectory::Fourier(f) => Some(f.harmonic_numbers()),
-        Trajectory::Waypoints(_) => None,
+        Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
     };
     if let Some(hs) = &harmonics {
         md.insert(

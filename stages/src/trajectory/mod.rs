@@ -4,9 +4,11 @@
 //! of simulation and excitation files.
 
 mod fourier;
+mod sweeps;
 mod waypoints;
 
 pub use fourier::FourierSeries;
+pub use sweeps::Sweeps;
 pub use waypoints::{Durations, Waypoints};
 
 use serde::{Deserialize, Serialize};
@@ -16,6 +18,8 @@ use serde::{Deserialize, Serialize};
 pub enum Trajectory {
     Fourier(FourierSeries),
     Waypoints(Waypoints),
+    /// Dedicated gravity and friction experiments (Bona §3.2).
+    Sweeps(Sweeps),
 }
 
 impl Trajectory {
@@ -24,6 +28,7 @@ impl Trajectory {
         match self {
             Trajectory::Fourier(f) => f.q0.len(),
             Trajectory::Waypoints(w) => w.points.first().map_or(0, Vec::len),
+            Trajectory::Sweeps(s) => s.hold.len(),
         }
     }
 
@@ -31,7 +36,7 @@ impl Trajectory {
     pub fn period(&self) -> Option<f64> {
         match self {
             Trajectory::Fourier(f) => Some(f.period()),
-            Trajectory::Waypoints(_) => None,
+            Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
         }
     }
 
@@ -40,6 +45,7 @@ impl Trajectory {
         match self {
             Trajectory::Fourier(f) => f.eval(t, q, qd, qdd),
             Trajectory::Waypoints(w) => w.eval(t, q, qd, qdd),
+            Trajectory::Sweeps(s) => s.eval(t, q, qd, qdd),
         }
     }
 
@@ -49,6 +55,11 @@ impl Trajectory {
         match self {
             Trajectory::Fourier(f) => f.q0.clone(),
             Trajectory::Waypoints(w) => w.points[0].clone(),
+            Trajectory::Sweeps(s) => {
+                let mut q = s.hold.clone();
+                q[s.joint] = s.range[0];
+                q
+            }
         }
     }
 
@@ -56,6 +67,7 @@ impl Trajectory {
         match self {
             Trajectory::Fourier(f) => f.check(),
             Trajectory::Waypoints(w) => w.check(),
+            Trajectory::Sweeps(s) => s.check(),
         }
     }
 }
