@@ -29,3 +29,7 @@ fi
   -o out/kuka_axis3_sweeps/gravity_friction.parquet
 "$bin" estimate out/kuka_axis3/kuka_axis3/regressor.parquet \
   --known out/kuka_axis3_sweeps/gravity_friction.parquet -o out/kuka_axis3/parameters_friction_known.parquet
+# The identified model as a URDF: physically consistent standard parameters
+# closest to the robot file's.
+"$bin" export --robot fixtures/robots/kuka_axis3.toml -p out/kuka_axis3/parameters.parquet \
+  -o out/kuka_axis3/identified.urdf

@@ -32,6 +32,9 @@ enum Command {
     /// Validate identified parameters on recordings they were not estimated
     /// from: predicted vs measured torque, residues, their distribution.
     Validate(cmd::validate::Args),
+    /// Export identified parameters as a URDF: physically consistent
+    /// standard parameters closest to the a-priori model.
+    Export(cmd::export::Args),
     /// Gravity and friction of one joint from constant-velocity sweeps
     /// (dedicated experiments, Bona §3.2).
     Sweeps(cmd::sweeps::Args),
@@ -56,6 +59,7 @@ fn main() -> ExitCode {
         Command::Validate(a) => cmd::validate::run(a),
         Command::Predict(a) => cmd::predict::run(a),
         Command::Sweeps(a) => cmd::sweeps::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Check(a) => cmd::check::run(a),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),

@@ -443,6 +443,7 @@ fn ml_input_noise(
 /// none).
 pub fn estimate_all(
     plan: &Plan,
+    model: Option<&Model>,
     results: &[RecordingResult],
     out: &Path,
 ) -> Result<Option<(PathBuf, Estimate)>, String> {
@@ -477,8 +478,14 @@ pub fn estimate_all(
         }
     }
     let noise = merge_noise(noises);
-    let est = estimate(&sys, cfg, noise.as_ref()).map_err(|e| format!("estimate: {e}"))?;
+    let mut est = estimate(&sys, cfg, noise.as_ref()).map_err(|e| format!("estimate: {e}"))?;
     let mut md = sys.metadata.clone();
+    if cfg.physical {
+        let model = model.ok_or("estimate: physical = true needs the robot")?;
+        let (fit, note) = physical_fit(model, &sys, &est)?;
+        est.values = fit.base.clone();
+        md.insert("robotid.physical".into(), note);
+    }
     for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
         md.remove(k);
     }
@@ -489,6 +496,35 @@ pub fn estimate_all(
     let path = out.join("parameters.parquet");
     write_parquet(&path, &batch).map_err(|e| e.to_string())?;
     Ok(Some((path, est)))
+}
+
+/// The physically consistent estimate nearest `est` (robot file as the
+/// a-priori model), and a note saying what it cost.
+fn physical_fit(
+    model: &Model,
+    sys: &System,
+    est: &Estimate,
+) -> Result<(robotid_stages::estimate::PhysicalFit, String), String> {
+    use robotid_stages::dynamics::{parameter_names, standard_parameters};
+    let cfg: robotid_stages::regressor::RegressorConfig = serde_json::from_str(
+        sys.metadata
+            .get(robotid_stages::regressor::CONFIG_KEY)
+            .ok_or("estimate: the regressor tables do not carry their configuration")?,
+    )
+    .map_err(|e| e.to_string())?;
+    let base = robotid_stages::regressor::BaseRegressor::new(model, &cfg)?;
+    let map = base.map().ok_or("estimate: physical = true needs the chain model")?;
+    if base.names() != est.names {
+        return Err("estimate: physical = true cannot be combined with known parameters".into());
+    }
+    let names = parameter_names(&base.model, base.terms);
+    let prior = standard_parameters(&base.model, base.terms);
+    let fit = robotid_stages::estimate::physically_consistent(&names, &prior, map, &est.values, &est.covariance, 1e-3)?;
+    let note = format!(
+        "nearest physically consistent estimate: χ² = {:.4} against the covariance, {} iterations, smallest pseudo-inertia eigenvalues {:?}",
+        fit.chi2, fit.iterations, fit.min_eigen
+    );
+    Ok((fit, note))
 }
 
 /// A `parameters` table's values and covariance, to be taken as known.

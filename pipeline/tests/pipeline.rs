@@ -67,7 +67,7 @@ fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<robotid:
         },
     );
     if results.iter().all(|r| r.outcome.is_ok()) {
-        robotid::run::estimate_all(&plan, &results, out).unwrap();
+        robotid::run::estimate_all(&plan, model.as_ref(), &results, out).unwrap();
     }
     results
 }
@@ -453,6 +453,34 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let rows = &sys.a * &params.values;
     let worst = (0..tau.len()).map(|i| (tau[i] - rows[i]).abs()).fold(0.0, f64::max);
     assert!(worst < 1e-9 * rows.amax(), "predict differs by {worst}");
+    // `robotid export`: a URDF whose model reproduces the estimate's base
+    // parameters (the KUKA has no rotor inertia to lose in URDF).
+    let urdf = out.join("identified.urdf");
+    run_cli(&[
+        "export",
+        "--robot",
+        &p("robots/kuka_axis3.toml"),
+        "-p",
+        &params_path.display().to_string(),
+        "-o",
+        &urdf.display().to_string(),
+    ]);
+    let exported = load_robot(&urdf).unwrap();
+    let mut rc_sym = rc.clone();
+    rc_sym.coulomb_transition_rad_s = Some(0.01);
+    let back = BaseRegressor::new(&exported, &rc_sym)
+        .unwrap()
+        .base_values(&exported)
+        .unwrap();
+    for i in 0..5 {
+        assert!(
+            (back[i] - params.values[i]).abs() < 1e-3 * params.std[i].max(1e-9) + 1e-9 * params.values[i].abs(),
+            "{}: exported {} vs estimate {}",
+            params.names[i],
+            back[i],
+            params.values[i]
+        );
+    }
 }
 
 /// Dedicated experiments from the command line: the sweeps pipeline, then
@@ -502,4 +530,52 @@ fn sweeps_then_estimate_with_known_friction() {
         est.metadata.get("robotid.known").map(String::as_str),
         Some("Fv_a3,Fc_a3")
     );
+}
+
+/// The `estimate` stage with `physical = true` and `method = "ml"`: the
+/// KUKA estimate is already consistent, so the physical fit leaves it in
+/// place (χ² ≈ 0); ML agrees with OLS here (the position noise is tiny
+/// after averaging) to well within the intervals.
+#[test]
+fn estimate_stage_ml_and_physical_options() {
+    use robotid_stages::estimate::parameters_from_table;
+    let ws = workspace(&["kuka_axis3"]);
+    let file = ws.path().join("pipelines/kuka_axis3.toml");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let ols_out = ws.path().join("ols");
+    run_pipeline(&file, &ols_out, None);
+    let ols = parameters_from_table(&read_parquet(&ols_out.join("parameters.parquet")).unwrap()).unwrap();
+    for (edit, label) in [
+        ("method = \"ml\"", "ml"),
+        ("method = \"ols\"\nphysical = true", "physical"),
+    ] {
+        let f = ws.path().join(format!("pipelines/{label}.toml"));
+        std::fs::write(&f, text.replace("method = \"ols\"", edit)).unwrap();
+        let out = ws.path().join(label);
+        let r = run_pipeline(&f, &out, None);
+        assert!(r.iter().all(|r| r.outcome.is_ok()));
+        let p = parameters_from_table(&read_parquet(&out.join("parameters.parquet")).unwrap()).unwrap();
+        println!(
+            "{label}: {:?} (OLS {:?}) {:?}",
+            p.values.as_slice(),
+            ols.values.as_slice(),
+            p.metadata.get("robotid.physical")
+        );
+        for i in 0..5 {
+            assert!(
+                (p.values[i] - ols.values[i]).abs() < 0.5 * ols.std[i],
+                "{label}: {}",
+                p.names[i]
+            );
+        }
+        if label == "physical" {
+            assert!(
+                p.metadata["robotid.physical"].contains("χ² = 0.0000"),
+                "{}",
+                p.metadata["robotid.physical"]
+            );
+        } else {
+            assert_eq!(p.metadata["robotid.estimate.method"], "ml");
+        }
+    }
 }

@@ -268,3 +268,79 @@ fn system_from(names: &[String], kin: &Kinematics, a: DMatrix<f64>, b: DVector<f
         DVector::from_element(m, 1.0),
     )
 }
+
+/// Physically consistent standard parameters from a base estimate: a
+/// consistent estimate (the simulated robot's own base values) comes back
+/// exactly, and the model rebuilt from the standard parameters predicts
+/// the same torques as the base parameters; an inconsistent one (negative
+/// viscous friction, negative inertia) is pulled onto the feasible set.
+#[test]
+fn physically_consistent_standard_parameters() {
+    use robotid_stages::dynamics::{parameter_names, standard_parameters, with_standard_parameters};
+    use robotid_stages::estimate::{physically_consistent, pseudo_inertia};
+    for robot in ["kuka_axis3.toml", "arm3.toml"] {
+        let model = dynamics::load_robot(&fixture(&format!("robots/{robot}"))).unwrap();
+        let base = BaseRegressor::new(&model, &config()).unwrap();
+        let map = base.map().unwrap();
+        let names = parameter_names(&base.model, base.terms);
+        let prior = standard_parameters(&base.model, base.terms);
+        let truth = base.base_values(&model).unwrap();
+        let nb = truth.len();
+        let cov = DMatrix::from_diagonal(&truth.map(|v| (1e-3 * v.abs()).max(1e-6).powi(2)));
+        // A prior that is off by 20 % in every inertial parameter.
+        let off: Vec<f64> = prior
+            .iter()
+            .enumerate()
+            .map(|(i, v)| if i % 10 == 9 { *v } else { v * 1.2 })
+            .collect();
+        let fit = physically_consistent(&names, &off, map, &truth, &cov, 1e-3).unwrap();
+        println!(
+            "{robot}: χ² {:.2e}, iterations {}, min eigenvalues {:?}",
+            fit.chi2, fit.iterations, fit.min_eigen
+        );
+        assert!(fit.chi2 < 1e-6, "{robot}: χ² {}", fit.chi2);
+        assert!(fit.min_eigen.iter().all(|&e| e >= -1e-12));
+        // The rebuilt model predicts like the base parameters.
+        let rebuilt = with_standard_parameters(&base.model, base.terms, &fit.standard);
+        let back = BaseRegressor::new(&rebuilt, &config())
+            .unwrap()
+            .base_values(&rebuilt)
+            .unwrap();
+        assert!(
+            (&back - &truth).amax() < 1e-6 * truth.amax(),
+            "{robot}: {back} vs {truth}"
+        );
+        // Inconsistent: viscous friction of the first joint negative.
+        let fv = base.names().iter().position(|n| n.starts_with("Fv")).unwrap();
+        let mut bad = truth.clone();
+        bad[fv] = -1.0;
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap();
+        assert!(
+            fit.base[fv] >= 0.0 && fit.base[fv] < 1e-3,
+            "{robot}: Fv {}",
+            fit.base[fv]
+        );
+        for i in (0..nb).filter(|&i| i != fv) {
+            assert!(
+                (fit.base[i] - truth[i]).abs() < 1e-4 * truth.amax(),
+                "{robot}: {}",
+                base.names()[i]
+            );
+        }
+        // Inconsistent: the first base inertia negative.
+        let mut bad = truth.clone();
+        bad[0] = -0.5 * truth[0].abs();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap();
+        println!(
+            "{robot}: negative inertia → {:.4} (χ² {:.1}), {} iterations",
+            fit.base[0], fit.chi2, fit.iterations
+        );
+        for l in 0..model.dof() {
+            let e = pseudo_inertia(&fit.standard[10 * l..10 * l + 10])
+                .symmetric_eigenvalues()
+                .min();
+            assert!(e >= -1e-9, "{robot}: link {l} eigenvalue {e}");
+        }
+        assert!(fit.base[0] >= -1e-9, "{robot}: {}", fit.base[0]);
+    }
+}

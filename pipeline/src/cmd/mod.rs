@@ -1,5 +1,6 @@
 pub mod check;
 pub mod estimate;
+pub mod export;
 pub mod lint;
 pub mod model;
 pub mod predict;

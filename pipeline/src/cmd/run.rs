@@ -100,7 +100,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); their tables were not written");
     }
-    if let Some((path, est)) = robotid::run::estimate_all(&p, &results, &out).map_err(anyhow::Error::msg)? {
+    if let Some((path, est)) =
+        robotid::run::estimate_all(&p, model.as_ref(), &results, &out).map_err(anyhow::Error::msg)?
+    {
         let level = p
             .stages
             .iter()

@@ -15,6 +15,7 @@ mod regressor;
 mod rnea;
 mod robot_file;
 mod urdf;
+mod urdf_export;
 
 pub use base_parameters::{base_parameters, BaseParameters};
 pub use data::Data;
@@ -24,9 +25,10 @@ pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
 pub use r_factor::RFactor;
 pub use regressor::{
-    friction_names, parameter_names, parameter_unit, regressor, standard_parameters, FrictionTerms, RegressorTerms,
-    Spring,
+    friction_names, parameter_names, parameter_unit, regressor, standard_parameters, with_standard_parameters,
+    FrictionTerms, RegressorTerms, Spring,
 };
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, parse_robot_file};
 pub use urdf::{load_urdf, parse_urdf};
+pub use urdf_export::to_urdf;

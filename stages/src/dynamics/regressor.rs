@@ -152,6 +152,54 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
     theta
 }
 
+/// The inverse of [`standard_parameters`]: a copy of `model` with its
+/// inertials, reflected rotor inertias (the rotor inertia is set so that
+/// rotor·gear² matches), friction and offsets taken from `theta`. Spring
+/// coefficients have no place in the model and are ignored.
+pub fn with_standard_parameters(model: &Model, terms: RegressorTerms, theta: &[f64]) -> Model {
+    assert_eq!(theta.len(), terms.count(model.dof()), "standard parameter count");
+    let mut m = model.clone();
+    for (k, l) in m.links.iter_mut().enumerate() {
+        let t = &theta[10 * k..10 * k + 10];
+        let io = Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
+        let h = Vector3::new(t[6], t[7], t[8]);
+        let mass = t[9];
+        let com = if mass > 0.0 { h / mass } else { Vector3::zeros() };
+        l.mass = mass;
+        l.com = com;
+        l.inertia_com = io - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
+    }
+    let mut at = 10 * m.dof();
+    for j in 0..m.dof() {
+        if terms.rotor {
+            let g2 = m.drives[j].gear_ratio * m.drives[j].gear_ratio;
+            if g2 > 0.0 {
+                m.drives[j].rotor_inertia = theta[at] / g2;
+            }
+            at += 1;
+        }
+        let f = &mut m.friction[j];
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 1], theta[at + 1]);
+                at += 2;
+            }
+            FrictionTerms::Asymmetric => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at + 1]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 2], theta[at + 3]);
+                at += 4;
+            }
+        }
+        if terms.offset {
+            f.offset = theta[at];
+            at += 1;
+        }
+    }
+    m
+}
+
 fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }

@@ -9,6 +9,7 @@
 
 mod least_squares;
 mod ml;
+mod physical;
 mod system;
 mod table;
 
@@ -18,6 +19,7 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 
 pub use least_squares::{least_squares, solve_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
+pub use physical::{physically_consistent, pseudo_inertia, PhysicalFit};
 pub use system::{row_weights, Known, System};
 pub use table::{parameters_from_table, parameters_table, Parameters};
 
@@ -103,6 +105,12 @@ pub struct EstimateConfig {
     /// pipeline file.
     #[serde(default)]
     pub known: Option<std::path::PathBuf>,
+    /// Replace the estimate by the nearest physically consistent one
+    /// (`physical.rs`: every link's pseudo-inertia positive semidefinite,
+    /// friction and rotor inertia ≥ 0), in the metric of its covariance,
+    /// the robot file as the a-priori model. The covariance is kept.
+    #[serde(default)]
+    pub physical: bool,
 }
 
 fn default_confidence() -> f64 {
@@ -117,6 +125,7 @@ impl Default for EstimateConfig {
             weights: Weights::PerJoint,
             covariance: Covariance::Auto,
             known: None,
+            physical: false,
         }
     }
 }

@@ -1,0 +1,93 @@
+//! [`Model`] → URDF: a base link, then one revolute joint and link per
+//! joint, each link's inertial at its centre of mass. URDF knows gravity
+//! only as −z: a model whose gravity points elsewhere (the KUKA axis's
+//! −x) gets a fixed `world` joint that turns it there. What URDF cannot
+//! hold — asymmetric friction, Coulomb transition, offsets, rotor inertia —
+//! is written as a `robotid:` comment beside each joint; `<dynamics>`
+//! carries the symmetric mean of viscous and Coulomb friction.
+
+use std::fmt::Write;
+
+use nalgebra::{Rotation3, Vector3};
+
+use super::model::Model;
+
+fn v3(v: &Vector3<f64>) -> String {
+    format!("{} {} {}", v.x, v.y, v.z)
+}
+
+fn rpy(m: &nalgebra::Matrix3<f64>) -> String {
+    let (r, p, y) = Rotation3::from_matrix_unchecked(*m).euler_angles();
+    format!("{r} {p} {y}")
+}
+
+/// The URDF text of `model`; `note` goes into a comment at the top.
+pub fn to_urdf(model: &Model, note: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "<?xml version=\"1.0\"?>");
+    let _ = writeln!(s, "<!-- {} -->", note.replace("--", "- -"));
+    let _ = writeln!(s, "<robot name=\"{}\">", model.name);
+    let g = model.gravity;
+    let mut parent = "base_link".to_string();
+    if g.norm() > 0.0 && (g.normalize() - Vector3::new(0.0, 0.0, -1.0)).norm() > 1e-12 {
+        // R·g = −|g|·z: the base turned so that gravity is URDF's −z.
+        let r = Rotation3::rotation_between(&g, &Vector3::new(0.0, 0.0, -1.0))
+            .unwrap_or_else(|| Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+        let _ = writeln!(s, "  <link name=\"world\"/>");
+        let _ = writeln!(
+            s,
+            "  <joint name=\"world_to_base\" type=\"fixed\">\n    <parent link=\"world\"/>\n    <child link=\"base_link\"/>\n    <origin xyz=\"0 0 0\" rpy=\"{}\"/>\n  </joint>",
+            rpy(r.matrix())
+        );
+    }
+    let _ = writeln!(s, "  <link name=\"base_link\"/>");
+    for (i, j) in model.joints.iter().enumerate() {
+        let child = format!("{}_link", j.name);
+        let lim = &model.limits[i];
+        let (lo, hi) = lim.position.unwrap_or((-std::f64::consts::PI, std::f64::consts::PI));
+        let f = &model.friction[i];
+        let d = &model.drives[i];
+        let _ = writeln!(
+            s,
+            "  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {}, offset = {}, coulomb_transition = {}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} -->",
+            f.viscous_pos,
+            f.viscous_neg,
+            f.coulomb_pos,
+            f.coulomb_neg,
+            f.offset,
+            f.transition,
+            d.rotor_inertia,
+            d.gear_ratio,
+            d.reflected_inertia()
+        );
+        let _ = writeln!(
+            s,
+            "  <joint name=\"{}\" type=\"revolute\">\n    <parent link=\"{parent}\"/>\n    <child link=\"{child}\"/>\n    <origin xyz=\"{}\" rpy=\"{}\"/>\n    <axis xyz=\"{}\"/>\n    <limit lower=\"{lo}\" upper=\"{hi}\" effort=\"{}\" velocity=\"{}\"/>\n    <dynamics damping=\"{}\" friction=\"{}\"/>\n  </joint>",
+            j.name,
+            v3(&j.origin_xyz),
+            rpy(&j.origin_rot),
+            v3(&j.axis),
+            lim.torque.unwrap_or(0.0),
+            lim.velocity.unwrap_or(0.0),
+            0.5 * (f.viscous_pos + f.viscous_neg),
+            0.5 * (f.coulomb_pos + f.coulomb_neg),
+        );
+        let l = &model.links[i];
+        let ic = (l.inertia_com + l.inertia_com.transpose()) * 0.5;
+        let _ = writeln!(
+            s,
+            "  <link name=\"{child}\">\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"{}\"/>\n      <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n    </inertial>\n  </link>",
+            v3(&l.com),
+            l.mass,
+            ic[(0, 0)],
+            ic[(0, 1)],
+            ic[(0, 2)],
+            ic[(1, 1)],
+            ic[(1, 2)],
+            ic[(2, 2)]
+        );
+        parent = child;
+    }
+    let _ = writeln!(s, "</robot>");
+    s
+}
