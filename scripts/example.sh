@@ -33,3 +33,6 @@ fi
 # closest to the robot file's.
 "$bin" export --robot fixtures/robots/kuka_axis3.toml -p out/kuka_axis3/parameters.parquet \
   -o out/kuka_axis3/identified.urdf
+# One page with everything: parameters, intervals, torques, residues, noise.
+"$bin" report -p out/kuka_axis3/parameters.parquet --excitation out/kuka_axis3/kuka_axis3/regressor.parquet \
+  --validation out/validation/kuka_axis3_validation/regressor.parquet -o out/kuka_axis3/report.html

@@ -5,5 +5,6 @@
 pub mod check;
 pub mod plan;
 pub mod plot;
+pub mod report;
 pub mod run;
 pub mod validation;

@@ -35,6 +35,9 @@ enum Command {
     /// Export identified parameters as a URDF: physically consistent
     /// standard parameters closest to the a-priori model.
     Export(cmd::export::Args),
+    /// One self-contained HTML page per identification: parameters with
+    /// intervals, torques, residues and noise densities.
+    Report(cmd::report::Args),
     /// Gravity and friction of one joint from constant-velocity sweeps
     /// (dedicated experiments, Bona §3.2).
     Sweeps(cmd::sweeps::Args),
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
         Command::Predict(a) => cmd::predict::run(a),
         Command::Sweeps(a) => cmd::sweeps::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Report(a) => cmd::report::run(a),
         Command::Check(a) => cmd::check::run(a),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),

@@ -114,6 +114,16 @@ pub(crate) fn figure(
     cols: usize,
     draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<(), String>,
 ) -> Result<(), String> {
+    let svg = figure_svg(rows, cols, draw)?;
+    write_text(path, &svg)
+}
+
+/// A figure of `rows × cols` charts as SVG text.
+pub(crate) fn figure_svg(
+    rows: usize,
+    cols: usize,
+    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<(), String>,
+) -> Result<String, String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (520 * cols as u32, 260 * rows as u32)).into_drawing_area();
@@ -122,9 +132,14 @@ pub(crate) fn figure(
         draw(&areas)?;
         root.present().map_err(|e| e.to_string())?;
     }
+    Ok(svg)
+}
+
+/// Writes a text file atomically.
+pub fn write_text(path: &Path, text: &str) -> Result<(), String> {
     write_atomic(path, |w| {
         use std::io::Write;
-        w.write_all(svg.as_bytes())
+        w.write_all(text.as_bytes())
             .map_err(|e| robotid_stages::Error::io(path, e))
     })
     .map_err(|e| e.to_string())
@@ -324,22 +339,14 @@ pub fn write_report(dir: &Path, name: &str, o: &Outcome, pictures: &[PathBuf]) -
     Ok(path)
 }
 
-/// Pictures of a validation (`robotid validate --plot DIR`):
-/// `validation_torques.svg` (measured in grey, predicted in blue, per
-/// joint, row by row), `validation_residues.svg` (residue histogram as a
-/// density against the Gaussian of the same mean and spread) and
-/// `validation.md`.
-pub fn plot_validation(
-    dir: &Path,
+/// Measured (grey) and predicted (blue) torque per joint, row by row.
+pub fn torques_svg(
     sys: &robotid_stages::estimate::System,
     predicted: &nalgebra::DVector<f64>,
-    stats: &[crate::validation::JointResidue],
-) -> Result<Vec<PathBuf>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+) -> Result<String, String> {
     let nj = sys.joints.len();
     let rows_of = |j: usize| (0..sys.rows()).filter(move |&i| sys.joint[i] == j);
-    let torques = dir.join("validation_torques.svg");
-    figure(&torques, nj, 1, |areas| {
+    figure_svg(nj, 1, |areas| {
         for j in 0..nj {
             let measured: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, sys.b[i])).collect();
             let pred: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, predicted[i])).collect();
@@ -353,12 +360,17 @@ pub fn plot_validation(
             )?;
         }
         Ok(())
-    })?;
-    let residues = dir.join("validation_residues.svg");
-    figure(&residues, nj, 1, |areas| {
+    })
+}
+
+/// Density of `values` per joint (a 40-bin histogram over ±4 std) against
+/// the Gaussian of the same mean and spread.
+pub fn density_svg(joints: &[String], values: &[Vec<f64>], what: &str) -> Result<String, String> {
+    let nj = joints.len();
+    figure_svg(nj, 1, |areas| {
         for j in 0..nj {
-            let r: Vec<f64> = rows_of(j).map(|i| sys.b[i] - predicted[i]).collect();
-            let n = r.len() as f64;
+            let r = &values[j];
+            let n = r.len().max(1) as f64;
             let mean = r.iter().sum::<f64>() / n;
             let sd = (r.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n)
                 .sqrt()
@@ -367,7 +379,7 @@ pub fn plot_validation(
             let (lo, hi) = (mean - 4.0 * sd, mean + 4.0 * sd);
             let w = (hi - lo) / bins as f64;
             let mut count = vec![0usize; bins];
-            for x in &r {
+            for x in r {
                 let b = ((x - lo) / w).floor();
                 if b >= 0.0 && (b as usize) < bins {
                     count[b as usize] += 1;
@@ -388,29 +400,53 @@ pub fn plot_validation(
                 .collect();
             chart(
                 &areas[j],
-                &format!("{}: residue density", sys.joints[j]),
-                "residue [N·m]",
+                &format!("{}: {what} density", joints[j]),
+                &format!("{what} [N·m]"),
                 "1/(N·m)",
-                &[
-                    (hist, BLUE_, "residues"),
-                    (gauss, ORANGE, "Gaussian, same mean and std"),
-                ],
+                &[(hist, BLUE_, what), (gauss, ORANGE, "Gaussian, same mean and std")],
                 &[],
             )?;
         }
         Ok(())
-    })?;
+    })
+}
+
+/// Residues b − Aθ per joint.
+pub fn residues_by_joint(sys: &robotid_stages::estimate::System, predicted: &nalgebra::DVector<f64>) -> Vec<Vec<f64>> {
+    (0..sys.joints.len())
+        .map(|j| {
+            (0..sys.rows())
+                .filter(|&i| sys.joint[i] == j)
+                .map(|i| sys.b[i] - predicted[i])
+                .collect()
+        })
+        .collect()
+}
+
+/// Pictures of a validation (`robotid validate --plot DIR`):
+/// `validation_torques.svg` (measured in grey, predicted in blue, per
+/// joint), `validation_residues.svg` (residue density against the Gaussian
+/// of the same mean and spread) and `validation.md`.
+pub fn plot_validation(
+    dir: &Path,
+    sys: &robotid_stages::estimate::System,
+    predicted: &nalgebra::DVector<f64>,
+    stats: &[crate::validation::JointResidue],
+) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let torques = dir.join("validation_torques.svg");
+    write_text(&torques, &torques_svg(sys, predicted)?)?;
+    let residues = dir.join("validation_residues.svg");
+    write_text(
+        &residues,
+        &density_svg(&sys.joints, &residues_by_joint(sys, predicted), "residue")?,
+    )?;
     let report = dir.join("validation.md");
     let text = format!(
         "# Validation\n\nRecordings: {}\n\n```\n{}```\n\nMSR: mean squared residue (Swevers' figure); noise floor: mean torque noise variance from the noise stage (an MSR at the floor means the model explains all but the noise). KS: Kolmogorov–Smirnov distance of the standardised residue to a Gaussian.\n\n![torques](validation_torques.svg)\n\n![residues](validation_residues.svg)\n",
         sys.recordings.join(", "),
         crate::validation::table(stats)
     );
-    write_atomic(&report, |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes())
-            .map_err(|e| robotid_stages::Error::io(&report, e))
-    })
-    .map_err(|e| e.to_string())?;
+    write_text(&report, &text)?;
     Ok(vec![torques, residues, report])
 }

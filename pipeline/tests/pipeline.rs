@@ -453,6 +453,26 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let rows = &sys.a * &params.values;
     let worst = (0..tau.len()).map(|i| (tau[i] - rows[i]).abs()).fold(0.0, f64::max);
     assert!(worst < 1e-9 * rows.amax(), "predict differs by {worst}");
+    // `robotid report`: one self-contained page.
+    let html = out.join("report.html");
+    run_cli(&[
+        "report",
+        "-p",
+        &params_path.display().to_string(),
+        "--excitation",
+        &out.join("ex/kuka_axis3/regressor.parquet").display().to_string(),
+        "--validation",
+        &reg.display().to_string(),
+        "-o",
+        &html.display().to_string(),
+    ]);
+    let page = std::fs::read_to_string(&html).unwrap();
+    for name in &params.names {
+        assert!(page.contains(name.as_str()), "{name} missing from the report");
+    }
+    // Excitation: torques, residues, noise; validation: torques, residues.
+    assert_eq!(page.matches("<svg").count(), 5);
+    assert!(page.contains("95.0 % interval") && page.contains("ZZ_a3 + Ia_a3"));
     // `robotid export`: a URDF whose model reproduces the estimate's base
     // parameters (the KUKA has no rotor inertia to lose in URDF).
     let urdf = out.join("identified.urdf");

@@ -4,6 +4,7 @@ pub mod export;
 pub mod lint;
 pub mod model;
 pub mod predict;
+pub mod report;
 pub mod run;
 pub mod schema;
 pub mod simulate;

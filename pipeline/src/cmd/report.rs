@@ -1,0 +1,58 @@
+use std::path::PathBuf;
+
+use arrow::array::{Array, StringArray};
+use robotid::report::{html, DataSet};
+use robotid_stages::estimate::parameters_from_table;
+use robotid_stages::formats::parquet::read_parquet;
+
+use super::estimate::load_system;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Identified parameters (`parameters.parquet`).
+    #[arg(long, short)]
+    pub parameters: PathBuf,
+    /// Regressor tables of the excitation data (the estimate's own).
+    #[arg(long, num_args = 1..)]
+    pub excitation: Vec<PathBuf>,
+    /// Regressor tables of validation recordings.
+    #[arg(long, num_args = 1..)]
+    pub validation: Vec<PathBuf>,
+    /// Output HTML page (self-contained: pictures inline).
+    #[arg(long, short, default_value = "report.html")]
+    pub out: PathBuf,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let batch = read_parquet(&args.parameters).map_err(anyhow::Error::msg)?;
+    let params = parameters_from_table(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
+    let expressions: Vec<String> = batch
+        .column_by_name("expression")
+        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+        .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
+        .unwrap_or_default();
+    let excitation = (!args.excitation.is_empty())
+        .then(|| load_system(&args.excitation))
+        .transpose()?;
+    let validation = (!args.validation.is_empty())
+        .then(|| load_system(&args.validation))
+        .transpose()?;
+    let mut sets = Vec::new();
+    if let Some(s) = &excitation {
+        sets.push(DataSet {
+            title: "Excitation data",
+            sys: s,
+        });
+    }
+    if let Some(s) = &validation {
+        sets.push(DataSet {
+            title: "Validation data",
+            sys: s,
+        });
+    }
+    let page =
+        html(&params, &expressions, &args.parameters.display().to_string(), &sets).map_err(anyhow::Error::msg)?;
+    robotid::plot::write_text(&args.out, &page).map_err(anyhow::Error::msg)?;
+    println!("report in {}", args.out.display());
+    Ok(())
+}

@@ -1,0 +1,134 @@
+//! `robotid report`: one self-contained HTML page per identification — the
+//! parameter table with its intervals, how the estimate was made, and for
+//! the excitation and validation data the residue statistics, measured vs
+//! predicted torques, residue densities and the noise densities (the
+//! periods' deviations from their mean), all as inline SVG.
+
+use nalgebra::DVector;
+use robotid_stages::estimate::{Parameters, System};
+
+use crate::plot::{density_svg, residues_by_joint, torques_svg};
+use crate::validation::{residues, table};
+
+/// Escapes text for HTML.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// One data set shown in the report.
+pub struct DataSet<'a> {
+    pub title: &'a str,
+    pub sys: &'a System,
+}
+
+/// The deviations of each period's torque from the periods' mean, per
+/// joint: samples of the measurement noise (Bona's noise PDFs).
+fn noise_by_joint(sys: &System) -> Option<Vec<Vec<f64>>> {
+    let mut out = vec![Vec::new(); sys.joints.len()];
+    let mut any = false;
+    for (r, p) in sys.periods.iter().enumerate() {
+        let Some(tp) = p else { continue };
+        any = true;
+        let start = sys.offsets[r];
+        for i in 0..tp.nrows() {
+            let mean = tp.row(i).sum() / tp.ncols() as f64;
+            for k in 0..tp.ncols() {
+                out[sys.joint[start + i]].push(tp[(i, k)] - mean);
+            }
+        }
+    }
+    any.then_some(out)
+}
+
+/// The report's HTML. `expressions` are the parameters' regrouping
+/// expressions (the table's `expression` column).
+pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String, String> {
+    let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
+    let level: f64 = md("robotid.estimate.confidence").parse().unwrap_or(0.95);
+    let dof: usize = md("robotid.estimate.dof").parse().unwrap_or(1);
+    let t = robotid_stages::estimate::student_t_quantile(0.5 + level / 2.0, dof);
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}svg{max-width:100%;height:auto}.note{color:#555}</style></head><body>\n");
+    h.push_str(&format!(
+        "<h1>Identification of <code>{}</code></h1>\n",
+        esc(md("robotid.robot"))
+    ));
+    h.push_str("<table>\n");
+    for (k, v) in [
+        ("parameters", source.to_string()),
+        ("estimator", md("robotid.estimate.method").to_string()),
+        (
+            "covariance",
+            format!("{} ({} degrees of freedom)", md("robotid.estimate.covariance"), dof),
+        ),
+        (
+            "confidence level",
+            format!("{:.1} % (Student t = {t:.3})", 100.0 * level),
+        ),
+        ("rows", md("robotid.estimate.rows").to_string()),
+        (
+            "condition number (column-scaled)",
+            md("robotid.condition_number").to_string(),
+        ),
+        (
+            "residual variance",
+            md("robotid.estimate.residual_variance").to_string(),
+        ),
+        ("recordings", md("robotid.recordings").to_string()),
+        ("model", md("robotid.model").to_string()),
+        ("regressor configuration", md("robotid.regressor_config").to_string()),
+        ("known parameters", md("robotid.known").to_string()),
+        ("physical consistency", md("robotid.physical").to_string()),
+        ("pipeline SHA-256", md("robotid.config_sha256").to_string()),
+        ("written by", md("robotid.generator").to_string()),
+    ] {
+        h.push_str(&format!("<tr><th>{k}</th><td class=\"l\">{}</td></tr>\n", esc(&v)));
+    }
+    h.push_str("</table>\n<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th><th>std %</th>");
+    h.push_str(&format!("<th>{:.1} % interval</th><th>unit</th></tr>\n", 100.0 * level));
+    for i in 0..params.names.len() {
+        let (v, s) = (params.values[i], params.std[i]);
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{v:.6}</td><td>{s:.3e}</td><td>{:.3}</td><td>[{:.6}, {:.6}]</td><td class=\"l\">{}</td></tr>\n",
+            esc(&params.names[i]),
+            esc(expressions.get(i).map(String::as_str).unwrap_or("")),
+            100.0 * s / v.abs(),
+            v - t * s,
+            v + t * s,
+            esc(&params.units[i])
+        ));
+    }
+    h.push_str("</table>\n");
+    for set in sets {
+        let sys = set.sys;
+        if sys.names != params.names {
+            return Err(format!(
+                "{}: its parameters {:?} are not the estimate's {:?}",
+                set.title, sys.names, params.names
+            ));
+        }
+        let predicted: DVector<f64> = &sys.a * &params.values;
+        let stats = residues(sys, &predicted);
+        h.push_str(&format!(
+            "<h2>{}</h2>\n<p class=\"note\">{}</p>\n<pre>{}</pre>\n",
+            esc(set.title),
+            esc(&sys.recordings.join(", ")),
+            esc(&table(&stats))
+        ));
+        h.push_str("<h3>Measured and predicted torque</h3>\n");
+        h.push_str(&torques_svg(sys, &predicted)?);
+        h.push_str("\n<h3>Residue density against a Gaussian</h3>\n");
+        h.push_str(&density_svg(
+            &sys.joints,
+            &residues_by_joint(sys, &predicted),
+            "residue",
+        )?);
+        if let Some(noise) = noise_by_joint(sys) {
+            h.push_str("\n<h3>Measurement noise density (periods minus their mean)</h3>\n");
+            h.push_str(&density_svg(&sys.joints, &noise, "noise")?);
+        }
+        h.push('\n');
+    }
+    h.push_str("<p class=\"note\">MSR: mean squared residue (Swevers' validation figure). Noise floor: mean torque noise variance of the averaged data, from the noise stage. KS: Kolmogorov–Smirnov distance of the standardised residue to a Gaussian.</p>\n</body></html>\n");
+    Ok(h)
+}
