@@ -36,3 +36,6 @@ fi
 # One page with everything: parameters, intervals, torques, residues, noise.
 "$bin" report -p out/kuka_axis3/parameters.parquet --excitation out/kuka_axis3/kuka_axis3/regressor.parquet \
   --validation out/validation/kuka_axis3_validation/regressor.parquet -o out/kuka_axis3/report.html
+# Optimal excitation for the KUKA axis and the 3-dof arm (Swevers §4).
+"$bin" excite fixtures/excite/kuka_axis3.toml -o out/excite/kuka_axis3
+"$bin" excite fixtures/excite/arm3.toml -o out/excite/arm3

@@ -32,6 +32,10 @@ enum Command {
     /// Validate identified parameters on recordings they were not estimated
     /// from: predicted vs measured torque, residues, their distribution.
     Validate(cmd::validate::Args),
+    /// Design an optimal periodic excitation (Swevers §3): Fourier
+    /// coefficients minimising the regressor's condition number under
+    /// joint and Cartesian constraints.
+    Excite(cmd::excite::Args),
     /// Export identified parameters as a URDF: physically consistent
     /// standard parameters closest to the a-priori model.
     Export(cmd::export::Args),
@@ -63,6 +67,7 @@ fn main() -> ExitCode {
         Command::Predict(a) => cmd::predict::run(a),
         Command::Sweeps(a) => cmd::sweeps::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Excite(a) => cmd::excite::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Check(a) => cmd::check::run(a),
         Command::Model(a) => cmd::model::run(a),

@@ -450,3 +450,57 @@ pub fn plot_validation(
     write_text(&report, &text)?;
     Ok(vec![torques, residues, report])
 }
+
+/// Pictures of a designed excitation: `excitation.svg` (q, q̇, q̈ per
+/// joint over one period) and `end_effector.svg` (its path seen from above
+/// and from the side).
+pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64>]) -> Result<Vec<PathBuf>, String> {
+    let nj = kin.joints.len();
+    let path = dir.join("excitation.svg");
+    figure(&path, nj, 3, |areas| {
+        for j in 0..nj {
+            for (k, (v, what, unit)) in [
+                (&kin.q[j], "position", "rad"),
+                (&kin.qd[j], "velocity", "rad/s"),
+                (&kin.qdd[j], "acceleration", "rad/s²"),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let pts = kin.time.iter().zip(v.iter()).map(|(t, v)| (*t, *v)).collect();
+                chart(
+                    &areas[3 * j + k],
+                    &format!("{} {what}", kin.joints[j]),
+                    "time [s]",
+                    unit,
+                    &[(pts, BLUE_, "")],
+                    &[],
+                )?;
+            }
+        }
+        Ok(())
+    })?;
+    let ee_path = dir.join("end_effector.svg");
+    figure(&ee_path, 1, 2, |areas| {
+        let top: Vec<(f64, f64)> = ee.iter().map(|p| (p.x, p.y)).collect();
+        let side: Vec<(f64, f64)> = ee.iter().map(|p| ((p.x * p.x + p.y * p.y).sqrt(), p.z)).collect();
+        chart(
+            &areas[0],
+            "end effector, seen from above",
+            "x [m]",
+            "y [m]",
+            &[(top, BLUE_, "")],
+            &[],
+        )?;
+        chart(
+            &areas[1],
+            "end effector, distance from axis 1 and height",
+            "r [m]",
+            "z [m]",
+            &[(side, ORANGE, "")],
+            &[],
+        )?;
+        Ok(())
+    })?;
+    Ok(vec![path, ee_path])
+}

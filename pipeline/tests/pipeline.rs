@@ -599,3 +599,53 @@ fn estimate_stage_ml_and_physical_options() {
         }
     }
 }
+
+/// `robotid excite` writes a trajectory the simulator takes as is
+/// (`trajectory_file`), with its coefficients, samples and pictures.
+#[test]
+fn excite_writes_a_trajectory_the_simulator_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ex");
+    let cli = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap();
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let cfg = fixtures().join("excite/kuka_axis3.toml");
+    let text = cli(&[
+        "excite",
+        &cfg.display().to_string(),
+        "-o",
+        &out.display().to_string(),
+        "--starts",
+        "2",
+    ]);
+    println!("{text}");
+    for f in [
+        "excitation.toml",
+        "coefficients.parquet",
+        "trajectory.parquet",
+        "excitation.svg",
+        "end_effector.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let traj = robotid_stages::trajectory::load_trajectory(&out.join("excitation.toml")).unwrap();
+    assert_eq!(traj.period(), Some(10.0));
+    let sim = dir.path().join("sim.toml");
+    std::fs::write(
+        &sim,
+        format!(
+            "robot = \"{}\"\ntrajectory_file = \"ex/excitation.toml\"\n[timing]\nlog_rate_hz = 150.0\ntransient_s = 2.0\nperiods = 2\n[output]\nname = \"optimised\"\nformats = [\"parquet\"]\n",
+            fixtures().join("robots/kuka_axis3.toml").display()
+        ),
+    )
+    .unwrap();
+    cli(&[
+        "simulate",
+        &sim.display().to_string(),
+        "--out",
+        &dir.path().join("rec").display().to_string(),
+    ]);
+    assert!(dir.path().join("rec/optimised.parquet").is_file());
+}

@@ -34,7 +34,9 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("estimate");
     g.sample_size(10);
     g.throughput(Throughput::Elements(rows as u64));
-    g.bench_function("ols_ur5_60k_rows_64_params", |b| b.iter(|| least_squares(&sys).unwrap()));
+    g.bench_function("ols_ur5_60k_rows_64_params", |b| {
+        b.iter(|| least_squares(&sys).unwrap())
+    });
     g.finish();
     // ML: 1-dof, 1500 samples, 5 parameters, 3 noisy inputs.
     let (rows, p) = (1500, 5);

@@ -8,6 +8,7 @@ pub mod differentiate;
 pub mod dynamics;
 mod error;
 pub mod estimate;
+pub mod excite;
 pub mod formats;
 pub mod inverse_filter;
 pub mod noise;

@@ -1,5 +1,6 @@
 pub mod check;
 pub mod estimate;
+pub mod excite;
 pub mod export;
 pub mod lint;
 pub mod model;

@@ -239,10 +239,36 @@ impl SimConfig {
     /// Parses simulation-file text; `path` names it in errors and anchors
     /// the robot path.
     pub fn parse(text: &str, path: &Path) -> Result<SimConfig> {
-        let mut cfg: SimConfig = toml::from_str(text).map_err(|e| Error::Config {
+        let err = |msg: String| Error::Config {
             path: path.to_path_buf(),
-            msg: crate::error::toml_message(text, &e),
-        })?;
+            msg,
+        };
+        let mut table: toml::Table = toml::from_str(text).map_err(|e| err(crate::error::toml_message(text, &e)))?;
+        // `trajectory_file = "…"` instead of a [trajectory] table: the
+        // [trajectory] of another file, e.g. `robotid excite`'s output.
+        // Without it, deserialise the text itself (errors keep their line).
+        if !table.contains_key("trajectory_file") {
+            let mut cfg: SimConfig = toml::from_str(text).map_err(|e| err(crate::error::toml_message(text, &e)))?;
+            cfg.robot = path.parent().unwrap_or(Path::new(".")).join(&cfg.robot);
+            cfg.check().map_err(err)?;
+            return Ok(cfg);
+        }
+        if let Some(file) = table.remove("trajectory_file") {
+            let rel = file
+                .as_str()
+                .ok_or_else(|| err("trajectory_file must be a path".into()))?;
+            if table.contains_key("trajectory") {
+                return Err(err("give either [trajectory] or trajectory_file, not both".into()));
+            }
+            let t = crate::trajectory::load_trajectory(&path.parent().unwrap_or(Path::new(".")).join(rel))?;
+            table.insert(
+                "trajectory".into(),
+                toml::Value::try_from(t).map_err(|e| err(format!("trajectory_file: {e}")))?,
+            );
+        }
+        let mut cfg: SimConfig = toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| err(e.message().to_string()))?;
         cfg.robot = path.parent().unwrap_or(Path::new(".")).join(&cfg.robot);
         cfg.check().map_err(|msg| Error::Config {
             path: path.to_path_buf(),

@@ -1,0 +1,198 @@
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::Context;
+use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use indicatif::{ProgressBar, ProgressStyle};
+use robotid_schemas::{metadata, Kinematics};
+use robotid_stages::dynamics::{end_effector_position, load_robot, Data};
+use robotid_stages::excite::{design, ExciteConfig};
+use robotid_stages::formats::parquet::write_parquet;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Excitation file (TOML), see docs/excitation-file.md.
+    pub config: PathBuf,
+    /// Output folder: excitation.toml (the trajectory, readable by the
+    /// simulator and by `align`'s reference_trajectory), coefficients and
+    /// sampled trajectory as Parquet, plots.
+    #[arg(long, short, default_value = "out/excite")]
+    pub out: PathBuf,
+    /// Override the number of starts.
+    #[arg(long)]
+    pub starts: Option<usize>,
+    /// Worker threads (default: one per core). The result does not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(&args.config).with_context(|| args.config.display().to_string())?;
+    let mut cfg: ExciteConfig = toml::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {}",
+            args.config.display(),
+            robotid_stages::error_message_of_toml(&text, &e)
+        )
+    })?;
+    if let Some(s) = args.starts {
+        cfg.starts = s;
+    }
+    cfg.robot = args
+        .config
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(&cfg.robot);
+    let model = load_robot(&cfg.robot).map_err(anyhow::Error::msg)?;
+    cfg.check(&model)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
+    let bar = ProgressBar::new(cfg.starts as u64);
+    bar.set_style(ProgressStyle::with_template("starts [{bar:30}] {pos}/{len} {msg}").expect("template"));
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let progress = |done: usize, best: f64| {
+        bar.set_position(done as u64);
+        bar.set_message(format!("best criterion {best:.4}"));
+    };
+    let run = || design(&cfg, &model, &progress);
+    let d = match args.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(run),
+        None => run(),
+    }
+    .map_err(anyhow::Error::msg)?;
+    bar.finish_and_clear();
+    std::fs::create_dir_all(&args.out).with_context(|| args.out.display().to_string())?;
+    let feasible = d.starts.iter().filter(|s| s.feasible).count();
+    println!(
+        "{:?} criterion {:.4}, condition number {:.4}, {} of {} starts feasible, {:.2} s",
+        cfg.criterion,
+        d.criterion,
+        d.condition,
+        feasible,
+        d.starts.len(),
+        d.seconds
+    );
+    println!("constraints (largest value over the period; ≤ 0 satisfied):");
+    for (name, v) in &d.constraints {
+        println!("  {v:>9.4}  {name}{}", if *v > -0.01 { "  (active)" } else { "" });
+    }
+    // The trajectory file: a [trajectory] table, as the simulator and the
+    // pipeline read it, and a [result] table saying how it was made.
+    let traj = toml::Value::try_from(robotid_stages::trajectory::Trajectory::Fourier(d.trajectory.clone()))?;
+    let mut doc = toml::Table::new();
+    doc.insert("trajectory".into(), traj);
+    let mut result = toml::Table::new();
+    result.insert("criterion".into(), format!("{:?}", cfg.criterion).to_lowercase().into());
+    result.insert("value".into(), d.criterion.into());
+    result.insert("condition_number".into(), d.condition.into());
+    result.insert("seconds".into(), d.seconds.into());
+    result.insert("starts".into(), (d.starts.len() as i64).into());
+    result.insert("feasible_starts".into(), (feasible as i64).into());
+    result.insert("robot".into(), cfg.robot.display().to_string().into());
+    result.insert(
+        "active_constraints".into(),
+        toml::Value::Array(d.active().into_iter().map(|s| s.to_string().into()).collect()),
+    );
+    doc.insert("result".into(), toml::Value::Table(result));
+    let toml_path = args.out.join("excitation.toml");
+    robotid::plot::write_text(
+        &toml_path,
+        &format!(
+            "# Optimised excitation (robotid excite {}). Use it as a simulation's\n# [trajectory] or as align's reference_trajectory.\n{}",
+            args.config.display(),
+            toml::to_string(&doc)?
+        ),
+    )
+    .map_err(anyhow::Error::msg)?;
+    // Coefficients as Parquet.
+    let f = &d.trajectory;
+    let (mut joint, mut harmonic, mut a, mut b, mut q0) = (vec![], vec![], vec![], vec![], vec![]);
+    for (j, jn) in model.joint_names().iter().enumerate() {
+        for (l, h) in f.harmonic_numbers().iter().enumerate() {
+            joint.push(jn.clone());
+            harmonic.push(*h as i64);
+            a.push(f.a[j][l]);
+            b.push(f.b[j][l]);
+            q0.push(f.q0[j]);
+        }
+    }
+    let unit = |u: &str| BTreeMap::from([(metadata::UNIT.to_string(), u.to_string())]);
+    let md = BTreeMap::from([
+        ("robotid.table".to_string(), "excitation_coefficients".to_string()),
+        (metadata::PERIOD_S.to_string(), f.period().to_string()),
+        ("robotid.base_frequency_hz".to_string(), f.base_frequency_hz.to_string()),
+        ("robotid.condition_number".to_string(), d.condition.to_string()),
+        (
+            "robotid.formula".to_string(),
+            "q(t) = q0 + Σ (a sin(kωt) − b cos(kωt))/(kω)".to_string(),
+        ),
+    ]);
+    let schema = Schema::new(vec![
+        Field::new("joint", DataType::Utf8, false),
+        Field::new("harmonic", DataType::Int64, false).with_metadata(unit("1")),
+        Field::new("a", DataType::Float64, false).with_metadata(unit("rad/s")),
+        Field::new("b", DataType::Float64, false).with_metadata(unit("rad/s")),
+        Field::new("q0", DataType::Float64, false).with_metadata(unit("rad")),
+    ])
+    .with_metadata(md);
+    let cols: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(joint)),
+        Arc::new(Int64Array::from(harmonic)),
+        Arc::new(Float64Array::from(a)),
+        Arc::new(Float64Array::from(b)),
+        Arc::new(Float64Array::from(q0)),
+    ];
+    write_parquet(
+        &args.out.join("coefficients.parquet"),
+        &RecordBatch::try_new(Arc::new(schema), cols)?,
+    )
+    .map_err(anyhow::Error::msg)?;
+    // The sampled trajectory as a kinematics table.
+    let n = model.dof();
+    let samples = cfg.samples();
+    let mut kin = Kinematics {
+        joints: model.joint_names(),
+        time: Vec::with_capacity(samples),
+        q: vec![Vec::with_capacity(samples); n],
+        qd: vec![Vec::with_capacity(samples); n],
+        qdd: vec![Vec::with_capacity(samples); n],
+        torque: None,
+        metadata: BTreeMap::from([
+            (metadata::PERIOD_S.to_string(), f.period().to_string()),
+            (metadata::SAMPLE_RATE_HZ.to_string(), cfg.sample_rate_hz.to_string()),
+            (
+                metadata::HARMONICS.to_string(),
+                f.harmonic_numbers()
+                    .iter()
+                    .map(|h| h.to_string())
+                    .collect::<Vec<_>>()
+                    .join(","),
+            ),
+        ]),
+    };
+    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut data = Data::new(&model);
+    let mut ee = Vec::with_capacity(samples);
+    for k in 0..samples {
+        let t = k as f64 / cfg.sample_rate_hz;
+        f.eval(t, &mut q, &mut qd, &mut qdd);
+        kin.time.push(t);
+        for j in 0..n {
+            kin.q[j].push(q[j]);
+            kin.qd[j].push(qd[j]);
+            kin.qdd[j].push(qdd[j]);
+        }
+        ee.push(end_effector_position(&model, &mut data, &q));
+    }
+    write_parquet(&args.out.join("trajectory.parquet"), &kin.to_record_batch()?).map_err(anyhow::Error::msg)?;
+    let pictures = robotid::plot::plot_excitation(&args.out, &kin, &ee).map_err(anyhow::Error::msg)?;
+    println!(
+        "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
+        toml_path.display(),
+        pictures.len()
+    );
+    Ok(())
+}
