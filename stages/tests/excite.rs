@@ -17,19 +17,23 @@ fn load(rel: &str) -> (ExciteConfig, dynamics::Model) {
     (cfg, model)
 }
 
+fn report(label: &str, d: &robotid_stages::excite::Design) {
+    let starts: Vec<_> = d
+        .starts
+        .iter()
+        .map(|s| (s.criterion, s.feasible, s.evaluations))
+        .collect();
+    println!(
+        "{label}: condition {:.4} in {:.2} s; starts {starts:?}",
+        d.condition, d.seconds
+    );
+}
+
 #[test]
 fn kuka_axis3_reaches_swevers_condition_number() {
     let (cfg, model) = load("excite/kuka_axis3.toml");
     let d = design(&cfg, &model, &|_, _| {}).unwrap();
-    println!(
-        "KUKA axis 3: condition {:.4} in {:.2} s; starts {:?}",
-        d.condition,
-        d.seconds,
-        d.starts
-            .iter()
-            .map(|s| (s.criterion, s.feasible, s.evaluations))
-            .collect::<Vec<_>>()
-    );
+    report("KUKA axis 3", &d);
     println!("constraints {:?}", d.constraints);
     assert!(d.condition <= 3.0, "condition {}", d.condition);
     assert!(d.constraints.iter().all(|(_, v)| *v <= 1e-9));
@@ -39,15 +43,7 @@ fn kuka_axis3_reaches_swevers_condition_number() {
 fn arm3_beats_swevers_with_cartesian_constraints() {
     let (cfg, model) = load("excite/arm3.toml");
     let d = design(&cfg, &model, &|_, _| {}).unwrap();
-    println!(
-        "arm3: condition {:.3} in {:.2} s; starts {:?}",
-        d.condition,
-        d.seconds,
-        d.starts
-            .iter()
-            .map(|s| (s.criterion, s.feasible, s.evaluations))
-            .collect::<Vec<_>>()
-    );
+    report("arm3", &d);
     println!("constraints {:?}\nactive {:?}", d.constraints, d.active());
     assert!(d.condition < 47.3, "condition {}", d.condition);
     assert!(d.constraints.iter().all(|(_, v)| *v <= 1e-9));

@@ -79,6 +79,30 @@ fn run_with(
     (sys, truth, model)
 }
 
+/// The KUKA axis through the pipeline's stages: inverse filter to 20 Hz,
+/// derivatives to 15 Hz.
+const KUKA: Case = Case {
+    sim: "sims/kuka_axis3.toml",
+    disturbance: true,
+    bandwidth_hz: 20.0,
+    dft_hz: 15.0,
+};
+
+/// Swevers' axis-3 model with the plant's Coulomb transition, columns
+/// band-limited like the torque.
+fn kuka_regressor() -> RegressorConfig {
+    RegressorConfig {
+        model: Default::default(),
+        friction: FrictionModel::Symmetric,
+        rotor: true,
+        offset: false,
+        coulomb_transition_rad_s: Some(0.01),
+        spring: None,
+        band_limit_hz: Some(20.0),
+        projection: None,
+    }
+}
+
 struct Tally {
     inside95: usize,
     inside999: usize,
@@ -157,22 +181,8 @@ fn kuka_axis3_intervals_cover_the_truth() {
     // the torque answers to; at 8 Hz MX, MY, Fv and Fc came out biased by
     // 0.3–0.5 Monte Carlo standard deviations (0.1–0.2 at 15 Hz, within the
     // Monte Carlo's own error).
-    let case = Case {
-        sim: "sims/kuka_axis3.toml",
-        disturbance: true,
-        bandwidth_hz: 20.0,
-        dft_hz: 15.0,
-    };
-    let rc = RegressorConfig {
-        model: Default::default(),
-        friction: FrictionModel::Symmetric,
-        rotor: true,
-        offset: false,
-        coulomb_transition_rad_s: Some(0.01),
-        spring: None,
-        band_limit_hz: Some(20.0),
-        projection: None,
-    };
+    let case = KUKA;
+    let rc = kuka_regressor();
     let results = monte_carlo(&case, &rc, 40);
     report("KUKA axis 3", &results);
     for (m, t, _) in &results {
@@ -229,22 +239,8 @@ fn arm3_intervals_cover_the_truth() {
 #[test]
 fn projection_method_removes_the_closed_loop_bias() {
     use robotid_stages::projection::ProjectionConfig;
-    let case = Case {
-        sim: "sims/kuka_axis3.toml",
-        disturbance: true,
-        bandwidth_hz: 20.0,
-        dft_hz: 15.0,
-    };
-    let plain = RegressorConfig {
-        model: Default::default(),
-        friction: FrictionModel::Symmetric,
-        rotor: true,
-        offset: false,
-        coulomb_transition_rad_s: Some(0.01),
-        spring: None,
-        band_limit_hz: Some(20.0),
-        projection: None,
-    };
+    let case = KUKA;
+    let plain = kuka_regressor();
     let pm = RegressorConfig {
         projection: Some(ProjectionConfig { m1: 20, m2: 20 }),
         ..plain.clone()
@@ -357,22 +353,8 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
     }
     assert!((e.values[2] - truth[2]).abs() < 0.05 * truth[2], "Fv");
     // Friction known: the inertial parameters from the excitation data.
-    let case = Case {
-        sim: "sims/kuka_axis3.toml",
-        disturbance: true,
-        bandwidth_hz: 20.0,
-        dft_hz: 15.0,
-    };
-    let rc = RegressorConfig {
-        model: Default::default(),
-        friction: FrictionModel::Symmetric,
-        rotor: true,
-        offset: false,
-        coulomb_transition_rad_s: Some(0.01),
-        spring: None,
-        band_limit_hz: Some(20.0),
-        projection: None,
-    };
+    let case = KUKA;
+    let rc = kuka_regressor();
     let (mut sys, t, _) = run(&case, 7, &rc);
     let fixed = sys
         .fix(&robotid_stages::estimate::Known {

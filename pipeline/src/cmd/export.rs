@@ -1,11 +1,9 @@
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
-use robotid_stages::dynamics::{load_robot, parameter_names, standard_parameters, to_urdf, with_standard_parameters};
-use robotid_stages::estimate::{parameters_from_table, physically_consistent};
-use robotid_stages::formats::parquet::read_parquet;
+use anyhow::bail;
+use robotid_stages::dynamics::{parameter_names, standard_parameters, to_urdf, with_standard_parameters};
+use robotid_stages::estimate::physically_consistent;
 use robotid_stages::formats::write_atomic;
-use robotid_stages::regressor::{BaseRegressor, RegressorConfig, CONFIG_KEY};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -28,27 +26,10 @@ pub struct Args {
 /// Physically consistent standard parameters closest to the a-priori model
 /// that reproduce the identified base parameters, written as a URDF.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let params = parameters_from_table(&read_parquet(&args.parameters).map_err(anyhow::Error::msg)?)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
-    let cfg: RegressorConfig = serde_json::from_str(
-        params
-            .metadata
-            .get(CONFIG_KEY)
-            .with_context(|| format!("{}: no `{CONFIG_KEY}` in its metadata", args.parameters.display()))?,
-    )?;
-    let model = load_robot(&args.robot).map_err(anyhow::Error::msg)?;
-    let base = BaseRegressor::new(&model, &cfg).map_err(anyhow::Error::msg)?;
+    let (params, _, base) = super::identified(&args.robot, &args.parameters)?;
     let Some(map) = base.map() else {
         bail!("export needs the chain model's base parameters (the decoupled model has no standard parameters)");
     };
-    if base.names() != params.names {
-        bail!(
-            "robot `{}` gives base parameters {:?}, not the table's {:?}",
-            model.name,
-            base.names(),
-            params.names
-        );
-    }
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
     let fit = physically_consistent(

@@ -1,11 +1,8 @@
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use robotid_schemas::Kinematics;
-use robotid_stages::dynamics::load_robot;
-use robotid_stages::estimate::parameters_from_table;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::regressor::{BaseRegressor, RegressorConfig, CONFIG_KEY};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -25,26 +22,7 @@ pub struct Args {
 /// τ = Φ_base(q, q̇, q̈)·θ̂, the base regressor rebuilt from the robot and
 /// the regressor configuration the parameters carry.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let params = parameters_from_table(&read_parquet(&args.parameters).map_err(anyhow::Error::msg)?)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
-    let cfg_text = params.metadata.get(CONFIG_KEY).with_context(|| {
-        format!(
-            "{}: no regressor configuration in its metadata (`{CONFIG_KEY}`)",
-            args.parameters.display()
-        )
-    })?;
-    let cfg: RegressorConfig =
-        serde_json::from_str(cfg_text).with_context(|| format!("{}: `{CONFIG_KEY}`", args.parameters.display()))?;
-    let model = load_robot(&args.robot).map_err(anyhow::Error::msg)?;
-    let base = BaseRegressor::new(&model, &cfg).map_err(anyhow::Error::msg)?;
-    if base.names() != params.names {
-        bail!(
-            "robot `{}` with the parameters' regressor configuration has base parameters {:?}, not the table's {:?}: is it the robot they were identified for?",
-            model.name,
-            base.names(),
-            params.names
-        );
-    }
+    let (params, model, base) = super::identified(&args.robot, &args.parameters)?;
     let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
     let mut kin =
         Kinematics::from_record_batch(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.kinematics.display()))?;

@@ -25,8 +25,8 @@ pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
 pub use r_factor::RFactor;
 pub use regressor::{
-    friction_names, parameter_names, parameter_unit, regressor, standard_parameters, with_standard_parameters,
-    FrictionTerms, RegressorTerms, Spring,
+    friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
+    with_standard_parameters, FrictionTerms, RegressorTerms, Spring,
 };
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, parse_robot_file};

@@ -77,18 +77,7 @@ pub fn pseudo_inertia(t: &[f64]) -> Matrix4<f64> {
 fn from_pseudo_inertia(j: &Matrix4<f64>) -> [f64; 10] {
     let sigma = j.fixed_view::<3, 3>(0, 0).into_owned();
     let i = nalgebra::Matrix3::identity() * sigma.trace() - sigma;
-    [
-        i[(0, 0)],
-        i[(0, 1)],
-        i[(0, 2)],
-        i[(1, 1)],
-        i[(1, 2)],
-        i[(2, 2)],
-        j[(0, 3)],
-        j[(1, 3)],
-        j[(2, 3)],
-        j[(3, 3)],
-    ]
+    crate::dynamics::inertial_parameters(&i, &nalgebra::Vector3::new(j[(0, 3)], j[(1, 3)], j[(2, 3)]), j[(3, 3)])
 }
 
 /// Upper-triangular U with J = U·Uᵀ (J made positive definite first).
@@ -235,6 +224,7 @@ pub fn physically_consistent(
     let mut cost = r.norm_squared();
     let mut mu = 1e-3;
     let mut iterations = 0;
+    let mut converged = false;
     for it in 1..=500 {
         iterations = it;
         // Jacobian by central differences.
@@ -270,24 +260,12 @@ pub fn physically_consistent(
                 cost = c;
                 mu = (mu * 0.3).max(1e-12);
                 improved = true;
-                if rel < 1e-12 {
-                    return Ok(finish(
-                        &[],
-                        Some(&x),
-                        &kinds,
-                        links,
-                        map,
-                        &l_inv,
-                        base_estimate,
-                        prior,
-                        iterations,
-                    ));
-                }
+                converged = rel < 1e-12;
                 break;
             }
             mu *= 10.0;
         }
-        if !improved {
+        if !improved || converged {
             break;
         }
     }

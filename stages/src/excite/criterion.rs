@@ -189,24 +189,12 @@ impl Criterion {
         let ymax = DVector::from_fn(p, |i, _| d[i] * vmax[i]);
         let ymin = DVector::from_fn(p, |i, _| d[i] * vmin[i]);
         // Weights of dG_ii in dλ: λ·v_i²/G_ii (normalised case only).
-        let wmax: Vec<f64> = (0..p)
-            .map(|i| {
-                if normalise {
-                    lmax * vmax[i] * vmax[i] / g[(i, i)]
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let wmin: Vec<f64> = (0..p)
-            .map(|i| {
-                if normalise {
-                    lmin * vmin[i] * vmin[i] / g[(i, i)]
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let weights = |l: f64, v: &DVector<f64>| -> Vec<f64> {
+            (0..p)
+                .map(|i| if normalise { l * v[i] * v[i] / g[(i, i)] } else { 0.0 })
+                .collect()
+        };
+        let (wmax, wmin) = (weights(lmax, &vmax), weights(lmin, &vmin));
         let series = self.layout.series(x);
         let n = self.layout.joints();
         let mut ws = self.base.workspace();
