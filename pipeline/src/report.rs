@@ -132,3 +132,44 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
     h.push_str("<p class=\"note\">MSR: mean squared residue (Swevers' validation figure). Noise floor: mean torque noise variance of the averaged data, from the noise stage. KS: Kolmogorov–Smirnov distance of the standardised residue to a Gaussian.</p>\n</body></html>\n");
     Ok(h)
 }
+
+/// The report of a run with an `estimate` stage: its parameters against
+/// the regressor tables of its own recordings, as `<dir>/report.html`.
+pub fn write_run_report(
+    parameters: &std::path::Path,
+    results: &[crate::run::RecordingResult],
+    dir: &std::path::Path,
+) -> Result<std::path::PathBuf, String> {
+    use arrow::array::{Array, StringArray};
+    let batch = robotid_stages::formats::parquet::read_parquet(parameters).map_err(|e| e.to_string())?;
+    let params = robotid_stages::estimate::parameters_from_table(&batch)?;
+    let expressions: Vec<String> = batch
+        .column_by_name("expression")
+        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+        .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
+        .unwrap_or_default();
+    let tables: Vec<(String, arrow::array::RecordBatch)> = results
+        .iter()
+        .filter_map(|r| {
+            let o = r.outcome.as_ref().ok()?;
+            Some((r.name.clone(), o.regressor.clone()?))
+        })
+        .collect();
+    if params.metadata.get("robotid.known").is_some_and(|k| !k.is_empty()) {
+        return Err("the estimate took parameters as known; `robotid report --excitation` on tables with them compensated shows it".into());
+    }
+    let sys = System::from_tables(&tables)?;
+    let page = html(
+        &params,
+        &expressions,
+        &parameters.display().to_string(),
+        &[DataSet {
+            title: "Excitation data",
+            sys: &sys,
+        }],
+    )?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join("report.html");
+    crate::plot::write_text(&path, &page)?;
+    Ok(path)
+}

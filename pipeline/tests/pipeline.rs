@@ -381,7 +381,20 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let p = |rel: &str| ws.path().join(rel).display().to_string();
     let ex = out.join("ex").display().to_string();
     let va = out.join("va").display().to_string();
-    println!("{}", run_cli(&["run", &p("pipelines/kuka_axis3.toml"), "--out", &ex]));
+    let run_plots = out.join("run_plots").display().to_string();
+    println!(
+        "{}",
+        run_cli(&[
+            "run",
+            &p("pipelines/kuka_axis3.toml"),
+            "--out",
+            &ex,
+            "--plot",
+            &run_plots
+        ])
+    );
+    // With --plot, a run with an `estimate` stage writes its report too.
+    assert!(out.join("run_plots/report.html").is_file());
     run_cli(&["run", &p("pipelines/validation.toml"), "--out", &va]);
     let params_path = out.join("ex/parameters.parquet");
     let params = parameters_from_table(&read_parquet(&params_path).unwrap()).unwrap();

@@ -113,6 +113,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or(0.95);
         print!("{}", super::estimate::summary(&est, level));
         println!("parameters in {}", path.display());
+        if let Some(dir) = &args.plot {
+            match robotid::report::write_run_report(&path, &results, dir) {
+                Ok(report) => println!("report in {}", report.display()),
+                Err(e) => eprintln!("warning: no report: {e}"),
+            }
+        }
     }
     Ok(())
 }
