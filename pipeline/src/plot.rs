@@ -253,33 +253,44 @@ pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>, String> 
         files.push(path);
     }
     if let Some(kin) = inp.kinematics {
-        let nj = kin.joints.len();
         let path = dir.join("derivatives.svg");
-        figure(&path, nj, 2, |areas| {
-            for j in 0..nj {
-                for (k, (v, what, unit)) in [
-                    (&kin.qd[j], "velocity", "rad/s"),
-                    (&kin.qdd[j], "acceleration", "rad/s²"),
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    let pts = kin.time.iter().zip(v.iter()).map(|(t, v)| (*t, *v)).collect();
-                    chart(
-                        &areas[2 * j + k],
-                        &format!("{} {what}", kin.joints[j]),
-                        "time [s]",
-                        unit,
-                        &[(pts, BLUE_, "")],
-                        &[],
-                    )?;
-                }
-            }
-            Ok(())
-        })?;
+        kinematics_figure(&path, kin, false)?;
         files.push(path);
     }
     Ok(files)
+}
+
+/// Velocities and accelerations (and positions, if asked) of every joint
+/// against time, one row of charts per joint.
+fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<(), String> {
+    let nj = kin.joints.len();
+    let mut quantities = Vec::new();
+    if positions {
+        quantities.push((0, "position", "rad"));
+    }
+    quantities.extend([(1, "velocity", "rad/s"), (2, "acceleration", "rad/s²")]);
+    let cols = quantities.len();
+    figure(path, nj, cols, |areas| {
+        for j in 0..nj {
+            for (k, &(which, what, unit)) in quantities.iter().enumerate() {
+                let v = match which {
+                    0 => &kin.q[j],
+                    1 => &kin.qd[j],
+                    _ => &kin.qdd[j],
+                };
+                let pts = kin.time.iter().zip(v.iter()).map(|(t, v)| (*t, *v)).collect();
+                chart(
+                    &areas[cols * j + k],
+                    &format!("{} {what}", kin.joints[j]),
+                    "time [s]",
+                    unit,
+                    &[(pts, BLUE_, "")],
+                    &[],
+                )?;
+            }
+        }
+        Ok(())
+    })
 }
 
 /// `report.md`: what the run found, what it could not do, the pictures.
@@ -455,31 +466,8 @@ pub fn plot_validation(
 /// joint over one period) and `end_effector.svg` (its path seen from above
 /// and from the side).
 pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64>]) -> Result<Vec<PathBuf>, String> {
-    let nj = kin.joints.len();
     let path = dir.join("excitation.svg");
-    figure(&path, nj, 3, |areas| {
-        for j in 0..nj {
-            for (k, (v, what, unit)) in [
-                (&kin.q[j], "position", "rad"),
-                (&kin.qd[j], "velocity", "rad/s"),
-                (&kin.qdd[j], "acceleration", "rad/s²"),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                let pts = kin.time.iter().zip(v.iter()).map(|(t, v)| (*t, *v)).collect();
-                chart(
-                    &areas[3 * j + k],
-                    &format!("{} {what}", kin.joints[j]),
-                    "time [s]",
-                    unit,
-                    &[(pts, BLUE_, "")],
-                    &[],
-                )?;
-            }
-        }
-        Ok(())
-    })?;
+    kinematics_figure(&path, kin, true)?;
     let ee_path = dir.join("end_effector.svg");
     figure(&ee_path, 1, 2, |areas| {
         let top: Vec<(f64, f64)> = ee.iter().map(|p| (p.x, p.y)).collect();

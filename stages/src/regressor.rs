@@ -40,15 +40,11 @@ pub enum ModelKind {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct RegressorConfig {
-    #[serde(default)]
     pub model: ModelKind,
-    #[serde(default = "symmetric")]
     pub friction: FrictionModel,
-    #[serde(default = "yes")]
     pub rotor: bool,
-    #[serde(default)]
     pub offset: bool,
     /// Coulomb transition velocity of the estimation model, rad/s: tanh(q̇/v)
     /// instead of sign(q̇) (default: the robot file's). A model whose
@@ -60,18 +56,33 @@ pub struct RegressorConfig {
     /// in its angle.
     pub spring: Option<SpringConfig>,
     /// Band-limit every regressor column, over the period, to the band the
-    /// torque was inverse-filtered to (lines above are zeroed). Without it
-    /// the Coulomb columns keep their sharp edges while the torque has lost
-    /// them above the band, a mismatch that biases the friction and gravity
-    /// estimates (measured on the simulated KUKA axis: about 0.6 σ each).
-    /// Periodic kinematics only.
-    #[serde(default)]
+    /// torque was inverse-filtered to (lines above are zeroed), so that both
+    /// sides of A·θ = b see the same band: the Coulomb columns' sharp edges
+    /// have energy above it that the torque lost. On the simulated KUKA axis
+    /// the effect is small (the estimates move by under 0.05 σ); the
+    /// derivative band matters more there. Periodic kinematics only.
     pub band_limit_hz: Option<f64>,
     /// Closed-loop data: the Projection Method (`projection.rs`) with a
     /// non-causal FIR of taps −m1..m2 from the references to the command;
     /// torque and columns are projected on the references' span.
-    #[serde(default)]
     pub projection: Option<crate::projection::ProjectionConfig>,
+}
+
+/// The chain model with rotor inertia and symmetric friction (Swevers' and
+/// Bona's), sign(q̇) Coulomb unless the robot file says otherwise.
+impl Default for RegressorConfig {
+    fn default() -> Self {
+        RegressorConfig {
+            model: ModelKind::Chain,
+            friction: FrictionModel::Symmetric,
+            rotor: true,
+            offset: false,
+            coulomb_transition_rad_s: None,
+            spring: None,
+            band_limit_hz: None,
+            projection: None,
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -79,13 +90,6 @@ pub struct RegressorConfig {
 pub struct SpringConfig {
     pub joint: String,
     pub harmonics: u32,
-}
-
-fn symmetric() -> FrictionModel {
-    FrictionModel::Symmetric
-}
-fn yes() -> bool {
-    true
 }
 
 impl RegressorConfig {

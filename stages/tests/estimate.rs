@@ -15,7 +15,7 @@ use robotid_stages::estimate::{
     estimate, least_squares, maximum_likelihood, weighted_least_squares, EstimateConfig, InputNoise, Method, MlOptions,
     System,
 };
-use robotid_stages::regressor::{BaseRegressor, FrictionModel, RegressorConfig};
+use robotid_stages::regressor::{BaseRegressor, RegressorConfig};
 use robotid_stages::simulate::SimConfig;
 use robotid_stages::trajectory::Trajectory;
 
@@ -25,14 +25,8 @@ fn fixture(rel: &str) -> PathBuf {
 
 fn config() -> RegressorConfig {
     RegressorConfig {
-        model: Default::default(),
-        friction: FrictionModel::Symmetric,
-        rotor: true,
-        offset: false,
         coulomb_transition_rad_s: Some(0.01),
-        spring: None,
-        band_limit_hz: None,
-        projection: None,
+        ..Default::default()
     }
 }
 

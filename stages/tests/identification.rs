@@ -51,13 +51,7 @@ fn run_with(
         cfg.disturbance = Default::default();
     }
     edit(&mut cfg);
-    let model = dynamics::load_robot(&cfg.robot).unwrap();
-    let mut s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
-    for (j, col) in s.raw.effort.iter_mut().enumerate() {
-        let k = model.drives[j].joint_torque_per_amp();
-        col.iter_mut().for_each(|v| *v *= k);
-    }
-    s.raw.effort_kind = TorqueChannel::Torque;
+    let (model, s) = simulate_torque(&cfg);
     let spectra = Spectra::new();
     let mut p = align(&s.raw, &AlignConfig::default(), case.sim).unwrap();
     let ifc = InverseFilterConfig {
@@ -92,15 +86,23 @@ const KUKA: Case = Case {
 /// band-limited like the torque.
 fn kuka_regressor() -> RegressorConfig {
     RegressorConfig {
-        model: Default::default(),
-        friction: FrictionModel::Symmetric,
-        rotor: true,
-        offset: false,
         coulomb_transition_rad_s: Some(0.01),
-        spring: None,
         band_limit_hz: Some(20.0),
-        projection: None,
+        ..Default::default()
     }
+}
+
+/// Simulates `cfg` and turns its motor currents into joint torques, as the
+/// read stage does with the robot's drives.
+fn simulate_torque(cfg: &SimConfig) -> (Model, robotid_stages::simulate::Simulation) {
+    let model = dynamics::load_robot(&cfg.robot).unwrap();
+    let mut s = simulate(cfg, &model, &BTreeMap::new()).unwrap();
+    for (j, col) in s.raw.effort.iter_mut().enumerate() {
+        let k = model.drives[j].joint_torque_per_amp();
+        col.iter_mut().for_each(|v| *v *= k);
+    }
+    s.raw.effort_kind = TorqueChannel::Torque;
+    (model, s)
 }
 
 struct Tally {
@@ -210,14 +212,10 @@ fn arm3_intervals_cover_the_truth() {
         dft_hz: 10.0,
     };
     let rc = RegressorConfig {
-        model: Default::default(),
         friction: FrictionModel::Asymmetric,
-        rotor: true,
-        offset: false,
         coulomb_transition_rad_s: Some(0.01),
-        spring: None,
         band_limit_hz: Some(30.0),
-        projection: None,
+        ..Default::default()
     };
     let results = monte_carlo(&case, &rc, 16);
     report("arm3", &results);
@@ -290,13 +288,7 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
     use robotid_stages::differentiate::differentiate_record;
     use robotid_stages::inverse_filter::inverse_filter_record;
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3_sweeps.toml")).unwrap();
-    let model = dynamics::load_robot(&cfg.robot).unwrap();
-    let mut s = simulate(&cfg, &model, &BTreeMap::new()).unwrap();
-    for (j, col) in s.raw.effort.iter_mut().enumerate() {
-        let k = model.drives[j].joint_torque_per_amp();
-        col.iter_mut().for_each(|v| *v *= k);
-    }
-    s.raw.effort_kind = TorqueChannel::Torque;
+    let (_, mut s) = simulate_torque(&cfg);
     let spectra = Spectra::new();
     let ifc = InverseFilterConfig {
         filter: cfg.measurement.filter,

@@ -135,7 +135,7 @@ fn base_parameters_predict_like_the_full_set() {
 /// tanh(q̇/0.01 rad/s), matched here by the model's transition).
 #[test]
 fn truth_regression_recovers_the_axis() {
-    use robotid_stages::regressor::{regressor_table, FrictionModel, RegressorConfig};
+    use robotid_stages::regressor::{regressor_table, RegressorConfig};
     use robotid_stages::simulate::{simulate, SimConfig};
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
     let mut model = dynamics::load_robot(&cfg.robot).unwrap();
@@ -154,16 +154,7 @@ fn truth_regression_recovers_the_axis() {
     };
     for (transition, label) in [(0.01, "matched tanh"), (0.0, "sign")] {
         model.friction[0].transition = transition;
-        let rc = RegressorConfig {
-            model: Default::default(),
-            friction: FrictionModel::Symmetric,
-            rotor: true,
-            offset: false,
-            coulomb_transition_rad_s: None,
-            spring: None,
-            band_limit_hz: None,
-            projection: None,
-        };
+        let rc = RegressorConfig::default();
         let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
         let theta = least_squares(&batch);
         println!("truth regression ({label}): {:?}", theta.as_slice());
@@ -185,13 +176,8 @@ fn truth_regression_recovers_the_axis() {
     model.friction[0].transition = 0.01;
     let rc = RegressorConfig {
         model: robotid_stages::regressor::ModelKind::Decoupled,
-        friction: FrictionModel::Symmetric,
         rotor: false,
-        offset: false,
-        coulomb_transition_rad_s: None,
-        spring: None,
-        band_limit_hz: None,
-        projection: None,
+        ..Default::default()
     };
     let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();
     assert_eq!(batch.schema().field(6).name(), "Mi_a3");

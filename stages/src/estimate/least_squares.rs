@@ -39,9 +39,8 @@ pub(super) fn solve(sys: &System, weights: Option<&DVector<f64>>) -> Result<Solu
         acc.add_rows(&a, &b);
     }
     let svd = acc.r.clone().svd(false, true);
-    let (imax, smax) = svd.singular_values.argmax();
+    let smax = svd.singular_values.max();
     let (imin, smin) = svd.singular_values.argmin();
-    let _ = imax;
     let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
     if !(condition < MAX_CONDITION) {
         let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();

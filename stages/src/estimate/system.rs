@@ -232,7 +232,7 @@ impl System {
                     }
                 }
             }
-            self.a = self.a.clone().remove_column(c);
+            self.a = std::mem::replace(&mut self.a, DMatrix::zeros(0, 0)).remove_column(c);
             self.names.remove(c);
             self.units.remove(c);
             self.expressions.remove(c);

@@ -25,7 +25,7 @@ pub struct ExciteConfig {
     #[serde(default)]
     pub criterion: CriterionKind,
     /// The identification model whose base regressor is conditioned.
-    #[serde(default = "default_regressor")]
+    #[serde(default)]
     pub regressor: RegressorConfig,
     /// Limits (default: the robot file's).
     #[serde(default)]
@@ -41,9 +41,6 @@ pub struct ExciteConfig {
     pub max_iterations: usize,
 }
 
-fn default_regressor() -> RegressorConfig {
-    toml::from_str("").expect("all defaults")
-}
 fn default_starts() -> usize {
     8
 }
@@ -63,7 +60,9 @@ pub enum CriterionKind {
     /// Condition number with the columns scaled by the a-priori base
     /// parameters instead (Gautier): balances the torque contributions.
     Gautier,
-    /// −log det of the normalised information matrix (D-optimality).
+    /// −log det of the information matrix with the columns scaled by the
+    /// a-priori base parameters (D-optimality: the volume of the
+    /// confidence ellipsoid, in units of the parameters' own sizes).
     LogDet,
 }
 
