@@ -82,7 +82,10 @@ impl Criterion {
         let g = self.gram(x);
         let p = g.nrows();
         let d: Vec<f64> = match kind {
-            CriterionKind::Gautier => (0..p).map(|i| self.prior_scale[i]).collect(),
+            // Fixed scales: the a-priori parameter sizes. Normalising by the
+            // trajectory's own column norms (as `condition` does) would make
+            // the determinant blind to how much the trajectory excites.
+            CriterionKind::Gautier | CriterionKind::LogDet => (0..p).map(|i| self.prior_scale[i]).collect(),
             _ => (0..p)
                 .map(|i| {
                     let v = g[(i, i)];

@@ -19,7 +19,7 @@ pub use config::{Cartesian, CriterionKind, ExciteConfig, Keep, LimitsConfig};
 pub use constraints::Constraints;
 pub use criterion::Criterion;
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
@@ -253,6 +253,5 @@ pub fn random_feasible(cfg: &ExciteConfig, model: &Model, seed: u64) -> Result<F
     let layout = cfg.layout(model);
     let constraints = Constraints::new(cfg, model, &layout)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let _ = rng.random::<f64>();
     Ok(layout.series(&constraints.feasible_start(&mut rng, &layout)))
 }
