@@ -3,11 +3,10 @@
 //! that recording and writing the output tables.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use robotid::plan::{parse, resolve};
-use robotid::run::{run, RunOptions};
+use robotid::{Pipeline, RunOptions};
 use robotid_stages::formats::parquet::write_parquet;
-use robotid_stages::read::{read, ReadConfig};
-use robotid_stages::synthetic::synthetic_recording;
+use robotid_stages::simulation::synthetic::synthetic_recording;
+use robotid_stages::stage::read::{read, ReadConfig};
 
 const PIPELINE: &str = r#"
 version = 1
@@ -40,8 +39,7 @@ fn whole(c: &mut Criterion) {
     drop(raw);
     let file = dir.path().join("pipeline.toml");
     std::fs::write(&file, PIPELINE).unwrap();
-    let plan = parse(PIPELINE, &file).unwrap();
-    let (model, logs, start) = resolve(&plan).unwrap();
+    let built = Pipeline::from_toml(PIPELINE, &file).unwrap().build().unwrap();
     let out = dir.path().join("out");
     let opts = RunOptions {
         out: out.clone(),
@@ -50,7 +48,7 @@ fn whole(c: &mut Criterion) {
         plot: None,
     };
     // The result tables the floor writes: the pipeline's own, once.
-    let results = run(&plan, model.as_ref(), &logs, start, &opts);
+    let results = built.run_recordings(&opts);
     assert!(results[0].outcome.is_ok(), "{:?}", results[0].outcome);
     let tables: Vec<_> = ["period_mean", "noise", "kinematics"]
         .iter()
@@ -62,21 +60,19 @@ fn whole(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(samples));
     let cfg = ReadConfig {
-        joints: plan.read.joints.clone(),
+        joints: built.plan.read.joints.clone(),
         ..Default::default()
     };
     g.bench_function("read_and_write_only", |b| {
         b.iter(|| {
-            let raw = read(&logs[0], &cfg, None).unwrap();
+            let raw = read(&built.logs[0], &cfg, None).unwrap();
             for (t, batch) in ["a", "b", "c"].iter().zip(&tables) {
                 write_parquet(&dir.path().join(format!("{t}.parquet")), batch).unwrap();
             }
             raw.len()
         })
     });
-    g.bench_function("whole_pipeline", |b| {
-        b.iter(|| run(&plan, model.as_ref(), &logs, start, &opts))
-    });
+    g.bench_function("whole_pipeline", |b| b.iter(|| built.run(&opts).unwrap()));
     g.finish();
 }
 

@@ -49,7 +49,8 @@ enum Command {
     /// the feed-forward of a computed-torque controller.
     Predict(cmd::predict::Args),
     /// Compare a run's tables with golden tables, column by column.
-    Check(cmd::check::Args),
+    #[command(alias = "check")]
+    Compare(cmd::compare::Args),
     /// Inspect a robot model: parameters, base parameters, conditioning.
     Model(cmd::model::Args),
     /// Print the Arrow schema of a robotid table kind.
@@ -69,7 +70,7 @@ fn main() -> ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Excite(a) => cmd::excite::run(a),
         Command::Report(a) => cmd::report::run(a),
-        Command::Check(a) => cmd::check::run(a),
+        Command::Compare(a) => cmd::compare::run(a),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),
     };

@@ -1,22 +1,31 @@
 //! Pipeline files (format version 1, `docs/pipeline-file.md`): parsed into a
-//! plain-data plan and validated in two steps, structure then context,
-//! reporting every error at once with its stage and key. Nothing is read
-//! from a log until the whole chain checks.
+//! plain-data [`Plan`] and checked in two steps, structure ([`parse`]) then
+//! context ([`lint`]: the robot, the logs, every stage against them),
+//! reporting every problem at once with its place. Nothing is read from a
+//! log's samples until the whole pipeline checks.
 
 use std::path::{Path, PathBuf};
 
-use robotid_schemas::TableKind;
-use robotid_stages::align::AlignConfig;
-use robotid_stages::decimate::DecimateConfig;
-use robotid_stages::differentiate::{DifferentiateConfig, Method};
+use robotid_schemas::{metadata, TableKind};
 use robotid_stages::dynamics::{load_robot, Model};
-use robotid_stages::estimate::EstimateConfig;
-use robotid_stages::inverse_filter::InverseFilterConfig;
-use robotid_stages::read::ReadConfig;
-use robotid_stages::regressor::RegressorConfig;
+use robotid_stages::stage::align::AlignConfig;
+use robotid_stages::stage::average::AverageConfig;
+use robotid_stages::stage::decimate::DecimateConfig;
+use robotid_stages::stage::differentiate::DifferentiateConfig;
+use robotid_stages::stage::estimate::EstimateConfig;
+use robotid_stages::stage::inverse_filter::InverseFilterConfig;
+use robotid_stages::stage::noise::NoiseConfig;
+use robotid_stages::stage::read::ReadConfig;
+use robotid_stages::stage::regressor::RegressorConfig;
+use robotid_stages::stage::{Component, Context, LintContext, Problem, Product, Stage};
 use serde::Deserialize;
 
+use crate::error::{Place, Placed, Problems};
+
 pub const FORMAT_VERSION: u32 = 1;
+
+/// File extensions a raw log may have (`read` decides the format by it).
+pub const LOG_EXTENSIONS: &[&str] = &["csv", "parquet", "mcap"];
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -42,92 +51,75 @@ pub struct SourceConfig {
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputConfig {
-    /// Tables written per recording: raw_samples, period_mean, noise, kinematics.
+    /// Tables written per recording: raw_samples, period_mean, noise, kinematics, regressor, r_factor.
     #[serde(default)]
     pub tables: Vec<String>,
 }
 
-/// Stages in the order the pipeline file lists them. A closed set: adding
-/// one is a visible change to every `match`.
+/// The stages, in the order the pipeline file lists them. A closed set:
+/// adding one is a new variant here and a line in [`each_stage!`].
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum StageConfig {
     Align(AlignConfig),
     InverseFilter(InverseFilterConfig),
     Decimate(DecimateConfig),
-    Average(NoOptions),
+    Average(AverageConfig),
     Noise(NoiseConfig),
     Differentiate(DifferentiateConfig),
     Regressor(RegressorConfig),
-    /// A reduce over all recordings: their regressor tables stacked, one
-    /// `parameters.parquet` in the output folder.
+    /// A reduce over all recordings: one `parameters.parquet` in the output folder.
     Estimate(EstimateConfig),
 }
 
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NoOptions {}
-
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NoiseConfig {
-    /// Excited harmonics (default: the recording's `robotid.harmonics`).
-    pub harmonics: Option<Vec<u32>>,
+/// Applies `$f` to the [`Component`] inside any [`StageConfig`]: the one
+/// exhaustive match every dispatch goes through.
+macro_rules! each_stage {
+    ($s:expr, $c:ident => $f:expr) => {
+        match $s {
+            StageConfig::Align($c) => $f,
+            StageConfig::InverseFilter($c) => $f,
+            StageConfig::Decimate($c) => $f,
+            StageConfig::Average($c) => $f,
+            StageConfig::Noise($c) => $f,
+            StageConfig::Differentiate($c) => $f,
+            StageConfig::Regressor($c) => $f,
+            StageConfig::Estimate($c) => $f,
+        }
+    };
 }
 
-/// What the data is at a point of the chain.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Data {
-    Raw,
-    Periods,
-    PeriodMean,
-    Noise,
-    Kinematics,
-    Regressor,
+fn name_of<C: Component>(_: &C) -> &'static str {
+    C::NAME
 }
 
 impl StageConfig {
     pub fn name(&self) -> &'static str {
-        match self {
-            StageConfig::Align(_) => "align",
-            StageConfig::InverseFilter(_) => "inverse_filter",
-            StageConfig::Decimate(_) => "decimate",
-            StageConfig::Average(_) => "average",
-            StageConfig::Noise(_) => "noise",
-            StageConfig::Differentiate(_) => "differentiate",
-            StageConfig::Regressor(_) => "regressor",
-            StageConfig::Estimate(_) => "estimate",
-        }
+        each_stage!(self, c => name_of(c))
     }
 
-    /// What the stage needs and what it adds.
-    pub fn signature(&self) -> (&'static [Data], Option<Data>) {
-        match self {
-            StageConfig::Align(_) => (&[Data::Raw], Some(Data::Periods)),
-            // Periodic (after align) or record mode (before it): either input.
-            StageConfig::InverseFilter(_) | StageConfig::Decimate(_) => (&[], None),
-            StageConfig::Average(_) => (&[Data::Periods], Some(Data::PeriodMean)),
-            StageConfig::Noise(_) => (&[Data::Periods, Data::PeriodMean], Some(Data::Noise)),
-            StageConfig::Differentiate(c) if c.method == Method::Filtered => (&[Data::Raw], Some(Data::Kinematics)),
-            StageConfig::Differentiate(_) => (&[Data::PeriodMean], Some(Data::Kinematics)),
-            StageConfig::Regressor(_) => (&[Data::Kinematics], Some(Data::Regressor)),
-            StageConfig::Estimate(_) => (&[Data::Regressor], None),
-        }
+    pub fn takes(&self) -> &'static [Product] {
+        each_stage!(self, c => c.takes())
     }
 
-    fn check(&self) -> Result<(), String> {
-        match self {
-            StageConfig::Align(c) => c.check(),
-            StageConfig::InverseFilter(c) => c.check(),
-            StageConfig::Decimate(c) => c.check(),
-            StageConfig::Average(_) | StageConfig::Noise(_) | StageConfig::Regressor(_) => Ok(()),
-            StageConfig::Differentiate(c) => c.check(),
-            StageConfig::Estimate(c) => c.check(),
-        }
+    pub fn makes(&self) -> Option<Product> {
+        each_stage!(self, c => c.makes())
+    }
+
+    pub fn problems(&self) -> Vec<Problem> {
+        each_stage!(self, c => c.problems())
+    }
+
+    pub fn lint(&self, ctx: &LintContext) -> Vec<Problem> {
+        each_stage!(self, c => c.lint(ctx))
+    }
+
+    pub fn build(&self, ctx: &Context) -> robotid_stages::Result<Box<dyn Stage>> {
+        each_stage!(self, c => c.build(ctx))
     }
 }
 
-/// A validated pipeline.
+/// A parsed pipeline: plain data, nothing loaded.
 #[derive(Debug, Clone)]
 pub struct Plan {
     pub file: PathBuf,
@@ -137,20 +129,33 @@ pub struct Plan {
     pub source: String,
     pub read: ReadConfig,
     pub stages: Vec<StageConfig>,
+    /// Line of each stage in the file.
+    pub lines: Vec<usize>,
     pub tables: Vec<TableKind>,
 }
 
-/// Every problem found, each prefixed with its place.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Problems(pub Vec<String>);
+impl Plan {
+    /// The folder relative paths are resolved against.
+    pub fn base_dir(&self) -> &Path {
+        self.file.parent().unwrap_or(Path::new("."))
+    }
 
-impl std::fmt::Display for Problems {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} problem(s): {}", self.0.len(), self.0.join("; "))
+    pub fn place(&self, i: usize, key: &str) -> Place {
+        Place::Stage {
+            index: i + 1,
+            kind: self.stages[i].name().to_string(),
+            line: self.lines[i],
+            key: key.to_string(),
+        }
+    }
+
+    pub fn estimate(&self) -> Option<&EstimateConfig> {
+        self.stages.iter().find_map(|s| match s {
+            StageConfig::Estimate(c) => Some(c),
+            _ => None,
+        })
     }
 }
-
-impl std::error::Error for Problems {}
 
 fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
@@ -159,43 +164,68 @@ fn line_of(text: &str, offset: usize) -> usize {
 /// Step 1, structure: the file parses, every stage and key is known, values
 /// are in range, the chain of stages fits together.
 pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
-    let at = |msg: String| format!("{}: {msg}", file.display());
-    let raw: PipelineFile =
-        toml::from_str(text).map_err(|e| Problems(vec![at(robotid_stages::error_message_of_toml(text, &e))]))?;
+    let at = |place: Place, message: String| Placed {
+        file: file.to_path_buf(),
+        place,
+        message,
+    };
+    let raw: PipelineFile = toml::from_str(text)
+        .map_err(|e| Problems(vec![at(Place::File, robotid_stages::error_message_of_toml(text, &e))]))?;
     let mut problems = Vec::new();
     if raw.version != FORMAT_VERSION {
-        problems.push(at(format!(
-            "version {} is not supported (this build reads version {FORMAT_VERSION})",
-            raw.version
-        )));
+        problems.push(at(
+            Place::Key("version".into()),
+            format!(
+                "{} is not supported (this build reads version {FORMAT_VERSION})",
+                raw.version
+            ),
+        ));
     }
-    if let Err(errs) = raw.read.check() {
-        problems.extend(errs.into_iter().map(|e| at(format!("[read] {e}"))));
+    for p in raw.read.problems() {
+        problems.push(at(Place::Read(p.key), p.message));
     }
     let mut stages = Vec::new();
+    let mut lines = Vec::new();
     for (i, spanned) in raw.stage.iter().enumerate() {
         let line = line_of(text, spanned.span().start);
         let table = spanned.get_ref();
         let kind = table.get("kind").and_then(|v| v.as_str()).unwrap_or("?").to_string();
-        let place = format!("stage {} (`{kind}`, line {line})", i + 1);
         match toml::Value::Table(table.clone()).try_into::<StageConfig>() {
             Ok(s) => {
-                if let Err(e) = s.check() {
-                    problems.push(at(format!("{place}: {e}")));
+                for p in s.problems() {
+                    problems.push(at(
+                        Place::Stage {
+                            index: i + 1,
+                            kind: kind.clone(),
+                            line,
+                            key: p.key,
+                        },
+                        p.message,
+                    ));
                 }
                 stages.push(s);
+                lines.push(line);
             }
-            Err(e) => problems.push(at(format!("{place}: {}", e.message().trim()))),
+            Err(e) => problems.push(at(
+                Place::Stage {
+                    index: i + 1,
+                    kind,
+                    line,
+                    key: String::new(),
+                },
+                e.message().trim().to_string(),
+            )),
         }
     }
     let mut tables = Vec::new();
     for t in &raw.output.tables {
         match t.parse::<TableKind>() {
             Ok(TableKind::Parameters) => problems.push(at(
-                "[output] tables: `parameters` is made by estimation, not by a pipeline".into(),
+                Place::Key("output.tables".into()),
+                "`parameters` is made by estimation, not by a pipeline".into(),
             )),
             Ok(k) => tables.push(k),
-            Err(_) => problems.push(at(format!("[output] tables: unknown table `{t}`"))),
+            Err(_) => problems.push(at(Place::Key("output.tables".into()), format!("unknown table `{t}`"))),
         }
     }
     if !problems.is_empty() {
@@ -208,68 +238,108 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
         source: raw.source.path,
         read: raw.read,
         stages,
+        lines,
         tables,
     })
 }
 
-/// Each stage finds what it needs before it; each requested table is made.
-/// `start` is what the source holds.
-pub fn check_chain(stages: &[StageConfig], tables: &[TableKind], start: Data) -> Vec<String> {
+/// What step 2 found: the robot, the logs and what they hold.
+#[derive(Debug, Clone)]
+pub struct Resolved {
+    pub model: Option<Model>,
+    pub logs: Vec<PathBuf>,
+    pub start: Product,
+}
+
+/// The product a table kind is made from.
+fn table_needs(t: TableKind) -> Product {
+    match t {
+        TableKind::RawSamples => Product::Raw,
+        TableKind::PeriodMean => Product::PeriodMean,
+        TableKind::Noise => Product::Noise,
+        TableKind::Regressor | TableKind::RFactor => Product::Regressor,
+        TableKind::Kinematics | TableKind::Parameters => Product::Kinematics,
+    }
+}
+
+/// Each stage finds what it needs before it, lints itself, and each
+/// requested table is made. `start` is what the source holds.
+pub fn check_chain(plan: &Plan, model: Option<&Model>, start: Product, provenance: Option<bool>) -> Vec<Placed> {
+    let at = |place: Place, message: String| Placed {
+        file: plan.file.clone(),
+        place,
+        message,
+    };
+    let names: Vec<&'static str> = plan.stages.iter().map(StageConfig::name).collect();
     let mut have = vec![start];
     let mut problems = Vec::new();
-    for (i, s) in stages.iter().enumerate() {
-        let (needs, adds) = s.signature();
-        for need in needs {
+    for (i, s) in plan.stages.iter().enumerate() {
+        for need in s.takes() {
             if !have.contains(need) {
-                problems.push(format!(
-                    "stage {} (`{}`) needs {:?} data, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate, regressor, estimate)",
-                    i + 1,
-                    s.name(),
-                    need
+                problems.push(at(
+                    plan.place(i, ""),
+                    format!(
+                        "needs {need}, which no stage before it makes (order: read, align, inverse_filter, decimate, average, noise, differentiate, regressor, estimate)"
+                    ),
                 ));
             }
         }
-        if matches!(s, StageConfig::Estimate(_)) && i + 1 != stages.len() {
-            problems.push(format!(
-                "stage {} (`estimate`): it must be the last stage (it runs once, over all recordings)",
-                i + 1
+        if matches!(s, StageConfig::Estimate(_)) && i + 1 != plan.stages.len() {
+            problems.push(at(
+                plan.place(i, ""),
+                "it must be the last stage (it runs once, over all recordings)".into(),
             ));
         }
-        if matches!(s, StageConfig::Align(_)) && have.contains(&Data::Periods) {
-            problems.push(format!("stage {} (`align`): the data is already aligned", i + 1));
+        let ctx = LintContext {
+            model,
+            base_dir: plan.base_dir(),
+            before: &have,
+            provenance,
+            stages: &names,
+        };
+        for p in s.lint(&ctx) {
+            problems.push(at(plan.place(i, &p.key), p.message));
         }
-        if let Some(a) = adds {
+        if let Some(a) = s.makes() {
             have.push(a);
         }
     }
-    for t in tables {
-        let need = match t {
-            TableKind::RawSamples => Data::Raw,
-            TableKind::PeriodMean => Data::PeriodMean,
-            TableKind::Noise => Data::Noise,
-            TableKind::Regressor | TableKind::RFactor => Data::Regressor,
-            _ => Data::Kinematics,
-        };
-        if !have.contains(&need) {
-            problems.push(format!("[output] tables: `{t}` is not made by any stage"));
+    for t in &plan.tables {
+        if !have.contains(&table_needs(*t)) {
+            problems.push(at(
+                Place::Key("output.tables".into()),
+                format!("`{t}` is not made by any stage"),
+            ));
         }
     }
     problems
 }
 
 /// What a source file holds: a raw log, or a robotid table from an earlier
-/// run (`period_mean`, `kinematics`), which a pipeline may continue.
-pub fn source_kind(path: &Path) -> Result<Data, String> {
-    if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("parquet")) {
-        return Ok(Data::Raw);
+/// run (`period_mean`, `kinematics`), which a pipeline may continue; and
+/// whether it carries robotid's provenance (period, harmonics), when that
+/// can be told without reading samples.
+pub fn source_kind(path: &Path) -> Result<(Product, Option<bool>), String> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext == "csv" {
+        return Ok((Product::Raw, Some(false)));
+    }
+    if ext != "parquet" {
+        return Ok((Product::Raw, None));
     }
     let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
         .map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok(match TableKind::of(builder.schema()) {
-        Ok(TableKind::PeriodMean) => Data::PeriodMean,
-        Ok(TableKind::Kinematics) => Data::Kinematics,
-        Ok(TableKind::RawSamples) | Err(_) => Data::Raw,
+    let schema = builder.schema();
+    let provenance = Some(schema.metadata().contains_key(metadata::HARMONICS));
+    Ok(match TableKind::of(schema) {
+        Ok(TableKind::PeriodMean) => (Product::PeriodMean, provenance),
+        Ok(TableKind::Kinematics) => (Product::Kinematics, provenance),
+        Ok(TableKind::RawSamples) => (Product::Raw, provenance),
+        Err(_) => (Product::Raw, Some(false)),
         Ok(other) => {
             return Err(format!(
                 "{}: a `{other}` table cannot start a preprocessing pipeline",
@@ -280,89 +350,88 @@ pub fn source_kind(path: &Path) -> Result<Data, String> {
 }
 
 /// Step 2, context: the robot loads, the source names existing logs of one
-/// kind, the chain of stages fits what they hold, the joints match.
-/// Returns the robot, the logs and what they hold.
-pub fn resolve(plan: &Plan) -> Result<(Option<Model>, Vec<PathBuf>, Data), Problems> {
+/// kind, every stage lints clean against them, the joints match.
+pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
     let mut problems = Vec::new();
-    let at = |msg: String| format!("{}: {msg}", plan.file.display());
+    let at = |place: Place, message: String| Placed {
+        file: plan.file.clone(),
+        place,
+        message,
+    };
     let model = match &plan.robot {
         Some(r) => match load_robot(r) {
             Ok(m) => Some(m),
             Err(e) => {
-                problems.push(at(format!("robot: {e}")));
+                problems.push(at(Place::Key("robot".into()), e.to_string()));
                 None
             }
         },
         None => None,
     };
-    if let (Some(m), Some(j)) = (&model, &plan.read.joints) {
-        let names = m.joint_names();
-        for name in j {
-            if !names.contains(name) {
-                problems.push(at(format!(
-                    "[read] joints: `{name}` is not a joint of robot `{}` ({names:?})",
-                    m.name
-                )));
-            }
+    let needs_all = plan.stages.iter().any(|s| matches!(s, StageConfig::Regressor(_)));
+    if let Some(m) = &model {
+        for p in plan.read.problems_with(m, needs_all) {
+            problems.push(at(Place::Read(p.key), p.message));
         }
     }
-    if model.is_none() && plan.stages.iter().any(|s| matches!(s, StageConfig::Regressor(_))) {
-        problems.push(at("the regressor stage needs the robot: set `robot`".into()));
-    }
-    if model.is_none() && plan.read.joints.is_none() && problems.is_empty() {
-        problems.push(at("no robot and no [read] joints: the joint names are unknown".into()));
+    if plan.robot.is_none() && plan.read.joints.is_none() {
+        problems.push(at(
+            Place::Key("robot".into()),
+            "no robot and no [read] joints: the joint names are unknown".into(),
+        ));
     }
     let logs = match source_files(plan) {
         Ok(l) => l,
         Err(e) => {
-            problems.push(at(format!("[source] {e}")));
+            problems.push(at(Place::Source, e));
             Vec::new()
         }
     };
-    let mut start = Data::Raw;
-    let kinds: Vec<Result<Data, String>> = logs.iter().map(|l| source_kind(l)).collect();
-    for k in &kinds {
-        if let Err(e) = k {
-            problems.push(at(format!("[source] {e}")));
+    let mut start = Product::Raw;
+    let mut provenance = None;
+    let mut kinds = Vec::new();
+    for l in &logs {
+        match source_kind(l) {
+            Ok(k) => kinds.push(k),
+            Err(e) => problems.push(at(Place::Source, e)),
         }
     }
-    let kinds: Vec<Data> = kinds.into_iter().filter_map(Result::ok).collect();
     if let Some(first) = kinds.first() {
-        start = *first;
-        if kinds.iter().any(|k| k != first) {
-            problems.push(at("[source] mixes raw logs and tables of other kinds".into()));
+        start = first.0;
+        if kinds.iter().any(|k| k.0 != first.0) {
+            problems.push(at(Place::Source, "mixes raw logs and tables of other kinds".into()));
         }
+        // Provenance known to be absent from any log: the settings it would give are needed.
+        provenance = if kinds.iter().any(|k| k.1 == Some(false)) {
+            Some(false)
+        } else if kinds.iter().all(|k| k.1 == Some(true)) {
+            Some(true)
+        } else {
+            None
+        };
     }
-    problems.extend(check_chain(&plan.stages, &plan.tables, start).into_iter().map(at));
-    for (i, s) in plan.stages.iter().enumerate() {
-        if let StageConfig::Align(c) = s {
-            if let Some(rel) = &c.reference_trajectory {
-                if let Err(e) = reference_trajectory(plan, rel) {
-                    problems.push(at(format!("stage {} (`align`): reference_trajectory: {e}", i + 1)));
-                }
-            }
+    // A robot that failed to load is reported once, above, not again by every stage that needs it.
+    let robot_failed = plan.robot.is_some() && model.is_none();
+    for p in check_chain(plan, model.as_ref(), start, provenance) {
+        if robot_failed && p.message.contains("needs the robot") {
+            continue;
         }
+        problems.push(p);
     }
     if problems.is_empty() {
-        Ok((model, logs, start))
+        Ok(Resolved { model, logs, start })
     } else {
         Err(Problems(problems))
     }
 }
 
-/// The logs a source names, sorted: a file, every csv/parquet/mcap file in
-/// a folder, or the matches of a glob.
+/// The logs a source names, sorted: a file, every log file in a folder, or
+/// the matches of a glob. A file of an extension no reader takes is refused.
 pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
-    let base = plan.file.parent().unwrap_or(Path::new("."));
-    let full = base.join(&plan.source);
+    let full = plan.base_dir().join(&plan.source);
     let is_log = |p: &Path| {
         p.extension()
-            .map(|e| {
-                matches!(
-                    e.to_string_lossy().to_ascii_lowercase().as_str(),
-                    "csv" | "parquet" | "mcap"
-                )
-            })
+            .map(|e| LOG_EXTENSIONS.contains(&e.to_string_lossy().to_ascii_lowercase().as_str()))
             .unwrap_or(false)
     };
     let mut files: Vec<PathBuf> = if full.is_file() {
@@ -385,18 +454,17 @@ pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
     if files.is_empty() {
         return Err(format!("path `{}` names no log file", full.display()));
     }
-    Ok(files)
-}
-
-/// The periodic trajectory an `align` stage registers against, relative to
-/// the pipeline file.
-pub fn reference_trajectory(plan: &Plan, rel: &Path) -> Result<robotid_stages::trajectory::FourierSeries, String> {
-    let path = plan.file.parent().unwrap_or(Path::new(".")).join(rel);
-    match robotid_stages::trajectory::load_trajectory(&path).map_err(|e| e.to_string())? {
-        robotid_stages::trajectory::Trajectory::Fourier(f) => Ok(f),
-        _ => Err(format!(
-            "{}: the trajectory is not periodic (kind = \"fourier\" needed)",
-            path.display()
-        )),
+    let unreadable: Vec<String> = files
+        .iter()
+        .filter(|p| !is_log(p))
+        .map(|p| p.display().to_string())
+        .collect();
+    if !unreadable.is_empty() {
+        return Err(format!(
+            "no reader takes {} (logs are {})",
+            unreadable.join(", "),
+            LOG_EXTENSIONS.join(", ")
+        ));
     }
+    Ok(files)
 }

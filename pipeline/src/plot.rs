@@ -12,12 +12,12 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 use robotid_schemas::{Kinematics, NoiseTable, PeriodMean};
-use robotid_stages::align::Periods;
 use robotid_stages::formats::write_atomic;
-use robotid_stages::noise::ChannelNoise;
 use robotid_stages::signal::Spectra;
+use robotid_stages::stage::noise::ChannelNoise;
+use robotid_stages::stage::Periods;
 
-use crate::run::Outcome;
+use robotid_stages::stage::Report;
 
 /// What a run produced for one recording.
 pub struct Inputs<'a> {
@@ -294,7 +294,7 @@ fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<(
 }
 
 /// `report.md`: what the run found, what it could not do, the pictures.
-pub fn write_report(dir: &Path, name: &str, o: &Outcome, pictures: &[PathBuf]) -> Result<PathBuf, String> {
+pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) -> Result<PathBuf, String> {
     let mut r = format!("# {name}\n\n");
     r.push_str(&format!("- samples read: {}\n", o.samples));
     if let (Some(k), Some(f)) = (o.periods_kept, o.periods_found) {
@@ -352,7 +352,7 @@ pub fn write_report(dir: &Path, name: &str, o: &Outcome, pictures: &[PathBuf]) -
 
 /// Measured (grey) and predicted (blue) torque per joint, row by row.
 pub fn torques_svg(
-    sys: &robotid_stages::estimate::System,
+    sys: &robotid_stages::estimation::System,
     predicted: &nalgebra::DVector<f64>,
 ) -> Result<String, String> {
     let nj = sys.joints.len();
@@ -423,7 +423,10 @@ pub fn density_svg(joints: &[String], values: &[Vec<f64>], what: &str) -> Result
 }
 
 /// Residues b − Aθ per joint.
-pub fn residues_by_joint(sys: &robotid_stages::estimate::System, predicted: &nalgebra::DVector<f64>) -> Vec<Vec<f64>> {
+pub fn residues_by_joint(
+    sys: &robotid_stages::estimation::System,
+    predicted: &nalgebra::DVector<f64>,
+) -> Vec<Vec<f64>> {
     (0..sys.joints.len())
         .map(|j| {
             (0..sys.rows())
@@ -440,7 +443,7 @@ pub fn residues_by_joint(sys: &robotid_stages::estimate::System, predicted: &nal
 /// of the same mean and spread) and `validation.md`.
 pub fn plot_validation(
     dir: &Path,
-    sys: &robotid_stages::estimate::System,
+    sys: &robotid_stages::estimation::System,
     predicted: &nalgebra::DVector<f64>,
     stats: &[crate::validation::JointResidue],
 ) -> Result<Vec<PathBuf>, String> {

@@ -5,7 +5,8 @@
 //! periods' deviations from their mean), all as inline SVG.
 
 use nalgebra::DVector;
-use robotid_stages::estimate::{Parameters, System};
+use robotid_schemas::metadata;
+use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, residues_by_joint, torques_svg};
 use crate::validation::{residues, table};
@@ -44,43 +45,43 @@ fn noise_by_joint(sys: &System) -> Option<Vec<Vec<f64>>> {
 /// expressions (the table's `expression` column).
 pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String, String> {
     let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
-    let level: f64 = md("robotid.estimate.confidence").parse().unwrap_or(0.95);
-    let dof: usize = md("robotid.estimate.dof").parse().unwrap_or(1);
-    let t = robotid_stages::estimate::student_t_quantile(0.5 + level / 2.0, dof);
+    let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
+    let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
+    let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
     let mut h = String::new();
     h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}svg{max-width:100%;height:auto}.note{color:#555}</style></head><body>\n");
     h.push_str(&format!(
         "<h1>Identification of <code>{}</code></h1>\n",
-        esc(md("robotid.robot"))
+        esc(md(metadata::ROBOT))
     ));
     h.push_str("<table>\n");
     for (k, v) in [
         ("parameters", source.to_string()),
-        ("estimator", md("robotid.estimate.method").to_string()),
+        ("estimator", md(metadata::ESTIMATE_METHOD).to_string()),
         (
             "covariance",
-            format!("{} ({} degrees of freedom)", md("robotid.estimate.covariance"), dof),
+            format!("{} ({} degrees of freedom)", md(metadata::ESTIMATE_COVARIANCE), dof),
         ),
         (
             "confidence level",
             format!("{:.1} % (Student t = {t:.3})", 100.0 * level),
         ),
-        ("rows", md("robotid.estimate.rows").to_string()),
+        ("rows", md(metadata::ESTIMATE_ROWS).to_string()),
         (
             "condition number (column-scaled)",
-            md("robotid.condition_number").to_string(),
+            md(metadata::CONDITION_NUMBER).to_string(),
         ),
         (
             "residual variance",
-            md("robotid.estimate.residual_variance").to_string(),
+            md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(),
         ),
-        ("recordings", md("robotid.recordings").to_string()),
-        ("model", md("robotid.model").to_string()),
-        ("regressor configuration", md("robotid.regressor_config").to_string()),
-        ("known parameters", md("robotid.known").to_string()),
-        ("physical consistency", md("robotid.physical").to_string()),
-        ("pipeline SHA-256", md("robotid.config_sha256").to_string()),
-        ("written by", md("robotid.generator").to_string()),
+        ("recordings", md(metadata::RECORDINGS).to_string()),
+        ("model", md(metadata::MODEL).to_string()),
+        ("regressor configuration", md(metadata::REGRESSOR_CONFIG).to_string()),
+        ("known parameters", md(metadata::KNOWN).to_string()),
+        ("physical consistency", md(metadata::PHYSICAL).to_string()),
+        ("pipeline SHA-256", md(metadata::CONFIG_SHA256).to_string()),
+        ("written by", md(metadata::GENERATOR).to_string()),
     ] {
         h.push_str(&format!("<tr><th>{k}</th><td class=\"l\">{}</td></tr>\n", esc(&v)));
     }
@@ -142,23 +143,20 @@ pub fn write_run_report(
 ) -> Result<std::path::PathBuf, String> {
     use arrow::array::{Array, StringArray};
     let batch = robotid_stages::formats::parquet::read_parquet(parameters).map_err(|e| e.to_string())?;
-    let params = robotid_stages::estimate::parameters_from_table(&batch)?;
+    let params = robotid_stages::estimation::parameters_from_table(&batch).map_err(|e| e.to_string())?;
     let expressions: Vec<String> = batch
         .column_by_name("expression")
         .and_then(|c| c.as_any().downcast_ref::<StringArray>())
         .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
         .unwrap_or_default();
-    let tables: Vec<(String, arrow::array::RecordBatch)> = results
+    let systems: Vec<&System> = results
         .iter()
-        .filter_map(|r| {
-            let o = r.outcome.as_ref().ok()?;
-            Some((r.name.clone(), o.regressor.clone()?))
-        })
+        .filter_map(|r| Some(&r.outcome.as_ref().ok()?.regressor.as_ref()?.system))
         .collect();
-    if params.metadata.get("robotid.known").is_some_and(|k| !k.is_empty()) {
+    if params.metadata.get(metadata::KNOWN).is_some_and(|k| !k.is_empty()) {
         return Err("the estimate took parameters as known; `robotid report --excitation` on tables with them compensated shows it".into());
     }
-    let sys = System::from_tables(&tables)?;
+    let sys = System::stack(&systems).map_err(|e| e.to_string())?;
     let page = html(
         &params,
         &expressions,

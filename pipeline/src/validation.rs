@@ -3,7 +3,7 @@
 //! against a Gaussian).
 
 use nalgebra::DVector;
-use robotid_stages::estimate::System;
+use robotid_stages::estimation::System;
 
 /// Residue statistics of one joint.
 pub struct JointResidue {
@@ -37,7 +37,7 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
         let m4 = r.iter().map(|x| ((x - mean) / sd).powi(4)).sum::<f64>() / n;
         let mut z: Vec<f64> = r.iter().map(|x| (x - mean) / sd).collect();
         z.sort_by(f64::total_cmp);
-        let normal = robotid_stages::estimate::normal_cdf;
+        let normal = robotid_stages::estimation::normal_cdf;
         let ks = z
             .iter()
             .enumerate()

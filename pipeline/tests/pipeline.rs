@@ -1,94 +1,36 @@
 //! Pipelines end to end on freshly simulated recordings, laid out as in
 //! fixtures/ (robots/, pipelines/, recordings/) inside a temporary folder.
 
-use std::collections::BTreeMap;
+use robotid_schemas::metadata;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use robotid::check::{check, Tolerances};
-use robotid::plan::{parse, resolve};
-use robotid::run::{run, RunOptions};
+use robotid::compare::{compare, Tolerances};
+use robotid::run::RecordingResult;
+use robotid::{Pipeline, RunOptions};
 use robotid_schemas::{Kinematics, PeriodMean};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::formats::parquet::read_parquet;
-use robotid_stages::simulate::{provenance, simulate, write_simulation, SimConfig};
+use robotid_tests::{bytes_of, fixture, workspace};
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures")
+    fixture("")
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
-    }
-}
-
-/// robots/ and pipelines/ copied, the named simulations run into recordings/.
-fn workspace(sims: &[&str]) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    copy_dir(&fixtures().join("robots"), &dir.path().join("robots"));
-    copy_dir(&fixtures().join("pipelines"), &dir.path().join("pipelines"));
-    copy_dir(&fixtures().join("sims"), &dir.path().join("sims"));
-    for s in sims {
-        let path = dir.path().join("sims").join(format!("{s}.toml"));
-        let (cfg, text) = SimConfig::load(&path).unwrap();
-        let model = load_robot(&cfg.robot).unwrap();
-        let sim = simulate(&cfg, &model, &provenance(&path, &text, &cfg.robot).unwrap()).unwrap();
-        write_simulation(
-            &dir.path().join("recordings").join(s),
-            &cfg.output.name,
-            &cfg.output.formats,
-            &sim,
-            &model,
-        )
-        .unwrap();
-    }
-    dir
-}
-
-/// Runs a pipeline as `robotid run` does: its recordings, then its
-/// `estimate` stage if it has one.
-fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<robotid::run::RecordingResult> {
-    let text = std::fs::read_to_string(file).unwrap();
-    let plan = parse(&text, file).unwrap();
-    let (model, logs, start) = resolve(&plan).unwrap();
-    let results = run(
-        &plan,
-        model.as_ref(),
-        &logs,
-        start,
-        &RunOptions {
-            out: out.to_path_buf(),
-            threads,
-            progress: false,
-            plot: None,
-        },
-    );
+/// Runs a pipeline as `robotid run` does, through the library API: its
+/// recordings, then its `estimate` stage if it has one and all succeeded.
+fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<RecordingResult> {
+    let built = Pipeline::from_path(file).unwrap().build().unwrap();
+    let results = built.run_recordings(&RunOptions {
+        out: out.to_path_buf(),
+        threads,
+        progress: false,
+        plot: None,
+    });
     if results.iter().all(|r| r.outcome.is_ok()) {
-        robotid::run::estimate_all(&plan, model.as_ref(), &results, out).unwrap();
+        built.estimate_all(&results, out).unwrap();
     }
     results
-}
-
-fn bytes_of(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.insert(
-                    p.strip_prefix(dir).unwrap().display().to_string(),
-                    std::fs::read(&p).unwrap(),
-                );
-            }
-        }
-    }
-    out
 }
 
 #[test]
@@ -116,7 +58,7 @@ fn example_pipelines_run_and_are_thread_count_independent() {
         // Against the pinned golden tables (`fixtures/regenerate.sh`): the
         // run is deterministic, so only float-library differences between
         // machines may show; 1e-9 relative leaves room for those alone.
-        let report = check(&one, &fixtures().join("golden").join(name), &Tolerances::default());
+        let report = compare(&one, &fixtures().join("golden").join(name), &Tolerances::default());
         assert!(
             report.passed(),
             "{name}: differs from fixtures/golden (run `bash fixtures/regenerate.sh` after an intended change): {:?} {:?}",
@@ -132,14 +74,14 @@ fn example_pipelines_run_and_are_thread_count_independent() {
     // The KUKA run: steady periods, provenance in the metadata.
     let pm = read_parquet(&ws.path().join("out1/kuka_axis3/kuka_axis3/period_mean.parquet")).unwrap();
     let md = pm.schema().metadata().clone();
-    assert_eq!(md.get("robotid.periods").map(String::as_str), Some("6"));
-    assert_eq!(md.get("robotid.period_s").map(String::as_str), Some("10"));
-    assert_eq!(md.get("robotid.harmonics").map(String::as_str), Some("1,2,3,4,5"));
+    assert_eq!(md.get(metadata::PERIODS).map(String::as_str), Some("6"));
+    assert_eq!(md.get(metadata::PERIOD_S).map(String::as_str), Some("10"));
+    assert_eq!(md.get(metadata::HARMONICS).map(String::as_str), Some("1,2,3,4,5"));
     assert_eq!(
-        md.get("robotid.source_file").map(String::as_str),
+        md.get(metadata::SOURCE_FILE).map(String::as_str),
         Some("kuka_axis3.mcap")
     );
-    assert_eq!(md.get("robotid.config_sha256").map(String::len), Some(64));
+    assert_eq!(md.get(metadata::CONFIG_SHA256).map(String::len), Some(64));
     assert_eq!(pm.num_rows(), 1500);
     let f = pm.schema().field_with_name("torque_a3").unwrap().clone();
     assert_eq!(f.metadata().get("unit").map(String::as_str), Some("N*m"));
@@ -161,7 +103,7 @@ fn a_failing_recording_writes_nothing_and_others_go_on() {
     let results = run_pipeline(&file, &out, None);
     assert_eq!(results.len(), 2);
     let broken = results.iter().find(|r| r.name == "broken").unwrap();
-    let err = broken.outcome.as_ref().unwrap_err();
+    let err = broken.outcome.as_ref().unwrap_err().to_string();
     assert!(
         err.contains("broken.mcap") && (err.contains("truncated") || err.contains("corrupt")),
         "{err}"
@@ -216,11 +158,11 @@ fn lint_reports_every_problem_with_its_place() {
     let err = validate(&bad);
     for needle in [
         "6 problem(s)",
-        "version 2",
-        "unknown effort unit `furlong`",
+        "`version`: 2 is not supported",
+        "[read] effort.unit: `effort.unit` must be one of A, mA, N*m, not `furlong`",
         "stage 1 (`alin`, line 6): unknown variant `alin`",
         "stage 2 (`align`, line 8): unknown field `colour`",
-        "stage 3 (`differentiate`, line 11): bandwidth_hz applies to method = \"dft\"",
+        "stage 3 (`differentiate`, line 11) `bandwidth_hz`: applies to method = \"dft\"",
         "unknown table `bogus`",
     ] {
         assert!(err.contains(needle), "missing `{needle}` in {err}");
@@ -233,7 +175,7 @@ fn lint_reports_every_problem_with_its_place() {
     .unwrap();
     let err = validate(&bad);
     assert!(
-        err.contains("names no log file") && err.contains("stage 1 (`average`) needs Periods"),
+        err.contains("names no log file") && err.contains("stage 1 (`average`, line 6): needs aligned periods"),
         "{err}"
     );
 }
@@ -246,16 +188,16 @@ fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
     assert_eq!(results.len(), 3);
     for r in &results {
         let o = r.outcome.as_ref().unwrap_or_else(|e| panic!("{}: {e}", r.name));
-        assert_eq!(o.periods_found, Some(2), "{}", r.name);
+        assert_eq!(o.report.periods_found, Some(2), "{}", r.name);
         assert_eq!(
-            o.periods_kept,
+            o.report.periods_kept,
             Some(1),
             "{}: the first period holds the start-up transient",
             r.name
         );
-        assert!(o.notes.iter().any(|n| n.contains("only one full steady period")));
-        assert!(o.notes.iter().any(|n| n.contains("resampled")));
-        let t = o.noise.iter().find(|c| c.channel == "torque").unwrap();
+        assert!(o.report.notes.iter().any(|n| n.contains("only one full steady period")));
+        assert!(o.report.notes.iter().any(|n| n.contains("resampled")));
+        let t = o.report.noise.iter().find(|c| c.channel == "torque").unwrap();
         assert!(t.var_time.is_nan() && t.var_freq > 0.0);
     }
 }
@@ -264,9 +206,7 @@ fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
 fn plots_and_report_are_written() {
     let ws = workspace(&["kuka_axis3"]);
     let file = ws.path().join("pipelines/kuka_axis3.toml");
-    let text = std::fs::read_to_string(&file).unwrap();
-    let plan = parse(&text, &file).unwrap();
-    let (model, logs, start) = resolve(&plan).unwrap();
+    let built = Pipeline::from_path(&file).unwrap().build().unwrap();
     let plots = ws.path().join("plots");
     let opts = RunOptions {
         out: ws.path().join("out"),
@@ -274,7 +214,7 @@ fn plots_and_report_are_written() {
         progress: false,
         plot: Some(plots.clone()),
     };
-    let r = run(&plan, model.as_ref(), &logs, start, &opts);
+    let r = built.run_recordings(&opts);
     assert!(r[0].outcome.is_ok(), "{:?}", r[0].outcome);
     for (f, needle) in [
         ("signals.svg", "a3 torque"),
@@ -304,11 +244,11 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
     let batch = read_parquet(&out.join("kuka_axis3/regressor.parquet")).unwrap();
     let schema = batch.schema();
     assert_eq!(
-        schema.metadata().get("robotid.base_parameters").map(String::as_str),
+        schema.metadata().get(metadata::BASE_PARAMETERS).map(String::as_str),
         Some("5")
     );
     let params: Vec<String> =
-        robotid_stages::regressor::columns_of(&schema, robotid_stages::regressor::PARAMETER_COLUMN)
+        robotid_stages::stage::regressor::columns_of(&schema, robotid_stages::stage::regressor::PARAMETER_COLUMN)
             .into_iter()
             .map(|i| schema.field(i).name().clone())
             .collect();
@@ -331,7 +271,7 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
     // The R-factor table, solved on its own, gives the same estimate.
     let rf = read_parquet(&out.join("kuka_axis3/r_factor.parquet")).unwrap();
     let rs = rf.schema();
-    assert_eq!(rs.metadata().get("robotid.table").map(String::as_str), Some("r_factor"));
+    assert_eq!(rs.metadata().get(metadata::TABLE).map(String::as_str), Some("r_factor"));
     let rcol = |name: &str| {
         let a = rf.column(rs.index_of(name).unwrap());
         a.as_any()
@@ -363,8 +303,8 @@ fn least_squares_on_the_regressor_table_recovers_the_axis() {
 /// rows (the best any parameter set can do with that noise and filtering).
 #[test]
 fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
-    use robotid_stages::estimate::{parameters_from_table, System};
-    use robotid_stages::regressor::{BaseRegressor, RegressorConfig};
+    use robotid_stages::estimation::{parameters_from_table, System};
+    use robotid_stages::stage::regressor::RegressorConfig;
     let ws = workspace(&["kuka_axis3", "kuka_axis3_validation"]);
     let out = ws.path().join("out");
     let run_cli = |args: &[&str]| {
@@ -442,7 +382,7 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let msr = |theta: &nalgebra::DVector<f64>| (&sys.b - &sys.a * theta).norm_squared() / sys.rows() as f64;
     let model = load_robot(&ws.path().join("robots/kuka_axis3.toml")).unwrap();
     let rc: RegressorConfig = serde_json::from_str(&params.metadata["robotid.regressor_config"]).unwrap();
-    let true_base = BaseRegressor::new(&model, &rc).unwrap().base_values(&model).unwrap();
+    let true_base = rc.base_regressor(&model).unwrap().base_values(&model).unwrap();
     let (est, floor) = (msr(&params.values), msr(&true_base));
     println!("validation MSR {est:.4} (N·m)², floor (true parameters) {floor:.4}");
     assert!(est < 1.05 * floor, "validation MSR {est} above the floor {floor}");
@@ -501,7 +441,8 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let exported = load_robot(&urdf).unwrap();
     let mut rc_sym = rc.clone();
     rc_sym.coulomb_transition_rad_s = Some(0.01);
-    let back = BaseRegressor::new(&exported, &rc_sym)
+    let back = rc_sym
+        .base_regressor(&exported)
         .unwrap()
         .base_values(&exported)
         .unwrap();
@@ -522,7 +463,7 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
 /// friction columns are gone.
 #[test]
 fn sweeps_then_estimate_with_known_friction() {
-    use robotid_stages::estimate::parameters_from_table;
+    use robotid_stages::estimation::parameters_from_table;
     let ws = workspace(&["kuka_axis3", "kuka_axis3_sweeps"]);
     let out = ws.path().join("out");
     let cli = |args: &[&str]| {
@@ -560,7 +501,7 @@ fn sweeps_then_estimate_with_known_friction() {
     assert_eq!(est.names, ["ZZ_a3", "MX_a3", "MY_a3"]);
     assert!((est.values[0] - 8.348).abs() < 4.0 * est.std[0], "ZZ {}", est.values[0]);
     assert_eq!(
-        est.metadata.get("robotid.known").map(String::as_str),
+        est.metadata.get(metadata::KNOWN).map(String::as_str),
         Some("Fv_a3,Fc_a3")
     );
 }
@@ -571,7 +512,7 @@ fn sweeps_then_estimate_with_known_friction() {
 /// after averaging) to well within the intervals.
 #[test]
 fn estimate_stage_ml_and_physical_options() {
-    use robotid_stages::estimate::parameters_from_table;
+    use robotid_stages::estimation::parameters_from_table;
     let ws = workspace(&["kuka_axis3"]);
     let file = ws.path().join("pipelines/kuka_axis3.toml");
     let text = std::fs::read_to_string(&file).unwrap();
@@ -592,7 +533,7 @@ fn estimate_stage_ml_and_physical_options() {
             "{label}: {:?} (OLS {:?}) {:?}",
             p.values.as_slice(),
             ols.values.as_slice(),
-            p.metadata.get("robotid.physical")
+            p.metadata.get(metadata::PHYSICAL)
         );
         for i in 0..5 {
             assert!(

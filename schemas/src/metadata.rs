@@ -34,3 +34,77 @@ pub const JOINT: &str = "joint";
 pub fn generator() -> String {
     format!("robotid {}", env!("CARGO_PKG_VERSION"))
 }
+
+// What the stages record about a run (schema keys).
+
+/// Whole periods kept by `align`.
+pub const PERIODS: &str = "robotid.periods";
+/// Time of the first kept sample in the recording's clock, s.
+pub const PERIOD_START_S: &str = "robotid.period_start_s";
+/// `true` when `align` registered the phase against a reference trajectory.
+pub const PHASE_REGISTERED: &str = "robotid.phase_registered";
+/// The time of a text log's first sample, s (times are written relative to it).
+pub const TIME_ORIGIN_S: &str = "robotid.time_origin_s";
+/// The unit a log declared for its effort channel.
+pub const READ_EFFORT_UNIT: &str = "robotid.read.effort_unit";
+/// Band of the inverse-filtered torque, Hz: lines above it were zeroed.
+pub const INVERSE_FILTER_BANDWIDTH_HZ: &str = "robotid.inverse_filter_bandwidth_hz";
+/// Prefix of the drift keys `robotid.drift.<joint>.{q_rad,torque_nm}`.
+pub const DRIFT_PREFIX: &str = "robotid.drift";
+/// Prefix of the noise keys `robotid.noise.<joint>.<channel>.<statistic>`.
+pub const NOISE_PREFIX: &str = "robotid.noise";
+/// Which estimate the per-sample noise variances are.
+pub const NOISE_PER_SAMPLE: &str = "robotid.noise.per_sample";
+/// How the kinematics were differentiated: `fourier_fit`, `dft`, `filtered`.
+pub const DIFFERENTIATION: &str = "robotid.differentiation";
+/// The regressor configuration (JSON) a table was made with.
+pub const REGRESSOR_CONFIG: &str = "robotid.regressor_config";
+/// `chain` or `decoupled`.
+pub const MODEL: &str = "robotid.model";
+/// The robot's name.
+pub const ROBOT: &str = "robotid.robot";
+/// Robot file name and SHA-256 of a simulation.
+pub const ROBOT_FILE: &str = "robotid.robot_file";
+pub const ROBOT_SHA256: &str = "robotid.robot_sha256";
+/// Condition number of the column-normalised regressor.
+pub const CONDITION_NUMBER: &str = "robotid.condition_number";
+/// Number of base parameters.
+pub const BASE_PARAMETERS: &str = "robotid.base_parameters";
+/// What the Projection Method found (text).
+pub const PROJECTION: &str = "robotid.projection";
+/// Independent equations of a projected regressor table.
+pub const PROJECTION_EQUATIONS: &str = "robotid.projection.equations";
+/// Residual sum of squares and rows of an `r_factor` table.
+pub const RSS: &str = "robotid.rss";
+pub const ROWS: &str = "robotid.rows";
+/// The pipeline file's name.
+pub const PIPELINE_FILE: &str = "robotid.pipeline_file";
+/// Recordings an estimate was made from, comma separated.
+pub const RECORDINGS: &str = "robotid.recordings";
+/// Parameters taken as known, comma separated.
+pub const KNOWN: &str = "robotid.known";
+/// What the physically consistent estimate cost.
+pub const PHYSICAL: &str = "robotid.physical";
+/// The estimator, its confidence level and the intervals' degrees of freedom.
+pub const ESTIMATE_METHOD: &str = "robotid.estimate.method";
+pub const ESTIMATE_CONFIDENCE: &str = "robotid.estimate.confidence";
+pub const ESTIMATE_DOF: &str = "robotid.estimate.dof";
+/// Where the covariance came from, rows used, residual variance, iterations.
+pub const ESTIMATE_COVARIANCE: &str = "robotid.estimate.covariance";
+pub const ESTIMATE_ROWS: &str = "robotid.estimate.rows";
+pub const ESTIMATE_RESIDUAL_VARIANCE: &str = "robotid.estimate.residual_variance";
+pub const ESTIMATE_ITERATIONS: &str = "robotid.estimate.iterations";
+/// The dedicated experiment a parameters table comes from (`sweeps`).
+pub const DEDICATED: &str = "robotid.dedicated";
+/// `predicted` when a kinematics table's torque is a prediction.
+pub const TORQUE: &str = "robotid.torque";
+/// The parameters table a prediction used.
+pub const PARAMETERS_FILE: &str = "robotid.parameters_file";
+/// An excitation design's fundamental, Hz, and its formula.
+pub const BASE_FREQUENCY_HZ: &str = "robotid.base_frequency_hz";
+pub const FORMULA: &str = "robotid.formula";
+
+/// Field key: a base parameter's expression in standard parameters.
+pub const EXPRESSION: &str = "expression";
+/// Field key: the period a per-period column belongs to.
+pub const PERIOD: &str = "period";

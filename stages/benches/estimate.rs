@@ -7,7 +7,7 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use robotid_stages::estimate::{least_squares, maximum_likelihood, InputNoise, MlOptions, System};
+use robotid_stages::estimation::{least_squares, maximum_likelihood, InputNoise, MlOptions, System};
 
 fn system(rows: usize, p: usize, n: usize, periods: usize) -> System {
     let mut rng = ChaCha8Rng::seed_from_u64(1);

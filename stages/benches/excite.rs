@@ -6,7 +6,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use robotid_stages::dynamics::load_robot;
-use robotid_stages::excite::{design, ExciteConfig};
+use robotid_stages::excitation::{design, ExciteConfig};
 
 fn load(rel: &str) -> (ExciteConfig, robotid_stages::dynamics::Model) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel);

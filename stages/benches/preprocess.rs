@@ -2,13 +2,13 @@
 //! recording (600 k samples per channel); throughput in samples per second.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use robotid_stages::align::{align, AlignConfig};
-use robotid_stages::average::average;
-use robotid_stages::differentiate::{differentiate, Method};
-use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
-use robotid_stages::noise::noise;
 use robotid_stages::signal::{FilterFamily, FilterSpec, Spectra};
-use robotid_stages::synthetic::synthetic_recording;
+use robotid_stages::simulation::synthetic::synthetic_recording;
+use robotid_stages::stage::align::{align, AlignConfig};
+use robotid_stages::stage::average::average;
+use robotid_stages::stage::differentiate::{differentiate, Differentiation};
+use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::stage::noise::noise;
 
 fn stages(c: &mut Criterion) {
     let raw = synthetic_recording(6, 1000.0, 600.0, 10.0, 1);
@@ -26,6 +26,8 @@ fn stages(c: &mut Criterion) {
         zpk: None,
         bandwidth_hz: 100.0,
     };
+    // Built once per run, as the stage does.
+    let response = ifc.response().unwrap();
     let (mean, _) = average(&periods);
     let h = [1, 2, 3, 4, 5];
     let mut g = c.benchmark_group("stages_6joints_600k");
@@ -35,14 +37,14 @@ fn stages(c: &mut Criterion) {
     g.bench_function("inverse_filter", |b| {
         b.iter_batched(
             || periods.clone(),
-            |mut p| inverse_filter_periods(&mut p, &ifc, &spectra).unwrap(),
+            |mut p| inverse_filter_periods(&mut p, &*response, ifc.bandwidth_hz, &spectra),
             criterion::BatchSize::LargeInput,
         )
     });
     g.bench_function("average", |b| b.iter(|| average(&periods)));
-    g.bench_function("noise", |b| b.iter(|| noise(&periods, &mean, &h, &spectra)));
+    g.bench_function("noise", |b| b.iter(|| noise(&periods, &mean, &h, None, &spectra)));
     g.bench_function("differentiate_fourier_fit", |b| {
-        b.iter(|| differentiate(&mean, 10.0, Method::FourierFit, &h, None, &spectra))
+        b.iter(|| differentiate(&mean, 10.0, Differentiation::FourierFit, &h, None, &spectra))
     });
     g.finish();
 }

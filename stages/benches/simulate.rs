@@ -6,7 +6,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use robotid_stages::dynamics::{self, Data};
-use robotid_stages::simulate::{simulate, SimConfig};
+use robotid_stages::simulation::{simulate, SimConfig};
 
 fn fixture(rel: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)

@@ -3,7 +3,7 @@
 //! `cargo run --release -p robotid-stages --example synthetic -- OUT.parquet [joints] [rate_hz] [seconds]`.
 
 use robotid_stages::formats::parquet::write_parquet;
-use robotid_stages::synthetic::synthetic_recording;
+use robotid_stages::simulation::synthetic::synthetic_recording;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

@@ -2,8 +2,9 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-/// Errors of the stages crate. Each names the file and, where there is one,
-/// the key, channel or sample at fault.
+/// Errors of the stages crate and its cores. Each names its place: the
+/// file, the recording and channel and sample, the stage and key, or the
+/// parameter at fault, with what was expected and what was found.
 #[derive(Debug, Error)]
 pub enum Error {
     #[error("{}: {msg}", path.display())]
@@ -28,8 +29,56 @@ pub enum Error {
     },
     #[error(transparent)]
     Schema(#[from] robotid_schemas::SchemaError),
-    #[error("{0}")]
-    Invalid(String),
+    /// A setting that cannot be used: its key, what it must be, what it is.
+    #[error("`{key}` must be {expected}, not {found}")]
+    Setting {
+        key: String,
+        expected: String,
+        found: String,
+    },
+    /// Something a computation needs is not there; `hint` says how to get it.
+    #[error("{what} is needed: {hint}")]
+    Missing { what: String, hint: String },
+    /// Two things that must agree do not.
+    #[error("{what}: expected {expected}, found {found}")]
+    Mismatch {
+        what: String,
+        expected: String,
+        found: String,
+    },
+    /// A non-finite or otherwise unusable number, and where it sits.
+    #[error("{what} holds {value} at {at}")]
+    NotFinite { what: String, value: f64, at: String },
+    /// Estimation: a parameter whose column is zero on every row.
+    #[error("parameter `{parameter}` is not excited: its regressor column is zero on all {rows} rows; drop it from the model or excite it")]
+    NotExcited { parameter: String, rows: usize },
+    /// Estimation: fewer rows than parameters.
+    #[error("too few samples: {rows} rows for {parameters} parameters; least squares needs more rows than parameters (and many more for useful intervals)")]
+    TooFewRows { rows: usize, parameters: usize },
+    /// Estimation: parameters the data cannot tell apart.
+    #[error("the regressor is rank-deficient (condition number {condition:.3e} of the column-scaled system): parameters {} cannot be told apart; the data says nothing about {combination} (scaled). Excite them differently or drop one from the model", parameters.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", "))]
+    RankDeficient {
+        condition: f64,
+        parameters: Vec<String>,
+        combination: String,
+    },
+    /// A failure inside one stage of one recording.
+    #[error("{source_name}: stage `{stage}`: {source}")]
+    Stage {
+        stage: &'static str,
+        source_name: String,
+        #[source]
+        source: Box<Error>,
+    },
+    /// Every problem of a settings file or table, each with its key.
+    #[error("{what}: {}", problems.iter().map(|p| if p.key.is_empty() { p.message.clone() } else { format!("`{}`: {}", p.key, p.message) }).collect::<Vec<_>>().join("; "))]
+    Problems {
+        what: String,
+        problems: Vec<crate::stage::Problem>,
+    },
+    /// A numerical method that could not do its work (with its reason).
+    #[error("{method}: {msg}")]
+    Numerical { method: &'static str, msg: String },
 }
 
 impl Error {
@@ -37,6 +86,49 @@ impl Error {
         Error::Io {
             path: path.into(),
             source,
+        }
+    }
+
+    pub fn setting(key: impl Into<String>, expected: impl Into<String>, found: impl ToString) -> Error {
+        Error::Setting {
+            key: key.into(),
+            expected: expected.into(),
+            found: found.to_string(),
+        }
+    }
+
+    pub fn missing(what: impl Into<String>, hint: impl Into<String>) -> Error {
+        Error::Missing {
+            what: what.into(),
+            hint: hint.into(),
+        }
+    }
+
+    pub fn mismatch(what: impl Into<String>, expected: impl ToString, found: impl ToString) -> Error {
+        Error::Mismatch {
+            what: what.into(),
+            expected: expected.to_string(),
+            found: found.to_string(),
+        }
+    }
+
+    pub fn numerical(method: &'static str, msg: impl Into<String>) -> Error {
+        Error::Numerical {
+            method,
+            msg: msg.into(),
+        }
+    }
+
+    /// This error, placed in a stage of a recording.
+    pub fn in_stage(self, stage: &'static str, source_name: &str) -> Error {
+        match self {
+            // Already placed, or naming its own source.
+            e @ (Error::Stage { .. } | Error::Data { .. }) => e,
+            e => Error::Stage {
+                stage,
+                source_name: source_name.to_string(),
+                source: Box::new(e),
+            },
         }
     }
 }

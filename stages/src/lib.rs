@@ -1,23 +1,24 @@
-//! robotid's stages and the numerical cores they share.
+//! robotid's pipeline stages and the numerical cores they share.
+//!
+//! - [`stage`]: the pipeline stages, one module each (`read`, `align`,
+//!   `inverse_filter`, `decimate`, `average`, `noise`, `differentiate`,
+//!   `regressor`, `estimate`): a serde config, what it takes and makes, a
+//!   `build` done once per run and a `run` on one recording's [`stage::Chain`].
+//! - The cores, which know nothing of stages: [`dynamics`] (rigid-body
+//!   models, RNEA, regressors, base parameters), [`signal`] (spectra, analog
+//!   filters), [`estimation`] (least squares, maximum likelihood, physical
+//!   consistency, the Projection Method, dedicated experiments),
+//!   [`excitation`] (optimal excitation design), [`simulation`] (the
+//!   closed-loop simulator), [`trajectory`] and [`formats`] (files).
 
-pub mod align;
-pub mod average;
-pub mod decimate;
-pub mod dedicated;
-pub mod differentiate;
 pub mod dynamics;
 mod error;
-pub mod estimate;
-pub mod excite;
+pub mod estimation;
+pub mod excitation;
 pub mod formats;
-pub mod inverse_filter;
-pub mod noise;
-pub mod projection;
-pub mod read;
-pub mod regressor;
 pub mod signal;
-pub mod simulate;
-pub mod synthetic;
+pub mod simulation;
+pub mod stage;
 pub mod trajectory;
 
 pub use error::{toml_message as error_message_of_toml, Error, Result};

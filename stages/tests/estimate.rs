@@ -10,14 +10,16 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use robotid_schemas::Kinematics;
+use robotid_stages::dynamics::BaseRegressor;
 use robotid_stages::dynamics::{self, base_parameters, standard_parameters, Model};
-use robotid_stages::estimate::{
-    estimate, least_squares, maximum_likelihood, weighted_least_squares, EstimateConfig, InputNoise, Method, MlOptions,
-    System,
+use robotid_stages::estimation::{
+    estimate, least_squares, maximum_likelihood, weighted_least_squares, Estimator as Method, InputNoise, MlOptions,
+    Options as EstimateConfig, System,
 };
-use robotid_stages::regressor::{BaseRegressor, RegressorConfig};
-use robotid_stages::simulate::SimConfig;
+use robotid_stages::simulation::SimConfig;
+use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::trajectory::Trajectory;
+use robotid_stages::Error;
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
@@ -57,8 +59,8 @@ fn kuka() -> (Model, BaseRegressor, Kinematics, DVector<f64>) {
         kin.qd[0].push(qd[0]);
         kin.qdd[0].push(qdd[0]);
     }
-    let base = BaseRegressor::new(&model, &config()).unwrap();
-    let terms = config().terms(&model).unwrap();
+    let base = config().base_regressor(&model).unwrap();
+    let terms = config().regressor_model().terms(&model).unwrap();
     let bp = base_parameters(&model, terms, 40, 7);
     let truth = bp.base_values(&standard_parameters(&model, terms));
     (model, base, kin, truth)
@@ -216,26 +218,30 @@ fn bad_systems_are_refused_by_name() {
     let mut bad = a.clone();
     bad[(17, 3)] = f64::NAN;
     let e = least_squares(&mk(bad, b.clone())).unwrap_err();
-    assert!(e.contains(&format!("`{}`", names[3])) && e.contains("row 17"), "{e}");
+    assert!(
+        matches!(&e, Error::NotFinite { what, at, .. } if what.contains(&format!("`{}`", names[3])) && at.starts_with("row 17 ")),
+        "{e}"
+    );
     // A parameter with no excitation.
     let mut bad = a.clone();
     bad.column_mut(2).fill(0.0);
     let e = least_squares(&mk(bad, b.clone())).unwrap_err();
-    assert!(e.contains(&format!("`{}` is not excited", names[2])), "{e}");
+    assert!(
+        matches!(&e, Error::NotExcited { parameter, .. } if *parameter == names[2]),
+        "{e}"
+    );
     // Two columns that cannot be told apart.
     let mut bad = a.clone();
     let c1 = bad.column(1).clone_owned() * 2.0;
     bad.set_column(4, &c1);
     let e = least_squares(&mk(bad, b.clone())).unwrap_err();
     assert!(
-        e.contains("rank-deficient")
-            && e.contains(&format!("`{}`", names[1]))
-            && e.contains(&format!("`{}`", names[4])),
+        matches!(&e, Error::RankDeficient { parameters, .. } if parameters.contains(&names[1]) && parameters.contains(&names[4])),
         "{e}"
     );
     // Too few samples.
     let e = least_squares(&mk(a.rows(0, 4).into_owned(), b.rows(0, 4).into_owned())).unwrap_err();
-    assert!(e.contains("too few samples"), "{e}");
+    assert!(matches!(e, Error::TooFewRows { rows: 4, parameters: 5 }), "{e}");
     // Weighted estimation without variances says which stage is missing.
     let mut sys = mk(a.clone(), b.clone());
     sys.var.fill(f64::NAN);
@@ -248,7 +254,10 @@ fn bad_systems_are_refused_by_name() {
         None,
     )
     .unwrap_err();
-    assert!(e.contains("noise"), "{e}");
+    assert!(
+        matches!(&e, Error::Missing { what, .. } if what.contains("noise variance")),
+        "{e}"
+    );
 }
 
 fn system_from(names: &[String], kin: &Kinematics, a: DMatrix<f64>, b: DVector<f64>) -> System {
@@ -271,10 +280,10 @@ fn system_from(names: &[String], kin: &Kinematics, a: DMatrix<f64>, b: DVector<f
 #[test]
 fn physically_consistent_standard_parameters() {
     use robotid_stages::dynamics::{parameter_names, standard_parameters, with_standard_parameters};
-    use robotid_stages::estimate::{physically_consistent, pseudo_inertia};
+    use robotid_stages::estimation::{physically_consistent, pseudo_inertia};
     for robot in ["kuka_axis3.toml", "arm3.toml"] {
         let model = dynamics::load_robot(&fixture(&format!("robots/{robot}"))).unwrap();
-        let base = BaseRegressor::new(&model, &config()).unwrap();
+        let base = config().base_regressor(&model).unwrap();
         let map = base.map().unwrap();
         let names = parameter_names(&base.model, base.terms);
         let prior = standard_parameters(&base.model, base.terms);
@@ -296,7 +305,8 @@ fn physically_consistent_standard_parameters() {
         assert!(fit.min_eigen.iter().all(|&e| e >= -1e-12));
         // The rebuilt model predicts like the base parameters.
         let rebuilt = with_standard_parameters(&base.model, base.terms, &fit.standard);
-        let back = BaseRegressor::new(&rebuilt, &config())
+        let back = config()
+            .base_regressor(&rebuilt)
             .unwrap()
             .base_values(&rebuilt)
             .unwrap();

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use robotid_stages::dynamics;
-use robotid_stages::excite::{design, ExciteConfig};
+use robotid_stages::excitation::{design, ExciteConfig};
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
@@ -17,7 +17,7 @@ fn load(rel: &str) -> (ExciteConfig, dynamics::Model) {
     (cfg, model)
 }
 
-fn report(label: &str, d: &robotid_stages::excite::Design) {
+fn report(label: &str, d: &robotid_stages::excitation::Design) {
     let starts: Vec<_> = d
         .starts
         .iter()
@@ -88,9 +88,9 @@ fn d_optimal_excitation_gives_smaller_variances_than_random_ones() {
     use nalgebra::{DMatrix, DVector};
     use rand::{Rng, SeedableRng};
     use rand_distr::{Distribution, Normal};
-    use robotid_stages::estimate::{least_squares, System};
-    use robotid_stages::excite::CriterionKind;
-    use robotid_stages::regressor::BaseRegressor;
+    use robotid_stages::dynamics::BaseRegressor;
+    use robotid_stages::estimation::{least_squares, System};
+    use robotid_stages::excitation::CriterionKind;
     for file in ["excite/kuka_axis3.toml", "excite/arm3.toml"] {
         let (mut cfg, model) = load(file);
         cfg.cartesian.clear();
@@ -138,7 +138,7 @@ fn d_optimal_excitation_gives_smaller_variances_than_random_ones() {
         println!("  condition-optimal: {:?}", measure(&regressor(&condition_design)));
         for seed in 0..12 {
             let r = measure(&regressor(
-                &robotid_stages::excite::random_feasible(&cfg, &model, seed).unwrap(),
+                &robotid_stages::excitation::random_feasible(&cfg, &model, seed).unwrap(),
             ));
             println!("  random {seed}: {r:?}");
             assert!(
@@ -227,12 +227,12 @@ fn design_does_not_depend_on_the_thread_count() {
 #[test]
 fn condition_gradient_matches_finite_differences() {
     use rand::SeedableRng;
-    use robotid_stages::excite::{Constraints, Criterion};
+    use robotid_stages::excitation::{Constraints, Criterion};
     for (file, kind) in [
-        ("excite/arm3.toml", robotid_stages::excite::CriterionKind::Condition),
+        ("excite/arm3.toml", robotid_stages::excitation::CriterionKind::Condition),
         (
             "excite/kuka_axis3.toml",
-            robotid_stages::excite::CriterionKind::Condition,
+            robotid_stages::excitation::CriterionKind::Condition,
         ),
     ] {
         let (mut cfg, model) = load(file);

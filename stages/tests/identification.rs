@@ -10,16 +10,17 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DVector;
 use robotid_schemas::TorqueChannel;
-use robotid_stages::align::{align, AlignConfig};
-use robotid_stages::average::average;
-use robotid_stages::differentiate::{differentiate, Method as Diff};
+use robotid_stages::dynamics::FrictionTerms as FrictionModel;
 use robotid_stages::dynamics::{self, Model};
-use robotid_stages::estimate::{estimate, Estimate, EstimateConfig, Method, System};
-use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
-use robotid_stages::noise::noise;
-use robotid_stages::regressor::{regressor_table, BaseRegressor, FrictionModel, RegressorConfig};
+use robotid_stages::estimation::{estimate, Estimate, Estimator as Method, Options as EstimateConfig, System};
 use robotid_stages::signal::Spectra;
-use robotid_stages::simulate::{simulate, SimConfig};
+use robotid_stages::simulation::{simulate, SimConfig};
+use robotid_stages::stage::align::{align, AlignConfig};
+use robotid_stages::stage::average::average;
+use robotid_stages::stage::differentiate::{differentiate, Differentiation as Diff};
+use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::stage::noise::noise;
+use robotid_stages::stage::regressor::{regressor_table, RegressorConfig};
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
@@ -59,17 +60,17 @@ fn run_with(
         zpk: None,
         bandwidth_hz: case.bandwidth_hz,
     };
-    inverse_filter_periods(&mut p, &ifc, &spectra).unwrap();
+    inverse_filter_periods(&mut p, &*ifc.response().unwrap(), ifc.bandwidth_hz, &spectra);
     let (mean, _) = average(&p);
     let robotid_stages::trajectory::Trajectory::Fourier(f) = &cfg.trajectory else {
         panic!("periodic excitation")
     };
     let h = f.harmonic_numbers();
-    let (nt, _) = noise(&p, &mean, &h, &spectra);
+    let (nt, _) = noise(&p, &mean, &h, bandwidth_of(&p), &spectra);
     let kin = differentiate(&mean, p.period_s, Diff::Dft, &h, Some(case.dft_hz), &spectra);
     let table = regressor_table(&kin, Some(&nt), Some(&p), &model, rc, "sim").unwrap();
     let sys = System::from_tables(&[("sim".into(), table)]).unwrap();
-    let truth = BaseRegressor::new(&model, rc).unwrap().base_values(&model).unwrap();
+    let truth = rc.base_regressor(&model).unwrap().base_values(&model).unwrap();
     (sys, truth, model)
 }
 
@@ -94,7 +95,7 @@ fn kuka_regressor() -> RegressorConfig {
 
 /// Simulates `cfg` and turns its motor currents into joint torques, as the
 /// read stage does with the robot's drives.
-fn simulate_torque(cfg: &SimConfig) -> (Model, robotid_stages::simulate::Simulation) {
+fn simulate_torque(cfg: &SimConfig) -> (Model, robotid_stages::simulation::Simulation) {
     let model = dynamics::load_robot(&cfg.robot).unwrap();
     let mut s = simulate(cfg, &model, &BTreeMap::new()).unwrap();
     for (j, col) in s.raw.effort.iter_mut().enumerate() {
@@ -236,7 +237,7 @@ fn arm3_intervals_cover_the_truth() {
 /// the reference's 11 lines are left as equations.
 #[test]
 fn projection_method_removes_the_closed_loop_bias() {
-    use robotid_stages::projection::ProjectionConfig;
+    use robotid_stages::estimation::projection::ProjectionConfig;
     let case = KUKA;
     let plain = kuka_regressor();
     let pm = RegressorConfig {
@@ -249,7 +250,7 @@ fn projection_method_removes_the_closed_loop_bias() {
     for seed in 0..trials {
         for (k, rc) in [&plain, &pm].into_iter().enumerate() {
             let (s, t, _) = run_with(&case, 2000 + seed, rc, |c| {
-                c.disturbance.torque_std_nm = robotid_stages::simulate::PerJoint::All(30.0)
+                c.disturbance.torque_std_nm = robotid_stages::simulation::PerJoint::All(30.0)
             });
             if k == 1 && seed == 0 {
                 println!("{}", s.metadata["robotid.projection"]);
@@ -284,9 +285,9 @@ fn projection_method_removes_the_closed_loop_bias() {
 /// known) in the inertial estimation from the excitation data.
 #[test]
 fn sweeps_give_gravity_and_friction_and_compensate_it() {
-    use robotid_stages::dedicated::{gravity_friction, SweepConfig};
-    use robotid_stages::differentiate::differentiate_record;
-    use robotid_stages::inverse_filter::inverse_filter_record;
+    use robotid_stages::estimation::dedicated::{gravity_friction, SweepConfig};
+    use robotid_stages::stage::differentiate::differentiate_record;
+    use robotid_stages::stage::inverse_filter::inverse_filter_record;
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3_sweeps.toml")).unwrap();
     let (_, mut s) = simulate_torque(&cfg);
     let spectra = Spectra::new();
@@ -295,10 +296,15 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
         zpk: None,
         bandwidth_hz: 20.0,
     };
-    inverse_filter_record(&mut s.raw, 150.0, &ifc, &spectra).unwrap();
+    inverse_filter_record(&mut s.raw, 150.0, &*ifc.response().unwrap(), ifc.bandwidth_hz, &spectra).unwrap();
     let lowpass: robotid_stages::signal::FilterSpec =
         toml::from_str("family = \"butterworth\"\norder = 2\ncutoff_hz = 5.0").unwrap();
-    let kin = differentiate_record(&s.raw, 150.0, &lowpass, &spectra).unwrap();
+    let kin = differentiate_record(
+        &s.raw,
+        150.0,
+        &robotid_stages::signal::AnalogFilter::new(lowpass).unwrap(),
+        &spectra,
+    );
     let sc = SweepConfig {
         joint: "a3".into(),
         max_acceleration_rad_s2: 0.5,
@@ -349,7 +355,7 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
     let rc = kuka_regressor();
     let (mut sys, t, _) = run(&case, 7, &rc);
     let fixed = sys
-        .fix(&robotid_stages::estimate::Known {
+        .fix(&robotid_stages::estimation::Known {
             names: e.names.clone(),
             values: e.values.clone(),
             covariance: e.covariance.clone(),
@@ -370,4 +376,11 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
             est.names[i]
         );
     }
+}
+
+/// The band the inverse filter left in the periods (None if it did not run).
+fn bandwidth_of(p: &robotid_stages::stage::Periods) -> Option<f64> {
+    p.metadata
+        .get(robotid_schemas::metadata::INVERSE_FILTER_BANDWIDTH_HZ)
+        .and_then(|v| v.parse().ok())
 }

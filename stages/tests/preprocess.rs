@@ -6,14 +6,14 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use robotid_schemas::TorqueChannel;
-use robotid_stages::align::{align, AlignConfig};
-use robotid_stages::average::average;
-use robotid_stages::differentiate::{differentiate, fit_reference, Method};
 use robotid_stages::dynamics::{self, Model};
-use robotid_stages::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
-use robotid_stages::noise::noise;
 use robotid_stages::signal::{AnalogFilter, Spectra};
-use robotid_stages::simulate::{simulate, SimConfig, Simulation};
+use robotid_stages::simulation::{simulate, SimConfig, Simulation};
+use robotid_stages::stage::align::{align, AlignConfig};
+use robotid_stages::stage::average::average;
+use robotid_stages::stage::differentiate::{differentiate, fit_reference, Differentiation as Method};
+use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
+use robotid_stages::stage::noise::noise;
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
@@ -68,7 +68,7 @@ fn kuka_axis3_chain_recovers_the_truth() {
         zpk: None,
         bandwidth_hz: bw,
     };
-    inverse_filter_periods(&mut p, &ifc, &spectra).unwrap();
+    inverse_filter_periods(&mut p, &*ifc.response().unwrap(), ifc.bandwidth_hz, &spectra);
     let (mean, _drift) = average(&p);
     let np = p.periods as f64;
 
@@ -108,7 +108,7 @@ fn kuka_axis3_chain_recovers_the_truth() {
 
     // Noise: the time-domain variance of the averaged torque within 10 % of
     // the expected one (≈ 7500 degrees of freedom: 1.6 % standard error).
-    let (table, summary) = noise(&p, &mean, &[1, 2, 3, 4, 5], &spectra);
+    let (table, summary) = noise(&p, &mean, &[1, 2, 3, 4, 5], bandwidth_of(&p), &spectra);
     let t_noise = summary.iter().find(|c| c.channel == "torque").unwrap();
     let q_noise = summary.iter().find(|c| c.channel == "q").unwrap();
     println!(
@@ -331,8 +331,8 @@ fn frictionless_axis_derivatives_match_the_raw_truth() {
 /// equal the sines at the coarse instants to round-off.
 #[test]
 fn decimating_whole_periods_keeps_the_band() {
-    use robotid_stages::decimate::{decimate_periods, DecimateConfig};
     use robotid_stages::signal::{FilterFamily, FilterSpec};
+    use robotid_stages::stage::decimate::{decimate_periods, DecimateConfig};
     let (mut cfg, model, mut s) = sim("sims/kuka_axis3.toml", |c| {
         c.measurement.position_noise_std_rad = Default::default()
     });
@@ -365,7 +365,10 @@ fn decimating_whole_periods_keeps_the_band() {
     // A cutoff above the new Nyquist frequency is refused.
     let bad = DecimateConfig { factor: 5, ..dc };
     let e = decimate_periods(&mut p, &bad, &spectra).unwrap_err();
-    assert!(e.contains("Nyquist") || e.contains("divide"), "{e}");
+    assert!(
+        matches!(&e, robotid_stages::Error::Setting { key, .. } if key == "filter.cutoff_hz"),
+        "{e}"
+    );
 }
 
 /// Non-periodic differentiation (Swevers' Approach II for validation data)
@@ -378,8 +381,8 @@ fn decimating_whole_periods_keeps_the_band() {
 /// derivative of the filtered position equals the filtered derivative.
 #[test]
 fn filtered_differentiation_of_a_validation_run() {
-    use robotid_stages::differentiate::differentiate_record;
     use robotid_stages::signal::{FilterFamily, FilterSpec};
+    use robotid_stages::stage::differentiate::differentiate_record;
     let (_, _, s) = sim("sims/kuka_axis3_validation.toml", |_| {});
     // Holding still, the smooth Coulomb term keeps the plant from chattering.
     let rest: Vec<f64> = s.truth.qd[0]
@@ -403,7 +406,12 @@ fn filtered_differentiation_of_a_validation_run() {
         cutoff_hz: 5.0,
         ripple_db: None,
     };
-    let k = differentiate_record(&raw, 150.0, &spec, &Spectra::new()).unwrap();
+    let k = differentiate_record(
+        &raw,
+        150.0,
+        &robotid_stages::signal::AnalogFilter::new(spec).unwrap(),
+        &Spectra::new(),
+    );
     let rel = |a: &[f64], b: &[f64]| rms(a, b) / rms(b, &vec![0.0; b.len()]);
     let e = [
         rel(&k.q[0], &s.truth.q[0]),
@@ -429,7 +437,7 @@ fn filtered_differentiation_of_a_validation_run() {
 /// (max|ṙ|·dt/2 ≈ 1.45 rad/s · 3.3 ms ≈ 5e-3 rad).
 #[test]
 fn phase_is_registered_against_the_trajectory() {
-    use robotid_stages::align::register_phase;
+    use robotid_stages::stage::align::register_phase;
     use robotid_stages::trajectory::Trajectory;
     let (cfg, model, mut s) = sim("sims/kuka_axis3.toml", |_| {});
     to_torque(&mut s, &model);
@@ -461,4 +469,11 @@ fn phase_is_registered_against_the_trajectory() {
     other.b[0].rotate_left(1);
     let e = register_phase(&mut p, &other, "k").unwrap_err().to_string();
     assert!(e.contains("does not follow"), "{e}");
+}
+
+/// The band the inverse filter left in the periods (None if it did not run).
+fn bandwidth_of(p: &robotid_stages::stage::Periods) -> Option<f64> {
+    p.metadata
+        .get(robotid_schemas::metadata::INVERSE_FILTER_BANDWIDTH_HZ)
+        .and_then(|v| v.parse().ok())
 }

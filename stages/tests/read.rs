@@ -4,10 +4,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use robotid_stages::align::{align, AlignConfig};
 use robotid_stages::dynamics::{self, Model};
-use robotid_stages::read::{read, Channel, ReadConfig};
-use robotid_stages::simulate::{simulate, write_simulation, SimConfig, Simulation};
+use robotid_stages::simulation::{simulate, write_simulation, SimConfig, Simulation};
+use robotid_stages::stage::align::{align, AlignConfig};
+use robotid_stages::stage::read::{read, Channel, ReadConfig};
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
@@ -146,8 +146,10 @@ fn bad_inputs_name_file_channel_and_sample() {
         }),
         ..Default::default()
     };
-    let e = c.check().unwrap_err().join("; ");
-    assert!(e.contains("unknown effort unit `furlong`"), "{e}");
+    let problems = c.problems();
+    assert_eq!(problems.len(), 1, "{problems:?}");
+    assert_eq!(problems[0].key, "effort.unit");
+    assert!(problems[0].message.contains("`furlong`"), "{problems:?}");
 
     // Truncated MCAP.
     let mcap = std::fs::read(dir.path().join("rec.mcap")).unwrap();

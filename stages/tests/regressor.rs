@@ -135,8 +135,8 @@ fn base_parameters_predict_like_the_full_set() {
 /// tanh(q̇/0.01 rad/s), matched here by the model's transition).
 #[test]
 fn truth_regression_recovers_the_axis() {
-    use robotid_stages::regressor::{regressor_table, RegressorConfig};
-    use robotid_stages::simulate::{simulate, SimConfig};
+    use robotid_stages::simulation::{simulate, SimConfig};
+    use robotid_stages::stage::regressor::{regressor_table, RegressorConfig};
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
     let mut model = dynamics::load_robot(&cfg.robot).unwrap();
     let s = simulate(&cfg, &model, &Default::default()).unwrap();
@@ -175,7 +175,7 @@ fn truth_regression_recovers_the_axis() {
     // G_s = −g·m·l_x, G_c = −g·m·l_y (τ_g = −m g l_x sin q − m g l_y cos q here).
     model.friction[0].transition = 0.01;
     let rc = RegressorConfig {
-        model: robotid_stages::regressor::ModelKind::Decoupled,
+        model: robotid_stages::dynamics::ModelKind::Decoupled,
         rotor: false,
         ..Default::default()
     };

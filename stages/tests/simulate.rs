@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use robotid_stages::dynamics::{self, lagrange, Data, Friction, Model};
 use robotid_stages::signal::AnalogFilter;
-use robotid_stages::simulate::{simulate, write_simulation, Plant, Reference, SimConfig, Simulation};
+use robotid_stages::simulation::{simulate, write_simulation, Plant, Reference, SimConfig, Simulation};
 use robotid_stages::trajectory::{Durations, Trajectory, Waypoints};
 use rustfft::num_complex::Complex64;
 

@@ -1,1 +1,98 @@
+//! Helpers shared by robotid's tests: the fixtures folder, example
+//! recordings simulated once per test binary, workspaces laid out as
+//! `fixtures/` is, the Python interpreter of the cross-checks.
 
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+
+use robotid_stages::dynamics::load_robot;
+use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
+
+/// The repository's `fixtures/` folder.
+pub fn fixture(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
+}
+
+/// The real recordings beside the repository (`../shared/realdata/NAME`),
+/// or None with a message saying the test is skipped.
+pub fn realdata(name: &str) -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/realdata")
+        .join(name);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        eprintln!("skipped: {} is absent", dir.display());
+        None
+    }
+}
+
+/// Copies the files of `from` (not sub-folders) into `to`.
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_file() {
+            std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
+        }
+    }
+}
+
+/// The folder holding the simulation `sim` of `fixtures/sims/`, simulated
+/// on first use in this test binary and kept until it exits.
+pub fn simulated(sim: &str) -> PathBuf {
+    static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
+    static DONE: OnceLock<Mutex<HashMap<String, PathBuf>>> = OnceLock::new();
+    let root = ROOT.get_or_init(|| tempfile::tempdir().unwrap()).path();
+    let mut done = DONE.get_or_init(Default::default).lock().unwrap();
+    if let Some(p) = done.get(sim) {
+        return p.clone();
+    }
+    let path = fixture("sims").join(format!("{sim}.toml"));
+    let (cfg, text) = SimConfig::load(&path).unwrap();
+    let model = load_robot(&cfg.robot).unwrap();
+    let result = simulate(&cfg, &model, &provenance(&path, &text, &cfg.robot).unwrap()).unwrap();
+    let dir = root.join(sim);
+    write_simulation(&dir, &cfg.output.name, &cfg.output.formats, &result, &model).unwrap();
+    done.insert(sim.to_string(), dir.clone());
+    dir
+}
+
+/// A temporary folder laid out as `fixtures/`: robots/, pipelines/ and
+/// sims/ copied, the named simulations' recordings in recordings/.
+pub fn workspace(sims: &[&str]) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for sub in ["robots", "pipelines", "sims"] {
+        copy_dir(&fixture(sub), &dir.path().join(sub));
+    }
+    for s in sims {
+        copy_dir(&simulated(s), &dir.path().join("recordings").join(s));
+    }
+    dir
+}
+
+/// Every file under `dir`, by relative path, with its bytes.
+pub fn bytes_of(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().display().to_string(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// The Python of the cross-checks (`ROBOTID_PYTHON`, set by scripts/test.sh).
+pub fn python() -> String {
+    std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
+}

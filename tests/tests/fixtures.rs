@@ -8,7 +8,7 @@ use std::path::Path;
 
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::formats::sha256_hex;
-use robotid_stages::simulate::{provenance, simulate, write_simulation, SimConfig};
+use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
 
 #[test]
 fn fixtures_are_reproducible() {

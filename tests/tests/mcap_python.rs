@@ -3,23 +3,21 @@
 //! JointStates from the schema text stored in the file. The test command
 //! (scripts/test.sh) installs both; `ROBOTID_PYTHON` names the interpreter.
 
+use robotid_schemas::metadata;
+use robotid_tests::python;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
 use robotid_stages::dynamics::load_robot;
-use robotid_stages::simulate::{simulate, write_simulation, OutputFormat, SimConfig};
-
-fn python() -> String {
-    std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
-}
+use robotid_stages::simulation::{simulate, write_simulation, OutputFormat, SimConfig};
 
 #[test]
 fn python_mcap_reads_what_we_write() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let (cfg, _) = SimConfig::load(&root.join("fixtures/sims/arm3.toml")).unwrap();
     let model = load_robot(&cfg.robot).unwrap();
-    let md = BTreeMap::from([("robotid.source_file".to_string(), "arm3.toml".to_string())]);
+    let md = BTreeMap::from([(metadata::SOURCE_FILE.to_string(), "arm3.toml".to_string())]);
     let sim = simulate(&cfg, &model, &md).unwrap();
     let dir = tempfile::tempdir().unwrap();
     write_simulation(dir.path(), "rec", &[OutputFormat::Mcap], &sim, &model).unwrap();

@@ -2,6 +2,7 @@
 //! installed by scripts/test.sh): the same URDF, the same random states,
 //! torques equal to 1e-9 relative.
 
+use robotid_tests::python;
 use std::path::Path;
 use std::process::Command;
 
@@ -9,10 +10,6 @@ use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robotid_stages::dynamics::{self, regressor, standard_parameters, Data, FrictionTerms, RegressorTerms};
-
-fn python() -> String {
-    std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
-}
 
 #[test]
 fn rnea_and_regressor_match_pinocchio() {

@@ -1,8 +1,10 @@
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
-use robotid_stages::estimate::{estimate, parameters_table, Covariance, Estimate, EstimateConfig, Method, System};
+use anyhow::{bail, Context as _};
+use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::stage::estimate::EstimateConfig;
+use robotid_stages::stage::Context;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -31,8 +33,8 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let method = match args.method.as_str() {
-        "ols" => Method::Ols,
-        "wls" => Method::Wls,
+        "ols" => Estimator::Ols,
+        "wls" => Estimator::Wls,
         "ml" => anyhow::bail!(
             "--method ml needs the positions' noise and the robot: run it as a pipeline's `estimate` stage"
         ),
@@ -48,25 +50,40 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         method,
         confidence: args.confidence,
         covariance,
+        known: args.known.clone(),
         ..Default::default()
     };
-    cfg.check().map_err(anyhow::Error::msg).context("--confidence")?;
-    let mut sys = load_system(&args.regressors)?;
-    if let Some(k) = &args.known {
-        let fixed = sys
-            .fix(&robotid::run::load_known(k).map_err(anyhow::Error::msg)?)
-            .map_err(anyhow::Error::msg)?;
-        if fixed.is_empty() {
-            bail!("--known {}: none of its parameters is in the model", k.display());
-        }
-        println!("known ({}): {}", k.display(), fixed.join(", "));
+    if let Some(p) = cfg.settings_problems().first() {
+        bail!("--{}: {}", p.key, p.message);
     }
-    let est = estimate(&sys, &cfg, None).map_err(anyhow::Error::msg)?;
-    let mut md = sys.metadata.clone();
-    md.insert("robotid.recordings".into(), sys.recordings.join(","));
-    let batch = parameters_table(&est, cfg.confidence, &sys.expressions, &md).map_err(anyhow::Error::msg)?;
-    write_parquet(&args.out, &batch).map_err(anyhow::Error::msg)?;
-    print!("{}", summary(&est, cfg.confidence));
+    let reducer = cfg.reducer(&Context {
+        base_dir: PathBuf::from("."),
+        ..Default::default()
+    })?;
+    // The same map and reduce as a pipeline's `estimate` stage: each table
+    // folded into its summary, the summaries merged.
+    let mut parts = Vec::new();
+    let mut seen: Vec<(String, PathBuf)> = Vec::new();
+    for p in &args.regressors {
+        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
+        let hash = robotid_stages::formats::sha256_hex(&bytes);
+        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
+            bail!(
+                "{} and {} are the same table: given twice, its rows would count twice and the intervals shrink by √2",
+                first.display(),
+                p.display()
+            );
+        }
+        seen.push((hash, p.clone()));
+        let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
+        parts.push(reducer.part_of(sys)?);
+    }
+    let out = reducer.reduce(&parts, &Default::default())?;
+    if let Some(k) = &args.known {
+        println!("known ({}): {}", k.display(), out.known.join(", "));
+    }
+    write_parquet(&args.out, &out.table)?;
+    print!("{}", summary(&out.estimate, cfg.confidence));
     println!("parameters in {}", args.out.display());
     Ok(())
 }
@@ -75,10 +92,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn load_system(paths: &[PathBuf]) -> anyhow::Result<System> {
     let mut tables = Vec::new();
     for p in paths {
-        let b = read_parquet(p).map_err(anyhow::Error::msg)?;
-        tables.push((p.display().to_string(), b));
+        tables.push((p.display().to_string(), read_parquet(p)?));
     }
-    System::from_tables(&tables).map_err(anyhow::Error::msg)
+    Ok(System::from_tables(&tables)?)
 }
 
 /// The parameter table as text: value, std, relative std and interval.

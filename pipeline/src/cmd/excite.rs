@@ -8,7 +8,7 @@ use arrow::datatypes::{DataType, Field, Schema};
 use indicatif::{ProgressBar, ProgressStyle};
 use robotid_schemas::{metadata, Kinematics};
 use robotid_stages::dynamics::{end_effector_position, load_robot, Data};
-use robotid_stages::excite::{design, ExciteConfig};
+use robotid_stages::excitation::{design, ExciteConfig};
 use robotid_stages::formats::parquet::write_parquet;
 
 #[derive(clap::Args)]
@@ -46,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .unwrap_or(std::path::Path::new("."))
         .join(&cfg.robot);
     let model = load_robot(&cfg.robot).map_err(anyhow::Error::msg)?;
-    cfg.check(&model)
+    cfg.validate(&model)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let bar = ProgressBar::new(cfg.starts as u64);
     bar.set_style(ProgressStyle::with_template("starts [{bar:30}] {pos}/{len} {msg}").expect("template"));
@@ -121,12 +121,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let unit = |u: &str| BTreeMap::from([(metadata::UNIT.to_string(), u.to_string())]);
     let md = BTreeMap::from([
-        ("robotid.table".to_string(), "excitation_coefficients".to_string()),
+        (metadata::TABLE.to_string(), "excitation_coefficients".to_string()),
         (metadata::PERIOD_S.to_string(), f.period().to_string()),
-        ("robotid.base_frequency_hz".to_string(), f.base_frequency_hz.to_string()),
-        ("robotid.condition_number".to_string(), d.condition.to_string()),
+        (metadata::BASE_FREQUENCY_HZ.to_string(), f.base_frequency_hz.to_string()),
+        (metadata::CONDITION_NUMBER.to_string(), d.condition.to_string()),
         (
-            "robotid.formula".to_string(),
+            metadata::FORMULA.to_string(),
             "q(t) = q0 + Σ (a sin(kωt) − b cos(kωt))/(kω)".to_string(),
         ),
     ]);

@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use robotid_stages::dynamics::{parameter_names, standard_parameters, to_urdf, with_standard_parameters};
-use robotid_stages::estimate::physically_consistent;
+use robotid_stages::estimation::physically_consistent;
 use robotid_stages::formats::write_atomic;
 
 #[derive(clap::Args)]

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use robotid::plan;
+use robotid::Pipeline;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -10,17 +10,15 @@ pub struct Args {
 
 /// Checks a pipeline file without running it: every problem at once.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let text =
-        std::fs::read_to_string(&args.pipeline).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
-    let p = plan::parse(&text, &args.pipeline)?;
-    let (model, logs, start) = plan::resolve(&p)?;
+    let p = Pipeline::from_path(&args.pipeline)?;
+    let r = p.lint()?;
     println!(
-        "{}: valid; {} stage(s) on {} log(s) starting from {:?} data{}",
+        "{}: valid; {} stage(s) on {} log(s) starting from {}{}",
         args.pipeline.display(),
-        p.stages.len(),
-        logs.len(),
-        start,
-        model
+        p.plan.stages.len(),
+        r.logs.len(),
+        r.start,
+        r.model
             .map(|m| format!(", robot `{}` ({} joints)", m.name, m.dof()))
             .unwrap_or_default()
     );

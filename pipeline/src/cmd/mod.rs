@@ -1,4 +1,4 @@
-pub mod check;
+pub mod compare;
 pub mod estimate;
 pub mod excite;
 pub mod export;
@@ -15,27 +15,20 @@ pub mod validate;
 use std::path::Path;
 
 use anyhow::{bail, Context};
+use robotid_stages::dynamics::BaseRegressor;
 use robotid_stages::dynamics::{load_robot, Model};
-use robotid_stages::estimate::{parameters_from_table, Parameters};
+use robotid_stages::estimation::{parameters_from_table, Parameters};
 use robotid_stages::formats::parquet::read_parquet;
-use robotid_stages::regressor::{BaseRegressor, RegressorConfig, CONFIG_KEY};
+use robotid_stages::stage::regressor::RegressorConfig;
 
 /// A parameters table with the robot it was identified for and the base
 /// regressor rebuilt from the regressor configuration it carries; refused
 /// when the robot does not give the table's base parameters.
 pub fn identified(robot: &Path, parameters: &Path) -> anyhow::Result<(Parameters, Model, BaseRegressor)> {
-    let params = parameters_from_table(&read_parquet(parameters).map_err(anyhow::Error::msg)?)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", parameters.display()))?;
-    let text = params.metadata.get(CONFIG_KEY).with_context(|| {
-        format!(
-            "{}: no regressor configuration in its metadata (`{CONFIG_KEY}`)",
-            parameters.display()
-        )
-    })?;
-    let cfg: RegressorConfig =
-        serde_json::from_str(text).with_context(|| format!("{}: `{CONFIG_KEY}`", parameters.display()))?;
-    let model = load_robot(robot).map_err(anyhow::Error::msg)?;
-    let base = BaseRegressor::new(&model, &cfg).map_err(anyhow::Error::msg)?;
+    let params = parameters_from_table(&read_parquet(parameters)?).with_context(|| parameters.display().to_string())?;
+    let cfg = RegressorConfig::of_metadata(&params.metadata).with_context(|| parameters.display().to_string())?;
+    let model = load_robot(robot)?;
+    let base = cfg.base_regressor(&model)?;
     if base.names() != params.names {
         bail!(
             "robot `{}` with the parameters' regressor configuration has base parameters {:?}, not the table's {:?}: is it the robot they were identified for?",

@@ -1,6 +1,7 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
+use robotid_schemas::metadata;
 use robotid_schemas::Kinematics;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 
@@ -38,9 +39,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let tau = base.matrix(&kin) * &params.values;
     let samples = kin.time.len();
     kin.torque = Some((0..n).map(|j| (0..samples).map(|k| tau[k * n + j]).collect()).collect());
-    kin.metadata.insert("robotid.torque".into(), "predicted".into());
+    kin.metadata.insert(metadata::TORQUE.into(), "predicted".into());
     kin.metadata
-        .insert("robotid.parameters_file".into(), args.parameters.display().to_string());
+        .insert(metadata::PARAMETERS_FILE.into(), args.parameters.display().to_string());
     write_parquet(&args.out, &kin.to_record_batch().map_err(anyhow::Error::msg)?).map_err(anyhow::Error::msg)?;
     println!("{} samples × {n} joints predicted into {}", samples, args.out.display());
     Ok(())

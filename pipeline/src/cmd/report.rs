@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use arrow::array::{Array, StringArray};
 use robotid::report::{html, DataSet};
-use robotid_stages::estimate::parameters_from_table;
+use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
 
 use super::estimate::load_system;

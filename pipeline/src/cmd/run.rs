@@ -2,8 +2,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::bail;
-use robotid::plan;
-use robotid::run::{run as run_plan, RunOptions};
+use robotid::{Pipeline, RunOptions};
+use robotid_stages::stage::ChannelNoise;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -25,11 +25,9 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let started = Instant::now();
-    let text =
-        std::fs::read_to_string(&args.pipeline).map_err(|e| anyhow::anyhow!("{}: {e}", args.pipeline.display()))?;
-    let p = plan::parse(&text, &args.pipeline)?;
-    let (model, logs, start) = plan::resolve(&p)?;
-    for w in model.iter().flat_map(|m| &m.warnings) {
+    let pipeline = Pipeline::from_path(&args.pipeline)?;
+    let built = pipeline.build()?;
+    for w in built.model.iter().flat_map(|m| &m.warnings) {
         eprintln!("warning: robot: {w}");
     }
     let out = args.out.unwrap_or_else(|| {
@@ -41,18 +39,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         plot: args.plot.clone(),
     };
-    let results = run_plan(&p, model.as_ref(), &logs, start, &opts);
+    let recordings = built.run_recordings(&opts);
     println!(
         "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
         "recording", "samples", "periods", "dropped s", "jitter s", "var tau time", "var tau freq"
     );
     let mut failed = 0;
-    for r in &results {
+    for r in &recordings {
         match &r.outcome {
             Ok(o) => {
-                let torque: Vec<&robotid_stages::noise::ChannelNoise> =
-                    o.noise.iter().filter(|c| c.channel == "torque").collect();
-                let mean = |f: &dyn Fn(&robotid_stages::noise::ChannelNoise) -> f64| {
+                let o = &o.report;
+                let torque: Vec<&ChannelNoise> = o.noise.iter().filter(|c| c.channel == "torque").collect();
+                let mean = |f: &dyn Fn(&ChannelNoise) -> f64| {
                     if torque.is_empty() {
                         "-".to_string()
                     } else {
@@ -92,29 +90,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!(
         "{} of {} recording(s) done in {:.2} s; tables in {}",
-        results.len() - failed,
-        results.len(),
+        recordings.len() - failed,
+        recordings.len(),
         started.elapsed().as_secs_f64(),
         out.display()
     );
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); their tables were not written");
     }
-    if let Some((path, est)) =
-        robotid::run::estimate_all(&p, model.as_ref(), &results, &out).map_err(anyhow::Error::msg)?
-    {
-        let level = p
-            .stages
-            .iter()
-            .find_map(|s| match s {
-                plan::StageConfig::Estimate(c) => Some(c.confidence),
-                _ => None,
-            })
-            .unwrap_or(0.95);
-        print!("{}", super::estimate::summary(&est, level));
+    if let Some((est, path)) = built.estimate_all(&recordings, &out)? {
+        let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
+        print!("{}", super::estimate::summary(&est.estimate, level));
         println!("parameters in {}", path.display());
         if let Some(dir) = &args.plot {
-            match robotid::report::write_run_report(&path, &results, dir) {
+            match robotid::report::write_run_report(&path, &recordings, dir) {
                 Ok(report) => println!("report in {}", report.display()),
                 Err(e) => eprintln!("warning: no report: {e}"),
             }

@@ -3,7 +3,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use robotid_stages::dynamics::load_robot;
-use robotid_stages::simulate::{provenance, simulate, write_simulation, SimConfig};
+use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
 
 #[derive(clap::Args)]
 pub struct Args {

@@ -1,10 +1,11 @@
 use std::path::PathBuf;
 
+use robotid_schemas::metadata;
 use robotid_schemas::Kinematics;
-use robotid_stages::dedicated::{gravity_friction, SweepConfig};
-use robotid_stages::estimate::parameters_table;
+use robotid_stages::dynamics::FrictionTerms;
+use robotid_stages::estimation::dedicated::{gravity_friction, SweepConfig};
+use robotid_stages::estimation::parameters_table;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::regressor::FrictionModel;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -36,8 +37,8 @@ pub struct Args {
 /// compensate.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let friction = match args.friction.as_str() {
-        "symmetric" => FrictionModel::Symmetric,
-        "asymmetric" => FrictionModel::Asymmetric,
+        "symmetric" => FrictionTerms::Symmetric,
+        "asymmetric" => FrictionTerms::Asymmetric,
         f => anyhow::bail!("--friction: `{f}` is not symmetric or asymmetric"),
     };
     let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
@@ -60,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     print!("{}", super::estimate::summary(&gf.estimate, args.confidence));
     let mut md = kin.metadata.clone();
-    md.insert("robotid.dedicated".into(), "sweeps".into());
+    md.insert(metadata::DEDICATED.into(), "sweeps".into());
     let table = parameters_table(&gf.estimate, args.confidence, &gf.estimate.names, &md).map_err(anyhow::Error::msg)?;
     write_parquet(&args.out, &table).map_err(anyhow::Error::msg)?;
     println!("parameters in {}", args.out.display());

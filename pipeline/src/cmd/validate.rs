@@ -1,7 +1,8 @@
 use std::path::PathBuf;
 
 use anyhow::bail;
-use robotid_stages::estimate::parameters_from_table;
+use robotid_schemas::metadata;
+use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
 
 use super::estimate::load_system;
@@ -40,7 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.parameters.display(),
         params
             .metadata
-            .get("robotid.estimate.method")
+            .get(metadata::ESTIMATE_METHOD)
             .map(String::as_str)
             .unwrap_or("?"),
         sys.recordings.join(", ")

@@ -7,7 +7,7 @@
 
 use nalgebra::DMatrix;
 
-use super::regressor::{friction_columns, friction_names};
+use super::torque_regressor::{friction_columns, friction_names};
 use super::{FrictionTerms, Model};
 
 fn per_joint(friction: FrictionTerms) -> usize {

@@ -4,6 +4,7 @@
 //! `lagrange.rs`.
 
 mod base_parameters;
+mod base_regressor;
 mod data;
 mod decoupled;
 mod forward_dynamics;
@@ -11,24 +12,25 @@ mod kinematics;
 pub mod lagrange;
 pub mod model;
 mod r_factor;
-mod regressor;
 mod rnea;
 mod robot_file;
+mod torque_regressor;
 mod urdf;
 mod urdf_export;
 
 pub use base_parameters::{base_parameters, BaseParameters};
+pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
 pub use r_factor::RFactor;
-pub use regressor::{
+pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
+pub use robot_file::{load_robot, parse_robot_file};
+pub use torque_regressor::{
     friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
     with_standard_parameters, FrictionTerms, RegressorTerms, Spring,
 };
-pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
-pub use robot_file::{load_robot, parse_robot_file};
 pub use urdf::{load_urdf, parse_urdf};
 pub use urdf_export::to_urdf;

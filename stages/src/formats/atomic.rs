@@ -13,9 +13,10 @@ pub fn write_atomic(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> Resu
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::Invalid(format!("{}: not a file path", path.display())))?;
+    let name = path.file_name().ok_or_else(|| Error::Format {
+        path: path.to_path_buf(),
+        msg: "not a file path".into(),
+    })?;
     let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
     let result = (|| {
         let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
@@ -43,7 +44,7 @@ mod tests {
         std::fs::write(&p, b"old").unwrap();
         let r = write_atomic(&p, |w| {
             w.write_all(b"partial").unwrap();
-            Err(Error::Invalid("boom".into()))
+            Err(Error::numerical("test", "boom"))
         });
         assert!(r.is_err());
         assert_eq!(std::fs::read(&p).unwrap(), b"old");

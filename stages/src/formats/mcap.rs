@@ -10,7 +10,7 @@ use std::path::Path;
 
 use mcap::records::MessageHeader;
 use mcap::{Compression, WriteOptions};
-use robotid_schemas::{RawSamples, TorqueChannel};
+use robotid_schemas::{metadata, RawSamples, TorqueChannel};
 
 use super::cdr::{encode_joint_state, JointState, JOINT_STATE_NAME, JOINT_STATE_SCHEMA};
 use super::write_atomic;
@@ -139,7 +139,7 @@ pub fn write_recording_mcap(path: &Path, raw: &RawSamples, torque_per_amp: &[f64
             }
         }
         let mut md: BTreeMap<String, String> = raw.metadata.clone();
-        md.insert("robotid.joints".into(), raw.joints.join(","));
+        md.insert(metadata::JOINTS.into(), raw.joints.join(","));
         out.write_metadata(&mcap::records::Metadata {
             name: "robotid".into(),
             metadata: md,

@@ -1,0 +1,110 @@
+//! The pipeline crate's errors: problems of a pipeline file, each with its
+//! place, and failures of a run.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+/// Where in a pipeline file a problem is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Place {
+    /// The file as a whole (it does not parse).
+    File,
+    /// A top-level key, e.g. `robot`, `version`, `output.tables`.
+    Key(String),
+    /// A key of `[read]`.
+    Read(String),
+    /// `[source]`.
+    Source,
+    /// A stage: its 1-based index, kind, line, and the key (empty for the stage itself).
+    Stage {
+        index: usize,
+        kind: String,
+        line: usize,
+        key: String,
+    },
+}
+
+impl std::fmt::Display for Place {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Place::File => Ok(()),
+            Place::Key(k) => write!(f, "`{k}`: "),
+            Place::Read(k) => write!(f, "[read] {k}: "),
+            Place::Source => write!(f, "[source] "),
+            Place::Stage { index, kind, line, key } if key.is_empty() => {
+                write!(f, "stage {index} (`{kind}`, line {line}): ")
+            }
+            Place::Stage { index, kind, line, key } => write!(f, "stage {index} (`{kind}`, line {line}) `{key}`: "),
+        }
+    }
+}
+
+/// One problem of a pipeline file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Placed {
+    pub file: PathBuf,
+    pub place: Place,
+    pub message: String,
+}
+
+impl std::fmt::Display for Placed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}{}", self.file.display(), self.place, self.message)
+    }
+}
+
+/// Every problem found in a pipeline file, at once.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problems(pub Vec<Placed>);
+
+impl std::fmt::Display for Problems {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} problem(s):", self.0.len())?;
+        for p in &self.0 {
+            write!(f, "\n  {p}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for Problems {}
+
+impl Problems {
+    /// Whether a problem sits at a stage's key (`kind`, `key`).
+    pub fn at_stage(&self, kind: &str, key: &str) -> bool {
+        self.0
+            .iter()
+            .any(|p| matches!(&p.place, Place::Stage { kind: k, key: q, .. } if k == kind && q == key))
+    }
+
+    /// Whether a problem sits at a place.
+    pub fn at(&self, place: &Place) -> bool {
+        self.0.iter().any(|p| &p.place == place)
+    }
+}
+
+/// Errors of the pipeline crate.
+#[derive(Debug, Error)]
+pub enum Error {
+    /// The pipeline file has problems (every one of them).
+    #[error(transparent)]
+    Problems(#[from] Problems),
+    /// A stage, a reader or an estimator failed.
+    #[error(transparent)]
+    Stage(#[from] robotid_stages::Error),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Recordings failed: nothing was estimated from the rest.
+    #[error("estimate: recording(s) {} failed, so no parameters were estimated (fix them or leave them out of the source)", .names.join(", "))]
+    RecordingsFailed { names: Vec<String> },
+    /// Pictures or a report could not be made.
+    #[error("{what}: {msg}")]
+    Output { what: String, msg: String },
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,244 @@
+//! The library entry point: a pipeline file → a checked plan → a built
+//! pipeline (every stage's recording-independent work done once) → a run
+//! over its recordings, the estimate included, or over samples in memory.
+//!
+//! ```no_run
+//! use robotid::{Pipeline, RunOptions};
+//!
+//! # fn main() -> Result<(), robotid::Error> {
+//! let built = Pipeline::from_path("fixtures/pipelines/kuka_axis3.toml")?.build()?;
+//! let report = built.run(&RunOptions { out: "out/kuka".into(), ..Default::default() })?;
+//! if let Some(est) = &report.estimate {
+//!     println!("{} parameters from {} recording(s)", est.estimate.values.len(), report.recordings.len());
+//! }
+//! # Ok(()) }
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use arrow::array::RecordBatch;
+use robotid_schemas::{metadata, RawSamples, TableKind};
+use robotid_stages::dynamics::Model;
+use robotid_stages::formats::parquet::write_parquet;
+use robotid_stages::signal::Spectra;
+use robotid_stages::stage::estimate::{Outcome as Estimated, Part, Reducer};
+use robotid_stages::stage::{Chain, Context, Product, Stage};
+
+use crate::error::{Error, Result};
+use crate::plan::{lint, parse, Plan, Resolved, StageConfig};
+use crate::run::{run_recordings, tables_of, RecordingResult, RunOptions};
+
+/// A parsed pipeline file.
+#[derive(Debug, Clone)]
+pub struct Pipeline {
+    pub plan: Plan,
+}
+
+/// A pipeline ready to run: robot loaded, logs found, stages built.
+pub struct Built {
+    pub plan: Plan,
+    pub model: Option<Arc<Model>>,
+    pub logs: Vec<PathBuf>,
+    /// What the logs hold.
+    pub start: Product,
+    pub context: Context,
+    /// (name, stage) in order; the estimate's map step is the last.
+    pub stages: Vec<(&'static str, Box<dyn Stage>)>,
+    pub reducer: Option<Reducer>,
+    /// Per stage: whether a later stage or sink still needs the raw samples.
+    raw_needed_after: Vec<bool>,
+}
+
+/// What a run gave: each recording's result and, when the pipeline
+/// estimates, the estimate and where its table went.
+#[derive(Debug)]
+pub struct RunReport {
+    pub recordings: Vec<RecordingResult>,
+    pub estimate: Option<Estimated>,
+    pub parameters: Option<PathBuf>,
+    pub seconds: f64,
+}
+
+impl Pipeline {
+    /// Reads and parses a pipeline file (step 1: structure).
+    pub fn from_path(path: impl AsRef<Path>) -> Result<Pipeline> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Parses pipeline text; relative paths resolve against `file`'s folder
+    /// (the file need not exist).
+    pub fn from_toml(text: &str, file: impl AsRef<Path>) -> Result<Pipeline> {
+        Ok(Pipeline {
+            plan: parse(text, file.as_ref())?,
+        })
+    }
+
+    /// Step 2, context: every problem knowable without reading samples.
+    pub fn lint(&self) -> Result<Resolved> {
+        Ok(lint(&self.plan)?)
+    }
+
+    /// Lints, then builds every stage once.
+    pub fn build(&self) -> Result<Built> {
+        let resolved = self.lint()?;
+        self.build_with(resolved)
+    }
+
+    /// Builds against an already linted context.
+    pub fn build_with(&self, resolved: Resolved) -> Result<Built> {
+        let plan = self.plan.clone();
+        let model = resolved.model.map(Arc::new);
+        let context = Context {
+            model: model.clone(),
+            base_dir: plan.base_dir().to_path_buf(),
+            spectra: Spectra::new(),
+        };
+        let mut stages = Vec::new();
+        let mut reducer = None;
+        for (i, s) in plan.stages.iter().enumerate() {
+            let built = match s {
+                StageConfig::Estimate(c) => c.reducer(&context).map(|r| {
+                    reducer = Some(r.clone());
+                    Box::new(r) as Box<dyn Stage>
+                }),
+                other => other.build(&context),
+            }
+            .map_err(|e| {
+                Error::Problems(crate::error::Problems(vec![crate::error::Placed {
+                    file: plan.file.clone(),
+                    place: plan.place(i, ""),
+                    message: e.to_string(),
+                }]))
+            })?;
+            stages.push((s.name(), built));
+        }
+        // Raw samples are large: freed after `align` unless a later stage
+        // (differentiate `filtered`) or the raw_samples table needs them.
+        let raw_table = plan.tables.contains(&TableKind::RawSamples);
+        let raw_needed_after = (0..plan.stages.len())
+            .map(|i| raw_table || plan.stages[i + 1..].iter().any(|s| s.takes().contains(&Product::Raw)))
+            .collect();
+        Ok(Built {
+            plan,
+            model,
+            logs: resolved.logs,
+            start: resolved.start,
+            context,
+            stages,
+            reducer,
+            raw_needed_after,
+        })
+    }
+}
+
+impl Built {
+    /// The run's provenance written into every table.
+    pub fn provenance(&self) -> BTreeMap<String, String> {
+        BTreeMap::from([
+            (metadata::CONFIG_SHA256.to_string(), self.plan.hash.clone()),
+            (
+                metadata::PIPELINE_FILE.to_string(),
+                self.plan
+                    .file
+                    .file_name()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+            ),
+        ])
+    }
+
+    /// Runs every stage on one chain; `progress` is told each stage's name.
+    pub fn run_stages(&self, chain: &mut Chain, mut progress: impl FnMut(&'static str)) -> robotid_stages::Result<()> {
+        for (i, (name, stage)) in self.stages.iter().enumerate() {
+            let t = Instant::now();
+            progress(name);
+            stage.run(chain).map_err(|e| e.in_stage(name, &chain.source))?;
+            if chain.periods.is_some() && !self.raw_needed_after[i] {
+                chain.raw = None;
+            }
+            chain.report.timings.push((name.to_string(), t.elapsed().as_secs_f64()));
+        }
+        Ok(())
+    }
+
+    /// The tables the pipeline writes for a finished chain.
+    pub fn tables(&self, chain: &Chain) -> robotid_stages::Result<Vec<(TableKind, RecordBatch)>> {
+        tables_of(chain, &self.plan.tables, &self.provenance())
+    }
+
+    /// Runs the stages on samples in memory and returns the chain, nothing
+    /// written: its typed values, its report, its tables through [`Built::tables`].
+    pub fn run_raw(&self, name: &str, raw: RawSamples) -> robotid_stages::Result<Chain> {
+        let mut chain = Chain::from_raw(name, name, raw);
+        self.run_stages(&mut chain, |_| {})?;
+        Ok(chain)
+    }
+
+    /// Every recording, then the estimate when the pipeline has one.
+    /// Tables go under `opts.out`, one folder per recording.
+    pub fn run(&self, opts: &RunOptions) -> Result<RunReport> {
+        let started = Instant::now();
+        let recordings = self.run_recordings(opts);
+        let estimate = self.estimate_all(&recordings, &opts.out)?;
+        let (estimate, parameters) = match estimate {
+            Some((e, p)) => (Some(e), Some(p)),
+            None => (None, None),
+        };
+        Ok(RunReport {
+            recordings,
+            estimate,
+            parameters,
+            seconds: started.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Every recording, in parallel; each writes its tables when it succeeds.
+    pub fn run_recordings(&self, opts: &RunOptions) -> Vec<RecordingResult> {
+        run_recordings(self, opts)
+    }
+
+    /// The `estimate` stage's reduce over finished recordings, its table
+    /// written as `<out>/parameters.parquet`. Refused when a recording
+    /// failed: an estimate silently missing data is worse than none.
+    pub fn estimate_all(&self, recordings: &[RecordingResult], out: &Path) -> Result<Option<(Estimated, PathBuf)>> {
+        let Some(reducer) = &self.reducer else {
+            return Ok(None);
+        };
+        let failed: Vec<String> = recordings
+            .iter()
+            .filter(|r| r.outcome.is_err())
+            .map(|r| r.name.clone())
+            .collect();
+        if !failed.is_empty() {
+            return Err(Error::RecordingsFailed { names: failed });
+        }
+        let parts: Vec<Part> = recordings
+            .iter()
+            .filter_map(|r| r.outcome.as_ref().ok().and_then(|o| o.part.clone()))
+            .collect();
+        let est = self.estimate(reducer, &parts)?;
+        std::fs::create_dir_all(out).map_err(|source| Error::Io {
+            path: out.to_path_buf(),
+            source,
+        })?;
+        let path = out.join("parameters.parquet");
+        write_parquet(&path, &est.table)?;
+        Ok(Some((est, path)))
+    }
+
+    /// The reduce over recordings' parts.
+    pub fn estimate(&self, reducer: &Reducer, parts: &[Part]) -> Result<Estimated> {
+        let provenance = BTreeMap::from([(metadata::CONFIG_SHA256.to_string(), self.plan.hash.clone())]);
+        reducer
+            .reduce(parts, &provenance)
+            .map_err(|e| Error::Stage(e.in_stage("estimate", "estimate")))
+    }
+}

@@ -1,0 +1,335 @@
+//! The inverse-dynamics regressor Φ(q, q̇, q̈) with τ = Φ·θ (Swevers eq. 2,
+//! Bona eq. 9), by the Newton–Euler recursion written in its regressor form.
+//!
+//! Per link, the 10 standard inertial parameters about the link-frame
+//! origin, in this order: XX, XY, XZ, YY, YZ, ZZ (inertia), MX, MY, MZ
+//! (first moments m·c), M (mass). Per joint, optionally: Ia (rotor inertia
+//! seen at the joint), friction (Fv, Fc; or Fv+, Fv−, Fc+, Fc− as Bona eq.
+//! 2), Off (torque offset). The link's own wrench about its origin is linear
+//! in its parameters:
+//!   f = M·a + (S(ω̇) + S(ω)²)·h,
+//!   n = K(ω̇)·ι + S(ω)·K(ω)·ι − S(a)·h,
+//! with h the first moments, ι the inertia components, K(v)·ι = I·v, and a
+//! the link origin's acceleration with gravity; joint j's torque sums the
+//! wrenches of links i ≥ j carried back to frame j, projected on its axis.
+
+use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
+
+use super::rnea::forward_pass;
+use super::{Data, Model};
+
+/// Which joint terms the regressor carries besides the link inertials.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RegressorTerms {
+    pub rotor: bool,
+    pub friction: FrictionTerms,
+    pub offset: bool,
+    /// Swevers eq. 9: a gravity-compensation spring (plus gravity) on one
+    /// joint as a finite Fourier series in its angle, Σ_l A_l cos(l·q) + B_l sin(l·q).
+    pub spring: Option<Spring>,
+}
+
+/// Which joint carries the spring terms and how many harmonics they have.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Spring {
+    pub joint: usize,
+    pub harmonics: u32,
+}
+
+/// The friction columns of each joint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrictionTerms {
+    None,
+    /// Fv·q̇ + Fc·sign(q̇).
+    Symmetric,
+    /// Bona eq. 2: separate coefficients for each sign of q̇.
+    Asymmetric,
+}
+
+impl RegressorTerms {
+    /// Rotor inertia and symmetric friction: Swevers' and Bona's models.
+    pub const DEFAULT: RegressorTerms = RegressorTerms {
+        rotor: true,
+        friction: FrictionTerms::Symmetric,
+        offset: false,
+        spring: None,
+    };
+
+    fn per_joint(&self) -> usize {
+        self.rotor as usize
+            + match self.friction {
+                FrictionTerms::None => 0,
+                FrictionTerms::Symmetric => 2,
+                FrictionTerms::Asymmetric => 4,
+            }
+            + self.offset as usize
+    }
+
+    /// Number of parameters for `n` joints.
+    pub fn count(&self, n: usize) -> usize {
+        n * (10 + self.per_joint()) + self.spring.map_or(0, |s| 2 * s.harmonics as usize)
+    }
+}
+
+/// Parameter name prefixes (before `_<joint>`).
+const INERTIAL: [&str; 10] = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"];
+
+/// Parameter names (`ZZ_<joint>`, `Fv_<joint>`, …), in column order.
+pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
+    let mut names = Vec::with_capacity(terms.count(model.dof()));
+    for j in &model.joints {
+        names.extend(INERTIAL.iter().map(|p| format!("{p}_{}", j.name)));
+    }
+    for j in &model.joints {
+        let n = &j.name;
+        if terms.rotor {
+            names.push(format!("Ia_{n}"));
+        }
+        names.extend(friction_names(terms.friction, n));
+        if terms.offset {
+            names.push(format!("Off_{n}"));
+        }
+    }
+    if let Some(sp) = terms.spring {
+        let n = &model.joints[sp.joint].name;
+        for l in 1..=sp.harmonics {
+            names.extend([format!("SpA{l}_{n}"), format!("SpB{l}_{n}")]);
+        }
+    }
+    names
+}
+
+/// The unit of a parameter, from its name's prefix.
+pub fn parameter_unit(name: &str) -> &'static str {
+    match name.split('_').next().unwrap_or("") {
+        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "Ia" | "Mi" => "kg*m^2",
+        "MX" | "MY" | "MZ" => "kg*m",
+        "M" => "kg",
+        "Fv" | "Fv+" | "Fv-" => "N*m*s/rad",
+        _ => "N*m", // Fc, Off, spring coefficients
+    }
+}
+
+/// A link's 10 standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M] from its
+/// inertia about the link origin, first moment and mass.
+pub fn inertial_parameters(i: &Matrix3<f64>, h: &Vector3<f64>, mass: f64) -> [f64; 10] {
+    [
+        i[(0, 0)],
+        i[(0, 1)],
+        i[(0, 2)],
+        i[(1, 1)],
+        i[(1, 2)],
+        i[(2, 2)],
+        h.x,
+        h.y,
+        h.z,
+        mass,
+    ]
+}
+
+/// The model's own parameter values in [`parameter_names`] order. With
+/// symmetric terms, asymmetric friction is averaged.
+pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
+    let mut theta = Vec::with_capacity(terms.count(model.dof()));
+    for l in &model.links {
+        theta.extend(inertial_parameters(&l.inertia_origin(), &l.first_moment(), l.mass));
+    }
+    for (d, f) in model.drives.iter().zip(&model.friction) {
+        if terms.rotor {
+            theta.push(d.reflected_inertia());
+        }
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => theta.extend([
+                0.5 * (f.viscous_pos + f.viscous_neg),
+                0.5 * (f.coulomb_pos + f.coulomb_neg),
+            ]),
+            FrictionTerms::Asymmetric => theta.extend([f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg]),
+        }
+        if terms.offset {
+            theta.push(f.offset);
+        }
+    }
+    // The model has no spring: its Fourier coefficients are zero.
+    if let Some(sp) = terms.spring {
+        theta.extend(std::iter::repeat_n(0.0, 2 * sp.harmonics as usize));
+    }
+    theta
+}
+
+/// The inverse of [`standard_parameters`]: a copy of `model` with its
+/// inertials, reflected rotor inertias (the rotor inertia is set so that
+/// rotor·gear² matches), friction and offsets taken from `theta`. Spring
+/// coefficients have no place in the model and are ignored.
+pub fn with_standard_parameters(model: &Model, terms: RegressorTerms, theta: &[f64]) -> Model {
+    assert_eq!(theta.len(), terms.count(model.dof()), "standard parameter count");
+    let mut m = model.clone();
+    for (k, l) in m.links.iter_mut().enumerate() {
+        let t = &theta[10 * k..10 * k + 10];
+        let io = Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
+        let h = Vector3::new(t[6], t[7], t[8]);
+        let mass = t[9];
+        let com = if mass > 0.0 { h / mass } else { Vector3::zeros() };
+        l.mass = mass;
+        l.com = com;
+        l.inertia_com = io - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
+    }
+    let mut at = 10 * m.dof();
+    for j in 0..m.dof() {
+        if terms.rotor {
+            let g2 = m.drives[j].gear_ratio * m.drives[j].gear_ratio;
+            if g2 > 0.0 {
+                m.drives[j].rotor_inertia = theta[at] / g2;
+            }
+            at += 1;
+        }
+        let f = &mut m.friction[j];
+        match terms.friction {
+            FrictionTerms::None => {}
+            FrictionTerms::Symmetric => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 1], theta[at + 1]);
+                at += 2;
+            }
+            FrictionTerms::Asymmetric => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at + 1]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 2], theta[at + 3]);
+                at += 4;
+            }
+        }
+        if terms.offset {
+            f.offset = theta[at];
+            at += 1;
+        }
+    }
+    m
+}
+
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// K(v) with I·v = K(v)·[XX, XY, XZ, YY, YZ, ZZ].
+fn k_of(v: &Vector3<f64>) -> SMatrix<f64, 3, 6> {
+    SMatrix::<f64, 3, 6>::new(
+        v.x, v.y, v.z, 0.0, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z, 0.0, 0.0, 0.0, v.x, 0.0, v.y, v.z,
+    )
+}
+
+/// Fills `out` (n × terms.count(n)) with Φ(q, q̇, q̈). `transition` of each
+/// joint's friction shapes the Coulomb column as in the model (sign or tanh).
+pub fn regressor(
+    model: &Model,
+    data: &mut Data,
+    q: &[f64],
+    qd: &[f64],
+    qdd: &[f64],
+    terms: RegressorTerms,
+    out: &mut DMatrix<f64>,
+) {
+    let n = model.dof();
+    assert_eq!(
+        out.shape(),
+        (n, terms.count(n)),
+        "regressor: output matrix has the wrong shape"
+    );
+    forward_pass(model, data, q, qd, qdd, true);
+    out.fill(0.0);
+    for i in 0..n {
+        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
+        // Link i's own wrench regressor, frame i: force rows F, moment rows M (3 × 10 each).
+        let mut f = SMatrix::<f64, 3, 10>::zeros();
+        let mut m = SMatrix::<f64, 3, 10>::zeros();
+        let sw = skew(&w);
+        f.fixed_view_mut::<3, 3>(0, 6).copy_from(&(skew(&dw) + sw * sw));
+        f.fixed_view_mut::<3, 1>(0, 9).copy_from(&a);
+        m.fixed_view_mut::<3, 6>(0, 0).copy_from(&(k_of(&dw) + sw * k_of(&w)));
+        m.fixed_view_mut::<3, 3>(0, 6).copy_from(&(-skew(&a)));
+        // Carry it back to every joint j ≤ i.
+        for j in (0..=i).rev() {
+            let z = model.joints[j].axis.into_inner();
+            let row = z.transpose() * m;
+            for c in 0..10 {
+                out[(j, 10 * i + c)] = row[c];
+            }
+            if j > 0 {
+                let r = data.rot[j];
+                let p = skew(&model.joints[j].origin_xyz);
+                let rf = r * f;
+                m = r * m + p * rf;
+                f = rf;
+            }
+        }
+    }
+    let per = terms.per_joint();
+    for j in 0..n {
+        let mut c = 10 * n + per * j;
+        if terms.rotor {
+            out[(j, c)] = qdd[j];
+            c += 1;
+        }
+        c += friction_columns(terms.friction, &model.friction[j], qd[j], out, j, c);
+        if terms.offset {
+            out[(j, c)] = 1.0;
+        }
+    }
+    if let Some(sp) = terms.spring {
+        let c0 = n * (10 + per);
+        for l in 1..=sp.harmonics as usize {
+            let (s, c) = (l as f64 * q[sp.joint]).sin_cos();
+            out[(sp.joint, c0 + 2 * (l - 1))] = c;
+            out[(sp.joint, c0 + 2 * (l - 1) + 1)] = s;
+        }
+    }
+}
+
+/// Names of one joint's friction parameters.
+pub fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
+    match friction {
+        FrictionTerms::None => Vec::new(),
+        FrictionTerms::Symmetric => vec![format!("Fv_{joint}"), format!("Fc_{joint}")],
+        FrictionTerms::Asymmetric => {
+            vec![
+                format!("Fv+_{joint}"),
+                format!("Fv-_{joint}"),
+                format!("Fc+_{joint}"),
+                format!("Fc-_{joint}"),
+            ]
+        }
+    }
+}
+
+/// Writes one joint's friction columns into `out[(row, col..)]` for joint
+/// velocity `qd`; the Coulomb shape (sign or tanh) is the joint's. Returns
+/// the number of columns written.
+pub(crate) fn friction_columns(
+    friction: FrictionTerms,
+    model: &super::Friction,
+    qd: f64,
+    out: &mut DMatrix<f64>,
+    row: usize,
+    col: usize,
+) -> usize {
+    let sign = if model.transition > 0.0 {
+        (qd / model.transition).tanh()
+    } else {
+        qd.signum() * (qd != 0.0) as i32 as f64
+    };
+    match friction {
+        FrictionTerms::None => 0,
+        FrictionTerms::Symmetric => {
+            out[(row, col)] = qd;
+            out[(row, col + 1)] = sign;
+            2
+        }
+        FrictionTerms::Asymmetric => {
+            let pos = qd >= 0.0;
+            out[(row, col)] = if pos { qd } else { 0.0 };
+            out[(row, col + 1)] = if pos { 0.0 } else { qd };
+            out[(row, col + 2)] = if pos { sign.max(0.0) } else { 0.0 };
+            out[(row, col + 3)] = if pos { 0.0 } else { sign.min(0.0) };
+            4
+        }
+    }
+}

@@ -1,0 +1,203 @@
+//! Estimation: the stacked linear system A·θ = b of one or more `regressor`
+//! tables → parameters with covariance and Student-t confidence intervals.
+//!
+//! One estimator per file: `least_squares` (ordinary and weighted, by QR of
+//! the column-scaled system, never AᵀA), `ml` (Bona eq. 13–16: noise on
+//! positions and torques, iterated to convergence). `system` gathers and
+//! checks the input and names the parameter at fault; `summary` folds it
+//! per recording and merges (the reduce); `table` writes and reads the
+//! `parameters` table. Also the Projection Method (`projection`) and the
+//! dedicated experiments (`dedicated`).
+
+pub mod dedicated;
+mod least_squares;
+mod ml;
+mod physical;
+pub mod projection;
+mod summary;
+mod system;
+mod table;
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ContinuousCDF, StudentsT};
+
+use crate::{Error, Result};
+
+pub use least_squares::{least_squares, solve_least_squares, stacked_least_squares, weighted_least_squares};
+pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
+pub use physical::{physically_consistent, pseudo_inertia, PhysicalFit};
+pub use summary::{KnownPart, Summary, MAX_CONDITION};
+pub use system::{row_weights, Known, System};
+pub use table::{parameters_from_table, parameters_table, Parameters};
+
+/// Which estimator, chosen in the pipeline's `estimate` stage or on the
+/// command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimator {
+    /// Ordinary least squares; σ² from the residual.
+    #[default]
+    Ols,
+    /// Rows weighted by the inverse torque-noise variance of the noise stage.
+    Wls,
+    /// Maximum likelihood with noise on positions, velocities, accelerations
+    /// and torques (Bona eq. 13–16, Olsen 2003).
+    Ml,
+}
+
+impl Estimator {
+    pub fn name(self) -> &'static str {
+        match self {
+            Estimator::Ols => "ols",
+            Estimator::Wls => "wls",
+            Estimator::Ml => "ml",
+        }
+    }
+}
+
+/// How the weighted estimators use the noise stage's variances.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Weights {
+    /// One variance per joint and recording: the mean over its samples.
+    /// Variances from a few periods scatter (P − 1 degrees of freedom each);
+    /// weighting by them row by row favours the rows whose spread happened
+    /// to come out small.
+    #[default]
+    PerJoint,
+    /// The variance of each sample as estimated (Swevers eq. 13).
+    PerSample,
+}
+
+/// Where the covariance of a least-squares estimate comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Covariance {
+    /// `periods` when every table carries its periods' torques, else `residual`.
+    #[default]
+    Auto,
+    /// The spread of the estimate across periods: right for coloured noise
+    /// (the inverse filter and the band limit colour it), P − 1 degrees of
+    /// freedom per recording.
+    Periods,
+    /// σ̂²(AᵀA)⁻¹ from the residual: assumes white noise, m − p degrees of freedom.
+    Residual,
+}
+
+impl Covariance {
+    pub fn name(self) -> &'static str {
+        match self {
+            Covariance::Auto => "auto",
+            Covariance::Periods => "periods",
+            Covariance::Residual => "residual",
+        }
+    }
+}
+
+/// The estimator and how it weights rows and gets its covariance.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Options {
+    pub method: Estimator,
+    pub weights: Weights,
+    pub covariance: Covariance,
+}
+
+/// An estimate: values, covariance and what the intervals need.
+#[derive(Debug, Clone)]
+pub struct Estimate {
+    pub names: Vec<String>,
+    pub units: Vec<String>,
+    pub method: Estimator,
+    pub values: DVector<f64>,
+    /// Covariance of `values`.
+    pub covariance: DMatrix<f64>,
+    /// Residual degrees of freedom (rows − parameters): Student t's.
+    pub dof: usize,
+    /// Residual variance per unit weight: σ̂² for OLS (N·m)², the reduced
+    /// χ² for WLS and ML (≈ 1 when the noise model is right).
+    pub residual_variance: f64,
+    /// Condition number of the column-scaled (weighted) system.
+    pub condition: f64,
+    pub rows: usize,
+    /// Iterations to convergence (ML), 1 otherwise.
+    pub iterations: usize,
+    /// How the covariance was obtained (`periods` or `residual`).
+    pub covariance_from: Covariance,
+}
+
+impl Estimate {
+    pub fn std(&self) -> DVector<f64> {
+        DVector::from_fn(self.values.len(), |i, _| self.covariance[(i, i)].max(0.0).sqrt())
+    }
+
+    /// Half-width of the two-sided interval at `level`: t_{(1+level)/2, dof}·std.
+    pub fn half_width(&self, level: f64) -> DVector<f64> {
+        let t = student_t_quantile(0.5 + level / 2.0, self.dof);
+        self.std() * t
+    }
+}
+
+/// The quantile of Student's t with `dof` degrees of freedom (the normal
+/// quantile for very many, where the two agree to 1e-6).
+pub fn student_t_quantile(p: f64, dof: usize) -> f64 {
+    let nu = dof.max(1) as f64;
+    if nu > 1e7 {
+        return statrs::distribution::Normal::standard().inverse_cdf(p);
+    }
+    StudentsT::new(0.0, 1.0, nu).expect("ν > 0").inverse_cdf(p)
+}
+
+/// Runs the chosen estimator on a stacked system.
+pub fn estimate(sys: &System, opts: &Options, noise: Option<&InputNoise>) -> Result<Estimate> {
+    sys.validate()?;
+    match opts.method {
+        Estimator::Ols => solve_least_squares(sys, None, opts.covariance),
+        Estimator::Wls => solve_least_squares(sys, Some(&row_weights(sys, opts.weights)?), opts.covariance),
+        Estimator::Ml => {
+            let noise = noise.ok_or_else(|| {
+                Error::missing(
+                    "the noise on positions",
+                    "ml needs it: run it in a pipeline with `noise` and `differentiate` stages",
+                )
+            })?;
+            maximum_likelihood(sys, &row_weights(sys, opts.weights)?, noise, &MlOptions::default())
+        }
+    }
+}
+
+/// The standard normal CDF, for tests of residues against a Gaussian.
+pub fn normal_cdf(x: f64) -> f64 {
+    statrs::distribution::Normal::standard().cdf(x)
+}
+
+/// Least-squares covariance robust to correlated residuals (Newey–West,
+/// Bartlett weights): (AᵀA)⁻¹·(Σ_{|l|≤L} w_l Σ_t a_t r_t r_{t+l} a_{t+l}ᵀ)·(AᵀA)⁻¹.
+/// Low-passed records have strongly correlated noise, which the white
+/// σ̂²(AᵀA)⁻¹ would report as m-fold independent. The lag L is twice the
+/// first lag where the residual's autocorrelation falls under 0.05 (at
+/// most m/10). Rows must be in time order. Returns (covariance, L).
+pub fn newey_west(a: &DMatrix<f64>, r: &DVector<f64>, ata_inv: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let m = r.len();
+    let p = a.ncols();
+    let r0 = r.norm_squared();
+    let mut first = m / 20;
+    for l in 1..m / 20 {
+        let c: f64 = (0..m - l).map(|t| r[t] * r[t + l]).sum();
+        if (c / r0).abs() < 0.05 {
+            first = l;
+            break;
+        }
+    }
+    let lag = (2 * first).min(m / 10).max(1);
+    let g = DMatrix::from_fn(m, p, |t, j| a[(t, j)] * r[t]);
+    let mut s = g.transpose() * &g;
+    for l in 1..=lag {
+        let w = 1.0 - l as f64 / (lag + 1) as f64;
+        let head = g.rows(0, m - l);
+        let tail = g.rows(l, m - l);
+        let c = head.transpose() * tail;
+        s += (&c + c.transpose()) * w;
+    }
+    (ata_inv * s * ata_inv, lag)
+}

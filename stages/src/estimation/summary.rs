@@ -1,0 +1,262 @@
+//! Least squares as a map and a reduce: each recording is folded into its
+//! sufficient statistics as soon as its rows exist, and the estimate merges
+//! those, never a concatenation of every row.
+//!
+//! A recording's [`Summary`] holds the R factor of its (weighted) rows with
+//! Qᵀb and the residual sum of squares (`dynamics::RFactor`), Aᵀ·W·D for
+//! the deviations D of its periods' torques from their mean (the periods'
+//! covariance), and Aᵀ·W·A_k for parameters taken as known. All are
+//! additive over recordings, so summaries merge in any grouping. Column
+//! scaling, the rank check and the covariance are applied once, after the
+//! merge: the R factor of A·S is R·S for a diagonal S, and the column norms
+//! of A are those of R.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{DMatrix, DVector};
+
+use super::{Covariance, Estimate, Estimator, System};
+use crate::dynamics::RFactor;
+use crate::{Error, Result};
+
+/// Above this condition number of the column-scaled system the parameters
+/// along the weakest direction are noise amplified by more than 1e10: that
+/// is not an identifiable model.
+pub const MAX_CONDITION: f64 = 1e10;
+
+/// The known parameters' part of a summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KnownPart {
+    pub names: Vec<String>,
+    /// Σ Aᵀ·W·A_k (parameters × known).
+    pub cross: DMatrix<f64>,
+    /// Their covariance.
+    pub covariance: DMatrix<f64>,
+}
+
+/// Sufficient statistics of one or more recordings' least squares.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub names: Vec<String>,
+    pub units: Vec<String>,
+    pub expressions: Vec<String>,
+    pub recordings: Vec<String>,
+    /// R factor, Qᵀb, RSS and rows of diag(√w)·A (unscaled columns).
+    pub factor: RFactor,
+    /// Largest |A| per column (a parameter nothing excites has 0).
+    pub column_max: DVector<f64>,
+    /// Independent equations (fewer than rows after projection).
+    pub equations: usize,
+    /// Per recording, Aᵀ·W·D (parameters × periods); None without periods.
+    pub period_moments: Vec<Option<DMatrix<f64>>>,
+    pub known: Option<KnownPart>,
+    pub weighted: bool,
+    /// The first recording's provenance (regressor configuration, robot).
+    pub metadata: BTreeMap<String, String>,
+}
+
+impl Summary {
+    /// Folds one system (usually one recording) with optional row weights.
+    /// Non-finite values are refused here, with the row named.
+    pub fn of(sys: &System, weights: Option<&DVector<f64>>) -> Result<Summary> {
+        sys.validate_values()?;
+        let (m, p) = (sys.rows(), sys.parameters());
+        let sw = |i: usize| weights.map_or(1.0, |w| w[i].sqrt());
+        let mut factor = RFactor::new(p);
+        const BLOCK: usize = 4096;
+        for start in (0..m).step_by(BLOCK) {
+            let k = BLOCK.min(m - start);
+            let a = DMatrix::from_fn(k, p, |i, j| sw(start + i) * sys.a[(start + i, j)]);
+            let b = DVector::from_fn(k, |i, _| sw(start + i) * sys.b[start + i]);
+            factor.add_rows(&a, &b);
+        }
+        let column_max = DVector::from_fn(p, |j, _| sys.a.column(j).amax());
+        let mut period_moments = Vec::with_capacity(sys.recordings.len());
+        for (r, periods) in sys.periods.iter().enumerate() {
+            period_moments.push(periods.as_ref().map(|tp| {
+                let start = sys.offsets[r];
+                let np = tp.ncols();
+                let mut out = DMatrix::zeros(p, np);
+                for i in 0..tp.nrows() {
+                    let mean = tp.row(i).sum() / np as f64;
+                    let w = weights.map_or(1.0, |w| w[start + i]);
+                    for k in 0..np {
+                        let d = w * (tp[(i, k)] - mean);
+                        for j in 0..p {
+                            out[(j, k)] += sys.a[(start + i, j)] * d;
+                        }
+                    }
+                }
+                out
+            }));
+        }
+        let known = sys.known.as_ref().map(|(ak, ck)| {
+            let wak = match weights {
+                Some(w) => DMatrix::from_fn(ak.nrows(), ak.ncols(), |i, j| w[i] * ak[(i, j)]),
+                None => ak.clone(),
+            };
+            KnownPart {
+                names: sys
+                    .metadata
+                    .get(robotid_schemas::metadata::KNOWN)
+                    .map(|k| k.split(',').map(str::to_string).collect())
+                    .unwrap_or_default(),
+                cross: sys.a.transpose() * wak,
+                covariance: ck.clone(),
+            }
+        });
+        Ok(Summary {
+            names: sys.names.clone(),
+            units: sys.units.clone(),
+            expressions: sys.expressions.clone(),
+            recordings: sys.recordings.clone(),
+            factor,
+            column_max,
+            equations: sys.equations(),
+            period_moments,
+            known,
+            weighted: weights.is_some(),
+            metadata: sys.metadata.clone(),
+        })
+    }
+
+    /// Adds another summary of the same parameters (more recordings).
+    pub fn merge(&mut self, other: &Summary) -> Result<()> {
+        if other.names != self.names {
+            return Err(Error::mismatch(
+                format!(
+                    "{}: parameters (the recordings were not made with one regressor configuration)",
+                    other.recordings.join(", ")
+                ),
+                format!("{:?} (those of {})", self.names, self.recordings.join(", ")),
+                format!("{:?}", other.names),
+            ));
+        }
+        if other.weighted != self.weighted {
+            return Err(Error::mismatch(
+                "summaries to merge: weighting",
+                self.weighted,
+                other.weighted,
+            ));
+        }
+        match (&mut self.known, &other.known) {
+            (Some(a), Some(b)) if a.names == b.names => a.cross += &b.cross,
+            (None, None) => {}
+            _ => {
+                return Err(Error::mismatch(
+                    "summaries to merge: parameters taken as known",
+                    "the same in every recording",
+                    "different ones",
+                ))
+            }
+        }
+        self.factor.merge(&other.factor);
+        self.column_max.zip_apply(&other.column_max, |a, b| *a = a.max(b));
+        self.equations += other.equations;
+        self.recordings.extend(other.recordings.iter().cloned());
+        self.period_moments.extend(other.period_moments.iter().cloned());
+        Ok(())
+    }
+
+    pub fn parameters(&self) -> usize {
+        self.names.len()
+    }
+
+    /// The estimate: column-scaled R, rank judged on its singular values,
+    /// θ = R⁻¹z, and the chosen covariance.
+    pub fn solve(&self, covariance: Covariance) -> Result<Estimate> {
+        let p = self.parameters();
+        let m = self.factor.rows;
+        if m <= p {
+            return Err(Error::TooFewRows { rows: m, parameters: p });
+        }
+        let scale = self.column_max.max();
+        if let Some(j) = (0..p).find(|&j| self.column_max[j] <= 1e-14 * scale) {
+            return Err(Error::NotExcited {
+                parameter: self.names[j].clone(),
+                rows: m,
+            });
+        }
+        let norms: Vec<f64> = (0..p).map(|j| self.factor.r.column(j).norm()).collect();
+        let r = DMatrix::from_fn(p, p, |i, j| self.factor.r[(i, j)] / norms[j]);
+        let svd = r.clone().svd(false, true);
+        let smax = svd.singular_values.max();
+        let (imin, smin) = svd.singular_values.argmin();
+        let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+        if !(condition < MAX_CONDITION) {
+            let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();
+            let mut involved: Vec<(usize, f64)> = (0..p).filter(|&j| v[j].abs() > 0.05).map(|j| (j, v[j])).collect();
+            involved.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+            return Err(Error::RankDeficient {
+                condition,
+                parameters: involved.iter().map(|(j, _)| self.names[*j].clone()).collect(),
+                combination: involved
+                    .iter()
+                    .map(|(j, c)| format!("{c:+.2}·{}", self.names[*j]))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            });
+        }
+        let r_inv = r.try_inverse().ok_or_else(|| {
+            Error::numerical(
+                "least squares",
+                "the R factor is singular although its condition number is finite",
+            )
+        })?;
+        let theta_s = &r_inv * &self.factor.z;
+        let inv_scaled = &r_inv * r_inv.transpose();
+        let theta = DVector::from_fn(p, |j, _| theta_s[j] / norms[j]);
+        let inverse_normal = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] / (norms[i] * norms[j]));
+        let dof = self.equations.saturating_sub(p).max(1);
+        let residual_variance = self.factor.rss / dof as f64;
+        let have_periods = self.period_moments.iter().all(Option::is_some);
+        let use_periods = match covariance {
+            Covariance::Periods if !have_periods => {
+                return Err(Error::missing(
+                    "the torque of every period",
+                    "covariance = \"periods\" needs them in the regressor tables (an `align` stage with at least two periods before `regressor`)",
+                ))
+            }
+            Covariance::Periods => true,
+            Covariance::Residual => false,
+            Covariance::Auto => have_periods,
+        };
+        let (mut cov, dof) = if use_periods {
+            // θ = G·b̄ with b̄ the mean of P periods: Cov θ = G·Cov(b̄)·Gᵀ,
+            // Cov(b̄) from the periods' deviations, Σ(P − 1) degrees of freedom.
+            let mut cov = DMatrix::zeros(p, p);
+            let mut dof = 0;
+            for mm in self.period_moments.iter().flatten() {
+                let np = mm.ncols();
+                let g = &inverse_normal * mm;
+                cov += &g * g.transpose() / (np * (np - 1)) as f64;
+                dof += np - 1;
+            }
+            (cov, dof)
+        } else {
+            (&inverse_normal * residual_variance, dof)
+        };
+        // Known parameters' uncertainty: θ = G·(b − A_k θ_k) adds G·A_k·C_k·A_kᵀ·Gᵀ.
+        if let Some(k) = &self.known {
+            let g_ak = &inverse_normal * &k.cross;
+            cov += &g_ak * &k.covariance * g_ak.transpose();
+        }
+        Ok(Estimate {
+            names: self.names.clone(),
+            units: self.units.clone(),
+            method: if self.weighted { Estimator::Wls } else { Estimator::Ols },
+            values: theta,
+            covariance: cov,
+            dof,
+            residual_variance,
+            condition,
+            rows: m,
+            iterations: 1,
+            covariance_from: if use_periods {
+                Covariance::Periods
+            } else {
+                Covariance::Residual
+            },
+        })
+    }
+}

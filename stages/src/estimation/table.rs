@@ -1,0 +1,137 @@
+//! The `parameters` table: one row per parameter (name, unit, value, std,
+//! relative std, Student-t interval, expression), then one `cov_<name>`
+//! column per parameter holding the covariance matrix. The schema metadata
+//! says how the estimate was made (method, level, degrees of freedom,
+//! residual variance, condition number, recordings) and carries the
+//! regressor's provenance (robot, model, regressor configuration), so that
+//! `robotid predict` can rebuild the regressor the values belong to.
+
+use crate::{Error, Result};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow::array::{Array, ArrayRef, Float64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use nalgebra::{DMatrix, DVector};
+use robotid_schemas::{metadata, TableKind};
+
+use super::Estimate;
+
+/// Schema key: confidence level of `ci_low`/`ci_high`.
+pub use robotid_schemas::metadata::ESTIMATE_CONFIDENCE as CONFIDENCE;
+/// Schema key: Student-t degrees of freedom.
+pub use robotid_schemas::metadata::ESTIMATE_DOF as DOF;
+/// Schema key: estimator (`ols`, `wls`, `ml`).
+pub use robotid_schemas::metadata::ESTIMATE_METHOD as METHOD;
+
+/// A `parameters` table read back.
+#[derive(Debug, Clone)]
+pub struct Parameters {
+    pub names: Vec<String>,
+    pub units: Vec<String>,
+    pub values: DVector<f64>,
+    pub std: DVector<f64>,
+    pub covariance: DMatrix<f64>,
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// The table of an estimate; `extra` (provenance) goes into the schema
+/// metadata, `expressions` into the optional column.
+pub fn parameters_table(
+    est: &Estimate,
+    level: f64,
+    expressions: &[String],
+    extra: &BTreeMap<String, String>,
+) -> Result<RecordBatch> {
+    let p = est.values.len();
+    let std = est.std();
+    let half = est.half_width(level);
+    let mut md = extra.clone();
+    md.insert(METHOD.into(), est.method.name().into());
+    md.insert(CONFIDENCE.into(), level.to_string());
+    md.insert(DOF.into(), est.dof.to_string());
+    md.insert(metadata::ESTIMATE_COVARIANCE.into(), est.covariance_from.name().into());
+    md.insert(metadata::ESTIMATE_ROWS.into(), est.rows.to_string());
+    md.insert(
+        metadata::ESTIMATE_RESIDUAL_VARIANCE.into(),
+        est.residual_variance.to_string(),
+    );
+    md.insert(metadata::ESTIMATE_ITERATIONS.into(), est.iterations.to_string());
+    md.insert(metadata::CONDITION_NUMBER.into(), est.condition.to_string());
+    let base = TableKind::Parameters.schema(&[], &["expression"], &md);
+    let mut fields: Vec<Field> = base.fields().iter().map(|f| f.as_ref().clone()).collect();
+    let values: Vec<f64> = est.values.iter().copied().collect();
+    let mut columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(est.names.clone())),
+        Arc::new(StringArray::from(est.units.clone())),
+        Arc::new(Float64Array::from(values.clone())),
+        Arc::new(Float64Array::from(std.iter().copied().collect::<Vec<_>>())),
+        Arc::new(Float64Array::from(
+            (0..p).map(|i| 100.0 * std[i] / values[i].abs()).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float64Array::from(
+            (0..p).map(|i| values[i] - half[i]).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float64Array::from(
+            (0..p).map(|i| values[i] + half[i]).collect::<Vec<_>>(),
+        )),
+        Arc::new(StringArray::from(
+            (0..p)
+                .map(|i| expressions.get(i).cloned().unwrap_or_else(|| est.names[i].clone()))
+                .collect::<Vec<_>>(),
+        )),
+    ];
+    for (j, name) in est.names.iter().enumerate() {
+        fields.push(
+            Field::new(format!("cov_{name}"), DataType::Float64, false).with_metadata(BTreeMap::from([
+                (metadata::UNIT.to_string(), "1".to_string()),
+                (metadata::QUANTITY.to_string(), "covariance".to_string()),
+                ("parameter".to_string(), name.clone()),
+            ])),
+        );
+        columns.push(Arc::new(Float64Array::from(
+            (0..p).map(|i| est.covariance[(i, j)]).collect::<Vec<_>>(),
+        )));
+    }
+    let schema = Schema::new(fields).with_metadata(base.metadata().clone());
+    let batch = RecordBatch::try_new(Arc::new(schema), columns)
+        .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
+    TableKind::Parameters.check(&batch.schema())?;
+    Ok(batch)
+}
+
+/// Reads a `parameters` table back.
+pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
+    let schema = batch.schema();
+    TableKind::Parameters.check(&schema)?;
+    let missing = |name: &str| Error::mismatch(format!("parameters table: column `{name}`"), "present", "missing");
+    let s = |name: &str| -> Result<Vec<String>> {
+        let c = batch
+            .column_by_name(name)
+            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+            .ok_or_else(|| missing(name))?;
+        Ok((0..c.len()).map(|i| c.value(i).to_string()).collect())
+    };
+    let f = |name: &str| -> Result<DVector<f64>> {
+        let c = batch
+            .column_by_name(name)
+            .and_then(|c| c.as_any().downcast_ref::<Float64Array>())
+            .ok_or_else(|| missing(name))?;
+        Ok(DVector::from_fn(c.len(), |i, _| c.value(i)))
+    };
+    let names = s("name")?;
+    let p = names.len();
+    let mut covariance = DMatrix::zeros(p, p);
+    for (j, name) in names.iter().enumerate() {
+        let c = f(&format!("cov_{name}"))?;
+        covariance.set_column(j, &c);
+    }
+    Ok(Parameters {
+        units: s("unit")?,
+        values: f("value")?,
+        std: f("std")?,
+        names,
+        covariance,
+        metadata: schema.metadata().clone().into_iter().collect(),
+    })
+}

@@ -1,0 +1,350 @@
+//! Runs a simulation: integrates the closed loop at `log_rate × steps`
+//! and logs what a lab's measurement chain would see.
+
+use std::collections::BTreeMap;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use robotid_schemas::{metadata, RawSamples, TorqueChannel};
+
+use super::config::{ControllerConfig, SimConfig};
+use super::plant::{Gains, Plant, Reference};
+use super::truth::{filter_truth, joint_truths, GainsTruth, GroundTruth, TruthSamples};
+use crate::dynamics::{mass_matrix, rnea_terms, Data, Model, Terms};
+use crate::signal::AnalogFilter;
+use crate::trajectory::Trajectory;
+use crate::{Error, Result};
+
+/// A finished simulation.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    /// What the lab logs: quantised noisy positions, filtered noisy current,
+    /// reference, encoder counts.
+    pub raw: RawSamples,
+    pub truth: TruthSamples,
+    pub ground_truth: GroundTruth,
+    /// Things the user should know (limits exceeded, …), one per line.
+    pub notes: Vec<String>,
+}
+
+/// Random streams, one per purpose, so that changing one setting (say,
+/// jitter) leaves the others' draws unchanged.
+fn stream(seed: u64, id: u64) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    r.set_stream(id);
+    r
+}
+
+/// Simulates `cfg` on `model`. `provenance` is merged into the raw table's
+/// schema metadata (config file name and hash, …).
+pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, String>) -> Result<Simulation> {
+    let n = model.dof();
+    let mut plant_model = model.clone();
+    for f in &mut plant_model.friction {
+        if f.transition == 0.0 {
+            f.transition = cfg.plant.coulomb_transition_rad_s;
+        }
+    }
+    let model = &plant_model;
+    let invalid = |msg: String| Error::Config {
+        path: "simulation".into(),
+        msg,
+    };
+    if cfg.trajectory.dof() != n {
+        return Err(invalid(format!(
+            "the trajectory drives {} joints, robot `{}` has {n}",
+            cfg.trajectory.dof(),
+            model.name
+        )));
+    }
+    cfg.check().map_err(invalid)?;
+    let m = &cfg.measurement;
+    let pos_std = m
+        .position_noise_std_rad
+        .resolve(n, "measurement.position_noise_std_rad")
+        .map_err(invalid)?;
+    let cur_std = m
+        .current_noise_std_a
+        .resolve(n, "measurement.current_noise_std_a")
+        .map_err(invalid)?;
+    let dist_std = cfg
+        .disturbance
+        .torque_std_nm
+        .resolve(n, "disturbance.torque_std_nm")
+        .map_err(invalid)?;
+
+    let timing = &cfg.timing;
+    let fs = timing.log_rate_hz;
+    let steps = timing.steps_per_sample as usize;
+    let h = 1.0 / (fs * steps as f64);
+    let period = cfg.trajectory.period();
+    let phase = match (timing.start_phase_s, period) {
+        (Some(p), _) => p,
+        (None, Some(t)) => stream(cfg.seed, 0).random_range(0.0..t),
+        (None, None) => 0.0,
+    };
+    let duration = timing.transient_s
+        + match &cfg.trajectory {
+            Trajectory::Fourier(f) => f.period() * timing.periods.unwrap_or(1) as f64,
+            Trajectory::Waypoints(w) => w.duration(),
+            Trajectory::Sweeps(s) => s.duration(),
+        };
+    let nominal = (duration * fs).round() as usize;
+
+    // Sampling schedule on the integration grid: jittered, strictly
+    // increasing, some samples dropped.
+    let mut rng_sched = stream(cfg.seed, 1);
+    let mut schedule = Vec::with_capacity(nominal);
+    let mut dropped = 0;
+    let last_step = (nominal.saturating_sub(1)) * steps;
+    for k in 0..nominal {
+        let mut idx = (k * steps) as i64;
+        if timing.jitter_std_s > 0.0 {
+            let j: f64 = rng_sched.sample(StandardNormal);
+            idx += (j * timing.jitter_std_s / h).round() as i64;
+        }
+        let lo = schedule.last().map_or(0, |&p: &usize| p as i64 + 1);
+        let idx = idx.clamp(lo, last_step.max(lo as usize) as i64) as usize;
+        if timing.drop_probability > 0.0 && rng_sched.random::<f64>() < timing.drop_probability {
+            dropped += 1;
+            continue;
+        }
+        schedule.push(idx);
+    }
+
+    let reference = Reference::new(cfg.trajectory.clone(), timing.transient_s, phase);
+    let rest = reference.rest.clone();
+    let mut data = Data::new(model);
+    let gains = match &cfg.controller {
+        ControllerConfig::Off => None,
+        ControllerConfig::Pid {
+            bandwidth_hz,
+            damping,
+            integral_hz,
+            kp,
+            kd,
+            ki,
+        } => {
+            let mm = mass_matrix(model, &mut data, &rest).clone();
+            let w = 2.0 * std::f64::consts::PI * bandwidth_hz;
+            let wi = 2.0 * std::f64::consts::PI * integral_hz;
+            let diag: Vec<f64> = (0..n).map(|i| mm[(i, i)]).collect();
+            let pick = |given: &Option<super::config::PerJoint>, key: &str, default: &dyn Fn(usize) -> f64| match given
+            {
+                Some(g) => g.resolve(n, key).map_err(invalid),
+                None => Ok((0..n).map(default).collect::<Vec<f64>>()),
+            };
+            let kp = pick(kp, "controller.kp", &|i| diag[i] * w * w)?;
+            let kd = pick(kd, "controller.kd", &|i| 2.0 * damping * w * diag[i])?;
+            let ki = pick(ki, "controller.ki", &|i| kp[i] * wi)?;
+            Some(Gains { kp, kd, ki })
+        }
+    };
+    let filter = match &m.filter {
+        Some(spec) => Some(AnalogFilter::new(*spec).map_err(invalid)?),
+        None => None,
+    };
+    let gains_truth = gains.as_ref().map(|g| GainsTruth {
+        kp: g.kp.clone(),
+        kd: g.kd.clone(),
+        ki: g.ki.clone(),
+    });
+    let filt_truth = filter.as_ref().map(filter_truth);
+
+    let mut plant = Plant::new(model, reference, gains, filter);
+    let mut x = vec![0.0; plant.state_len()];
+    x[..n].copy_from_slice(&rest);
+    // Start as if the controller had been holding the rest position: the
+    // integrator carries the gravity torque.
+    let zero = vec![0.0; n];
+    let g0 = rnea_terms(
+        model,
+        &mut data,
+        &rest,
+        &zero,
+        &zero,
+        Terms {
+            gravity: true,
+            friction: false,
+            rotor: false,
+        },
+    )
+    .clone();
+    if let Some(g) = &plant.gains {
+        for i in 0..n {
+            if g.ki[i] > 0.0 {
+                x[2 * n + i] = g0[i] / g.ki[i];
+            }
+        }
+    }
+    plant.control(0.0, &x);
+    if let Some(f) = plant.filter.clone() {
+        let order = f.states();
+        for i in 0..n {
+            let s = 3 * n + i * order;
+            let current = plant.current(i, plant.u[i]);
+            f.steady_state(current, &mut x[s..s + order]);
+        }
+    }
+
+    let mut rng_pos = stream(cfg.seed, 2);
+    let mut rng_cur = stream(cfg.seed, 3);
+    let mut rng_dist = stream(cfg.seed, 4);
+    let cols = |len: usize| vec![Vec::with_capacity(len); n];
+    let len = schedule.len();
+    let mut raw_q = cols(len);
+    let mut raw_i = cols(len);
+    let mut raw_r = cols(len);
+    let mut raw_c: Vec<Vec<i64>> = vec![Vec::with_capacity(len); n];
+    let mut truth = TruthSamples {
+        joints: model.joint_names(),
+        time: Vec::with_capacity(len),
+        q: cols(len),
+        qd: cols(len),
+        qdd: cols(len),
+        torque: cols(len),
+        disturbance: cols(len),
+        current_clean: cols(len),
+    };
+    let mut dx = vec![0.0; x.len()];
+    let mut step = 0usize;
+    for &idx in &schedule {
+        while step < idx {
+            if step.is_multiple_of(steps) {
+                for i in 0..n {
+                    let z: f64 = rng_dist.sample(StandardNormal);
+                    plant.disturbance[i] = dist_std[i] * z;
+                }
+            }
+            plant.step(step as f64 * h, h, &mut x);
+            step += 1;
+        }
+        let t = idx as f64 * h;
+        plant.derivative(t, &x, &mut dx);
+        truth.time.push(t);
+        for i in 0..n {
+            let drive = &model.drives[i];
+            truth.q[i].push(x[i]);
+            truth.qd[i].push(x[n + i]);
+            truth.qdd[i].push(plant.qdd[i]);
+            truth.torque[i].push(plant.u[i]);
+            truth.disturbance[i].push(plant.disturbance[i]);
+            let clean = plant.filtered_current(&x, i);
+            truth.current_clean[i].push(clean);
+            let zq: f64 = rng_pos.sample(StandardNormal);
+            let noisy = x[i] + pos_std[i] * zq;
+            let quantum = drive.radians_per_count();
+            let counts = (noisy / quantum).round();
+            raw_c[i].push(counts as i64);
+            // `+ 0.0` turns −0 into 0 so files never show "-0".
+            raw_q[i].push(if m.quantise { counts * quantum + 0.0 } else { noisy });
+            let zi: f64 = rng_cur.sample(StandardNormal);
+            raw_i[i].push(clean + cur_std[i] * zi);
+        }
+        let (r, _) = plant.reference_at(t);
+        for i in 0..n {
+            raw_r[i].push(r[i]);
+        }
+    }
+
+    let mut md = provenance.clone();
+    md.insert(metadata::SAMPLE_RATE_HZ.into(), fs.to_string());
+    if let Some(p) = period {
+        md.insert(metadata::PERIOD_S.into(), p.to_string());
+    }
+    let harmonics = match &cfg.trajectory {
+        Trajectory::Fourier(f) => Some(f.harmonic_numbers()),
+        Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
+    };
+    if let Some(hs) = &harmonics {
+        md.insert(
+            metadata::HARMONICS.into(),
+            hs.iter().map(u32::to_string).collect::<Vec<_>>().join(","),
+        );
+    }
+    let raw = RawSamples {
+        joints: model.joint_names(),
+        time: truth.time.clone(),
+        q: raw_q,
+        effort_kind: TorqueChannel::Current,
+        effort: raw_i,
+        reference: Some(raw_r),
+        counts: Some(raw_c),
+        metadata: md,
+    };
+    let notes = limit_notes(model, &mut plant.reference, &truth, timing.transient_s);
+    let ground_truth = GroundTruth {
+        robot: model.name.clone(),
+        seed: cfg.seed,
+        log_rate_hz: fs,
+        steps_per_sample: timing.steps_per_sample,
+        period_s: period,
+        harmonics,
+        transient_s: timing.transient_s,
+        start_phase_s: phase,
+        samples: len,
+        dropped_samples: dropped,
+        jitter_std_s: timing.jitter_std_s,
+        filter: filt_truth,
+        controller: gains_truth,
+        trajectory: cfg.trajectory.clone(),
+        joints: joint_truths(model, &pos_std, m.quantise, &cur_std, &dist_std),
+    };
+    Ok(Simulation {
+        raw,
+        truth,
+        ground_truth,
+        notes,
+    })
+}
+
+/// The reference after the transient (what the trajectory designer
+/// controls) against the joint limits, and the commanded torque against the
+/// torque limits. Measured accelerations are not judged: Coulomb friction
+/// makes short spikes at every velocity reversal, as on a real robot.
+fn limit_notes(model: &Model, reference: &mut Reference, truth: &TruthSamples, transient_s: f64) -> Vec<String> {
+    let n = model.dof();
+    let start = truth.time.iter().position(|&t| t >= transient_s).unwrap_or(0);
+    let (mut r, mut rd, mut rdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut lo = vec![f64::MAX; n];
+    let mut hi = vec![f64::MIN; n];
+    let mut vmax = vec![0.0f64; n];
+    let mut amax = vec![0.0f64; n];
+    for &t in &truth.time[start..] {
+        reference.eval(t, &mut r, &mut rd, &mut rdd);
+        for i in 0..n {
+            lo[i] = lo[i].min(r[i]);
+            hi[i] = hi[i].max(r[i]);
+            vmax[i] = vmax[i].max(rd[i].abs());
+            amax[i] = amax[i].max(rdd[i].abs());
+        }
+    }
+    let mut notes = Vec::new();
+    for (i, l) in model.limits.iter().enumerate() {
+        let name = &model.joints[i].name;
+        if let Some((a, b)) = l.position {
+            if lo[i] < a || hi[i] > b {
+                notes.push(format!(
+                    "joint `{name}`: reference range [{:.4}, {:.4}] rad leaves the limits [{a}, {b}]",
+                    lo[i], hi[i]
+                ));
+            }
+        }
+        let tmax = truth.torque[i][start..].iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        for (what, value, limit, unit) in [
+            ("reference velocity", vmax[i], l.velocity, "rad/s"),
+            ("reference acceleration", amax[i], l.acceleration, "rad/s^2"),
+            ("commanded torque", tmax, l.torque, "N*m"),
+        ] {
+            if let Some(lim) = limit {
+                if value > lim {
+                    notes.push(format!(
+                        "joint `{name}`: peak {what} {value:.4} {unit} exceeds the limit {lim}"
+                    ));
+                }
+            }
+        }
+    }
+    notes
+}

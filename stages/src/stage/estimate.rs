@@ -1,0 +1,424 @@
+//! The `estimate` stage: the last of a pipeline, a map and a reduce. Per
+//! recording (`run`) its regressor rows are folded into a least-squares
+//! [`Summary`] (and, for maximum likelihood, kept with their input noise);
+//! once every recording is through, [`Reducer::reduce`] merges the
+//! summaries and solves: one `parameters` table for all recordings.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use arrow::array::RecordBatch;
+use nalgebra::DVector;
+use robotid_schemas::metadata;
+use serde::{Deserialize, Serialize};
+
+use super::differentiate::Differentiation;
+use super::{Chain, Component, Context, LintContext, Problem, Product, Stage};
+use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
+use crate::estimation::{
+    input_noise, maximum_likelihood, parameters_from_table, parameters_table, physically_consistent, row_weights,
+    Covariance, Estimate, Estimator, InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Weights,
+};
+use crate::formats::parquet::read_parquet;
+use crate::stage::regressor::RegressorConfig;
+use crate::{Error, Result};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimateConfig {
+    /// `ols`, `wls` (rows weighted by the noise stage's torque variances)
+    /// or `ml` (noise on positions too, Bona eq. 13–16).
+    #[serde(default)]
+    pub method: Estimator,
+    /// Confidence level of the intervals, e.g. 0.95 or 0.999.
+    #[serde(default = "default_confidence")]
+    pub confidence: f64,
+    #[serde(default)]
+    pub weights: Weights,
+    /// `auto`, `periods` or `residual`.
+    #[serde(default)]
+    pub covariance: Covariance,
+    /// A `parameters` table (e.g. friction from dedicated experiments,
+    /// `robotid sweeps`) whose parameters are taken as known: moved to the
+    /// right-hand side before estimating the rest. Relative to the
+    /// pipeline file.
+    #[serde(default)]
+    pub known: Option<PathBuf>,
+    /// Replace the estimate by the nearest physically consistent one
+    /// (`estimation/physical.rs`: every link's pseudo-inertia positive
+    /// semidefinite, friction and rotor inertia ≥ 0), in the metric of its
+    /// covariance, the robot file as the a-priori model. The covariance is kept.
+    #[serde(default)]
+    pub physical: bool,
+}
+
+fn default_confidence() -> f64 {
+    0.95
+}
+
+impl Default for EstimateConfig {
+    fn default() -> Self {
+        EstimateConfig {
+            method: Estimator::Ols,
+            confidence: default_confidence(),
+            weights: Weights::PerJoint,
+            covariance: Covariance::Auto,
+            known: None,
+            physical: false,
+        }
+    }
+}
+
+impl EstimateConfig {
+    pub fn options(&self) -> Options {
+        Options {
+            method: self.method,
+            weights: self.weights,
+            covariance: self.covariance,
+        }
+    }
+
+    /// Problems of the settings alone.
+    pub fn settings_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            out.push(Problem::new(
+                "confidence",
+                format!("must be in (0, 1), not {}", self.confidence),
+            ));
+        }
+        if self.physical && self.known.is_some() {
+            out.push(Problem::new(
+                "physical",
+                "cannot be combined with `known` (the physical fit needs every base parameter)",
+            ));
+        }
+        out
+    }
+}
+
+/// A `parameters` table's values and covariance, to be taken as known.
+pub fn load_known(path: &std::path::Path) -> Result<Known> {
+    let batch = read_parquet(path)?;
+    let p = parameters_from_table(&batch).map_err(|e| Error::Format {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })?;
+    Ok(Known {
+        names: p.names,
+        values: p.values,
+        covariance: p.covariance,
+    })
+}
+
+impl Component for EstimateConfig {
+    const NAME: &'static str = "estimate";
+
+    fn takes(&self) -> &'static [Product] {
+        &[Product::Regressor]
+    }
+
+    fn makes(&self) -> Option<Product> {
+        None
+    }
+
+    fn problems(&self) -> Vec<Problem> {
+        self.settings_problems()
+    }
+
+    fn lint(&self, ctx: &LintContext) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let noise = ctx.before.contains(&Product::Noise);
+        match self.method {
+            Estimator::Wls if !noise => out.push(Problem::new(
+                "method",
+                "\"wls\" weights rows by the torque noise variances: add a `noise` stage before `regressor`",
+            )),
+            Estimator::Ml if !noise => out.push(Problem::new(
+                "method",
+                "\"ml\" needs the position and torque noise: add a `noise` stage before `regressor`",
+            )),
+            _ => {}
+        }
+        if self.method == Estimator::Ml && !ctx.before.contains(&Product::PeriodMean) {
+            out.push(Problem::new(
+                "method",
+                "\"ml\" needs periodic data (average, then differentiate by `dft` or `fourier_fit`)",
+            ));
+        }
+        if self.method == Estimator::Ml && self.covariance == Covariance::Periods {
+            out.push(Problem::new(
+                "covariance",
+                "\"periods\" is not available with method = \"ml\" (its covariance is the information matrix's, Bona eq. 16)",
+            ));
+        }
+        if let Some(rel) = &self.known {
+            if let Err(e) = load_known(&ctx.base_dir.join(rel)) {
+                out.push(Problem::new("known", e.to_string()));
+            }
+        }
+        if self.physical && ctx.model.is_none() {
+            out.push(Problem::new("physical", "needs the robot: set `robot`"));
+        }
+        out
+    }
+
+    fn build(&self, ctx: &Context) -> Result<Box<dyn Stage>> {
+        Ok(Box::new(self.reducer(ctx)?))
+    }
+}
+
+impl EstimateConfig {
+    /// The built stage: known parameters loaded once.
+    pub fn reducer(&self, ctx: &Context) -> Result<Reducer> {
+        let known = match &self.known {
+            Some(rel) => Some(Arc::new(load_known(&ctx.path(rel))?)),
+            None => None,
+        };
+        Ok(Reducer {
+            cfg: self.clone(),
+            known,
+            model: ctx.model.clone(),
+        })
+    }
+}
+
+/// The built `estimate` stage: `run` is the map, `reduce` the reduce.
+#[derive(Clone)]
+pub struct Reducer {
+    pub cfg: EstimateConfig,
+    known: Option<Arc<Known>>,
+    model: Option<Arc<Model>>,
+}
+
+/// One recording's part of an estimate.
+#[derive(Debug, Clone)]
+pub struct Part {
+    pub summary: Summary,
+    /// Maximum likelihood keeps its rows and their input noise.
+    pub rows: Option<(System, Option<InputNoise>)>,
+    /// The regressor configuration the rows were made with.
+    pub config: Option<RegressorConfig>,
+}
+
+/// What the reduce gives: the estimate, its `parameters` table and what
+/// the physical fit did.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub estimate: Estimate,
+    pub table: RecordBatch,
+    pub physical: Option<PhysicalFit>,
+    pub known: Vec<String>,
+}
+
+impl Stage for Reducer {
+    fn run(&self, chain: &mut Chain) -> Result<()> {
+        let rows = chain.regressor()?;
+        let md = rows.table_metadata()?;
+        let fix = |mut sys: System| -> Result<System> {
+            sys.metadata = md.clone();
+            if let Some(k) = &self.known {
+                if sys.fix(k)?.is_empty() {
+                    return Err(Error::mismatch(
+                        "known: parameters",
+                        format!("some of the model's {:?}", sys.names),
+                        format!("{:?}", k.names),
+                    ));
+                }
+            }
+            Ok(sys)
+        };
+        let weights = |sys: &System| -> Result<Option<DVector<f64>>> {
+            match self.cfg.method {
+                Estimator::Ols => Ok(None),
+                Estimator::Wls | Estimator::Ml => row_weights(sys, self.cfg.weights).map(Some),
+            }
+        };
+        let config = Some(rows.config.clone());
+        let part = if self.cfg.method == Estimator::Ml {
+            let sys = fix(rows.system.clone())?;
+            let noise = self.ml_input_noise(chain, &rows.config)?;
+            Part {
+                summary: Summary::of(&sys, weights(&sys)?.as_ref())?,
+                rows: Some((sys, Some(noise))),
+                config,
+            }
+        } else if self.known.is_some() {
+            let sys = fix(rows.system.clone())?;
+            Part {
+                summary: Summary::of(&sys, weights(&sys)?.as_ref())?,
+                rows: None,
+                config,
+            }
+        } else {
+            let w = weights(&rows.system)?;
+            let mut summary = Summary::of(&rows.system, w.as_ref())?;
+            summary.metadata = md;
+            Part {
+                summary,
+                rows: None,
+                config,
+            }
+        };
+        chain.estimate = Some(part);
+        Ok(())
+    }
+}
+
+impl Reducer {
+    /// The noise on the regressor's inputs for maximum likelihood: the noise
+    /// stage's position variance (mean over the period, per joint) through
+    /// the differentiation's gains, with the regressor's Jacobians.
+    fn ml_input_noise(&self, chain: &Chain, rc: &RegressorConfig) -> Result<InputNoise> {
+        let kin = chain.kinematics()?;
+        let noise = chain
+            .noise
+            .as_ref()
+            .ok_or_else(|| Error::missing("the position noise", "method = \"ml\" needs it: add a `noise` stage"))?;
+        if chain.facts.differentiation == Some(Differentiation::Filtered) {
+            return Err(Error::missing(
+                "periodic data",
+                "method = \"ml\" needs it (differentiate by `dft` or `fourier_fit`)",
+            ));
+        }
+        let gains = chain.facts.differentiation_gains.ok_or_else(|| {
+            Error::missing(
+                "the differentiation's noise gains",
+                "method = \"ml\" needs a periodic `differentiate` stage",
+            )
+        })?;
+        let var_q: Vec<f64> = noise
+            .var_q
+            .iter()
+            .map(|v| v.iter().sum::<f64>() / v.len().max(1) as f64)
+            .collect();
+        let model = self
+            .model
+            .as_ref()
+            .ok_or_else(|| Error::missing("the robot", "set `robot`"))?;
+        let base = rc.base_regressor(model)?;
+        Ok(input_noise(&base, kin, &var_q, gains))
+    }
+
+    /// Merges the recordings' parts (in the order given) and solves.
+    /// `provenance` goes into the table's metadata.
+    pub fn reduce(&self, parts: &[Part], provenance: &BTreeMap<String, String>) -> Result<Outcome> {
+        let first = parts
+            .first()
+            .ok_or_else(|| Error::missing("a recording", "the estimate needs at least one"))?;
+        let mut summary = first.summary.clone();
+        for p in &parts[1..] {
+            summary.merge(&p.summary)?;
+        }
+        let mut est = match self.cfg.method {
+            Estimator::Ols | Estimator::Wls => summary.solve(self.cfg.covariance)?,
+            Estimator::Ml => {
+                let systems: Vec<&System> = parts.iter().filter_map(|p| p.rows.as_ref().map(|r| &r.0)).collect();
+                let sys = System::stack(&systems)?;
+                let noise = InputNoise::stack(parts.iter().filter_map(|p| p.rows.as_ref().and_then(|r| r.1.clone())))
+                    .ok_or_else(|| Error::missing("the input noise", "method = \"ml\" needs it"))?;
+                sys.validate()?;
+                let w = row_weights(&sys, self.cfg.weights)?;
+                maximum_likelihood(&sys, &w, &noise, &MlOptions::default())?
+            }
+        };
+        let mut md = summary.metadata.clone();
+        let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
+        let mut physical = None;
+        if self.cfg.physical {
+            let model = self
+                .model
+                .as_ref()
+                .ok_or_else(|| Error::missing("the robot", "physical = true needs it: set `robot`"))?;
+            let rc = first
+                .config
+                .clone()
+                .ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
+            let (fit, note) = physical_fit(&rc.base_regressor(model)?, &est)?;
+            est.values = fit.base.clone();
+            md.insert(metadata::PHYSICAL.into(), note);
+            physical = Some(fit);
+        }
+        for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
+            md.remove(k);
+        }
+        let projected: Option<usize> = parts
+            .iter()
+            .map(|p| (p.summary.equations < p.summary.factor.rows).then_some(p.summary.equations))
+            .sum();
+        md.remove(metadata::PROJECTION_EQUATIONS);
+        if let Some(e) = projected {
+            md.insert(metadata::PROJECTION_EQUATIONS.into(), e.to_string());
+        }
+        md.insert(metadata::RECORDINGS.into(), summary.recordings.join(","));
+        md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
+        let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
+        Ok(Outcome {
+            estimate: est,
+            table,
+            physical,
+            known,
+        })
+    }
+
+    /// The map step without a chain: one recording's part from its system
+    /// (as read back from a `regressor` table).
+    pub fn part_of(&self, mut sys: System) -> Result<Part> {
+        if self.cfg.method == Estimator::Ml {
+            return Err(Error::missing(
+                "the kinematics and their noise",
+                "method = \"ml\" runs as a pipeline's `estimate` stage",
+            ));
+        }
+        if let Some(k) = &self.known {
+            if sys.fix(k)?.is_empty() {
+                return Err(Error::mismatch(
+                    "known: parameters",
+                    format!("some of the model's {:?}", sys.names),
+                    format!("{:?}", k.names),
+                ));
+            }
+        }
+        let w = match self.cfg.method {
+            Estimator::Wls => Some(row_weights(&sys, self.cfg.weights)?),
+            _ => None,
+        };
+        let config = RegressorConfig::of_metadata(&sys.metadata).ok();
+        Ok(Part {
+            summary: Summary::of(&sys, w.as_ref())?,
+            rows: None,
+            config,
+        })
+    }
+}
+
+/// The physically consistent estimate nearest `est` (robot file as the
+/// a-priori model), and a note saying what it cost.
+fn physical_fit(base: &BaseRegressor, est: &Estimate) -> Result<(PhysicalFit, String)> {
+    let map = match (base.kind, base.map()) {
+        (ModelKind::Chain, Some(map)) => map,
+        _ => {
+            return Err(Error::setting(
+                "physical",
+                "used with the chain model (model = \"chain\")",
+                "true",
+            ))
+        }
+    };
+    if base.names() != est.names {
+        return Err(Error::setting(
+            "physical",
+            "used without known parameters (every base parameter estimated)",
+            "true",
+        ));
+    }
+    let names = parameter_names(&base.model, base.terms);
+    let prior = standard_parameters(&base.model, base.terms);
+    let fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, 1e-3)?;
+    let note = format!(
+        "nearest physically consistent estimate: χ² = {:.4} against the covariance, {} iterations, smallest pseudo-inertia eigenvalues {:?}",
+        fit.chi2, fit.iterations, fit.min_eigen
+    );
+    Ok((fit, note))
+}

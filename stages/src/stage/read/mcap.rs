@@ -1,0 +1,220 @@
+//! MCAP logs, decoded lazily from a memory map: only the mapped topics are
+//! decoded, straight into columns. `sensor_msgs/msg/JointState` (CDR)
+//! values are matched to joints by name; JSON channels carry arrays in
+//! joint order. The sample times are the log times of the position topic;
+//! the other topics must carry the same stamps.
+
+use robotid_schemas::metadata;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use super::{Channel, Columns, ReadConfig};
+use crate::formats::cdr::decode_joint_state;
+use crate::formats::sha256_hex;
+use crate::{Error, Result};
+
+struct Wanted {
+    topic: String,
+    field: String,
+}
+
+fn wanted(ch: &Option<Channel>, default_topic: &str, default_field: &str) -> Wanted {
+    let c = ch.as_ref();
+    Wanted {
+        topic: c.and_then(|c| c.topic.clone()).unwrap_or_else(|| default_topic.into()),
+        field: c.and_then(|c| c.field.clone()).unwrap_or_else(|| default_field.into()),
+    }
+}
+
+/// One mapped channel's samples: stamps (ns) and `[joint][sample]` values.
+struct Series {
+    stamps: Vec<u64>,
+    values: Vec<Vec<f64>>,
+    /// Joint index in the message for each joint (JointState), found on the first message.
+    order: Option<Vec<usize>>,
+}
+
+pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
+    let source = path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    // SAFETY: the file is opened read-only and robotid never writes to its
+    // inputs; a concurrent writer would be a misuse we cannot prevent.
+    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
+    let hash = sha256_hex(&map);
+    let fmt = |msg: String| Error::Format {
+        path: path.to_path_buf(),
+        msg,
+    };
+    if cfg.position.as_ref().is_some_and(|c| c.column.is_some())
+        || cfg.effort.as_ref().is_some_and(|c| c.column.is_some())
+    {
+        return Err(fmt(
+            "MCAP channels are given by `topic` and `field`, not `column`".into()
+        ));
+    }
+    let mut metadata = BTreeMap::new();
+    for record in mcap::read::LinearReader::new(&map).map_err(|e| fmt(format!("not a readable MCAP file: {e}")))? {
+        match record {
+            Ok(mcap::records::Record::Metadata(m)) if m.name == "robotid" => {
+                for (k, v) in m.metadata {
+                    if k.starts_with("robotid.") && k != metadata::JOINTS {
+                        metadata.insert(k, v);
+                    }
+                }
+            }
+            Ok(_) => {}
+            Err(e) => return Err(fmt(format!("corrupt or truncated: {e}"))),
+        }
+    }
+    let pos = wanted(&cfg.position, "/joint_states", "position");
+    let eff = wanted(&cfg.effort, "/joint_states", "effort");
+    let refw = cfg
+        .reference
+        .as_ref()
+        .map(|c| wanted(&Some(c.clone()), "/joint_reference", "position"));
+    let specs: Vec<&Wanted> = [Some(&pos), Some(&eff), refw.as_ref()].into_iter().flatten().collect();
+    let mut series: Vec<Series> = specs
+        .iter()
+        .map(|_| Series {
+            stamps: Vec::new(),
+            values: vec![Vec::new(); joints.len()],
+            order: None,
+        })
+        .collect();
+    let mut seen_topics = BTreeMap::new();
+    let options = mcap::read::Options::ValidateChunkCrcs.into();
+    let stream = mcap::MessageStream::new_with_options(&map, options)
+        .map_err(|e| fmt(format!("not a readable MCAP file: {e}")))?;
+    for (count, message) in stream.enumerate() {
+        let message = message.map_err(|e| fmt(format!("corrupt or truncated after {count} messages: {e}")))?;
+        let topic = &message.channel.topic;
+        *seen_topics.entry(topic.clone()).or_insert(0usize) += 1;
+        for (w, s) in specs.iter().zip(series.iter_mut()) {
+            if &w.topic != topic {
+                continue;
+            }
+            let sample = s.stamps.len();
+            let err = |msg: String| Error::Data {
+                source_name: source.clone(),
+                channel: format!("{}:{}", w.topic, w.field),
+                sample: Some(sample),
+                msg,
+            };
+            match message.channel.message_encoding.as_str() {
+                "cdr" => {
+                    let js = decode_joint_state(&message.data).map_err(|e| err(e.to_string()))?;
+                    let values = match w.field.as_str() {
+                        "position" => &js.position,
+                        "velocity" => &js.velocity,
+                        "effort" => &js.effort,
+                        other => {
+                            return Err(err(format!(
+                                "JointState has no field `{other}` (position, velocity, effort)"
+                            )))
+                        }
+                    };
+                    if s.order.is_none() {
+                        let order = joints
+                            .iter()
+                            .map(|j| js.name.iter().position(|n| n == j))
+                            .collect::<Option<Vec<usize>>>()
+                            .ok_or_else(|| {
+                                err(format!(
+                                    "joints {joints:?} not all in the message's names {:?}",
+                                    js.name
+                                ))
+                            })?;
+                        s.order = Some(order);
+                    }
+                    let order = s.order.as_ref().expect("set");
+                    for (j, &i) in order.iter().enumerate() {
+                        let v = *values.get(i).ok_or_else(|| {
+                            err(format!(
+                                "`{}` has {} values, joint `{}` is number {}",
+                                w.field,
+                                values.len(),
+                                joints[j],
+                                i + 1
+                            ))
+                        })?;
+                        s.values[j].push(v);
+                    }
+                }
+                "json" => {
+                    let v: serde_json::Value =
+                        serde_json::from_slice(&message.data).map_err(|e| err(format!("invalid JSON: {e}")))?;
+                    let arr = v
+                        .get(&w.field)
+                        .and_then(|a| a.as_array())
+                        .ok_or_else(|| err(format!("no array `{}` in the message", w.field)))?;
+                    if arr.len() != joints.len() {
+                        return Err(err(format!(
+                            "`{}` has {} values for {} joints",
+                            w.field,
+                            arr.len(),
+                            joints.len()
+                        )));
+                    }
+                    for (j, x) in arr.iter().enumerate() {
+                        s.values[j].push(x.as_f64().ok_or_else(|| err(format!("`{x}` is not a number")))?);
+                    }
+                }
+                other => return Err(err(format!("message encoding `{other}` is not supported (cdr, json)"))),
+            }
+            s.stamps.push(message.log_time);
+        }
+    }
+    for (w, s) in specs.iter().zip(&series) {
+        if s.stamps.is_empty() {
+            let have: Vec<String> = seen_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+            return Err(Error::Data {
+                source_name: source.clone(),
+                channel: w.topic.clone(),
+                sample: None,
+                msg: format!(
+                    "missing channel: no messages on this topic; the log has {}",
+                    have.join(", ")
+                ),
+            });
+        }
+    }
+    let base = &series[0].stamps;
+    for (w, s) in specs.iter().zip(&series).skip(1) {
+        if let Some(k) = (0..base.len().max(s.stamps.len())).find(|&k| base.get(k) != s.stamps.get(k)) {
+            return Err(Error::Data {
+                source_name: source.clone(),
+                channel: w.topic.clone(),
+                sample: Some(k),
+                msg: format!(
+                    "stamps differ from the position topic `{}` here; resample before reading",
+                    specs[0].topic
+                ),
+            });
+        }
+    }
+    let time: Vec<f64> = base.iter().map(|&ns| ns as f64).collect();
+    let mut it = series.into_iter();
+    let position = it.next().expect("position").values;
+    let effort = it.next().expect("effort").values;
+    let reference = refw.as_ref().map(|_| it.next().expect("reference").values);
+    let names = |w: &Wanted| {
+        joints
+            .iter()
+            .map(|j| format!("{}:{}[{j}]", w.topic, w.field))
+            .collect::<Vec<_>>()
+    };
+    if cfg.effort.is_none() {
+        metadata.insert(metadata::READ_EFFORT_UNIT.into(), "N*m".into());
+    }
+    Ok((
+        Columns {
+            time,
+            position,
+            effort,
+            reference,
+            names: [names(&pos), names(&eff), refw.as_ref().map(names).unwrap_or_default()],
+            metadata,
+        },
+        hash,
+    ))
+}

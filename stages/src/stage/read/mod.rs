@@ -1,0 +1,343 @@
+//! The `read` stage: a raw log (CSV, Parquet or MCAP) → `raw_samples` in
+//! SI units, with the effort channel as joint torque (N·m).
+//!
+//! The pipeline file maps the log's columns (CSV, Parquet) or topics and
+//! fields (MCAP) to joints and says their units; counts and currents are
+//! converted with the robot's drives (or the constants given here). Every
+//! value is checked: a NaN or infinity names the file, channel and sample.
+
+mod csv;
+mod mcap;
+mod parquet;
+
+use std::path::Path;
+
+use robotid_schemas::{metadata, RawSamples, TorqueChannel};
+use serde::{Deserialize, Serialize};
+
+use super::Problem;
+use crate::dynamics::Model;
+use crate::formats::sha256_hex;
+use crate::{Error, Result};
+
+/// Where one channel is in the log and its unit. `column` (CSV, Parquet)
+/// may hold `{joint}` (the joint name) or `{index}` (1-based joint number).
+/// `topic` and `field` (MCAP): a `sensor_msgs/msg/JointState` topic and one
+/// of `position`, `velocity`, `effort`, values matched to joints by name; or
+/// a JSON topic and the key of an array with one value per joint, in joint
+/// order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Channel {
+    pub column: Option<String>,
+    pub topic: Option<String>,
+    pub field: Option<String>,
+    pub unit: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadConfig {
+    /// Joint names, in model order (default: the robot's).
+    pub joints: Option<Vec<String>>,
+    /// Time column (default `time` in s; MCAP: the message log time).
+    pub time: Option<Channel>,
+    /// Positions (default: `q_{joint}` in rad; MCAP: `/joint_states` position).
+    pub position: Option<Channel>,
+    /// Motor current or joint torque (default: `current_{joint}` in A, else
+    /// `torque_{joint}` in N·m; MCAP: `/joint_states` effort in N·m).
+    pub effort: Option<Channel>,
+    /// Reference positions (optional).
+    pub reference: Option<Channel>,
+    /// Joint torque per ampere (N·m/A) per joint, when there is no robot file.
+    pub torque_per_amp: Option<Vec<f64>>,
+    /// Joint angle per encoder count (rad) per joint, when there is no robot file.
+    pub radians_per_count: Option<Vec<f64>>,
+}
+
+/// Unit conversions the read stage knows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scale {
+    /// Multiply by this factor.
+    Factor(f64),
+    /// Encoder counts: per joint radians per count.
+    Counts,
+    /// Motor current: per joint torque per ampere, times the factor (mA → 1e-3).
+    Current(f64),
+}
+
+/// What a unit string means for a channel kind.
+pub fn unit_scale(kind: &str, unit: &str) -> Result<Scale> {
+    let u = unit.trim();
+    let s = match (kind, u) {
+        ("time", "s") => Scale::Factor(1.0),
+        ("time", "ms") => Scale::Factor(1e-3),
+        ("time", "us") => Scale::Factor(1e-6),
+        ("time", "ns") => Scale::Factor(1e-9),
+        ("position" | "reference", "rad") => Scale::Factor(1.0),
+        ("position" | "reference", "deg") => Scale::Factor(std::f64::consts::PI / 180.0),
+        ("position" | "reference", "count" | "counts") => Scale::Counts,
+        ("effort", "N*m" | "Nm" | "N.m" | "N·m") => Scale::Factor(1.0),
+        ("effort", "A") => Scale::Current(1.0),
+        ("effort", "mA") => Scale::Current(1e-3),
+        _ => {
+            let known = match kind {
+                "time" => "s, ms, us, ns",
+                "effort" => "A, mA, N*m",
+                _ => "rad, deg, count",
+            };
+            return Err(Error::setting(
+                format!("{kind}.unit"),
+                format!("one of {known}"),
+                format!("`{u}`"),
+            ));
+        }
+    };
+    Ok(s)
+}
+
+impl ReadConfig {
+    /// Structural problems (units known, channel given one way), keyed.
+    pub fn problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        for (kind, ch) in [
+            ("time", &self.time),
+            ("position", &self.position),
+            ("effort", &self.effort),
+            ("reference", &self.reference),
+        ] {
+            if let Some(c) = ch {
+                if let Err(e) = unit_scale(kind, &c.unit) {
+                    out.push(Problem::new(format!("{kind}.unit"), e.to_string()));
+                }
+                if c.column.is_some() && (c.topic.is_some() || c.field.is_some()) {
+                    out.push(Problem::new(
+                        kind,
+                        "give `column` (CSV, Parquet) or `topic`/`field` (MCAP), not both",
+                    ));
+                }
+            }
+        }
+        if self.joints.as_ref().is_some_and(|j| j.is_empty()) {
+            out.push(Problem::new("joints", "is empty: name the recorded joints"));
+        }
+        out
+    }
+
+    /// Problems of the joints against the robot; `all_needed` when a
+    /// stage (the regressor) needs every joint of it.
+    pub fn problems_with(&self, model: &Model, all_needed: bool) -> Vec<Problem> {
+        let names = model.joint_names();
+        let mut out = Vec::new();
+        if let Some(j) = &self.joints {
+            for name in j {
+                if !names.contains(name) {
+                    out.push(Problem::new(
+                        "joints",
+                        format!("`{name}` is not a joint of robot `{}` ({names:?})", model.name),
+                    ));
+                }
+            }
+            if all_needed && out.is_empty() && *j != names {
+                out.push(Problem::new(
+                    "joints",
+                    format!(
+                        "{j:?} are not all of robot `{}`'s joints in its order ({names:?}): the regressor needs every joint (lock the others in the robot file)",
+                        model.name
+                    ),
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// Raw columns as found in a log, before unit conversion.
+pub(crate) struct Columns {
+    pub time: Vec<f64>,
+    pub position: Vec<Vec<f64>>,
+    pub effort: Vec<Vec<f64>>,
+    pub reference: Option<Vec<Vec<f64>>>,
+    /// Channel names for error messages, per joint.
+    pub names: [Vec<String>; 3],
+    pub metadata: std::collections::BTreeMap<String, String>,
+}
+
+/// Reads `path` into `raw_samples`. `model` supplies joint names and drive
+/// constants when given.
+pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
+    let source = path.display().to_string();
+    let joints: Vec<String> = cfg
+        .joints
+        .clone()
+        .or_else(|| model.map(Model::joint_names))
+        .ok_or_else(|| Error::Config {
+            path: path.to_path_buf(),
+            msg: "no joint names: give `joints` in the source or a robot file".into(),
+        })?;
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let bytes_hash;
+    let cols = match ext.as_str() {
+        "csv" => {
+            bytes_hash = hash_file(path)?;
+            csv::read_csv(path, cfg, &joints)?
+        }
+        "parquet" => {
+            bytes_hash = hash_file(path)?;
+            parquet::read_parquet_log(path, cfg, &joints)?
+        }
+        "mcap" => {
+            let (c, h) = mcap::read_mcap(path, cfg, &joints)?;
+            bytes_hash = h;
+            c
+        }
+        other => {
+            return Err(Error::Format {
+                path: path.to_path_buf(),
+                msg: format!("unknown log format `.{other}` (csv, parquet, mcap)"),
+            })
+        }
+    };
+    let unit = |ch: &Option<Channel>, default: &str| ch.as_ref().map_or(default.to_string(), |c| c.unit.clone());
+    let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
+        source_name: source.clone(),
+        channel: channel.to_string(),
+        sample,
+        msg,
+    };
+    let per_joint_const = |given: &Option<Vec<f64>>, from_model: &dyn Fn(&Model, usize) -> f64, what: &str| {
+        let vals: Option<Vec<f64>> = given.clone().or_else(|| {
+            model.map(|m| {
+                joints
+                    .iter()
+                    .map(|j| {
+                        m.joint_names()
+                            .iter()
+                            .position(|n| n == j)
+                            .map_or(f64::NAN, |i| from_model(m, i))
+                    })
+                    .collect()
+            })
+        });
+        match vals {
+            Some(v) if v.len() == joints.len() && v.iter().all(|x| x.is_finite() && *x > 0.0) => Ok(v),
+            Some(v) if v.len() != joints.len() => {
+                Err(format!("`{what}` lists {} values for {} joints", v.len(), joints.len()))
+            }
+            _ => Err(format!(
+                "converting needs `{what}` per joint: give a robot file whose joints match, or `{what}` in the source"
+            )),
+        }
+    };
+    let convert = |kind: &str, unit: &str, values: &mut [Vec<f64>]| -> Result<()> {
+        let scale = unit_scale(kind, unit).map_err(|e| data_err(kind, None, e.to_string()))?;
+        match scale {
+            Scale::Factor(f) => values.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v *= f)),
+            Scale::Counts => {
+                let k = per_joint_const(
+                    &cfg.radians_per_count,
+                    &|m, i| m.drives[i].radians_per_count(),
+                    "radians_per_count",
+                )
+                .map_err(|e| data_err(kind, None, e))?;
+                for (c, f) in values.iter_mut().zip(k) {
+                    c.iter_mut().for_each(|v| *v *= f);
+                }
+            }
+            Scale::Current(f) => {
+                let k = per_joint_const(
+                    &cfg.torque_per_amp,
+                    &|m, i| m.drives[i].joint_torque_per_amp(),
+                    "torque_per_amp",
+                )
+                .map_err(|e| data_err(kind, None, e))?;
+                for (c, kj) in values.iter_mut().zip(k) {
+                    c.iter_mut().for_each(|v| *v *= f * kj);
+                }
+            }
+        }
+        Ok(())
+    };
+    let Columns {
+        mut time,
+        mut position,
+        mut effort,
+        mut reference,
+        names,
+        metadata: mut md,
+    } = cols;
+    let time_unit = unit(&cfg.time, if ext == "mcap" { "ns" } else { "s" });
+    let mut t = [time];
+    convert("time", &time_unit, &mut t)?;
+    [time] = t;
+    convert("position", &unit(&cfg.position, "rad"), &mut position)?;
+    let effort_unit = md
+        .remove(metadata::READ_EFFORT_UNIT)
+        .unwrap_or_else(|| unit(&cfg.effort, "A"));
+    convert("effort", &effort_unit, &mut effort)?;
+    if let Some(r) = &mut reference {
+        convert("reference", &unit(&cfg.reference, "rad"), r)?;
+    }
+    // MCAP stamps are absolute; keep the origin, work relative to it.
+    if let Some(&t0) = time.first() {
+        if ext == "mcap" {
+            md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
+            time.iter_mut().for_each(|v| *v -= t0);
+        }
+    }
+    check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
+    check_finite(&source, &position, &names[0])?;
+    check_finite(&source, &effort, &names[1])?;
+    if let Some(r) = &reference {
+        check_finite(&source, r, &names[2])?;
+    }
+    md.insert(
+        metadata::SOURCE_FILE.into(),
+        path.file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+    );
+    md.insert(metadata::SOURCE_SHA256.into(), bytes_hash);
+    let raw = RawSamples {
+        joints,
+        time,
+        q: position,
+        effort_kind: TorqueChannel::Torque,
+        effort,
+        reference,
+        counts: None,
+        metadata: md,
+    };
+    raw.check_shape()?;
+    Ok(raw)
+}
+
+fn hash_file(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    Ok(sha256_hex(&bytes))
+}
+
+/// The first NaN or infinity, named by channel and sample.
+fn check_finite(source: &str, cols: &[Vec<f64>], names: &[String]) -> Result<()> {
+    for (c, name) in cols.iter().zip(names) {
+        if let Some(k) = c.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: name.clone(),
+                sample: Some(k),
+                msg: format!("value is {}", c[k]),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Expands a column template for joint `j` (0-based) named `name`.
+pub(crate) fn column_name(template: &str, j: usize, name: &str) -> String {
+    template
+        .replace("{joint}", name)
+        .replace("{index}", &(j + 1).to_string())
+}

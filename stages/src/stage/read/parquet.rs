@@ -1,0 +1,92 @@
+//! Parquet logs: any Float64 or Int64 columns, mapped like CSV, streamed
+//! batch by batch with only the mapped columns decoded. A robotid
+//! `raw_samples` file keeps its provenance (rate, period, harmonics).
+
+use robotid_schemas::metadata;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use arrow::array::{Array, Float64Array, Int64Array};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::ProjectionMask;
+
+use super::csv::{into_columns, resolve};
+use super::{Columns, ReadConfig};
+use crate::{Error, Result};
+
+pub(crate) fn read_parquet_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let source = path.display().to_string();
+    let fmt = |msg: String| Error::Format {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| fmt(e.to_string()))?;
+    let schema = builder.schema().clone();
+    let header: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
+    let mapping = resolve(&header, cfg, joints, &source)?;
+    let mut wanted: Vec<String> = std::iter::once(&mapping.time)
+        .chain(&mapping.position)
+        .chain(&mapping.effort)
+        .chain(mapping.reference.iter().flatten())
+        .cloned()
+        .collect();
+    wanted.sort();
+    wanted.dedup();
+    let indices: Vec<usize> = wanted.iter().map(|w| schema.index_of(w).expect("resolved")).collect();
+    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
+    let rows = builder.metadata().file_metadata().num_rows().max(0) as usize;
+    let reader = builder
+        .with_projection(mask)
+        .with_batch_size(65536)
+        .build()
+        .map_err(|e| fmt(e.to_string()))?;
+    let mut columns: BTreeMap<String, Vec<f64>> =
+        wanted.iter().map(|w| (w.clone(), Vec::with_capacity(rows))).collect();
+    for batch in reader {
+        let batch = batch.map_err(|e| fmt(format!("corrupt or truncated: {e}")))?;
+        for (name, out) in columns.iter_mut() {
+            let a = batch.column(batch.schema().index_of(name).expect("projected"));
+            if let Some(f) = a.as_any().downcast_ref::<Float64Array>() {
+                out.extend(f.iter().map(|v| v.unwrap_or(f64::NAN)));
+            } else if let Some(i) = a.as_any().downcast_ref::<Int64Array>() {
+                out.extend(i.iter().map(|v| v.map_or(f64::NAN, |x| x as f64)));
+            } else {
+                return Err(Error::Data {
+                    source_name: source,
+                    channel: name.clone(),
+                    sample: None,
+                    msg: format!("expected Float64 or Int64, found {}", a.data_type()),
+                });
+            }
+        }
+    }
+    let md: BTreeMap<String, String> = schema
+        .metadata()
+        .iter()
+        .filter(|(k, _)| k.starts_with("robotid.") && *k != metadata::TABLE && *k != metadata::VERSION)
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    // Move each column out on its first use; a column mapped twice is cloned.
+    let mut uses: BTreeMap<String, usize> = BTreeMap::new();
+    for n in std::iter::once(&mapping.time)
+        .chain(&mapping.position)
+        .chain(&mapping.effort)
+        .chain(mapping.reference.iter().flatten())
+    {
+        *uses.entry(n.clone()).or_default() += 1;
+    }
+    Ok(into_columns(
+        mapping,
+        |n| {
+            let left = uses.get_mut(n).expect("mapped");
+            *left -= 1;
+            if *left == 0 {
+                columns.remove(n).expect("read")
+            } else {
+                columns[n].clone()
+            }
+        },
+        md,
+    ))
+}

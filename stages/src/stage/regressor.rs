@@ -1,0 +1,567 @@
+//! The `regressor` stage: differentiated periods → the stacked linear system
+//! A·θ = b (Swevers eq. 2–3, Bona eq. 9), one row per (sample, joint), one
+//! column per base parameter (named after its leading standard parameter,
+//! with its unit and full expression), the measured torque and its noise
+//! variance. At the sink it becomes a `regressor` table, whose schema
+//! metadata holds the condition number of the column-normalised A.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use nalgebra::{DMatrix, DVector};
+use robotid_schemas::{metadata, Kinematics, NoiseTable, TableKind};
+use serde::{Deserialize, Serialize};
+
+use super::{Chain, Component, Context, LintContext, Periods, Problem, Product, Stage};
+use crate::dynamics::{parameter_unit, BaseRegressor, FrictionTerms, Model, ModelKind, RegressorModel, SpringConfig};
+use crate::estimation::projection::ProjectionConfig;
+use crate::estimation::System;
+use crate::signal::Spectra;
+use crate::{Error, Result};
+
+/// The regressor stage's settings: the identification model
+/// ([`RegressorModel`]'s keys) and how the rows are made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RegressorConfig {
+    /// `chain` (the robot's base parameters) or `decoupled` (Bona §3.1).
+    pub model: ModelKind,
+    /// `none`, `symmetric` (Fv, Fc) or `asymmetric` (Bona eq. 2).
+    pub friction: FrictionTerms,
+    /// Rotor inertia seen at each joint.
+    pub rotor: bool,
+    /// A constant torque offset per joint.
+    pub offset: bool,
+    /// Coulomb transition velocity of the estimation model, rad/s
+    /// (default: the robot file's); see [`RegressorModel`].
+    pub coulomb_transition_rad_s: Option<f64>,
+    /// Swevers eq. 9 gravity-spring terms on one joint.
+    pub spring: Option<SpringConfig>,
+    /// Band-limit every regressor column, over the period, to the band the
+    /// torque was inverse-filtered to (lines above are zeroed), so that both
+    /// sides of A·θ = b see the same band: the Coulomb columns' sharp edges
+    /// have energy above it that the torque lost. On the simulated KUKA axis
+    /// the effect is small (the estimates move by under 0.05 σ); the
+    /// derivative band matters more there. Periodic kinematics only, Hz.
+    pub band_limit_hz: Option<f64>,
+    /// Closed-loop data: the Projection Method (`estimation/projection.rs`)
+    /// with a non-causal FIR of taps −m1..m2 from the references to the
+    /// command; torque and columns are projected on the references' span.
+    pub projection: Option<ProjectionConfig>,
+}
+
+impl Default for RegressorConfig {
+    fn default() -> Self {
+        RegressorConfig::from_model(RegressorModel::default())
+    }
+}
+
+impl RegressorConfig {
+    pub fn from_model(m: RegressorModel) -> RegressorConfig {
+        RegressorConfig {
+            model: m.model,
+            friction: m.friction,
+            rotor: m.rotor,
+            offset: m.offset,
+            coulomb_transition_rad_s: m.coulomb_transition_rad_s,
+            spring: m.spring,
+            band_limit_hz: None,
+            projection: None,
+        }
+    }
+
+    /// The identification model these settings describe.
+    pub fn regressor_model(&self) -> RegressorModel {
+        RegressorModel {
+            model: self.model,
+            friction: self.friction,
+            rotor: self.rotor,
+            offset: self.offset,
+            coulomb_transition_rad_s: self.coulomb_transition_rad_s,
+            spring: self.spring.clone(),
+        }
+    }
+
+    /// The base regressor of `model` under these settings.
+    pub fn base_regressor(&self, model: &Model) -> Result<BaseRegressor> {
+        BaseRegressor::new(model, &self.regressor_model())
+    }
+
+    /// The settings a `regressor` table (or a parameters table) was made with.
+    pub fn of_metadata(md: &BTreeMap<String, String>) -> Result<RegressorConfig> {
+        let text = md.get(metadata::REGRESSOR_CONFIG).ok_or_else(|| {
+            Error::missing(
+                "the regressor configuration",
+                format!("the table has no `{}` metadata", metadata::REGRESSOR_CONFIG),
+            )
+        })?;
+        serde_json::from_str(text)
+            .map_err(|e| Error::setting(metadata::REGRESSOR_CONFIG, "a regressor configuration", e))
+    }
+}
+
+impl Component for RegressorConfig {
+    const NAME: &'static str = "regressor";
+
+    fn takes(&self) -> &'static [Product] {
+        &[Product::Kinematics]
+    }
+
+    fn makes(&self) -> Option<Product> {
+        Some(Product::Regressor)
+    }
+
+    fn problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        if let Some(b) = self.band_limit_hz.filter(|b| !(*b > 0.0 && b.is_finite())) {
+            out.push(Problem::new(
+                "band_limit_hz",
+                format!("must be > 0 Hz and finite, not {b}"),
+            ));
+        }
+        if let Some(v) = self.coulomb_transition_rad_s.filter(|v| !(*v >= 0.0 && v.is_finite())) {
+            out.push(Problem::new(
+                "coulomb_transition_rad_s",
+                format!("must be ≥ 0 rad/s and finite, not {v}"),
+            ));
+        }
+        out
+    }
+
+    fn lint(&self, ctx: &LintContext) -> Vec<Problem> {
+        let mut out = Vec::new();
+        match ctx.model {
+            Some(m) => {
+                if let Err(e) = self.base_regressor(m) {
+                    out.push(Problem::new("", e.to_string()));
+                }
+            }
+            None => out.push(Problem::new("", "needs the robot: set `robot` at the top of the file")),
+        }
+        if let Some(b) = self.band_limit_hz.filter(|b| !(*b > 0.0 && b.is_finite())) {
+            out.push(Problem::new(
+                "band_limit_hz",
+                format!("must be > 0 Hz and finite, not {b}"),
+            ));
+        }
+        if self.projection.is_some() && !ctx.before.contains(&Product::Periods) {
+            out.push(Problem::new(
+                "projection",
+                "needs the aligned periods and their reference channel: an `align` stage before it",
+            ));
+        }
+        out
+    }
+
+    fn build(&self, ctx: &Context) -> Result<Box<dyn Stage>> {
+        let model = ctx.model(Self::NAME)?;
+        Ok(Box::new(Regressor {
+            base: self.base_regressor(&model)?,
+            cfg: self.clone(),
+            spectra: ctx.spectra.clone(),
+        }))
+    }
+}
+
+/// The built `regressor` stage: the base regressor (base-parameter QR and
+/// SVD) made once per run.
+pub struct Regressor {
+    base: BaseRegressor,
+    cfg: RegressorConfig,
+    spectra: Spectra,
+}
+
+impl Stage for Regressor {
+    fn run(&self, chain: &mut Chain) -> Result<()> {
+        let kin = chain.kinematics()?;
+        let band = match self.cfg.band_limit_hz {
+            Some(b) => Some((
+                b,
+                chain
+                    .facts
+                    .period_s
+                    .filter(|_| chain.facts.differentiation != Some(super::differentiate::Differentiation::Filtered))
+                    .ok_or_else(|| {
+                        Error::missing(
+                            "one averaged period",
+                            "band_limit_hz applies to periodic kinematics (this record is not periodic)",
+                        )
+                    })?,
+            )),
+            None => None,
+        };
+        let rows = regressor_rows(
+            kin,
+            chain.noise.as_ref(),
+            chain.periods.as_ref(),
+            &self.base,
+            &self.cfg,
+            band,
+            &self.spectra,
+            &chain.name,
+        )?;
+        chain.report.notes.push(format!(
+            "regressor: {} rows, {} base parameters, condition number {} (column-normalised)",
+            rows.system.rows(),
+            rows.system.parameters(),
+            rows.condition
+        ));
+        chain.regressor = Some(rows);
+        Ok(())
+    }
+}
+
+/// One recording's regressor system, with what its table shows.
+#[derive(Debug, Clone)]
+pub struct RegressorRows {
+    /// A·θ = b, one recording; its per-period torques when aligned.
+    pub system: System,
+    /// Time of each sample, s.
+    pub time: Vec<f64>,
+    /// Condition number of the column-normalised A (Swevers' criterion).
+    pub condition: f64,
+    /// What the Projection Method found, for the metadata.
+    pub projection: Option<String>,
+    pub config: RegressorConfig,
+    pub robot: String,
+    /// The kinematics' metadata (provenance), carried into the table.
+    pub metadata: BTreeMap<String, String>,
+}
+
+/// The base regressor of `kin` and, with the aligned `periods`, the torque
+/// of every period (the estimator's covariance then comes from the spread
+/// across periods, which holds whatever the noise's colour, Swevers
+/// §4.1.2). `band`: (band limit Hz, period s).
+#[allow(clippy::too_many_arguments)]
+pub fn regressor_rows(
+    kin: &Kinematics,
+    noise: Option<&NoiseTable>,
+    periods: Option<&Periods>,
+    base: &BaseRegressor,
+    cfg: &RegressorConfig,
+    band: Option<(f64, f64)>,
+    spectra: &Spectra,
+    recording: &str,
+) -> Result<RegressorRows> {
+    let model = &base.model;
+    let names = model.joint_names();
+    if names != kin.joints {
+        return Err(Error::mismatch(
+            "the kinematics' joints",
+            format!("{names:?} (the robot's)"),
+            format!("{:?}", kin.joints),
+        ));
+    }
+    let torque = kin
+        .torque
+        .as_ref()
+        .ok_or_else(|| Error::missing("torques", "the kinematics table has none"))?;
+    let n = model.dof();
+    let samples = kin.time.len();
+    let rows = samples * n;
+    let mut a = base.matrix(kin);
+    if let Some((b, period)) = band {
+        band_limit(&mut a, n, samples, period, b, spectra);
+    }
+    let mut b_torque: Vec<Vec<f64>> = torque.clone();
+    let mut projection = None;
+    let mut equations = None;
+    if let Some(pc) = &cfg.projection {
+        let p = periods.filter(|p| p.samples_per_period == samples).ok_or_else(|| {
+            Error::missing(
+                "the aligned periods of this table",
+                "projection needs an `align` stage and no resampling after it",
+            )
+        })?;
+        let reference = p.reference.as_ref().ok_or_else(|| {
+            Error::missing(
+                "the reference channel",
+                "the Projection Method needs it: map `reference` in [read]",
+            )
+        })?;
+        let proj = crate::estimation::projection::sensitivity(reference, &p.torque, p.samples_per_period, pc)?;
+        let eq = n * proj.rank();
+        if eq <= a.ncols() {
+            return Err(Error::mismatch(
+                "projection: equations (the references' span per joint × joints)",
+                format!(
+                    "more than the {} parameters (excite more harmonics or use a smaller model)",
+                    a.ncols()
+                ),
+                format!("{eq} ({} per joint)", proj.rank()),
+            ));
+        }
+        let mut series = vec![0.0; samples];
+        for j in 0..n {
+            b_torque[j] = proj.apply(&torque[j]);
+            for c in 0..a.ncols() {
+                for k in 0..samples {
+                    series[k] = a[(k * n + j, c)];
+                }
+                let back = proj.apply(&series);
+                for k in 0..samples {
+                    a[(k * n + j, c)] = back[k];
+                }
+            }
+        }
+        projection = Some(format!(
+            "m1 = {}, m2 = {}, rank {} per joint, explained {:?}, corr(û, u − û) {:?}",
+            proj.m1,
+            proj.m2,
+            proj.rank(),
+            proj.explained,
+            proj.correlation
+        ));
+        equations = Some(eq);
+    }
+    let b = DVector::from_fn(rows, |i, _| b_torque[i % n][i / n]);
+    let var = DVector::from_fn(rows, |i, _| {
+        noise
+            .and_then(|t| t.var_torque.get(i % n).and_then(|v| v.get(i / n)).copied())
+            .unwrap_or(f64::NAN)
+    });
+    let period_torques = periods
+        .filter(|p| p.periods >= 2 && p.samples_per_period == samples)
+        .map(|p| DMatrix::from_fn(rows, p.periods, |i, pi| p.torque[i % n][pi * samples + i / n]));
+    // Condition number of the column-normalised A (Swevers' criterion).
+    let mut scaled = a.clone();
+    for mut c in scaled.column_iter_mut() {
+        let norm = c.norm();
+        if norm > 0.0 {
+            c /= norm;
+        }
+    }
+    let sv = scaled.singular_values();
+    let condition = if sv.min() > 0.0 {
+        sv.max() / sv.min()
+    } else {
+        f64::INFINITY
+    };
+    let units = base
+        .names()
+        .iter()
+        .map(|name| parameter_unit(name).to_string())
+        .collect();
+    let mut system = System::from_matrices(base.names(), units, names, a, b, var);
+    system.expressions = base.expressions();
+    system.recordings = vec![recording.to_string()];
+    system.periods = vec![period_torques];
+    system.equations = equations;
+    Ok(RegressorRows {
+        system,
+        time: kin.time.clone(),
+        condition,
+        projection,
+        config: cfg.clone(),
+        robot: model.name.clone(),
+        metadata: kin.metadata.clone(),
+    })
+}
+
+/// The base regressor of `kin` for `model` as a `regressor` table (the
+/// stage without a pipeline, for tests and tools).
+pub fn regressor_table(
+    kin: &Kinematics,
+    noise: Option<&NoiseTable>,
+    periods: Option<&Periods>,
+    model: &Model,
+    cfg: &RegressorConfig,
+    recording: &str,
+) -> Result<RecordBatch> {
+    let base = cfg.base_regressor(model)?;
+    let spectra = Spectra::new();
+    let band = match cfg.band_limit_hz {
+        Some(b) => Some((
+            b,
+            kin.metadata
+                .get(metadata::PERIOD_S)
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|_| kin.metadata.get(metadata::DIFFERENTIATION).map(String::as_str) != Some("filtered"))
+                .ok_or_else(|| Error::missing("one averaged period", "band_limit_hz applies to periodic kinematics"))?,
+        )),
+        None => None,
+    };
+    regressor_rows(kin, noise, periods, &base, cfg, band, &spectra, recording)?.to_record_batch()
+}
+
+impl RegressorRows {
+    /// The `regressor` table's schema metadata: the kinematics' provenance,
+    /// the condition number, the robot and the regressor configuration.
+    pub fn table_metadata(&self) -> Result<BTreeMap<String, String>> {
+        let sys = &self.system;
+        let mut md = self.metadata.clone();
+        md.insert(metadata::CONDITION_NUMBER.into(), self.condition.to_string());
+        md.insert(metadata::BASE_PARAMETERS.into(), sys.parameters().to_string());
+        md.insert(metadata::ROBOT.into(), self.robot.clone());
+        if let Some(p) = &self.projection {
+            md.insert(metadata::PROJECTION.into(), p.clone());
+        }
+        if let Some(e) = sys.equations {
+            md.insert(metadata::PROJECTION_EQUATIONS.into(), e.to_string());
+        }
+        md.insert(
+            metadata::REGRESSOR_CONFIG.into(),
+            serde_json::to_string(&self.config).map_err(|e| Error::numerical("serde_json", e.to_string()))?,
+        );
+        md.insert(metadata::MODEL.into(), self.config.model.name().into());
+        Ok(TableKind::Regressor.metadata(&sys.joints, &md))
+    }
+
+    /// The `regressor` table: recording, sample, joint, time, torque,
+    /// torque_var, one column per base parameter, then `torque_p0`, … for
+    /// each period when there are at least two.
+    pub fn to_record_batch(&self) -> Result<RecordBatch> {
+        let sys = &self.system;
+        let rows = sys.rows();
+        let md = self.table_metadata()?;
+        let base_schema = TableKind::Regressor.schema(&sys.joints, &[], &md);
+        let mut fields: Vec<Field> = base_schema.fields().iter().map(|f| f.as_ref().clone()).collect();
+        let recording = sys.recordings.first().map(String::as_str).unwrap_or("");
+        let mut columns: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(vec![recording; rows])),
+            Arc::new(Int64Array::from(sys.sample.clone())),
+            Arc::new(StringArray::from_iter_values(
+                sys.joint.iter().map(|&j| sys.joints[j].as_str()),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                sys.sample.iter().map(|&k| self.time[k as usize]),
+            )),
+            Arc::new(Float64Array::from_iter_values(sys.b.iter().copied())),
+            Arc::new(Float64Array::from_iter_values(sys.var.iter().copied())),
+        ];
+        for (i, name) in sys.names.iter().enumerate() {
+            fields.push(
+                Field::new(name, DataType::Float64, false).with_metadata(BTreeMap::from([
+                    (metadata::UNIT.to_string(), sys.units[i].clone()),
+                    (metadata::QUANTITY.to_string(), PARAMETER_COLUMN.to_string()),
+                    (metadata::EXPRESSION.to_string(), sys.expressions[i].clone()),
+                ])),
+            );
+            columns.push(Arc::new(Float64Array::from_iter_values(
+                sys.a.column(i).iter().copied(),
+            )));
+        }
+        if let Some(Some(p)) = sys.periods.first() {
+            for pi in 0..p.ncols() {
+                fields.push(
+                    Field::new(format!("torque_p{pi}"), DataType::Float64, false).with_metadata(BTreeMap::from([
+                        (metadata::UNIT.to_string(), "N*m".to_string()),
+                        (metadata::QUANTITY.to_string(), PERIOD_TORQUE.to_string()),
+                        (metadata::PERIOD.to_string(), pi.to_string()),
+                    ])),
+                );
+                columns.push(Arc::new(Float64Array::from_iter_values(p.column(pi).iter().copied())));
+            }
+        }
+        let schema = Schema::new(fields).with_metadata(base_schema.metadata().clone());
+        let batch = RecordBatch::try_new(Arc::new(schema), columns)
+            .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
+        TableKind::Regressor.check(&batch.schema())?;
+        Ok(batch)
+    }
+}
+
+/// Zeroes, per joint and column, the DFT lines of A above `band` Hz over
+/// the table's period.
+fn band_limit(a: &mut DMatrix<f64>, n: usize, samples: usize, period: f64, band: f64, spectra: &Spectra) {
+    let cols = a.ncols();
+    let mut series = vec![0.0; samples];
+    for j in 0..n {
+        for c in 0..cols {
+            for k in 0..samples {
+                series[k] = a[(k * n + j, c)];
+            }
+            let mut spec = spectra.forward(&series);
+            for (line, x) in spec.iter_mut().enumerate() {
+                if line as f64 / period > band {
+                    *x = rustfft::num_complex::Complex64::new(0.0, 0.0);
+                }
+            }
+            let back = spectra.inverse(&spec, samples);
+            for k in 0..samples {
+                a[(k * n + j, c)] = back[k];
+            }
+        }
+    }
+}
+
+/// Field quantity of the parameter columns.
+pub const PARAMETER_COLUMN: &str = "regressor_column";
+/// Field quantity of the per-period torque columns.
+pub const PERIOD_TORQUE: &str = "period_torque";
+
+/// Indices of the columns of a `regressor` table whose field quantity is `quantity`.
+pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
+    schema
+        .fields()
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.metadata().get(metadata::QUANTITY).map(String::as_str) == Some(quantity))
+        .map(|(i, _)| i)
+        .collect()
+}
+
+/// Reduces a `regressor` table to its R factor (`r_factor` table): one row
+/// per parameter with that row of R and of Qᵀb, folded in blocks of rows so
+/// the full system is never held twice. Its least-squares solution and
+/// residual are those of the table; factors of several recordings merge
+/// (`dynamics::RFactor::merge`).
+pub fn r_factor_table(regressor: &RecordBatch) -> Result<RecordBatch> {
+    use crate::dynamics::RFactor;
+    let schema = regressor.schema();
+    TableKind::Regressor.check(&schema)?;
+    let param_idx = columns_of(&schema, PARAMETER_COLUMN);
+    let params: Vec<Field> = param_idx.iter().map(|&i| schema.field(i).clone()).collect();
+    let p = params.len();
+    let f64s = |i: usize| -> Result<&Float64Array> {
+        regressor
+            .column(i)
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .ok_or_else(|| {
+                Error::mismatch(
+                    format!("regressor table: column `{}`", schema.field(i).name()),
+                    "Float64",
+                    regressor.column(i).data_type(),
+                )
+            })
+    };
+    let torque = schema
+        .index_of("torque")
+        .map_err(|_| Error::missing("column `torque`", "the regressor table has none"))?;
+    let b = f64s(torque)?;
+    let cols: Vec<&Float64Array> = param_idx.iter().map(|&i| f64s(i)).collect::<Result<_, _>>()?;
+    let rows = regressor.num_rows();
+    let mut acc = RFactor::new(p);
+    const BLOCK: usize = 4096;
+    for start in (0..rows).step_by(BLOCK) {
+        let k = BLOCK.min(rows - start);
+        let a = DMatrix::from_fn(k, p, |i, j| cols[j].value(start + i));
+        let bb = nalgebra::DVector::from_fn(k, |i, _| b.value(start + i));
+        acc.add_rows(&a, &bb);
+    }
+    let mut md: BTreeMap<String, String> = schema.metadata().clone().into();
+    md.insert(metadata::RSS.into(), acc.rss.to_string());
+    md.insert(metadata::ROWS.into(), acc.rows.to_string());
+    let base = TableKind::RFactor.schema(&[], &[], &md);
+    let mut fields: Vec<Field> = base.fields().iter().map(|f| f.as_ref().clone()).collect();
+    fields.extend(params);
+    let mut columns: Vec<ArrayRef> = vec![
+        Arc::new(Int64Array::from((0..p as i64).collect::<Vec<_>>())),
+        Arc::new(Float64Array::from(acc.z.iter().copied().collect::<Vec<f64>>())),
+    ];
+    for j in 0..p {
+        columns.push(Arc::new(Float64Array::from(
+            (0..p).map(|i| acc.r[(i, j)]).collect::<Vec<f64>>(),
+        )));
+    }
+    let out = RecordBatch::try_new(
+        Arc::new(Schema::new(fields).with_metadata(base.metadata().clone())),
+        columns,
+    )
+    .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
+    TableKind::RFactor.check(&out.schema())?;
+    Ok(out)
+}
