@@ -228,10 +228,8 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
             Err(_) => problems.push(at(Place::Key("output.tables".into()), format!("unknown table `{t}`"))),
         }
     }
-    if !problems.is_empty() {
-        return Err(Problems(problems));
-    }
-    Ok(Plan {
+    let every_stage_parsed = stages.len() == raw.stage.len();
+    let plan = Plan {
         file: file.to_path_buf(),
         hash: robotid_stages::formats::sha256_hex(text.as_bytes()),
         robot: raw.robot.map(|r| file.parent().unwrap_or(Path::new(".")).join(r)),
@@ -240,7 +238,22 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
         stages,
         lines,
         tables,
-    })
+    };
+    if problems.is_empty() {
+        return Ok(plan);
+    }
+    // Every problem at once: when each stage parsed, the context's problems
+    // too (with a stage missing, the chain's would only echo that).
+    if every_stage_parsed {
+        if let Err(more) = lint(&plan) {
+            for p in more.0 {
+                if !problems.contains(&p) {
+                    problems.push(p);
+                }
+            }
+        }
+    }
+    Err(Problems(problems))
 }
 
 /// What step 2 found: the robot, the logs and what they hold.
