@@ -332,7 +332,7 @@ pub fn check_chain(plan: &Plan, model: Option<&Model>, start: Product, provenanc
 /// run (`period_mean`, `kinematics`), which a pipeline may continue; and
 /// whether it carries robotid's provenance (period, harmonics), when that
 /// can be told without reading samples.
-pub fn source_kind(path: &Path) -> Result<(Product, Option<bool>), String> {
+pub fn source_kind(path: &Path) -> robotid_stages::Result<(Product, Option<bool>)> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -343,9 +343,13 @@ pub fn source_kind(path: &Path) -> Result<(Product, Option<bool>), String> {
     if ext != "parquet" {
         return Ok((Product::Raw, None));
     }
-    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let file = std::fs::File::open(path).map_err(|e| robotid_stages::Error::io(path, e))?;
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| {
+        robotid_stages::Error::Format {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        }
+    })?;
     let schema = builder.schema();
     let provenance = Some(schema.metadata().contains_key(metadata::HARMONICS));
     Ok(match TableKind::of(schema) {
@@ -354,10 +358,10 @@ pub fn source_kind(path: &Path) -> Result<(Product, Option<bool>), String> {
         Ok(TableKind::RawSamples) => (Product::Raw, provenance),
         Err(_) => (Product::Raw, Some(false)),
         Ok(other) => {
-            return Err(format!(
-                "{}: a `{other}` table cannot start a preprocessing pipeline",
-                path.display()
-            ))
+            return Err(robotid_stages::Error::Format {
+                path: path.to_path_buf(),
+                msg: format!("a `{other}` table cannot start a preprocessing pipeline"),
+            })
         }
     })
 }
@@ -396,7 +400,7 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
     let logs = match source_files(plan) {
         Ok(l) => l,
         Err(e) => {
-            problems.push(at(Place::Source, e));
+            problems.push(at(Place::Source, e.to_string()));
             Vec::new()
         }
     };
@@ -406,7 +410,7 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
     for l in &logs {
         match source_kind(l) {
             Ok(k) => kinds.push(k),
-            Err(e) => problems.push(at(Place::Source, e)),
+            Err(e) => problems.push(at(Place::Source, e.to_string())),
         }
     }
     if let Some(first) = kinds.first() {
@@ -440,7 +444,7 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
 
 /// The logs a source names, sorted: a file, every log file in a folder, or
 /// the matches of a glob. A file of an extension no reader takes is refused.
-pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
+pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
     let full = plan.base_dir().join(&plan.source);
     let is_log = |p: &Path| {
         p.extension()
@@ -451,21 +455,30 @@ pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
         vec![full.clone()]
     } else if full.is_dir() {
         std::fs::read_dir(&full)
-            .map_err(|e| format!("{}: {e}", full.display()))?
+            .map_err(|e| robotid_stages::Error::io(&full, e))?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.is_file() && is_log(p))
             .collect()
     } else {
         let pattern = full.to_string_lossy().into_owned();
         glob::glob(&pattern)
-            .map_err(|e| format!("bad glob `{pattern}`: {e}"))?
+            .map_err(|e| {
+                robotid_stages::Error::setting(
+                    "source.path",
+                    "a file, a folder or a glob",
+                    format!("`{pattern}` ({e})"),
+                )
+            })?
             .filter_map(Result::ok)
             .filter(|p| p.is_file())
             .collect()
     };
     files.sort();
     if files.is_empty() {
-        return Err(format!("path `{}` names no log file", full.display()));
+        return Err(robotid_stages::Error::missing(
+            "a log file",
+            format!("path `{}` names no log file", full.display()),
+        ));
     }
     let unreadable: Vec<String> = files
         .iter()
@@ -473,10 +486,10 @@ pub fn source_files(plan: &Plan) -> Result<Vec<PathBuf>, String> {
         .map(|p| p.display().to_string())
         .collect();
     if !unreadable.is_empty() {
-        return Err(format!(
-            "no reader takes {} (logs are {})",
+        return Err(robotid_stages::Error::setting(
+            "source.path",
+            format!("logs a reader takes ({})", LOG_EXTENSIONS.join(", ")),
             unreadable.join(", "),
-            LOG_EXTENSIONS.join(", ")
         ));
     }
     Ok(files)

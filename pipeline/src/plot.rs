@@ -8,6 +8,7 @@
 //!
 //! and `report.md`, a short summary with links to them.
 
+use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
@@ -58,9 +59,9 @@ pub(crate) fn chart(
     y_desc: &str,
     series: &[Series],
     markers: &[(f64, f64)],
-) -> Result<(), String> {
+) -> Result<()> {
     let (x0, x1, y0, y1) = range(series);
-    let e = |e: &dyn std::fmt::Display| e.to_string();
+    let e = |e: &dyn std::fmt::Display| picture(e);
     let mut c = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 16))
         .margin(8)
@@ -112,8 +113,8 @@ pub(crate) fn figure(
     path: &Path,
     rows: usize,
     cols: usize,
-    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<(), String>,
-) -> Result<(), String> {
+    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<()>,
+) -> Result<()> {
     let svg = figure_svg(rows, cols, draw)?;
     write_text(path, &svg)
 }
@@ -122,32 +123,35 @@ pub(crate) fn figure(
 pub(crate) fn figure_svg(
     rows: usize,
     cols: usize,
-    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<(), String>,
-) -> Result<String, String> {
+    draw: impl Fn(&[DrawingArea<SVGBackend, plotters::coord::Shift>]) -> Result<()>,
+) -> Result<String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (520 * cols as u32, 260 * rows as u32)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        root.fill(&WHITE).map_err(|e| picture(&e))?;
         let areas = root.split_evenly((rows, cols));
         draw(&areas)?;
-        root.present().map_err(|e| e.to_string())?;
+        root.present().map_err(|e| picture(&e))?;
     }
     Ok(svg)
 }
 
 /// Writes a text file atomically.
-pub fn write_text(path: &Path, text: &str) -> Result<(), String> {
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
     write_atomic(path, |w| {
         use std::io::Write;
         w.write_all(text.as_bytes())
             .map_err(|e| robotid_stages::Error::io(path, e))
     })
-    .map_err(|e| e.to_string())
+    .map_err(|e| picture(&e))
 }
 
 /// Writes the pictures of one recording into `dir`; returns the files.
-pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let mut files = Vec::new();
     if let (Some(p), Some(m)) = (inp.periods, inp.mean) {
         let n = p.samples_per_period;
@@ -262,7 +266,7 @@ pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>, String> 
 
 /// Velocities and accelerations (and positions, if asked) of every joint
 /// against time, one row of charts per joint.
-fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<(), String> {
+fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<()> {
     let nj = kin.joints.len();
     let mut quantities = Vec::new();
     if positions {
@@ -294,7 +298,7 @@ fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<(
 }
 
 /// `report.md`: what the run found, what it could not do, the pictures.
-pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) -> Result<PathBuf, String> {
+pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) -> Result<PathBuf> {
     let mut r = format!("# {name}\n\n");
     r.push_str(&format!("- samples read: {}\n", o.samples));
     if let (Some(k), Some(f)) = (o.periods_kept, o.periods_found) {
@@ -346,15 +350,12 @@ pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) ->
         w.write_all(r.as_bytes())
             .map_err(|e| robotid_stages::Error::io(&path, e))
     })
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| picture(&e))?;
     Ok(path)
 }
 
 /// Measured (grey) and predicted (blue) torque per joint, row by row.
-pub fn torques_svg(
-    sys: &robotid_stages::estimation::System,
-    predicted: &nalgebra::DVector<f64>,
-) -> Result<String, String> {
+pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebra::DVector<f64>) -> Result<String> {
     let nj = sys.joints.len();
     let rows_of = |j: usize| (0..sys.rows()).filter(move |&i| sys.joint[i] == j);
     figure_svg(nj, 1, |areas| {
@@ -376,7 +377,7 @@ pub fn torques_svg(
 
 /// Density of `values` per joint (a 40-bin histogram over ±4 std) against
 /// the Gaussian of the same mean and spread.
-pub fn density_svg(joints: &[String], values: &[Vec<f64>], what: &str) -> Result<String, String> {
+pub fn density_svg(joints: &[String], values: &[Vec<f64>], what: &str) -> Result<String> {
     let nj = joints.len();
     figure_svg(nj, 1, |areas| {
         for j in 0..nj {
@@ -446,8 +447,11 @@ pub fn plot_validation(
     sys: &robotid_stages::estimation::System,
     predicted: &nalgebra::DVector<f64>,
     stats: &[crate::validation::JointResidue],
-) -> Result<Vec<PathBuf>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let torques = dir.join("validation_torques.svg");
     write_text(&torques, &torques_svg(sys, predicted)?)?;
     let residues = dir.join("validation_residues.svg");
@@ -468,7 +472,7 @@ pub fn plot_validation(
 /// Pictures of a designed excitation: `excitation.svg` (q, q̇, q̈ per
 /// joint over one period) and `end_effector.svg` (its path seen from above
 /// and from the side).
-pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64>]) -> Result<Vec<PathBuf>, String> {
+pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64>]) -> Result<Vec<PathBuf>> {
     let path = dir.join("excitation.svg");
     kinematics_figure(&path, kin, true)?;
     let ee_path = dir.join("end_effector.svg");
@@ -494,4 +498,12 @@ pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64
         Ok(())
     })?;
     Ok(vec![path, ee_path])
+}
+
+/// A drawing or writing failure of a picture.
+fn picture(e: &dyn std::fmt::Display) -> Error {
+    Error::Output {
+        what: "picture".into(),
+        msg: e.to_string(),
+    }
 }

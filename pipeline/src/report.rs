@@ -4,6 +4,7 @@
 //! predicted torques, residue densities and the noise densities (the
 //! periods' deviations from their mean), all as inline SVG.
 
+use crate::error::{Error, Result};
 use nalgebra::DVector;
 use robotid_schemas::metadata;
 use robotid_stages::estimation::{Parameters, System};
@@ -43,7 +44,7 @@ fn noise_by_joint(sys: &System) -> Option<Vec<Vec<f64>>> {
 
 /// The report's HTML. `expressions` are the parameters' regrouping
 /// expressions (the table's `expression` column).
-pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String, String> {
+pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String> {
     let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
     let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
     let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
@@ -103,10 +104,11 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
     for set in sets {
         let sys = set.sys;
         if sys.names != params.names {
-            return Err(format!(
-                "{}: its parameters {:?} are not the estimate's {:?}",
-                set.title, sys.names, params.names
-            ));
+            return Err(Error::Stage(robotid_stages::Error::mismatch(
+                format!("{}: parameters", set.title),
+                format!("{:?} (the estimate's)", params.names),
+                format!("{:?}", sys.names),
+            )));
         }
         let predicted: DVector<f64> = &sys.a * &params.values;
         let stats = residues(sys, &predicted);
@@ -140,10 +142,10 @@ pub fn write_run_report(
     parameters: &std::path::Path,
     results: &[crate::run::RecordingResult],
     dir: &std::path::Path,
-) -> Result<std::path::PathBuf, String> {
+) -> Result<std::path::PathBuf> {
     use arrow::array::{Array, StringArray};
-    let batch = robotid_stages::formats::parquet::read_parquet(parameters).map_err(|e| e.to_string())?;
-    let params = robotid_stages::estimation::parameters_from_table(&batch).map_err(|e| e.to_string())?;
+    let batch = robotid_stages::formats::parquet::read_parquet(parameters)?;
+    let params = robotid_stages::estimation::parameters_from_table(&batch)?;
     let expressions: Vec<String> = batch
         .column_by_name("expression")
         .and_then(|c| c.as_any().downcast_ref::<StringArray>())
@@ -154,9 +156,12 @@ pub fn write_run_report(
         .filter_map(|r| Some(&r.outcome.as_ref().ok()?.regressor.as_ref()?.system))
         .collect();
     if params.metadata.get(metadata::KNOWN).is_some_and(|k| !k.is_empty()) {
-        return Err("the estimate took parameters as known; `robotid report --excitation` on tables with them compensated shows it".into());
+        return Err(Error::Output {
+            what: "report".into(),
+            msg: "the estimate took parameters as known; `robotid report --excitation` on tables with them compensated shows it".into(),
+        });
     }
-    let sys = System::stack(&systems).map_err(|e| e.to_string())?;
+    let sys = System::stack(&systems)?;
     let page = html(
         &params,
         &expressions,
@@ -166,7 +171,10 @@ pub fn write_run_report(
             sys: &sys,
         }],
     )?;
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let path = dir.join("report.html");
     crate::plot::write_text(&path, &page)?;
     Ok(path)

@@ -45,7 +45,7 @@ pub struct Outcome {
 pub struct RecordingResult {
     pub source: PathBuf,
     pub name: String,
-    pub outcome: Result<Outcome, robotid_stages::Error>,
+    pub outcome: crate::Result<Outcome>,
 }
 
 /// Output folder names: the file stem, or stem and extension where two
@@ -146,13 +146,7 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
     Ok(chain)
 }
 
-fn run_one(
-    built: &Built,
-    log: &Path,
-    name: &str,
-    opts: &RunOptions,
-    bar: &ProgressBar,
-) -> robotid_stages::Result<Outcome> {
+fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &ProgressBar) -> crate::Result<Outcome> {
     let t = Instant::now();
     bar.set_message("read");
     let mut chain = start_chain(built, log, name)?;
@@ -196,13 +190,8 @@ fn run_one(
             harmonics: &h,
             spectra: &built.context.spectra,
         };
-        let output = |what: &str, msg: String| robotid_stages::Error::Format {
-            path: dir.clone(),
-            msg: format!("{what}: {msg}"),
-        };
-        let pictures = crate::plot::plot_recording(&dir, &inputs).map_err(|e| output("plots", e))?;
-        let report =
-            crate::plot::write_report(&dir, name, &chain.report, &pictures).map_err(|e| output("report", e))?;
+        let pictures = crate::plot::plot_recording(&dir, &inputs)?;
+        let report = crate::plot::write_report(&dir, name, &chain.report, &pictures)?;
         outcome.files.extend(pictures);
         outcome.files.push(report);
         chain.report.timings.push(("plot".into(), t.elapsed().as_secs_f64()));

@@ -35,7 +35,7 @@ impl PeriodMean {
     }
 
     pub fn from_record_batch(batch: &RecordBatch) -> Result<PeriodMean, SchemaError> {
-        let joints = TableKind::PeriodMean.check(&batch.schema())?;
+        let joints = TableKind::PeriodMean.validate(&batch.schema())?;
         Ok(PeriodMean {
             time: f64_column(batch, "time")?,
             q: per_joint_columns(batch, "q", &joints)?,
@@ -68,7 +68,7 @@ impl NoiseTable {
     }
 
     pub fn from_record_batch(batch: &RecordBatch) -> Result<NoiseTable, SchemaError> {
-        let joints = TableKind::Noise.check(&batch.schema())?;
+        let joints = TableKind::Noise.validate(&batch.schema())?;
         Ok(NoiseTable {
             var_q: per_joint_columns(batch, "var_q", &joints)?,
             var_torque: per_joint_columns(batch, "var_torque", &joints)?,
@@ -105,7 +105,7 @@ impl Kinematics {
 
     pub fn from_record_batch(batch: &RecordBatch) -> Result<Kinematics, SchemaError> {
         let schema = batch.schema();
-        let joints = TableKind::Kinematics.check(&schema)?;
+        let joints = TableKind::Kinematics.validate(&schema)?;
         let has_torque = schema.index_of(&format!("torque_{}", joints[0])).is_ok();
         Ok(Kinematics {
             time: f64_column(batch, "time")?,

@@ -99,7 +99,7 @@ impl RawSamples {
     /// Reads a `raw_samples` record batch, checking it against the kind.
     pub fn from_record_batch(batch: &RecordBatch) -> Result<RawSamples, SchemaError> {
         let schema = batch.schema();
-        let joints = TableKind::RawSamples.check(&schema)?;
+        let joints = TableKind::RawSamples.validate(&schema)?;
         let has = |prefix: &str| schema.index_of(&format!("{prefix}_{}", joints[0])).is_ok();
         let (effort_kind, effort) = if has("current") {
             (TorqueChannel::Current, per_joint_columns(batch, "current", &joints)?)

@@ -281,7 +281,7 @@ impl TableKind {
     /// required column with the right type and unit, and the right type and
     /// unit on every optional column present. Extra columns are allowed.
     /// Returns the joint names.
-    pub fn check(self, schema: &Schema) -> Result<Vec<String>, SchemaError> {
+    pub fn validate(self, schema: &Schema) -> Result<Vec<String>, SchemaError> {
         let found = TableKind::of(schema)?;
         if found != self {
             return Err(SchemaError::WrongKind {
@@ -410,7 +410,7 @@ mod tests {
         for kind in TableKind::ALL {
             let all: Vec<&str> = kind.columns().iter().map(|c| c.prefix).collect();
             let s = kind.schema(&joints(), &all, &BTreeMap::new());
-            let j = kind.check(&s).unwrap();
+            let j = kind.validate(&s).unwrap();
             if kind.per_joint() {
                 assert_eq!(j, joints());
             }
@@ -421,7 +421,7 @@ mod tests {
     #[test]
     fn missing_effort_is_named() {
         let s = TableKind::RawSamples.schema(&joints(), &[], &BTreeMap::new());
-        let err = TableKind::RawSamples.check(&s).unwrap_err();
+        let err = TableKind::RawSamples.validate(&s).unwrap_err();
         assert_eq!(
             err,
             SchemaError::MissingColumn {
@@ -441,7 +441,7 @@ mod tests {
         fields[i] = fields[i].clone().with_metadata(md);
         let bad = Schema::new(fields.clone()).with_metadata(s.metadata().clone());
         assert_eq!(
-            TableKind::RawSamples.check(&bad).unwrap_err(),
+            TableKind::RawSamples.validate(&bad).unwrap_err(),
             SchemaError::UnknownUnit {
                 column: "q_j2".into(),
                 found: "deg".into()
@@ -450,7 +450,7 @@ mod tests {
         fields[i] = Field::new("q_j2", DataType::Float32, false).with_metadata(s.field(i).metadata().clone());
         let bad = Schema::new(fields).with_metadata(s.metadata().clone());
         assert!(matches!(
-            TableKind::RawSamples.check(&bad).unwrap_err(),
+            TableKind::RawSamples.validate(&bad).unwrap_err(),
             SchemaError::WrongType { column, .. } if column == "q_j2"
         ));
     }
@@ -459,7 +459,7 @@ mod tests {
     fn wrong_kind_is_rejected() {
         let s = TableKind::Noise.schema(&joints(), &[], &BTreeMap::new());
         assert!(matches!(
-            TableKind::RawSamples.check(&s),
+            TableKind::RawSamples.validate(&s),
             Err(SchemaError::WrongKind { .. })
         ));
         let plain = Schema::new(vec![Field::new("time", DataType::Float64, false)]);

@@ -62,10 +62,22 @@ impl fmt::Display for Unit {
     }
 }
 
+/// A unit symbol robotid does not know.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownUnit(pub String);
+
+impl fmt::Display for UnknownUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "unknown unit `{}`", self.0)
+    }
+}
+
+impl std::error::Error for UnknownUnit {}
+
 impl FromStr for Unit {
-    type Err = String;
+    type Err = UnknownUnit;
     /// Accepts the canonical symbol and common spellings (`Nm`, `N·m`, `rad/s2`).
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, UnknownUnit> {
         let t = s.trim();
         let u = match t {
             "s" | "sec" | "second" | "seconds" => Unit::Second,
@@ -81,7 +93,7 @@ impl FromStr for Unit {
             "A^2" | "A2" | "A²" => Unit::Ampere2,
             "1" | "" => Unit::Dimensionless,
             "%" | "percent" => Unit::Percent,
-            _ => return Err(format!("unknown unit `{t}`")),
+            _ => return Err(UnknownUnit(t.to_string())),
         };
         Ok(u)
     }

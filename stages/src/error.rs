@@ -81,6 +81,15 @@ pub enum Error {
     Numerical { method: &'static str, msg: String },
 }
 
+impl From<crate::stage::Problem> for Error {
+    fn from(p: crate::stage::Problem) -> Error {
+        Error::Problems {
+            what: "settings".into(),
+            problems: vec![p],
+        }
+    }
+}
+
 impl Error {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Error {
         Error::Io {

@@ -348,3 +348,89 @@ fn physically_consistent_standard_parameters() {
         assert!(fit.base[0] >= -1e-9, "{robot}: {}", fit.base[0]);
     }
 }
+
+/// The pipeline's reduce: each recording folded into its least-squares
+/// summary, the summaries merged, equals one QR of the whole stacked,
+/// column-scaled system (the twin kept for this), for OLS and WLS, with the
+/// periods' covariance and with known parameters, to 1e-12 relative —
+/// whatever the grouping of the merge.
+#[test]
+fn merged_summaries_equal_the_stacked_system() {
+    use robotid_stages::estimation::{row_weights, stacked_least_squares, Covariance, Known, Summary, Weights};
+    let (_, base, kin, truth) = kuka();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let noise = Normal::new(0.0, 0.5).unwrap();
+    let periods = 4;
+    // Three recordings of different lengths and noise levels, each with the
+    // torque of its periods.
+    let recordings: Vec<System> = (0..3)
+        .map(|r| {
+            let keep = kin.time.len() - 100 * r;
+            let sub = Kinematics {
+                time: kin.time[..keep].to_vec(),
+                q: vec![kin.q[0][..keep].to_vec()],
+                qd: vec![kin.qd[0][..keep].to_vec()],
+                qdd: vec![kin.qdd[0][..keep].to_vec()],
+                ..kin.clone()
+            };
+            let clean = base.matrix(&sub) * &truth;
+            let per = DMatrix::from_fn(keep, periods, |i, _| {
+                clean[i] + (1.0 + r as f64) * noise.sample(&mut rng)
+            });
+            let b = DVector::from_fn(keep, |i, _| per.row(i).sum() / periods as f64);
+            let mut s = system(&base, &sub, b, 0.2 + 0.1 * r as f64);
+            s.recordings = vec![format!("rec{r}")];
+            s.periods = vec![Some(per)];
+            s
+        })
+        .collect();
+    let known = Known {
+        names: vec![base.names()[3].clone()],
+        values: DVector::from_element(1, truth[3] * 1.01),
+        covariance: DMatrix::from_element(1, 1, 0.01),
+    };
+    for (with_known, weighted, covariance) in [
+        (false, false, Covariance::Periods),
+        (false, false, Covariance::Residual),
+        (false, true, Covariance::Periods),
+        (true, false, Covariance::Periods),
+        (true, true, Covariance::Residual),
+    ] {
+        let parts: Vec<System> = recordings
+            .iter()
+            .map(|s| {
+                let mut s = s.clone();
+                if with_known {
+                    s.fix(&known).unwrap();
+                }
+                s
+            })
+            .collect();
+        let weights = |s: &System| weighted.then(|| row_weights(s, Weights::PerJoint).unwrap());
+        let refs: Vec<&System> = parts.iter().collect();
+        let stacked = System::stack(&refs).unwrap();
+        let twin = stacked_least_squares(&stacked, weights(&stacked).as_ref(), covariance).unwrap();
+        // Merged as ((0 + 1) + 2) and as (0 + (1 + 2)).
+        let s: Vec<Summary> = parts
+            .iter()
+            .map(|p| Summary::of(p, weights(p).as_ref()).unwrap())
+            .collect();
+        let mut left = s[0].clone();
+        left.merge(&s[1]).unwrap();
+        left.merge(&s[2]).unwrap();
+        let mut right = s[1].clone();
+        right.merge(&s[2]).unwrap();
+        let mut first = s[0].clone();
+        first.merge(&right).unwrap();
+        for merged in [left, first] {
+            let est = merged.solve(covariance).unwrap();
+            let rel_values = (&est.values - &twin.values).amax() / twin.values.amax();
+            let rel_cov = (&est.covariance - &twin.covariance).amax() / twin.covariance.amax();
+            assert!(
+                rel_values < 1e-12 && rel_cov < 1e-12,
+                "known {with_known}, weighted {weighted}, {covariance:?}: values {rel_values:e}, covariance {rel_cov:e}"
+            );
+            assert_eq!((est.dof, est.rows, est.method), (twin.dof, twin.rows, twin.method));
+        }
+    }
+}

@@ -1,6 +1,7 @@
 //! The read stage on the simulator's three formats, and every class of bad
 //! input with the error it must give.
 
+use robotid_stages::Error;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -102,9 +103,9 @@ fn bad_inputs_name_file_channel_and_sample() {
     bad[101] = f.join(",");
     let p = dir.path().join("nan.csv");
     std::fs::write(&p, bad.join("\n")).unwrap();
-    let e = err_of(read(&p, &cfg, Some(&model)));
+    let e = read(&p, &cfg, Some(&model)).unwrap_err();
     assert!(
-        e.contains("nan.csv") && e.contains("q_j2") && e.contains("sample 100") && e.contains("NaN"),
+        matches!(&e, Error::Data { source_name, channel, sample: Some(100), msg } if source_name.ends_with("nan.csv") && channel == "q_j2" && msg.contains("NaN")),
         "{e}"
     );
 
@@ -130,9 +131,9 @@ fn bad_inputs_name_file_channel_and_sample() {
     // Missing channel.
     let p = dir.path().join("missing.csv");
     std::fs::write(&p, csv.replacen("current_j3", "curent_j3", 1)).unwrap();
-    let e = err_of(read(&p, &cfg, Some(&model)));
+    let e = read(&p, &cfg, Some(&model)).unwrap_err();
     assert!(
-        e.contains("missing.csv") && e.contains("current_j3") && e.contains("missing column"),
+        matches!(&e, Error::Data { source_name, channel, msg, .. } if source_name.ends_with("missing.csv") && channel.contains("current_j3") && msg.contains("missing column")),
         "{e}"
     );
 
@@ -198,15 +199,18 @@ fn bad_inputs_name_file_channel_and_sample() {
     assert!(e.contains("no excitation period"), "{e}");
     let mut back = raw.clone();
     back.time.swap(500, 501);
-    let e = err_of(align(&back, &ten, "rec.csv"));
+    let e = align(&back, &ten, "rec.csv").unwrap_err();
     assert!(
-        e.contains("rec.csv") && e.contains("channel `time`") && e.contains("sample 501") && e.contains("increase"),
+        matches!(&e, Error::Data { source_name, channel, sample: Some(501), msg } if source_name == "rec.csv" && channel == "time" && msg.contains("increase")),
         "{e}"
     );
     let mut gap = raw.clone();
     gap.time.iter_mut().skip(3000).for_each(|t| *t += 0.5);
-    let e = err_of(align(&gap, &ten, "rec.csv"));
-    assert!(e.contains("sample 3000") && e.contains("gap"), "{e}");
+    let e = align(&gap, &ten, "rec.csv").unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, sample: Some(3000), msg, .. } if channel == "time" && msg.contains("gap")),
+        "{e}"
+    );
     let mut short = raw.clone();
     let keep = 1500;
     short.time.truncate(keep);

@@ -4,6 +4,7 @@
 //! (`robot_file.rs`) or a URDF (`urdf.rs`); algorithms take `&Model` and a
 //! preallocated [`super::Data`].
 
+use crate::stage::Problem;
 use nalgebra::{Matrix3, Unit, Vector3};
 
 /// Rigid-body inertia of one link, in the link frame (the frame of the joint
@@ -225,10 +226,10 @@ impl Model {
     /// Checks the physical sanity of the description: positive masses
     /// (zero allowed), symmetric positive semidefinite inertias satisfying
     /// the triangle inequalities, positive drive constants.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Problem> {
         let n = self.dof();
         if n == 0 {
-            return Err("the robot has no moving joint".into());
+            return Err(Problem::new("joint", "the robot has no moving joint"));
         }
         for (what, len) in [
             ("links", self.links.len()),
@@ -237,43 +238,55 @@ impl Model {
             ("limits", self.limits.len()),
         ] {
             if len != n {
-                return Err(format!("{n} joints but {len} {what}"));
+                return Err(Problem::new("joint", format!("{n} joints but {len} {what}")));
             }
         }
         for (i, (j, l)) in self.joints.iter().zip(&self.links).enumerate() {
             let ctx = format!("joint {} (`{}`)", i + 1, j.name);
             if !(l.mass >= 0.0) || !l.mass.is_finite() {
-                return Err(format!("{ctx}: link mass must be ≥ 0, found {}", l.mass));
+                return Err(Problem::new(
+                    "mass",
+                    format!("{ctx}: link mass must be ≥ 0, found {}", l.mass),
+                ));
             }
             let ic = l.inertia_com;
             if (ic - ic.transpose()).abs().max() > 1e-12 * (1.0 + ic.abs().max()) {
-                return Err(format!("{ctx}: inertia tensor is not symmetric"));
+                return Err(Problem::new(
+                    "inertia",
+                    format!("{ctx}: inertia tensor is not symmetric"),
+                ));
             }
             let eig = ic.symmetric_eigenvalues();
             let tol = 1e-12 * (1.0 + ic.abs().max());
             if eig.iter().any(|e| *e < -tol) {
-                return Err(format!(
-                    "{ctx}: inertia about the centre of mass has a negative principal moment"
+                return Err(Problem::new(
+                    "mass",
+                    format!("{ctx}: inertia about the centre of mass has a negative principal moment"),
                 ));
             }
             let (a, b, c) = (eig[0], eig[1], eig[2]);
             if a + b < c - tol || a + c < b - tol || b + c < a - tol {
-                return Err(format!(
-                    "{ctx}: principal moments {a}, {b}, {c} violate the triangle inequality"
+                return Err(Problem::new(
+                    "inertia",
+                    format!("{ctx}: principal moments {a}, {b}, {c} violate the triangle inequality"),
                 ));
             }
             let d = &self.drives[i];
             if !(d.gear_ratio > 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
-                return Err(format!(
-                    "{ctx}: gear ratio, torque constant and encoder counts must be > 0"
+                return Err(Problem::new(
+                    "drive",
+                    format!("{ctx}: gear ratio, torque constant and encoder counts must be > 0"),
                 ));
             }
             if d.rotor_inertia < 0.0 {
-                return Err(format!("{ctx}: rotor inertia must be ≥ 0"));
+                return Err(Problem::new("inertia", format!("{ctx}: rotor inertia must be ≥ 0")));
             }
             let f = &self.friction[i];
             if f.coulomb_pos < 0.0 || f.coulomb_neg < 0.0 {
-                return Err(format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"));
+                return Err(Problem::new(
+                    "coulomb",
+                    format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"),
+                ));
             }
         }
         Ok(())

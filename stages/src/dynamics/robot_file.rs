@@ -3,6 +3,7 @@
 //! kinematics and inertials and adding drive and friction data by joint name.
 //! The format is documented in `docs/robot-file.md`.
 
+use crate::stage::Problem;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Unit, Vector3};
@@ -110,9 +111,9 @@ pub fn load_robot(path: &Path) -> Result<Model> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         parse_robot_file(&text, path)?
     };
-    model.check().map_err(|msg| Error::Robot {
+    model.validate().map_err(|p| Error::Robot {
         path: path.to_path_buf(),
-        msg,
+        msg: p.to_string(),
     })?;
     Ok(model)
 }
@@ -153,7 +154,8 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
                         )));
                     }
                 }
-                apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i]).map_err(err)?;
+                apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i])
+                    .map_err(|p| err(format!("joint `{}`: {p}", entry.name)))?;
             }
             m.name = file.name.clone();
             m
@@ -213,7 +215,7 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
                 });
                 m.links.push(Inertial { mass, com, inertia_com });
                 let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
-                apply_actuation(entry, &mut d, &mut f, &mut l).map_err(ctx)?;
+                apply_actuation(entry, &mut d, &mut f, &mut l).map_err(|p| ctx(p.to_string()))?;
                 m.drives.push(d);
                 m.friction.push(f);
                 m.limits.push(l);
@@ -234,7 +236,7 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
 }
 
 /// Drive, friction and limit keys of a joint entry, over the given defaults.
-fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limits) -> Result<(), String> {
+fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limits) -> Result<(), Problem> {
     if let Some(v) = e.gear_ratio {
         d.gear_ratio = v;
     }
@@ -247,9 +249,12 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     if let Some(v) = e.rotor_inertia {
         d.rotor_inertia = v;
     }
-    let pick = |both: Option<f64>, one: Option<f64>, name: &str, current: f64| -> Result<f64, String> {
+    let pick = |both: Option<f64>, one: Option<f64>, name: &str, current: f64| -> Result<f64, Problem> {
         match (both, one) {
-            (Some(_), Some(_)) => Err(format!("give `{name}` or its `_pos`/`_neg` forms, not both")),
+            (Some(_), Some(_)) => Err(Problem::new(
+                name,
+                format!("give `{name}` or its `_pos`/`_neg` forms, not both"),
+            )),
             (Some(v), None) | (None, Some(v)) => Ok(v),
             (None, None) => Ok(current),
         }
@@ -263,14 +268,17 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     }
     if let Some(v) = e.coulomb_transition {
         if !(v >= 0.0) {
-            return Err("coulomb_transition must be ≥ 0".into());
+            return Err(Problem::new("coulomb_transition", "coulomb_transition must be ≥ 0"));
         }
         f.transition = v;
     }
     if let Some(lim) = &e.limits {
         if let Some([lo, hi]) = lim.position {
             if lo >= hi {
-                return Err(format!("position limits [{lo}, {hi}] are empty"));
+                return Err(Problem::new(
+                    "limits.position",
+                    format!("position limits [{lo}, {hi}] are empty"),
+                ));
             }
             l.position = Some((lo, hi));
         }

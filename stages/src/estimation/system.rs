@@ -100,7 +100,7 @@ impl System {
         let mut at = 0;
         for (r, (label, t)) in tables.iter().enumerate() {
             let s = t.schema();
-            TableKind::Regressor.check(&s).map_err(|e| Error::Format {
+            TableKind::Regressor.validate(&s).map_err(|e| Error::Format {
                 path: label.into(),
                 msg: e.to_string(),
             })?;

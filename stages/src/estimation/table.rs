@@ -96,14 +96,14 @@ pub fn parameters_table(
     let schema = Schema::new(fields).with_metadata(base.metadata().clone());
     let batch = RecordBatch::try_new(Arc::new(schema), columns)
         .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
-    TableKind::Parameters.check(&batch.schema())?;
+    TableKind::Parameters.validate(&batch.schema())?;
     Ok(batch)
 }
 
 /// Reads a `parameters` table back.
 pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
     let schema = batch.schema();
-    TableKind::Parameters.check(&schema)?;
+    TableKind::Parameters.validate(&schema)?;
     let missing = |name: &str| Error::mismatch(format!("parameters table: column `{name}`"), "present", "missing");
     let s = |name: &str| -> Result<Vec<String>> {
         let c = batch

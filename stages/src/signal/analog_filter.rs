@@ -7,6 +7,7 @@
 //! |H(jωc)|² = ½; Chebyshev I has equiripple `ripple_db` in [0, ωc] and
 //! |H(jωc)|² = 1/(1+ε²) at the cutoff, with DC gain 1/√(1+ε²) for even order.
 
+use crate::stage::Problem;
 use std::f64::consts::PI;
 
 use rustfft::num_complex::Complex64;
@@ -37,17 +38,28 @@ pub struct FilterSpec {
 }
 
 impl FilterSpec {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Problem> {
         if !(1..=8).contains(&self.order) {
-            return Err(format!("filter order must be 1 to 8, found {}", self.order));
+            return Err(Problem::new(
+                "order",
+                format!("filter order must be 1 to 8, found {}", self.order),
+            ));
         }
         if !(self.cutoff_hz > 0.0 && self.cutoff_hz.is_finite()) {
-            return Err(format!("filter cutoff must be > 0 Hz, found {}", self.cutoff_hz));
+            return Err(Problem::new(
+                "cutoff_hz",
+                format!("filter cutoff must be > 0 Hz, found {}", self.cutoff_hz),
+            ));
         }
         match (self.family, self.ripple_db) {
             (FilterFamily::Chebyshev1, Some(r)) if r > 0.0 && r.is_finite() => Ok(()),
-            (FilterFamily::Chebyshev1, _) => Err("a chebyshev1 filter needs `ripple_db` > 0".into()),
-            (_, Some(_)) => Err("`ripple_db` applies to chebyshev1 filters only".into()),
+            (FilterFamily::Chebyshev1, _) => {
+                Err(Problem::new("ripple_db", "a chebyshev1 filter needs `ripple_db` > 0"))
+            }
+            (_, Some(_)) => Err(Problem::new(
+                "ripple_db",
+                "`ripple_db` applies to chebyshev1 filters only",
+            )),
             (_, None) => Ok(()),
         }
     }
@@ -84,8 +96,8 @@ pub struct AnalogFilter {
 }
 
 impl AnalogFilter {
-    pub fn new(spec: FilterSpec) -> Result<AnalogFilter, String> {
-        spec.check()?;
+    pub fn new(spec: FilterSpec) -> crate::Result<AnalogFilter> {
+        spec.validate()?;
         let n = spec.order;
         let wc = 2.0 * PI * spec.cutoff_hz;
         let (poles, dc_gain) = match spec.family {
@@ -368,9 +380,10 @@ mod tests {
             cutoff_hz: 20.0,
             ripple_db: Some(1.0),
         };
-        assert!(AnalogFilter::new(s).unwrap_err().contains("order"));
+        assert!(matches!(s.validate(), Err(p) if p.key == "order"));
+        assert!(AnalogFilter::new(s).is_err());
         s.order = 4;
         s.ripple_db = None;
-        assert!(AnalogFilter::new(s).unwrap_err().contains("ripple_db"));
+        assert!(matches!(s.validate(), Err(p) if p.key == "ripple_db"));
     }
 }

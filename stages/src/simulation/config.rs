@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::signal::FilterSpec;
+use crate::stage::Problem;
 use crate::trajectory::Trajectory;
 use crate::{Error, Result};
 
@@ -219,11 +220,15 @@ impl Default for PerJoint {
 }
 
 impl PerJoint {
-    pub fn resolve(&self, n: usize, key: &str) -> std::result::Result<Vec<f64>, String> {
+    pub fn resolve(&self, n: usize, key: &str) -> Result<Vec<f64>> {
         match self {
             PerJoint::All(v) => Ok(vec![*v; n]),
             PerJoint::Each(v) if v.len() == n => Ok(v.clone()),
-            PerJoint::Each(v) => Err(format!("`{key}` lists {} values for {n} joints", v.len())),
+            PerJoint::Each(v) => Err(Error::mismatch(
+                format!("`{key}`: values"),
+                format!("{n} (one per joint)"),
+                v.len(),
+            )),
         }
     }
 }
@@ -250,7 +255,7 @@ impl SimConfig {
         if !table.contains_key("trajectory_file") {
             let mut cfg: SimConfig = toml::from_str(text).map_err(|e| err(crate::error::toml_message(text, &e)))?;
             cfg.robot = path.parent().unwrap_or(Path::new(".")).join(&cfg.robot);
-            cfg.check().map_err(err)?;
+            cfg.validate().map_err(|e| err(e.to_string()))?;
             return Ok(cfg);
         }
         if let Some(file) = table.remove("trajectory_file") {
@@ -270,56 +275,72 @@ impl SimConfig {
             .try_into()
             .map_err(|e: toml::de::Error| err(e.message().to_string()))?;
         cfg.robot = path.parent().unwrap_or(Path::new(".")).join(&cfg.robot);
-        cfg.check().map_err(|msg| Error::Config {
+        cfg.validate().map_err(|e| Error::Config {
             path: path.to_path_buf(),
-            msg,
+            msg: e.to_string(),
         })?;
         Ok(cfg)
     }
 
-    /// Structural checks that need no robot (all problems, one per line).
-    pub fn check(&self) -> std::result::Result<(), String> {
+    /// Structural problems that need no robot, each with its key.
+    pub fn problems(&self) -> Vec<Problem> {
         let mut errs = Vec::new();
-        if let Err(e) = self.trajectory.check() {
-            errs.push(format!("trajectory: {e}"));
+        if let Err(e) = self.trajectory.validate() {
+            errs.push(e.under("trajectory"));
         }
         let t = &self.timing;
         if !(t.log_rate_hz > 0.0 && t.log_rate_hz.is_finite()) {
-            errs.push(format!("timing.log_rate_hz must be > 0, found {}", t.log_rate_hz));
+            errs.push(Problem::new(
+                "timing.log_rate_hz",
+                format!("must be > 0, found {}", t.log_rate_hz),
+            ));
         }
         if t.steps_per_sample == 0 {
-            errs.push("timing.steps_per_sample must be ≥ 1".into());
+            errs.push(Problem::new("timing.steps_per_sample", "must be ≥ 1"));
         }
         if !(t.transient_s >= 0.0) {
-            errs.push("timing.transient_s must be ≥ 0".into());
+            errs.push(Problem::new("timing.transient_s", "must be ≥ 0"));
         }
         match (&self.trajectory, t.periods) {
-            (Trajectory::Fourier(_), None) | (Trajectory::Fourier(_), Some(0)) => {
-                errs.push("timing.periods (≥ 1) is required for a periodic trajectory".into())
-            }
+            (Trajectory::Fourier(_), None) | (Trajectory::Fourier(_), Some(0)) => errs.push(Problem::new(
+                "timing.periods",
+                "(≥ 1) is required for a periodic trajectory",
+            )),
             (Trajectory::Waypoints(_) | Trajectory::Sweeps(_), Some(_)) => {
-                errs.push("timing.periods applies to periodic trajectories only".into())
+                errs.push(Problem::new("timing.periods", "applies to periodic trajectories only"))
             }
             _ => {}
         }
         if !(t.jitter_std_s >= 0.0) || !(0.0..1.0).contains(&t.drop_probability) {
-            errs.push("timing.jitter_std_s must be ≥ 0 and drop_probability in [0, 1)".into());
+            errs.push(Problem::new(
+                "timing.jitter_std_s",
+                "must be ≥ 0 and drop_probability in [0, 1)",
+            ));
         }
         if let Some(f) = &self.measurement.filter {
-            if let Err(e) = f.check() {
-                errs.push(format!("measurement.filter: {e}"));
+            if let Err(e) = f.validate() {
+                errs.push(e.under("measurement.filter"));
             }
         }
         if !(self.plant.coulomb_transition_rad_s >= 0.0) {
-            errs.push("plant.coulomb_transition_rad_s must be ≥ 0".into());
+            errs.push(Problem::new("plant.coulomb_transition_rad_s", "must be ≥ 0"));
         }
         if self.output.formats.is_empty() {
-            errs.push("output.formats is empty".into());
+            errs.push(Problem::new("output.formats", "is empty"));
         }
-        if errs.is_empty() {
+        errs
+    }
+
+    /// Refuses a file with structural problems, naming each.
+    pub fn validate(&self) -> Result<()> {
+        let problems = self.problems();
+        if problems.is_empty() {
             Ok(())
         } else {
-            Err(errs.join("\n"))
+            Err(Error::Problems {
+                what: "simulation file".into(),
+                problems,
+            })
         }
     }
 }

@@ -58,21 +58,13 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             model.name
         )));
     }
-    cfg.check().map_err(invalid)?;
+    cfg.validate()?;
     let m = &cfg.measurement;
     let pos_std = m
         .position_noise_std_rad
-        .resolve(n, "measurement.position_noise_std_rad")
-        .map_err(invalid)?;
-    let cur_std = m
-        .current_noise_std_a
-        .resolve(n, "measurement.current_noise_std_a")
-        .map_err(invalid)?;
-    let dist_std = cfg
-        .disturbance
-        .torque_std_nm
-        .resolve(n, "disturbance.torque_std_nm")
-        .map_err(invalid)?;
+        .resolve(n, "measurement.position_noise_std_rad")?;
+    let cur_std = m.current_noise_std_a.resolve(n, "measurement.current_noise_std_a")?;
+    let dist_std = cfg.disturbance.torque_std_nm.resolve(n, "disturbance.torque_std_nm")?;
 
     let timing = &cfg.timing;
     let fs = timing.log_rate_hz;
@@ -132,7 +124,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             let diag: Vec<f64> = (0..n).map(|i| mm[(i, i)]).collect();
             let pick = |given: &Option<super::config::PerJoint>, key: &str, default: &dyn Fn(usize) -> f64| match given
             {
-                Some(g) => g.resolve(n, key).map_err(invalid),
+                Some(g) => g.resolve(n, key),
                 None => Ok((0..n).map(default).collect::<Vec<f64>>()),
             };
             let kp = pick(kp, "controller.kp", &|i| diag[i] * w * w)?;
@@ -142,7 +134,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
         }
     };
     let filter = match &m.filter {
-        Some(spec) => Some(AnalogFilter::new(*spec).map_err(invalid)?),
+        Some(spec) => Some(AnalogFilter::new(*spec)?),
         None => None,
     };
     let gains_truth = gains.as_ref().map(|g| GainsTruth {

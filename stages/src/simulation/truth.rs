@@ -72,7 +72,7 @@ impl TruthSamples {
             columns.extend(group.iter().map(col));
         }
         let batch = RecordBatch::try_new(Arc::new(schema), columns)?;
-        kind.check(&batch.schema())?;
+        kind.validate(&batch.schema())?;
         Ok(batch)
     }
 }

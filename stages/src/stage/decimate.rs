@@ -23,8 +23,8 @@ pub struct DecimateConfig {
 impl DecimateConfig {
     fn settings_problems(&self) -> Vec<Problem> {
         let mut out = Vec::new();
-        if let Err(e) = self.filter.check() {
-            out.push(Problem::new("filter", e));
+        if let Err(e) = self.filter.validate() {
+            out.push(e.under("filter"));
         }
         if self.factor < 1 {
             out.push(Problem::new("factor", "must be ≥ 1"));

@@ -71,7 +71,7 @@ impl DifferentiateConfig {
             (Differentiation::Dft, _, None) => Vec::new(),
             (Differentiation::FourierFit, None, None) => Vec::new(),
             (Differentiation::Filtered, None, Some(f)) => {
-                f.check().err().map(|m| Problem::new("filter", m)).into_iter().collect()
+                f.validate().err().map(|p| p.under("filter")).into_iter().collect()
             }
             (Differentiation::Filtered, _, _) => {
                 e("filter", "method = \"filtered\" needs `filter` (and no bandwidth_hz)")

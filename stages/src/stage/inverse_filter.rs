@@ -53,8 +53,8 @@ impl InverseFilterConfig {
         let mut out = Vec::new();
         match (&self.filter, &self.zpk) {
             (Some(f), None) => {
-                if let Err(e) = f.check() {
-                    out.push(Problem::new("filter", e));
+                if let Err(e) = f.validate() {
+                    out.push(e.under("filter"));
                 }
             }
             (None, Some(z)) => {

@@ -44,7 +44,29 @@ pub struct Problem {
     pub message: String,
 }
 
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.key.is_empty() {
+            f.write_str(&self.message)
+        } else {
+            write!(f, "`{}`: {}", self.key, self.message)
+        }
+    }
+}
+
 impl Problem {
+    /// The same problem under a parent key (`filter` → `filter.order`).
+    pub fn under(self, parent: &str) -> Problem {
+        Problem {
+            key: if self.key.is_empty() {
+                parent.to_string()
+            } else {
+                format!("{parent}.{}", self.key)
+            },
+            message: self.message,
+        }
+    }
+
     pub fn new(key: impl Into<String>, message: impl Into<String>) -> Problem {
         Problem {
             key: key.into(),

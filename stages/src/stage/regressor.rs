@@ -458,7 +458,7 @@ impl RegressorRows {
         let schema = Schema::new(fields).with_metadata(base_schema.metadata().clone());
         let batch = RecordBatch::try_new(Arc::new(schema), columns)
             .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
-        TableKind::Regressor.check(&batch.schema())?;
+        TableKind::Regressor.validate(&batch.schema())?;
         Ok(batch)
     }
 }
@@ -511,7 +511,7 @@ pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
 pub fn r_factor_table(regressor: &RecordBatch) -> Result<RecordBatch> {
     use crate::dynamics::RFactor;
     let schema = regressor.schema();
-    TableKind::Regressor.check(&schema)?;
+    TableKind::Regressor.validate(&schema)?;
     let param_idx = columns_of(&schema, PARAMETER_COLUMN);
     let params: Vec<Field> = param_idx.iter().map(|&i| schema.field(i).clone()).collect();
     let p = params.len();
@@ -562,6 +562,6 @@ pub fn r_factor_table(regressor: &RecordBatch) -> Result<RecordBatch> {
         columns,
     )
     .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
-    TableKind::RFactor.check(&out.schema())?;
+    TableKind::RFactor.validate(&out.schema())?;
     Ok(out)
 }

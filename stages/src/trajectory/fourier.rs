@@ -1,3 +1,4 @@
+use crate::stage::Problem;
 use std::f64::consts::PI;
 
 use serde::{Deserialize, Serialize};
@@ -50,39 +51,44 @@ impl FourierSeries {
         (0..self.terms()).map(|l| self.harmonic(l)).collect()
     }
 
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Problem> {
         if !(self.base_frequency_hz > 0.0 && self.base_frequency_hz.is_finite()) {
-            return Err(format!(
-                "base_frequency_hz must be > 0, found {}",
-                self.base_frequency_hz
+            return Err(Problem::new(
+                "base_frequency_hz",
+                format!("base_frequency_hz must be > 0, found {}", self.base_frequency_hz),
             ));
         }
         let n = self.q0.len();
         if n == 0 {
-            return Err("q0 is empty".into());
+            return Err(Problem::new("q0", "q0 is empty"));
         }
         if self.a.len() != n || self.b.len() != n {
-            return Err(format!(
-                "q0 has {n} joints, a has {}, b has {}",
-                self.a.len(),
-                self.b.len()
+            return Err(Problem::new(
+                "q0",
+                format!("q0 has {n} joints, a has {}, b has {}", self.a.len(), self.b.len()),
             ));
         }
         let terms = self.terms();
         for (i, (a, b)) in self.a.iter().zip(&self.b).enumerate() {
             if a.len() != terms || b.len() != terms {
-                return Err(format!("joint {}: a and b must each have {terms} coefficients", i + 1));
+                return Err(Problem::new(
+                    "a",
+                    format!("joint {}: a and b must each have {terms} coefficients", i + 1),
+                ));
             }
         }
         if !self.harmonics.is_empty() {
             if self.harmonics.len() != terms {
-                return Err(format!(
-                    "{} harmonics listed for {terms} coefficients",
-                    self.harmonics.len()
+                return Err(Problem::new(
+                    "a",
+                    format!("{} harmonics listed for {terms} coefficients", self.harmonics.len()),
                 ));
             }
             if self.harmonics.contains(&0) || self.harmonics.windows(2).any(|w| w[0] >= w[1]) {
-                return Err("harmonics must be distinct positive integers in increasing order".into());
+                return Err(Problem::new(
+                    "harmonics",
+                    "harmonics must be distinct positive integers in increasing order",
+                ));
             }
         }
         Ok(())
@@ -120,7 +126,7 @@ mod tests {
             a: vec![vec![0.5, -0.2, 0.1], vec![0.1, 0.2, 0.3]],
             b: vec![vec![0.1, 0.3, -0.05], vec![-0.4, 0.0, 0.1]],
         };
-        f.check().unwrap();
+        f.validate().unwrap();
         let h = 1e-5;
         let (mut q, mut qd, mut qdd) = ([0.0; 2], [0.0; 2], [0.0; 2]);
         let (mut qp, mut qm, mut dp, mut dm) = ([0.0; 2], [0.0; 2], [0.0; 2], [0.0; 2]);

@@ -63,11 +63,11 @@ impl Trajectory {
         }
     }
 
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::stage::Problem> {
         match self {
-            Trajectory::Fourier(f) => f.check(),
-            Trajectory::Waypoints(w) => w.check(),
-            Trajectory::Sweeps(s) => s.check(),
+            Trajectory::Fourier(f) => f.validate(),
+            Trajectory::Waypoints(w) => w.validate(),
+            Trajectory::Sweeps(s) => s.validate(),
         }
     }
 }
@@ -87,6 +87,6 @@ pub fn load_trajectory(path: &std::path::Path) -> crate::Result<Trajectory> {
     let t: Trajectory = t
         .try_into()
         .map_err(|e: toml::de::Error| err(format!("[trajectory]: {}", e.message())))?;
-    t.check().map_err(|e| err(format!("[trajectory]: {e}")))?;
+    t.validate().map_err(|e| err(format!("[trajectory] {e}")))?;
     Ok(t)
 }

@@ -1,3 +1,4 @@
+use crate::stage::Problem;
 use serde::{Deserialize, Serialize};
 
 /// Dedicated experiments (Bona §3.2): one joint moves back and forth over a
@@ -24,22 +25,28 @@ pub struct Sweeps {
 }
 
 impl Sweeps {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Problem> {
         if self.joint >= self.hold.len() {
-            return Err(format!(
-                "joint {} is not among the {} held positions",
-                self.joint,
-                self.hold.len()
+            return Err(Problem::new(
+                "joint",
+                format!(
+                    "joint {} is not among the {} held positions",
+                    self.joint,
+                    self.hold.len()
+                ),
             ));
         }
         if !(self.range[1] > self.range[0]) {
-            return Err("range must be [low, high] with high > low".into());
+            return Err(Problem::new("range", "range must be [low, high] with high > low"));
         }
         if self.velocities.is_empty() || self.velocities.iter().any(|v| !(*v > 0.0)) {
-            return Err("velocities must be a non-empty list of speeds > 0".into());
+            return Err(Problem::new(
+                "velocities",
+                "velocities must be a non-empty list of speeds > 0",
+            ));
         }
         if !(self.acceleration > 0.0) || !(self.dwell_s >= 0.0) {
-            return Err("acceleration must be > 0 and dwell_s ≥ 0".into());
+            return Err(Problem::new("acceleration", "acceleration must be > 0 and dwell_s ≥ 0"));
         }
         Ok(())
     }
@@ -127,7 +134,7 @@ mod tests {
             acceleration: 2.0,
             dwell_s: 0.5,
         };
-        s.check().unwrap();
+        s.validate().unwrap();
         let (mut q, mut qd, mut qdd) = ([0.0; 2], [0.0; 2], [0.0; 2]);
         // Pass 1 at 0.5 rad/s: ramps 0.25 s, cruise 3.75 s.
         s.eval(0.5 + 2.0, &mut q, &mut qd, &mut qdd);

@@ -1,3 +1,4 @@
+use crate::stage::Problem;
 use serde::{Deserialize, Serialize};
 
 /// One duration for every move, or a list with one per move.
@@ -25,22 +26,30 @@ pub struct Waypoints {
 }
 
 impl Waypoints {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Problem> {
         if self.points.len() < 2 {
-            return Err("at least two waypoints are needed".into());
+            return Err(Problem::new("points", "at least two waypoints are needed"));
         }
         let n = self.points[0].len();
         if n == 0 || self.points.iter().any(|p| p.len() != n) {
-            return Err("every waypoint must list one position per joint".into());
+            return Err(Problem::new(
+                "points",
+                "every waypoint must list one position per joint",
+            ));
         }
         let moves = self.points.len() - 1;
         let list: &[f64] = match &self.segment_s {
             Durations::All(d) => std::slice::from_ref(d),
             Durations::Each(v) if v.len() == moves => v,
-            Durations::Each(v) => return Err(format!("segment_s lists {} durations for {moves} moves", v.len())),
+            Durations::Each(v) => {
+                return Err(Problem::new(
+                    "segment_s",
+                    format!("segment_s lists {} durations for {moves} moves", v.len()),
+                ))
+            }
         };
         if list.iter().any(|d| !(*d > 0.0)) || !(self.dwell_s >= 0.0) {
-            return Err("durations must be > 0 and dwell_s ≥ 0".into());
+            return Err(Problem::new("segment_s", "durations must be > 0 and dwell_s ≥ 0"));
         }
         Ok(())
     }
@@ -104,7 +113,7 @@ mod tests {
             segment_s: Durations::All(2.0),
             dwell_s: 0.5,
         };
-        w.check().unwrap();
+        w.validate().unwrap();
         assert!((w.duration() - 5.5).abs() < 1e-15);
         let (mut q, mut qd, mut qdd) = ([0.0; 2], [0.0; 2], [0.0; 2]);
         w.eval(2.5, &mut q, &mut qd, &mut qdd);
