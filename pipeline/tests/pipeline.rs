@@ -2,7 +2,7 @@
 //! fixtures/ (robots/, pipelines/, recordings/) inside a temporary folder.
 
 use robotid_schemas::metadata;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use robotid::compare::{compare, Tolerances};
@@ -12,10 +12,6 @@ use robotid_schemas::{Kinematics, PeriodMean};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_tests::{bytes_of, fixture, workspace};
-
-fn fixtures() -> PathBuf {
-    fixture("")
-}
 
 /// Runs a pipeline as `robotid run` does, through the library API: its
 /// recordings, then its `estimate` stage if it has one and all succeeded.
@@ -58,7 +54,7 @@ fn example_pipelines_run_and_are_thread_count_independent() {
         // Against the pinned golden tables (`fixtures/regenerate.sh`): the
         // run is deterministic, so only float-library differences between
         // machines may show; 1e-9 relative leaves room for those alone.
-        let report = compare(&one, &fixtures().join("golden").join(name), &Tolerances::default());
+        let report = compare(&one, &fixture("").join("golden").join(name), &Tolerances::default());
         assert!(
             report.passed(),
             "{name}: differs from fixtures/golden (run `bash fixtures/regenerate.sh` after an intended change): {:?} {:?}",
@@ -182,7 +178,7 @@ fn lint_reports_every_problem_with_its_place() {
 
 #[test]
 fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
-    let file = fixtures().join("pipelines/kuka_lwr4.toml");
+    let file = fixture("").join("pipelines/kuka_lwr4.toml");
     let out = tempfile::tempdir().unwrap();
     let results = run_pipeline(&file, out.path(), None);
     assert_eq!(results.len(), 3);
@@ -565,7 +561,7 @@ fn excite_writes_a_trajectory_the_simulator_reads() {
         assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
         String::from_utf8_lossy(&o.stdout).into_owned()
     };
-    let cfg = fixtures().join("excite/kuka_axis3.toml");
+    let cfg = fixture("").join("excite/kuka_axis3.toml");
     let text = cli(&[
         "excite",
         &cfg.display().to_string(),
@@ -591,7 +587,7 @@ fn excite_writes_a_trajectory_the_simulator_reads() {
         &sim,
         format!(
             "robot = \"{}\"\ntrajectory_file = \"ex/excitation.toml\"\n[timing]\nlog_rate_hz = 150.0\ntransient_s = 2.0\nperiods = 2\n[output]\nname = \"optimised\"\nformats = [\"parquet\"]\n",
-            fixtures().join("robots/kuka_axis3.toml").display()
+            fixture("").join("robots/kuka_axis3.toml").display()
         ),
     )
     .unwrap();

@@ -1,15 +1,12 @@
 //! RNEA against independent truths: closed forms (1-dof, planar 2-dof) and
 //! the Lagrangian twin (energies by forward kinematics, finite differences).
 
-use std::path::{Path, PathBuf};
+use robotid_tests::fixture;
+use std::path::Path;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robotid_stages::dynamics::{self, lagrange, Data, Model};
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     let num = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);

@@ -3,7 +3,7 @@
 //! drawn with known variances. Monte Carlo over seeds for interval
 //! coverage and for the bias of OLS and ML with noisy positions.
 
-use std::path::{Path, PathBuf};
+use robotid_tests::fixture;
 
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;
@@ -20,10 +20,6 @@ use robotid_stages::simulation::SimConfig;
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::trajectory::Trajectory;
 use robotid_stages::Error;
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn config() -> RegressorConfig {
     RegressorConfig {

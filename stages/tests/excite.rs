@@ -1,13 +1,9 @@
 //! Excitation design on the paper's problems.
 
-use std::path::{Path, PathBuf};
+use robotid_tests::fixture;
 
 use robotid_stages::dynamics;
 use robotid_stages::excitation::{design, ExciteConfig};
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn load(rel: &str) -> (ExciteConfig, dynamics::Model) {
     let path = fixture(rel);

@@ -5,8 +5,8 @@
 //! The intervals must contain the truth at close to their nominal rate,
 //! and each estimator's bias is printed (and bounded).
 
+use robotid_tests::fixture;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 
 use nalgebra::DVector;
 use robotid_schemas::TorqueChannel;
@@ -21,10 +21,6 @@ use robotid_stages::stage::differentiate::{differentiate, Differentiation as Dif
 use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
 use robotid_stages::stage::noise::noise;
 use robotid_stages::stage::regressor::{regressor_table, RegressorConfig};
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 struct Case {
     sim: &'static str,

@@ -2,8 +2,8 @@
 //! simulator's truth: transient dropped, inverse-filtered averaged torque,
 //! noise variance, derivatives by both approaches.
 
+use robotid_tests::fixture;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 
 use robotid_schemas::TorqueChannel;
 use robotid_stages::dynamics::{self, Model};
@@ -14,10 +14,6 @@ use robotid_stages::stage::average::average;
 use robotid_stages::stage::differentiate::{differentiate, fit_reference, Differentiation as Method};
 use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
 use robotid_stages::stage::noise::noise;
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn sim(name: &str, edit: impl FnOnce(&mut SimConfig)) -> (SimConfig, Model, Simulation) {
     let (mut cfg, _) = SimConfig::load(&fixture(name)).unwrap();

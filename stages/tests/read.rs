@@ -2,17 +2,14 @@
 //! input with the error it must give.
 
 use robotid_stages::Error;
+use robotid_tests::fixture;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use robotid_stages::dynamics::{self, Model};
 use robotid_stages::simulation::{simulate, write_simulation, SimConfig, Simulation};
 use robotid_stages::stage::align::{align, AlignConfig};
 use robotid_stages::stage::read::{read, Channel, ReadConfig};
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn recording(dir: &Path) -> (Model, Simulation) {
     let (cfg, _) = SimConfig::load(&fixture("sims/arm3.toml")).unwrap();

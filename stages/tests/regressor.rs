@@ -1,15 +1,12 @@
 //! The regressor against RNEA: Φ(q, q̇, q̈)·θ = τ for every shipped robot.
 
-use std::path::{Path, PathBuf};
+use robotid_tests::fixture;
+use std::path::Path;
 
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robotid_stages::dynamics::{self, regressor, standard_parameters, Data, FrictionTerms, RegressorTerms};
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 #[test]
 fn regressor_times_parameters_is_rnea() {

@@ -1,19 +1,15 @@
 //! The simulator against independent truths: energy conservation, the
 //! analog filter's frequency response, the noise it was told to add.
 
+use robotid_tests::fixture;
 use std::collections::BTreeMap;
 use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
 
 use robotid_stages::dynamics::{self, lagrange, Data, Friction, Model};
 use robotid_stages::signal::AnalogFilter;
 use robotid_stages::simulation::{simulate, write_simulation, Plant, Reference, SimConfig, Simulation};
 use robotid_stages::trajectory::{Durations, Trajectory, Waypoints};
 use rustfft::num_complex::Complex64;
-
-fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
-}
 
 fn load(sim: &str) -> (SimConfig, Model) {
     let (cfg, _) = SimConfig::load(&fixture(sim)).unwrap();
