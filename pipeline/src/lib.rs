@@ -15,3 +15,9 @@ pub mod validation;
 pub use error::{Error, Problems, Result};
 pub use pipeline::{Built, Pipeline, RunReport};
 pub use run::RunOptions;
+
+// The pipeline-file documentation, whose Rust example is compiled and run
+// as a doc test.
+#[doc = include_str!("../../docs/pipeline-file.md")]
+#[cfg(doctest)]
+pub struct PipelineFileDoc;
