@@ -29,4 +29,62 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+/// The regressor stage on one recording (1500 samples of a 6-dof UR5
+/// excitation): the base regressor regrouped for each recording, as before
+/// the build step, against the stage built once per run.
+fn stage(c: &mut Criterion) {
+    use robotid_schemas::Kinematics;
+    use robotid_stages::stage::regressor::{regressor_table, RegressorConfig};
+    use robotid_stages::stage::{Chain, Component, Context};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+    let model = dynamics::load_robot(&path).unwrap();
+    let n = 1500;
+    let period = 10.0;
+    let wave = |j: usize, d: u32| -> Vec<f64> {
+        (0..n)
+            .map(|k| {
+                let w = 2.0 * std::f64::consts::PI / period * (1 + j % 3) as f64;
+                let t = k as f64 * period / n as f64 + j as f64;
+                match d {
+                    0 => (w * t).sin(),
+                    1 => w * (w * t).cos(),
+                    _ => -w * w * (w * t).sin(),
+                }
+            })
+            .collect()
+    };
+    let kin = Kinematics {
+        joints: model.joint_names(),
+        time: (0..n).map(|k| k as f64 * period / n as f64).collect(),
+        q: (0..6).map(|j| wave(j, 0)).collect(),
+        qd: (0..6).map(|j| wave(j, 1)).collect(),
+        qdd: (0..6).map(|j| wave(j, 2)).collect(),
+        torque: Some((0..6).map(|j| wave(j, 0)).collect()),
+        metadata: Default::default(),
+    };
+    let cfg = RegressorConfig::default();
+    let ctx = Context {
+        model: Some(std::sync::Arc::new(model.clone())),
+        ..Default::default()
+    };
+    let built = cfg.build(&ctx).unwrap();
+    let mut g = c.benchmark_group("regressor_stage_ur5_1500");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(n as u64));
+    g.bench_function("regrouped_per_recording", |b| {
+        b.iter(|| regressor_table(&kin, None, None, &model, &cfg, "bench").unwrap())
+    });
+    g.bench_function("built_once", |b| {
+        b.iter(|| {
+            let mut chain = Chain::new("bench", "bench");
+            chain.kinematics = Some(kin.clone());
+            built.run(&mut chain).unwrap();
+            chain.regressor.unwrap().to_record_batch().unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(stages, stage);
+criterion_main!(benches, stages);
