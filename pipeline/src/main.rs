@@ -77,8 +77,18 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // One line: the whole cause chain, outermost first.
-            eprintln!("error: {}", format!("{e:#}").replace('\n', "; "));
+            // A pipeline file's problems: one line each. Anything else: one
+            // line, the whole cause chain, outermost first.
+            let problems = e
+                .downcast_ref::<robotid::Problems>()
+                .or_else(|| match e.downcast_ref::<robotid::Error>() {
+                    Some(robotid::Error::Problems(p)) => Some(p),
+                    _ => None,
+                });
+            match problems {
+                Some(p) => eprintln!("error: {p}"),
+                None => eprintln!("error: {}", format!("{e:#}").replace('\n', "; ")),
+            }
             ExitCode::FAILURE
         }
     }
