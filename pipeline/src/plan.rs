@@ -25,7 +25,7 @@ use crate::error::{Place, Placed, Problems};
 pub const FORMAT_VERSION: u32 = 1;
 
 /// File extensions a raw log may have (`read` decides the format by it).
-pub const LOG_EXTENSIONS: &[&str] = &["csv", "parquet", "mcap"];
+pub const LOG_EXTENSIONS: &[&str] = &["csv", "txt", "dat", "tsv", "parquet", "mcap"];
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -337,7 +337,7 @@ pub fn source_kind(path: &Path) -> robotid_stages::Result<(Product, Option<bool>
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    if ext == "csv" {
+    if robotid_stages::stage::read::TEXT_EXTENSIONS.contains(&ext.as_str()) {
         return Ok((Product::Raw, Some(false)));
     }
     if ext != "parquet" {

@@ -118,7 +118,10 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
     };
     match built.start {
         Product::Raw => {
-            let raw = read(log, &built.plan.read, built.model.as_deref())?;
+            let mut raw = read(log, &built.plan.read, built.model.as_deref())?;
+            if let Some(n) = raw.metadata.remove(metadata::READ_NOTES) {
+                chain.report.notes.push(n);
+            }
             chain.report.samples = raw.len();
             chain.raw = Some(raw);
         }

@@ -31,7 +31,7 @@ fn every_case_is_refused_with_its_place() {
     let ws = workspace(&["kuka_axis3"]);
     let dir = ws.path();
     lint(dir, |t| t).expect("the example pipeline is valid");
-    std::fs::write(dir.join("recordings/log.txt"), "0 0 0\n").unwrap();
+    std::fs::write(dir.join("recordings/log.bin"), "0 0 0\n").unwrap();
     std::fs::write(dir.join("recordings/log.csv"), "time,q_a3,current_a3\n0,0,0\n").unwrap();
     let without_noise = |t: String| t.replace("[[stage]]\nkind = \"noise\"\n", "");
     type Case = (
@@ -77,7 +77,7 @@ fn every_case_is_refused_with_its_place() {
         ),
         (
             "a source no reader takes",
-            Box::new(|t| t.replace("kuka_axis3/kuka_axis3.mcap", "log.txt")),
+            Box::new(|t| t.replace("kuka_axis3/kuka_axis3.mcap", "log.bin")),
             Box::new(|p: &Problems| p.at(&Place::Source)),
         ),
         (

@@ -45,6 +45,8 @@ pub const PERIOD_START_S: &str = "robotid.period_start_s";
 pub const PHASE_REGISTERED: &str = "robotid.phase_registered";
 /// The time of a text log's first sample, s (times are written relative to it).
 pub const TIME_ORIGIN_S: &str = "robotid.time_origin_s";
+/// What reading a log noticed and did (e.g. a truncated last line dropped).
+pub const READ_NOTES: &str = "robotid.read.notes";
 /// The unit a log declared for its effort channel.
 pub const READ_EFFORT_UNIT: &str = "robotid.read.effort_unit";
 /// Band of the inverse-filtered torque, Hz: lines above it were zeroed.

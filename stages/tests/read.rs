@@ -232,3 +232,170 @@ fn bad_inputs_name_file_channel_and_sample() {
     ));
     assert!(e.contains("do not repeat with period 9 s"), "{e}");
 }
+
+/// Text logs as labs write them: with or without a header, columns by name
+/// or number, comma, semicolon, tab or whitespace separated, decimal
+/// commas, comments, a byte-order mark, absolute times — all read to the
+/// same samples as the simulator's own CSV, with no hand conversion.
+#[test]
+fn text_logs_as_they_come() {
+    use robotid_stages::stage::read::{Column, OneColumn};
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let csv = std::fs::read_to_string(dir.path().join("rec.csv")).unwrap();
+    let reference = read(&dir.path().join("rec.csv"), &ReadConfig::default(), Some(&model)).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let joints = model.joint_names();
+    // Columns by number: time, positions, currents.
+    let by_number = ReadConfig {
+        time: Some(Channel {
+            column: Some(Column::Index(col("time"))),
+            topic: None,
+            field: None,
+            unit: "s".into(),
+        }),
+        position: Some(Channel {
+            column: Some(Column::Each(
+                joints
+                    .iter()
+                    .map(|j| OneColumn::Index(col(&format!("q_{j}"))))
+                    .collect(),
+            )),
+            topic: None,
+            field: None,
+            unit: "rad".into(),
+        }),
+        effort: Some(Channel {
+            column: Some(Column::Each(
+                joints
+                    .iter()
+                    .map(|j| OneColumn::Index(col(&format!("current_{j}"))))
+                    .collect(),
+            )),
+            topic: None,
+            field: None,
+            unit: "A".into(),
+        }),
+        ..Default::default()
+    };
+    let origin = 1297.5;
+    let shifted = |t: &str| format!("{}", t.parse::<f64>().unwrap() + origin);
+    let write = |name: &str, text: String| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let body = |sep: &str, comma: bool, shift: bool| -> String {
+        rows.iter()
+            .map(|r| {
+                r.iter()
+                    .enumerate()
+                    .map(|(i, v)| {
+                        let v = if shift && i == col("time") {
+                            shifted(v)
+                        } else {
+                            v.to_string()
+                        };
+                        if comma {
+                            v.replace('.', ",")
+                        } else {
+                            v
+                        }
+                    })
+                    .collect::<Vec<_>>()
+                    .join(sep)
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let by_name = ReadConfig::default();
+    let cases: Vec<(&str, String, &ReadConfig)> = vec![
+        ("headerless.csv", body(",", false, false), &by_number),
+        (
+            "semicolons.csv",
+            format!("{}\n{}\n", header.join(";"), body(";", true, false)),
+            &by_name,
+        ),
+        (
+            "tabs.tsv",
+            format!("{}\n{}", header.join("\t"), body("\t", false, false)),
+            &by_name,
+        ),
+        (
+            "matrix.txt",
+            format!(
+                "\u{feff}# exported by the lab's logger\n% units: s rad A\n{}\n\n{}\n",
+                header.join("  "),
+                body("   ", false, false)
+            ),
+            &by_name,
+        ),
+        ("absolute.dat", body(" ", true, true), &by_number),
+    ];
+    for (name, text, cfg) in &cases {
+        let r = read(&write(name, text.clone()), cfg, Some(&model)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(r.q, reference.q, "{name}");
+        assert_eq!(r.effort, reference.effort, "{name}");
+        let worst = r
+            .time
+            .iter()
+            .zip(&reference.time)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        // Absolute stamps lose digits to the origin: 1297.5 s carries ~2e-13 s.
+        assert!(worst < 1e-9, "{name}: times differ by {worst}");
+    }
+    let r = read(&dir.path().join("absolute.dat"), &by_number, Some(&model)).unwrap();
+    assert_eq!(r.metadata[robotid_schemas::metadata::TIME_ORIGIN_S], origin.to_string());
+    assert_eq!(r.time[0], 0.0);
+
+    // Headerless but named by name: the error says the log has no header.
+    let e = read(&dir.path().join("headerless.csv"), &ReadConfig::default(), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, msg, .. } if channel == "time" && msg.contains("no header line") && msg.contains("column = 0")),
+        "{e}"
+    );
+    // A number that is not one: line and column named.
+    let mut lines: Vec<String> = body(" ", false, false).lines().map(str::to_string).collect();
+    let mut fields: Vec<&str> = lines[3].split(' ').collect();
+    fields[1] = "1.2.3";
+    lines[3] = fields.join(" ");
+    let bad = write("bad.txt", lines.join("\n"));
+    let e = read(&bad, &by_number, Some(&model)).map(|r| r.len()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { sample: Some(3), msg, .. } if msg.starts_with("line 4, column 1: `1.2.3`")),
+        "{e}"
+    );
+    // A last line cut short: refused with the option named, or dropped with a note.
+    let full = body(",", false, false);
+    let cut = write("cut.csv", full[..full.len() - 30].to_string());
+    let e = read(&cut, &by_number, Some(&model)).map(|r| r.len()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { msg, .. } if msg.contains("drop_truncated_last_line")),
+        "{e}"
+    );
+    let drop = ReadConfig {
+        drop_truncated_last_line: true,
+        ..by_number.clone()
+    };
+    let r = read(&cut, &drop, Some(&model)).unwrap();
+    assert_eq!(r.len(), reference.len() - 1);
+    assert!(r.metadata[robotid_schemas::metadata::READ_NOTES].contains("dropped the last line"));
+    // A line cut short in the middle is never dropped.
+    let mut lines: Vec<String> = full.lines().map(str::to_string).collect();
+    let half = lines[10].len() / 2;
+    lines[10].truncate(half);
+    let e = read(&write("middle.csv", lines.join("\n")), &drop, Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(matches!(&e, Error::Data { sample: Some(10), .. }), "{e}");
+    // One field per line: the separator is named.
+    let e = read(&write("one.csv", body("|", false, false)), &by_number, Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(e.to_string().contains("separator"), "{e}");
+}

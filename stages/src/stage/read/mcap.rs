@@ -192,7 +192,17 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             });
         }
     }
-    let time: Vec<f64> = base.iter().map(|&ns| ns as f64).collect();
+    // Integer nanoseconds relative to the first stamp: epoch stamps as f64
+    // seconds would carry only ~0.2 µs of resolution, fake jitter.
+    let t0 = base.first().copied().unwrap_or(0);
+    metadata.insert(
+        metadata::TIME_ORIGIN_S.into(),
+        format!("{}.{:09}", t0 / 1_000_000_000, t0 % 1_000_000_000)
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .to_string(),
+    );
+    let time: Vec<f64> = base.iter().map(|&ns| (ns - t0) as f64).collect();
     let mut it = series.into_iter();
     let position = it.next().expect("position").values;
     let effort = it.next().expect("effort").values;

@@ -6,9 +6,9 @@
 //! converted with the robot's drives (or the constants given here). Every
 //! value is checked: a NaN or infinity names the file, channel and sample.
 
-mod csv;
 mod mcap;
 mod parquet;
+mod text;
 
 use std::path::Path;
 
@@ -29,10 +29,57 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Channel {
-    pub column: Option<String>,
+    /// Text and Parquet logs: a column name or template (`q_{joint}`,
+    /// `q{index}_rad`), a 0-based column number, or one of either per joint.
+    pub column: Option<Column>,
     pub topic: Option<String>,
     pub field: Option<String>,
     pub unit: String,
+}
+
+/// Where a channel is in a text or Parquet log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Column {
+    /// 0-based column number.
+    Index(usize),
+    /// A name, or a template with `{joint}` (name) or `{index}` (1-based joint number).
+    Name(String),
+    /// One column per joint, in joint order.
+    Each(Vec<OneColumn>),
+}
+
+/// One column by number or name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum OneColumn {
+    Index(usize),
+    Name(String),
+}
+
+impl From<&str> for Column {
+    fn from(s: &str) -> Column {
+        Column::Name(s.to_string())
+    }
+}
+
+/// How the fields of a text log are separated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Separator {
+    Comma,
+    Semicolon,
+    Tab,
+    /// Runs of spaces or tabs.
+    Whitespace,
+}
+
+/// The decimal mark of a text log's numbers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Decimal {
+    Point,
+    Comma,
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -53,7 +100,23 @@ pub struct ReadConfig {
     pub torque_per_amp: Option<Vec<f64>>,
     /// Joint angle per encoder count (rad) per joint, when there is no robot file.
     pub radians_per_count: Option<Vec<f64>>,
+    /// Text logs: whether the first line names the columns (default:
+    /// detected; a first line of numbers is data).
+    pub header: Option<bool>,
+    /// Text logs: `comma`, `semicolon`, `tab` or `whitespace` (default:
+    /// detected from the first line).
+    pub separator: Option<Separator>,
+    /// Text logs: `point` or `comma` (default: detected; a comma can only be
+    /// the decimal mark when it is not the separator).
+    pub decimal: Option<Decimal>,
+    /// Text logs: a last line with too few fields (a write cut short) is
+    /// dropped with a note instead of refused.
+    #[serde(default)]
+    pub drop_truncated_last_line: bool,
 }
+
+/// Extensions of the delimited-text logs (all read alike).
+pub const TEXT_EXTENSIONS: &[&str] = &["csv", "txt", "dat", "tsv"];
 
 /// Unit conversions the read stage knows.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -180,10 +243,11 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
     let bytes_hash;
+    let text = TEXT_EXTENSIONS.contains(&ext.as_str());
     let cols = match ext.as_str() {
-        "csv" => {
+        e if TEXT_EXTENSIONS.contains(&e) => {
             bytes_hash = hash_file(path)?;
-            csv::read_csv(path, cfg, &joints)?
+            text::read_text(path, cfg, &joints)?
         }
         "parquet" => {
             bytes_hash = hash_file(path)?;
@@ -197,7 +261,10 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         other => {
             return Err(Error::Format {
                 path: path.to_path_buf(),
-                msg: format!("unknown log format `.{other}` (csv, parquet, mcap)"),
+                msg: format!(
+                    "unknown log format `.{other}` ({}, parquet, mcap)",
+                    TEXT_EXTENSIONS.join(", ")
+                ),
             })
         }
     };
@@ -281,10 +348,11 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     if let Some(r) = &mut reference {
         convert("reference", &unit(&cfg.reference, "rad"), r)?;
     }
-    // MCAP stamps are absolute; keep the origin, work relative to it.
-    if let Some(&t0) = time.first() {
-        if ext == "mcap" {
-            md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
+    // MCAP and text logs stamp absolute times: keep the origin, work
+    // relative to it. (MCAP's are subtracted in integer nanoseconds.)
+    if let Some(&t0) = time.first().filter(|_| text) {
+        md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
+        if t0 != 0.0 {
             time.iter_mut().for_each(|v| *v -= t0);
         }
     }

@@ -10,7 +10,7 @@ use arrow::array::{Array, Float64Array, Int64Array};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 
-use super::csv::{into_columns, resolve};
+use super::text::{into_columns, resolve};
 use super::{Columns, ReadConfig};
 use crate::{Error, Result};
 

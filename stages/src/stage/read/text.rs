@@ -1,0 +1,398 @@
+//! CSV and Parquet logs share the column mapping; CSV is streamed line by
+//! line, keeping only the mapped columns.
+
+use robotid_schemas::metadata;
+use std::collections::BTreeMap;
+use std::io::BufRead;
+use std::path::Path;
+
+use super::{column_name, Column, Columns, Decimal, OneColumn, ReadConfig, Separator};
+use crate::{Error, Result};
+
+/// Column names the mapping asks for, resolved against a header.
+pub(crate) struct Mapping {
+    pub time: String,
+    pub position: Vec<String>,
+    pub effort: Vec<String>,
+    pub reference: Option<Vec<String>>,
+    /// Unit implied by a defaulted effort column (`torque_…` → N·m).
+    pub effort_unit: Option<&'static str>,
+}
+
+pub(crate) fn resolve(header: &[String], cfg: &ReadConfig, joints: &[String], source: &str) -> Result<Mapping> {
+    let has = |n: &str| header.iter().any(|h| h == n);
+    let headerless = header.first().is_some_and(|h| h.starts_with(HEADERLESS));
+    let missing = |col: &str| Error::Data {
+        source_name: source.to_string(),
+        channel: col.to_string(),
+        sample: None,
+        msg: if headerless {
+            format!(
+                "missing column: the log has no header line ({} columns of numbers); name columns by 0-based number, e.g. `time = {{ column = 0, unit = \"s\" }}`, `position = {{ column = [1, 2, 3], unit = \"rad\" }}`",
+                header.len()
+            )
+        } else {
+            format!("missing column; the log has: {}", header.join(", "))
+        },
+    };
+    let err = |kind: &str, msg: String| Error::Data {
+        source_name: source.to_string(),
+        channel: kind.to_string(),
+        sample: None,
+        msg,
+    };
+    let by_index = |kind: &str, i: usize| -> Result<String> {
+        header.get(i).cloned().ok_or_else(|| {
+            err(
+                kind,
+                format!(
+                    "column {i} does not exist: the log has {} columns (0 to {})",
+                    header.len(),
+                    header.len().saturating_sub(1)
+                ),
+            )
+        })
+    };
+    let one = |kind: &str, c: &OneColumn, j: usize, joint: &str| -> Result<String> {
+        match c {
+            OneColumn::Index(i) => by_index(kind, *i),
+            OneColumn::Name(t) => Ok(column_name(t, j, joint)),
+        }
+    };
+    // The columns of a per-joint channel, or None when it is not given.
+    let per_joint = |ch: &Option<super::Channel>, kind: &str| -> Result<Option<Vec<String>>> {
+        let Some(c) = ch else { return Ok(None) };
+        match (&c.column, &c.topic) {
+            (Some(Column::Each(list)), _) => {
+                if list.len() != joints.len() {
+                    return Err(err(
+                        kind,
+                        format!("lists {} columns for {} joints", list.len(), joints.len()),
+                    ));
+                }
+                list.iter()
+                    .enumerate()
+                    .map(|(j, c)| one(kind, c, j, &joints[j]))
+                    .collect::<Result<Vec<_>>>()
+                    .map(Some)
+            }
+            (Some(Column::Index(i)), _) if joints.len() == 1 => Ok(Some(vec![by_index(kind, *i)?])),
+            (Some(Column::Index(_)), _) => Err(err(
+                kind,
+                format!(
+                    "one column number for {} joints: give one per joint, e.g. `column = [1, 2, 3]`",
+                    joints.len()
+                ),
+            )),
+            (Some(Column::Name(t)), _) => Ok(Some(
+                joints
+                    .iter()
+                    .enumerate()
+                    .map(|(j, name)| column_name(t, j, name))
+                    .collect(),
+            )),
+            (None, Some(_)) => Err(err(
+                kind,
+                "`topic` applies to MCAP logs; give `column` for text and Parquet logs".into(),
+            )),
+            (None, None) => Ok(None),
+        }
+    };
+    let require = |cols: Vec<String>| -> Result<Vec<String>> {
+        match cols.iter().find(|c| !has(c)) {
+            Some(c) => Err(missing(c)),
+            None => Ok(cols),
+        }
+    };
+    let names = |template: &str| -> Vec<String> {
+        joints
+            .iter()
+            .enumerate()
+            .map(|(j, name)| column_name(template, j, name))
+            .collect()
+    };
+    let time = match cfg.time.as_ref().and_then(|c| c.column.as_ref()) {
+        Some(Column::Index(i)) => by_index("time", *i)?,
+        Some(Column::Name(n)) => n.clone(),
+        Some(Column::Each(_)) => return Err(err("time", "is one column, not a list".into())),
+        None => "time".into(),
+    };
+    if !has(&time) {
+        return Err(missing(&time));
+    }
+    let position = require(per_joint(&cfg.position, "position")?.unwrap_or_else(|| names("q_{joint}")))?;
+    let (effort, effort_unit) = match per_joint(&cfg.effort, "effort")? {
+        Some(cols) => (require(cols)?, None),
+        None => {
+            // Currents if the log has any, else torques; the error names
+            // the first missing column of the set in use.
+            let current = names("current_{joint}");
+            if current.iter().any(|c| has(c)) {
+                (require(current)?, Some("A"))
+            } else {
+                (require(names("torque_{joint}"))?, Some("N*m"))
+            }
+        }
+    };
+    let reference = match per_joint(&cfg.reference, "reference")? {
+        Some(cols) => Some(require(cols)?),
+        None => {
+            let r = names("ref_{joint}");
+            r.iter().all(|c| has(c)).then_some(r)
+        }
+    };
+    Ok(Mapping {
+        time,
+        position,
+        effort,
+        reference,
+        effort_unit: if cfg.effort.is_some() { None } else { effort_unit },
+    })
+}
+
+pub(crate) fn into_columns(
+    m: Mapping,
+    mut get: impl FnMut(&str) -> Vec<f64>,
+    mut metadata: BTreeMap<String, String>,
+) -> Columns {
+    if let Some(u) = m.effort_unit {
+        metadata.insert(metadata::READ_EFFORT_UNIT.into(), u.into());
+    }
+    Columns {
+        time: get(&m.time),
+        position: m.position.iter().map(|c| get(c)).collect(),
+        effort: m.effort.iter().map(|c| get(c)).collect(),
+        reference: m.reference.as_ref().map(|r| r.iter().map(|c| get(c)).collect()),
+        names: [
+            m.position.clone(),
+            m.effort.clone(),
+            m.reference.clone().unwrap_or_default(),
+        ],
+        metadata,
+    }
+}
+
+/// Names given to the columns of a log without a header line: `column 0`, …
+pub(crate) const HEADERLESS: &str = "column ";
+
+/// Whether a line is a comment: `#`, `%` or `//` first.
+fn comment(t: &str) -> bool {
+    let t = t.trim_start();
+    t.starts_with('#') || t.starts_with('%') || t.starts_with("//")
+}
+
+/// The separator a line uses: a semicolon or a tab where there is one
+/// (runs of tabs: whitespace), a comma unless the commas sit inside
+/// whitespace-separated numbers (decimal commas), else whitespace.
+fn separator_of(line: &str) -> Separator {
+    let t = line.trim();
+    if t.contains(';') {
+        Separator::Semicolon
+    } else if t.contains('\t') {
+        if t.contains("\t\t") || t.contains(" \t") || t.contains("\t ") {
+            Separator::Whitespace
+        } else {
+            Separator::Tab
+        }
+    } else if t.contains(',') {
+        let words: Vec<&str> = t.split_whitespace().collect();
+        if words.len() > 1
+            && words
+                .iter()
+                .all(|w| number(w, Decimal::Comma).is_some() && !w.ends_with(','))
+        {
+            Separator::Whitespace
+        } else {
+            Separator::Comma
+        }
+    } else {
+        Separator::Whitespace
+    }
+}
+
+fn fields(line: &str, sep: Separator) -> Box<dyn Iterator<Item = &str> + '_> {
+    match sep {
+        Separator::Comma => Box::new(line.split(',')),
+        Separator::Semicolon => Box::new(line.split(';')),
+        Separator::Tab => Box::new(line.split('\t')),
+        Separator::Whitespace => Box::new(line.split_whitespace()),
+    }
+}
+
+/// A number with either decimal mark, parsed without allocating.
+fn number(text: &str, decimal: Decimal) -> Option<f64> {
+    let text = text.trim().trim_matches('"');
+    if decimal == Decimal::Point || !text.contains(',') {
+        return text.parse().ok();
+    }
+    let mut buf = [0u8; 64];
+    let bytes = text.as_bytes();
+    if bytes.len() > buf.len() {
+        return None;
+    }
+    for (b, &c) in buf.iter_mut().zip(bytes) {
+        *b = if c == b',' { b'.' } else { c };
+    }
+    std::str::from_utf8(&buf[..bytes.len()]).ok()?.parse().ok()
+}
+
+/// Delimited text: CSV, semicolon, tab or whitespace separated, with or
+/// without a header line, comment lines and a UTF-8 byte-order mark
+/// skipped, either decimal mark. Streamed line by line; only the mapped
+/// columns are kept.
+pub(crate) fn read_text(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let source = path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut reader = std::io::BufReader::new(file);
+    let mut line = String::new();
+    let mut line_no = 0usize;
+    let fmt = |msg: String| Error::Format {
+        path: path.to_path_buf(),
+        msg,
+    };
+    // The next non-empty, non-comment line into `line`; false at the end.
+    let mut next = |line: &mut String, line_no: &mut usize| -> Result<bool> {
+        loop {
+            line.clear();
+            let read = reader.read_line(line).map_err(|e| match e.kind() {
+                std::io::ErrorKind::InvalidData => Error::Format {
+                    path: path.to_path_buf(),
+                    msg: format!("line {}: not UTF-8 text (is it a binary file?)", *line_no + 1),
+                },
+                _ => Error::io(path, e),
+            })?;
+            if read == 0 {
+                return Ok(false);
+            }
+            *line_no += 1;
+            if *line_no == 1 && line.starts_with('\u{feff}') {
+                line.drain(..'\u{feff}'.len_utf8());
+            }
+            let t = line.trim_end_matches(['\n', '\r']);
+            if !t.trim().is_empty() && !comment(t) {
+                let len = t.len();
+                line.truncate(len);
+                return Ok(true);
+            }
+        }
+    };
+    if !next(&mut line, &mut line_no)? {
+        return Err(fmt("empty file (no line of data)".into()));
+    }
+    let sep = cfg.separator.unwrap_or_else(|| separator_of(&line));
+    let first: Vec<String> = fields(&line, sep)
+        .map(|s| s.trim().trim_matches('"').to_string())
+        .collect();
+    // A comma can be the decimal mark only where it does not separate;
+    // there, either mark is read.
+    let decimal = cfg.decimal.unwrap_or(if sep == Separator::Comma {
+        Decimal::Point
+    } else {
+        Decimal::Comma
+    });
+    if sep == Separator::Comma && cfg.decimal == Some(Decimal::Comma) {
+        return Err(fmt("decimal = \"comma\" needs another separator than the comma".into()));
+    }
+    let numeric = first.iter().all(|f| number(f, decimal).is_some());
+    let has_header = cfg.header.unwrap_or(!numeric);
+    let header: Vec<String> = if has_header {
+        first.clone()
+    } else {
+        (0..first.len()).map(|i| format!("{HEADERLESS}{i}")).collect()
+    };
+    if header.len() < 2 {
+        return Err(fmt(format!(
+            "line {line_no} has a single field `{}`: the separator is not {} (give `separator` = \"comma\", \"semicolon\", \"tab\" or \"whitespace\")",
+            first.first().map(String::as_str).unwrap_or(""),
+            match sep {
+                Separator::Comma => "a comma",
+                Separator::Semicolon => "a semicolon",
+                Separator::Tab => "a tab",
+                Separator::Whitespace => "whitespace",
+            }
+        )));
+    }
+    let mapping = resolve(&header, cfg, joints, &source)?;
+    let wanted: Vec<String> = std::iter::once(mapping.time.clone())
+        .chain(mapping.position.iter().cloned())
+        .chain(mapping.effort.iter().cloned())
+        .chain(mapping.reference.iter().flatten().cloned())
+        .collect();
+    // For each header column, the slots (wanted entries) it feeds.
+    let mut slots: Vec<Vec<usize>> = vec![Vec::new(); header.len()];
+    for (k, w) in wanted.iter().enumerate() {
+        slots[header.iter().position(|h| h == w).expect("resolved")].push(k);
+    }
+    let mut data: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];
+    let mut notes = Vec::new();
+    let mut sample = 0usize;
+    let mut have = if has_header {
+        next(&mut line, &mut line_no)?
+    } else {
+        true
+    };
+    while have {
+        let this_line = line_no;
+        let mut count = 0usize;
+        let mut bad = None;
+        for (i, text) in fields(&line, sep).enumerate() {
+            count += 1;
+            if i >= header.len() || slots[i].is_empty() || bad.is_some() {
+                continue;
+            }
+            match number(text, decimal) {
+                Some(v) => slots[i].iter().for_each(|&k| data[k].push(v)),
+                None => bad = Some((i, text.trim().to_string())),
+            }
+        }
+        let short = count < header.len();
+        have = next(&mut line, &mut line_no)?;
+        if short && !have && cfg.drop_truncated_last_line {
+            // Roll back what the cut line gave.
+            let n = sample;
+            data.iter_mut().for_each(|c| c.truncate(n));
+            notes.push(format!(
+                "dropped the last line ({this_line}): {count} of {} fields, a write cut short",
+                header.len()
+            ));
+            break;
+        }
+        if count != header.len() {
+            return Err(Error::Data {
+                source_name: source.clone(),
+                channel: "(row)".into(),
+                sample: Some(sample),
+                msg: format!(
+                    "line {this_line} has {count} fields, the {} has {}{}",
+                    if has_header { "header" } else { "first line" },
+                    header.len(),
+                    if !have && short {
+                        " (truncated file? `drop_truncated_last_line = true` in [read] drops such a last line)"
+                    } else {
+                        " (truncated or corrupt file?)"
+                    }
+                ),
+            });
+        }
+        if let Some((i, text)) = bad {
+            let hint = if decimal == Decimal::Point && text.contains(',') {
+                " (a decimal comma? give `decimal = \"comma\"` and a separator other than the comma)"
+            } else {
+                ""
+            };
+            return Err(Error::Data {
+                source_name: source.clone(),
+                channel: header[i].clone(),
+                sample: Some(sample),
+                msg: format!("line {this_line}, column {i}: `{text}` is not a number{hint}"),
+            });
+        }
+        sample += 1;
+    }
+    let by_name: BTreeMap<String, usize> = wanted.iter().enumerate().map(|(k, w)| (w.clone(), k)).collect();
+    let mut md = BTreeMap::new();
+    if !notes.is_empty() {
+        md.insert(metadata::READ_NOTES.into(), notes.join("; "));
+    }
+    Ok(into_columns(mapping, |name| data[by_name[name]].clone(), md))
+}
