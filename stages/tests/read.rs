@@ -61,7 +61,7 @@ fn counts_and_degrees_are_converted() {
             column: Some("counts_{joint}".into()),
             topic: None,
             field: None,
-            unit: "count".into(),
+            unit: Some("count".into()),
         }),
         ..Default::default()
     };
@@ -140,7 +140,7 @@ fn bad_inputs_name_file_channel_and_sample() {
             column: Some("current_{joint}".into()),
             topic: None,
             field: None,
-            unit: "furlong".into(),
+            unit: Some("furlong".into()),
         }),
         ..Default::default()
     };
@@ -175,7 +175,7 @@ fn bad_inputs_name_file_channel_and_sample() {
             column: None,
             topic: Some("/torques".into()),
             field: Some("effort".into()),
-            unit: "N*m".into(),
+            unit: Some("N*m".into()),
         }),
         ..Default::default()
     };
@@ -254,7 +254,7 @@ fn text_logs_as_they_come() {
             column: Some(Column::Index(col("time"))),
             topic: None,
             field: None,
-            unit: "s".into(),
+            unit: Some("s".into()),
         }),
         position: Some(Channel {
             column: Some(Column::Each(
@@ -265,7 +265,7 @@ fn text_logs_as_they_come() {
             )),
             topic: None,
             field: None,
-            unit: "rad".into(),
+            unit: Some("rad".into()),
         }),
         effort: Some(Channel {
             column: Some(Column::Each(
@@ -276,7 +276,7 @@ fn text_logs_as_they_come() {
             )),
             topic: None,
             field: None,
-            unit: "A".into(),
+            unit: Some("A".into()),
         }),
         ..Default::default()
     };
@@ -398,4 +398,142 @@ fn text_logs_as_they_come() {
         .map(|r| r.len())
         .unwrap_err();
     assert!(e.to_string().contains("separator"), "{e}");
+}
+
+/// A channel's unit defaults as documented: a JointState `effort` needs no
+/// `unit` (N·m), a current-named column is A, an effort column whose name
+/// implies nothing is refused with the choice named.
+#[test]
+fn units_default_as_documented() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let mcap = dir.path().join("rec.mcap");
+    let effort = |topic: Option<&str>, field: Option<&str>, column: Option<&str>| ReadConfig {
+        effort: Some(Channel {
+            column: column.map(Into::into),
+            topic: topic.map(Into::into),
+            field: field.map(Into::into),
+            unit: None,
+        }),
+        ..Default::default()
+    };
+    let default = read(&mcap, &ReadConfig::default(), Some(&model)).unwrap();
+    let named = read(
+        &mcap,
+        &effort(Some("/joint_states"), Some("effort"), None),
+        Some(&model),
+    )
+    .unwrap();
+    assert_eq!(named.effort, default.effort);
+    let csv = dir.path().join("rec.csv");
+    let by_column = read(&csv, &effort(None, None, Some("current_{joint}")), Some(&model)).unwrap();
+    assert_eq!(
+        by_column.effort,
+        read(&csv, &ReadConfig::default(), Some(&model)).unwrap().effort
+    );
+    let text = std::fs::read_to_string(&csv).unwrap().replace("current_", "e_");
+    let odd = dir.path().join("odd.csv");
+    std::fs::write(&odd, text).unwrap();
+    let e = read(&odd, &effort(None, None, Some("e_{joint}")), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, msg, .. } if channel == "effort" && msg.contains("give `unit")),
+        "{e}"
+    );
+}
+
+/// An MCAP of JointStates as a ROS 2 bag holds them: epoch log times in
+/// nanoseconds (uniform: no jitter, no resampling), and a publisher that
+/// changes its joint order mid-log (followed by name) or repeats a name
+/// (refused, with the sample).
+#[test]
+fn ros2_joint_states_epoch_times_and_reordered_names() {
+    use robotid_stages::formats::cdr::{encode_joint_state, JointState, JOINT_STATE_NAME, JOINT_STATE_SCHEMA};
+    let write = |path: &Path, names_at: &dyn Fn(usize) -> Vec<&'static str>| {
+        let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+        let mut out = mcap::WriteOptions::new().create(file).unwrap();
+        let schema = out
+            .add_schema(JOINT_STATE_NAME, "ros2msg", JOINT_STATE_SCHEMA.as_bytes())
+            .unwrap();
+        let ch = out
+            .add_channel(schema, "/joint_states", "cdr", &BTreeMap::new())
+            .unwrap();
+        let epoch = 1_733_000_000_000_000_000u64;
+        let mut buf = Vec::new();
+        for k in 0..1200usize {
+            let ns = epoch + 5_000_000 * k as u64;
+            let t = 0.005 * k as f64;
+            let names = names_at(k);
+            let value = |name: &str| {
+                let j: f64 = name[1..].parse().unwrap();
+                j * (std::f64::consts::PI * t).sin()
+            };
+            let msg = JointState {
+                sec: (ns / 1_000_000_000) as i32,
+                nanosec: (ns % 1_000_000_000) as u32,
+                name: names.iter().map(|s| s.to_string()).collect(),
+                position: names.iter().map(|n| value(n)).collect(),
+                effort: names.iter().map(|n| 10.0 * value(n)).collect(),
+                ..Default::default()
+            };
+            encode_joint_state(&msg, &mut buf);
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: k as u32,
+                log_time: ns,
+                publish_time: ns,
+            };
+            out.write_to_known_channel(&header, &buf).unwrap();
+        }
+        out.finish().unwrap();
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = ReadConfig {
+        joints: Some(vec!["j1".into(), "j2".into(), "j3".into()]),
+        ..Default::default()
+    };
+    let bag = dir.path().join("bag.mcap");
+    write(&bag, &|k| {
+        if k < 600 {
+            vec!["j1", "j2", "j3"]
+        } else {
+            vec!["j3", "j1", "j2"]
+        }
+    });
+    let raw = read(&bag, &cfg, None).unwrap();
+    for (j, q) in raw.q.iter().enumerate() {
+        for (k, v) in q.iter().enumerate() {
+            let t = 0.005 * k as f64;
+            let expect = (j + 1) as f64 * (std::f64::consts::PI * t).sin();
+            assert_eq!(*v, expect, "joint {j}, sample {k}");
+        }
+    }
+    assert!(raw.metadata[robotid_schemas::metadata::READ_NOTES].contains("changed its joint names or order 1 time"));
+    assert_eq!(raw.metadata[robotid_schemas::metadata::TIME_ORIGIN_S], "1733000000");
+    let p = align(
+        &raw,
+        &AlignConfig {
+            period_s: Some(2.0),
+            ..Default::default()
+        },
+        "bag.mcap",
+    )
+    .unwrap();
+    assert!(!p.report.resampled, "a uniform bag is not resampled");
+    assert!(p.report.jitter_rms_s < 1e-12, "jitter {}", p.report.jitter_rms_s);
+    // A repeated name is refused at its sample.
+    let dup = dir.path().join("dup.mcap");
+    write(&dup, &|k| {
+        if k < 7 {
+            vec!["j1", "j2", "j3"]
+        } else {
+            vec!["j1", "j1", "j3"]
+        }
+    });
+    let e = read(&dup, &cfg, None).map(|r| r.len()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { sample: Some(7), msg, .. } if msg.contains("`j1` appears twice")),
+        "{e}"
+    );
 }

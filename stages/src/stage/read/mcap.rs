@@ -30,8 +30,11 @@ fn wanted(ch: &Option<Channel>, default_topic: &str, default_field: &str) -> Wan
 struct Series {
     stamps: Vec<u64>,
     values: Vec<Vec<f64>>,
-    /// Joint index in the message for each joint (JointState), found on the first message.
+    /// Joint index in the message for each joint (JointState), for the names last seen.
     order: Option<Vec<usize>>,
+    names: Vec<String>,
+    /// Times the publisher changed its joint order or names.
+    reorders: usize,
 }
 
 pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
@@ -79,6 +82,8 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             stamps: Vec::new(),
             values: vec![Vec::new(); joints.len()],
             order: None,
+            names: Vec::new(),
+            reorders: 0,
         })
         .collect();
     let mut seen_topics = BTreeMap::new();
@@ -113,7 +118,13 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                             )))
                         }
                     };
-                    if s.order.is_none() {
+                    // Names are matched on every message whose names differ
+                    // from the last: a publisher that reorders its joints
+                    // is followed, one that drops or repeats a name refused.
+                    if s.names != js.name {
+                        if let Some(d) = js.name.iter().enumerate().find(|(i, n)| js.name[..*i].contains(n)) {
+                            return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
+                        }
                         let order = joints
                             .iter()
                             .map(|j| js.name.iter().position(|n| n == j))
@@ -124,7 +135,11 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                                     js.name
                                 ))
                             })?;
+                        if s.order.is_some() {
+                            s.reorders += 1;
+                        }
                         s.order = Some(order);
+                        s.names = js.name.clone();
                     }
                     let order = s.order.as_ref().expect("set");
                     for (j, &i) in order.iter().enumerate() {
@@ -203,6 +218,20 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             .to_string(),
     );
     let time: Vec<f64> = base.iter().map(|&ns| (ns - t0) as f64).collect();
+    let notes: Vec<String> = specs
+        .iter()
+        .zip(&series)
+        .filter(|(_, s)| s.reorders > 0)
+        .map(|(w, s)| {
+            format!(
+                "{}: the publisher changed its joint names or order {} time(s); matched by name on every message",
+                w.topic, s.reorders
+            )
+        })
+        .collect();
+    if !notes.is_empty() {
+        metadata.insert(metadata::READ_NOTES.into(), notes.join("; "));
+    }
     let mut it = series.into_iter();
     let position = it.next().expect("position").values;
     let effort = it.next().expect("effort").values;

@@ -32,9 +32,14 @@ pub struct Channel {
     /// Text and Parquet logs: a column name or template (`q_{joint}`,
     /// `q{index}_rad`), a 0-based column number, or one of either per joint.
     pub column: Option<Column>,
+    /// MCAP logs: the topic and the message field (`position`, `velocity`,
+    /// `effort`; JSON: the array's key).
     pub topic: Option<String>,
     pub field: Option<String>,
-    pub unit: String,
+    /// Default: s (time; MCAP log times ns), rad (position, reference),
+    /// N·m for a JointState `effort` field or a torque-named column, A for
+    /// a current-named one; other effort columns must say.
+    pub unit: Option<String>,
 }
 
 /// Where a channel is in a text or Parquet log.
@@ -170,8 +175,10 @@ impl ReadConfig {
             ("reference", &self.reference),
         ] {
             if let Some(c) = ch {
-                if let Err(e) = unit_scale(kind, &c.unit) {
-                    out.push(Problem::new(format!("{kind}.unit"), e.to_string()));
+                if let Some(u) = &c.unit {
+                    if let Err(e) = unit_scale(kind, u) {
+                        out.push(Problem::new(format!("{kind}.unit"), e.to_string()));
+                    }
                 }
                 if c.column.is_some() && (c.topic.is_some() || c.field.is_some()) {
                     out.push(Problem::new(
@@ -268,7 +275,11 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             })
         }
     };
-    let unit = |ch: &Option<Channel>, default: &str| ch.as_ref().map_or(default.to_string(), |c| c.unit.clone());
+    let unit = |ch: &Option<Channel>, default: &str| {
+        ch.as_ref()
+            .and_then(|c| c.unit.clone())
+            .unwrap_or_else(|| default.to_string())
+    };
     let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
         source_name: source.clone(),
         channel: channel.to_string(),
@@ -341,9 +352,21 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     convert("time", &time_unit, &mut t)?;
     [time] = t;
     convert("position", &unit(&cfg.position, "rad"), &mut position)?;
-    let effort_unit = md
-        .remove(metadata::READ_EFFORT_UNIT)
-        .unwrap_or_else(|| unit(&cfg.effort, "A"));
+    let effort_unit = match (md.remove(metadata::READ_EFFORT_UNIT), cfg.effort.as_ref()) {
+        (Some(u), _) => u,
+        (None, Some(Channel { unit: Some(u), .. })) => u.clone(),
+        (None, Some(c)) => effort_unit_of(c, &names[1]).ok_or_else(|| {
+            data_err(
+                "effort",
+                None,
+                format!(
+                    "no unit given and none implied by the channel ({}): give `unit = \"A\"` (motor current) or `\"N*m\"` (joint torque)",
+                    names[1].first().map(String::as_str).unwrap_or("?")
+                ),
+            )
+        })?,
+        (None, None) => "A".to_string(),
+    };
     convert("effort", &effort_unit, &mut effort)?;
     if let Some(r) = &mut reference {
         convert("reference", &unit(&cfg.reference, "rad"), r)?;
@@ -381,6 +404,24 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     };
     raw.check_shape()?;
     Ok(raw)
+}
+
+/// The unit an effort channel's name implies: a JointState `effort` field
+/// or a torque-named column is N·m, a current-named one A.
+fn effort_unit_of(c: &Channel, columns: &[String]) -> Option<String> {
+    let name = c
+        .field
+        .clone()
+        .or_else(|| columns.first().cloned())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    if ["tau", "torque", "nm", "effort"].iter().any(|k| name.contains(k)) {
+        Some("N*m".into())
+    } else if ["current", "curr", "amp"].iter().any(|k| name.contains(k)) || name.ends_with("_a") {
+        Some("A".into())
+    } else {
+        None
+    }
 }
 
 fn hash_file(path: &Path) -> Result<String> {
