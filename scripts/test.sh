@@ -7,11 +7,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/pyenv"
-if ! "$venv/bin/python" -c "import mcap, mcap_ros2, pinocchio" 2>/dev/null; then
+# Rebuilt when the requirements change (their hash is stamped in the venv).
+stamp=$(sha256sum tests/python/requirements.txt | cut -d' ' -f1)
+if [ "$(cat "$venv/requirements.sha256" 2>/dev/null)" != "$stamp" ] \
+  || ! "$venv/bin/python" -c "import mcap, mcap_ros2, pinocchio" 2>/dev/null; then
   echo "setting up $venv (tests/python/requirements.txt)"
   rm -rf "$venv"
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --disable-pip-version-check -r tests/python/requirements.txt
+  echo "$stamp" > "$venv/requirements.sha256"
 fi
 export ROBOTID_PYTHON="$venv/bin/python"
 cargo fmt --all --check

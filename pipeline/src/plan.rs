@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use robotid_schemas::{metadata, TableKind};
-use robotid_stages::dynamics::{load_robot, Model};
+use robotid_stages::dynamics::{load_robot_with, Model};
 use robotid_stages::stage::align::AlignConfig;
 use robotid_stages::stage::average::AverageConfig;
 use robotid_stages::stage::decimate::DecimateConfig;
@@ -39,6 +39,10 @@ struct PipelineFile {
     stage: Vec<toml::Spanned<toml::Table>>,
     #[serde(default)]
     output: OutputConfig,
+    /// Joints of the robot's URDF held still in the recordings: name →
+    /// position (rad or m). Joints not in `[read] joints` are locked too.
+    #[serde(default)]
+    lock: std::collections::BTreeMap<String, f64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -132,9 +136,19 @@ pub struct Plan {
     /// Line of each stage in the file.
     pub lines: Vec<usize>,
     pub tables: Vec<TableKind>,
+    /// Locked joints and their positions (`[lock]`).
+    pub lock: std::collections::BTreeMap<String, f64>,
 }
 
 impl Plan {
+    /// Which joints of the robot's description move, which are locked.
+    pub fn locks(&self) -> robotid_stages::dynamics::Locks {
+        robotid_stages::dynamics::Locks {
+            keep: self.read.joints.clone(),
+            positions: self.lock.clone(),
+        }
+    }
+
     /// The folder relative paths are resolved against.
     pub fn base_dir(&self) -> &Path {
         self.file.parent().unwrap_or(Path::new("."))
@@ -238,6 +252,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
         stages,
         lines,
         tables,
+        lock: raw.lock,
     };
     if problems.is_empty() {
         return Ok(plan);
@@ -376,7 +391,7 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
         message,
     };
     let model = match &plan.robot {
-        Some(r) => match load_robot(r) {
+        Some(r) => match load_robot_with(r, &plan.locks()) {
             Ok(m) => Some(m),
             Err(e) => {
                 problems.push(at(Place::Key("robot".into()), e.to_string()));

@@ -1,6 +1,9 @@
-"""Independent inverse dynamics with Pinocchio: reads a URDF and a JSON file
-of states {"q": [[...]], "v": [[...]], "a": [[...]]}, prints the joint torques
-(pin.rnea, gravity (0, 0, -9.81)) and the joint names as JSON."""
+"""Independent inverse dynamics with Pinocchio: reads a URDF, a JSON file of
+states {"q": [[...]], "v": [[...]], "a": [[...]]} and optionally a JSON
+object of locked joints {name: position}; prints the joint torques
+(pin.rnea, gravity (0, 0, -9.81)) and the joint names as JSON. Locked
+joints are removed by pin.buildReducedModel at those positions (the other
+joints of the reference configuration at 0)."""
 import json
 import sys
 
@@ -8,8 +11,17 @@ import numpy as np
 import pinocchio as pin
 
 
-def main(urdf, states):
+def main(urdf, states, locks=None):
     model = pin.buildModelFromUrdf(urdf)
+    if locks:
+        locked = json.loads(locks)
+        q0 = pin.neutral(model)
+        ids = []
+        for name, x in locked.items():
+            jid = model.getJointId(name)
+            q0[model.joints[jid].idx_q] = x
+            ids.append(jid)
+        model = pin.buildReducedModel(model, ids, q0)
     data = model.createData()
     with open(states) as f:
         s = json.load(f)
@@ -20,4 +32,4 @@ def main(urdf, states):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    main(*sys.argv[1:])

@@ -3,6 +3,7 @@
 //! torques equal to 1e-9 relative.
 
 use robotid_tests::python;
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
@@ -11,14 +12,75 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use robotid_stages::dynamics::{self, regressor, standard_parameters, Data, FrictionTerms, RegressorTerms};
 
+/// A 4-link arm with a prismatic joint in mid-chain and a mimic pair at the
+/// tool: both load, locked; the reduced model is Pinocchio's.
+const PRISMATIC_URDF: &str = r#"<robot name="telescope">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0 0 0.2" rpy="0.1 0 0"/><mass value="3"/><inertia ixx="0.05" ixy="0.001" ixz="0" iyy="0.04" iyz="0.002" izz="0.02"/></inertial></link>
+  <link name="l2"><inertial><origin xyz="0.1 0 0.1" rpy="0 0 0"/><mass value="2"/><inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" izz="0.015"/></inertial></link>
+  <link name="l3"><inertial><origin xyz="0 0.05 0.3" rpy="0 0.2 0"/><mass value="1.5"/><inertia ixx="0.02" ixy="0" ixz="0.001" iyy="0.02" iyz="0" izz="0.005"/></inertial></link>
+  <link name="l4"><inertial><origin xyz="0.05 0 0.1" rpy="0 0 0"/><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.004"/></inertial></link>
+  <link name="f1"><inertial><origin xyz="0 0.01 0.02" rpy="0 0 0"/><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>
+  <link name="f2"><inertial><origin xyz="0 -0.01 0.02" rpy="0 0 0"/><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="100" velocity="2"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 0.4" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="100" velocity="2"/></joint>
+  <joint name="slide" type="prismatic"><parent link="l2"/><child link="l3"/><origin xyz="0.2 0 0" rpy="0 0.3 0"/><axis xyz="0 0 1"/><limit lower="0.05" upper="0.5" effort="100" velocity="0.5"/></joint>
+  <joint name="j4" type="revolute"><parent link="l3"/><child link="l4"/><origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="1 0 0"/><limit lower="-3" upper="3" effort="100" velocity="2"/></joint>
+  <joint name="finger1" type="prismatic"><parent link="l4"/><child link="f1"/><origin xyz="0 0 0.2" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/></joint>
+  <joint name="finger2" type="prismatic"><parent link="l4"/><child link="f2"/><origin xyz="0 0 0.2" rpy="0 0 0"/><axis xyz="0 -1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/><mimic joint="finger1"/></joint>
+</robot>"#;
+
+/// The Panda of the `example-robot-data` package (installed by
+/// scripts/test.sh beside Pinocchio).
+fn panda_urdf() -> Option<std::path::PathBuf> {
+    let venv = std::path::PathBuf::from(python()).parent()?.parent()?.to_path_buf();
+    let found = glob_panda(&venv.join("lib"));
+    if found.is_none() {
+        eprintln!("skipped the Panda: example-robot-data is not installed (scripts/test.sh installs it)");
+    }
+    found
+}
+
+fn glob_panda(lib: &Path) -> Option<std::path::PathBuf> {
+    for py in std::fs::read_dir(lib).ok()?.flatten() {
+        let p = py
+            .path()
+            .join("site-packages/cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf");
+        if p.is_file() {
+            return Some(p);
+        }
+    }
+    None
+}
+
 #[test]
 fn rnea_and_regressor_match_pinocchio() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    for urdf in [
-        root.join("fixtures/robots/ur5.urdf"),
-        root.join("../shared/realdata/kuka_lwr4/kuka_lwr4.urdf"),
-    ] {
-        let model = dynamics::load_robot(&urdf).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let telescope = dir.path().join("telescope.urdf");
+    std::fs::write(&telescope, PRISMATIC_URDF).unwrap();
+    let mut cases: Vec<(std::path::PathBuf, BTreeMap<String, f64>)> = vec![
+        (root.join("fixtures/robots/ur5.urdf"), BTreeMap::new()),
+        (
+            root.join("../shared/realdata/kuka_lwr4/kuka_lwr4.urdf"),
+            BTreeMap::new(),
+        ),
+        (
+            telescope,
+            BTreeMap::from([("slide".to_string(), 0.23), ("finger1".to_string(), 0.015)]),
+        ),
+    ];
+    if let Some(p) = panda_urdf() {
+        cases.push((p, BTreeMap::from([("panda_finger_joint1".to_string(), 0.02)])));
+    }
+    for (urdf, locks) in cases {
+        let lock = dynamics::Locks {
+            keep: None,
+            positions: locks.clone(),
+        };
+        let model = dynamics::load_robot_with(&urdf, &lock).unwrap();
+        // Pinocchio locks every joint the model does not keep, mimics included.
+        let locked: BTreeMap<String, f64> = model.locked.iter().cloned().collect();
         let n = model.dof();
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut states: [Vec<Vec<f64>>; 3] = Default::default();
@@ -31,10 +93,12 @@ fn rnea_and_regressor_match_pinocchio() {
         let file = dir.path().join("states.json");
         let json = serde_json::json!({"q": states[0], "v": states[1], "a": states[2]});
         std::fs::write(&file, json.to_string()).unwrap();
-        let out = Command::new(python())
-            .arg(root.join("tests/python/pin_rnea.py"))
-            .arg(&urdf)
-            .arg(&file)
+        let mut cmd = Command::new(python());
+        cmd.arg(root.join("tests/python/pin_rnea.py")).arg(&urdf).arg(&file);
+        if !locked.is_empty() {
+            cmd.arg(serde_json::to_string(&locked).unwrap());
+        }
+        let out = cmd
             .output()
             .unwrap_or_else(|e| panic!("cannot run {}: {e}; run scripts/test.sh, which installs pin", python()));
         assert!(

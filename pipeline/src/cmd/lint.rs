@@ -19,7 +19,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         r.logs.len(),
         r.start,
         r.model
-            .map(|m| format!(", robot `{}` ({} joints)", m.name, m.dof()))
+            .map(|m| {
+                let locked: Vec<String> = m.locked.iter().map(|(j, x)| format!("{j} at {x}")).collect();
+                format!(
+                    ", robot `{}` ({} joints{})",
+                    m.name,
+                    m.dof(),
+                    if locked.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; locked {}", locked.join(", "))
+                    }
+                )
+            })
             .unwrap_or_default()
     );
     Ok(())

@@ -30,6 +30,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for w in built.model.iter().flat_map(|m| &m.warnings) {
         eprintln!("warning: robot: {w}");
     }
+    if let Some(m) = built.model.as_ref().filter(|m| !m.locked.is_empty()) {
+        let l: Vec<String> = m.locked.iter().map(|(j, x)| format!("{j} at {x}")).collect();
+        println!("robot `{}`: {} moving joints; locked {}", m.name, m.dof(), l.join(", "));
+    }
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
     });

@@ -196,6 +196,9 @@ pub struct Model {
     pub end_effector: Vector3<f64>,
     /// What loading the description tolerated (shown to the user).
     pub warnings: Vec<String>,
+    /// Joints of the description locked out of the model, with their
+    /// position (rad or m).
+    pub locked: Vec<(String, f64)>,
 }
 
 impl Model {
@@ -211,6 +214,7 @@ impl Model {
             limits: Vec::new(),
             end_effector: Vector3::zeros(),
             warnings: Vec::new(),
+            locked: Vec::new(),
         }
     }
 

@@ -3,6 +3,7 @@
 //! kinematics and inertials and adding drive and friction data by joint name.
 //! The format is documented in `docs/robot-file.md`.
 
+use super::urdf::Locks;
 use crate::stage::Problem;
 use std::path::{Path, PathBuf};
 
@@ -104,12 +105,17 @@ struct LimitsEntry {
 
 /// Loads a robot from a `.toml` robot file or directly from a `.urdf`.
 pub fn load_robot(path: &Path) -> Result<Model> {
+    load_robot_with(path, &Locks::default())
+}
+
+/// Loads a robot with some joints of its URDF locked (see [`Locks`]).
+pub fn load_robot_with(path: &Path, locks: &Locks) -> Result<Model> {
     let is_urdf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     let model = if is_urdf {
-        super::urdf::load_urdf(path)?
+        super::urdf::load_urdf_with(path, locks)?
     } else {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        parse_robot_file(&text, path)?
+        parse_robot_file_with(&text, path, locks)?
     };
     model.validate().map_err(|p| Error::Robot {
         path: path.to_path_buf(),
@@ -121,6 +127,10 @@ pub fn load_robot(path: &Path) -> Result<Model> {
 /// Parses robot-file text; `path` names the file in errors and anchors a
 /// relative `urdf` path.
 pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
+    parse_robot_file_with(text, path, &Locks::default())
+}
+
+fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
     let err = |msg: String| Error::Robot {
         path: path.to_path_buf(),
         msg,
@@ -130,7 +140,7 @@ pub fn parse_robot_file(text: &str, path: &Path) -> Result<Model> {
     let mut model = match &file.urdf {
         Some(urdf) => {
             let full = path.parent().unwrap_or(Path::new(".")).join(urdf);
-            let mut m = super::urdf::load_urdf(&full)?;
+            let mut m = super::urdf::load_urdf_with(&full, locks)?;
             for entry in &file.joints {
                 let i = m.joints.iter().position(|j| j.name == entry.name).ok_or_else(|| {
                     err(format!(

@@ -1,8 +1,15 @@
 //! URDF → [`Model`]: follows the chain of moving joints from the root link,
 //! composing fixed joints into the next joint's origin and lumping the
 //! inertia of rigidly attached links into the moving link that carries them.
+//!
+//! Joints of any kind load. A locked joint is a fixed one at its locked
+//! position (as Pinocchio's `buildReducedModel`): revolute and continuous
+//! joints rotate about their axis by it, prismatic ones translate along it.
+//! Prismatic and mimic joints, and every joint a [`Locks`] does not keep,
+//! are locked (a mimic joint at its leader's position times its multiplier
+//! plus its offset); the model says which, and where.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use nalgebra::{Matrix3, Unit, Vector3};
@@ -22,12 +29,113 @@ fn pose(p: &urdf_rs::Pose) -> Frame {
     (rpy_rotation(p.rpy.0), Vector3::from(p.xyz.0))
 }
 
+/// Which joints of a description move: the others are locked.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Locks {
+    /// The joints that move (a recording's joints); None: every revolute
+    /// and continuous joint that no other joint mimics.
+    pub keep: Option<Vec<String>>,
+    /// Positions of locked joints, rad or m (default 0, or the nearest
+    /// limit when 0 lies outside the joint's range).
+    pub positions: BTreeMap<String, f64>,
+}
+
 pub fn load_urdf(path: &Path) -> Result<Model> {
+    load_urdf_with(path, &Locks::default())
+}
+
+pub fn load_urdf_with(path: &Path, locks: &Locks) -> Result<Model> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_urdf(&text, path)
+    parse_urdf_with(&text, path, locks)
 }
 
 pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
+    parse_urdf_with(text, path, &Locks::default())
+}
+
+/// The transform a joint adds at position `x` (rad or m).
+fn motion(j: &urdf_rs::Joint, x: f64) -> Frame {
+    let axis = Vector3::from(j.axis.xyz.0);
+    let axis = if axis.norm() > 0.0 {
+        axis.normalize()
+    } else {
+        Vector3::z()
+    };
+    match j.joint_type {
+        JointType::Prismatic => (Matrix3::identity(), axis * x),
+        JointType::Revolute | JointType::Continuous => (
+            super::model::axis_rotation(&Unit::new_unchecked(axis), x),
+            Vector3::zeros(),
+        ),
+        _ => (Matrix3::identity(), Vector3::zeros()),
+    }
+}
+
+/// Which joints are locked, and at which position.
+fn locked_positions(robot: &urdf_rs::Robot, locks: &Locks, path: &Path) -> Result<BTreeMap<String, f64>> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
+    for n in locks.positions.keys().chain(locks.keep.iter().flatten()) {
+        if !names.contains(&n.as_str()) {
+            return Err(err(format!(
+                "joint `{n}` is not in the URDF ({} joints: {})",
+                names.len(),
+                names.join(", ")
+            )));
+        }
+    }
+    let mut out = BTreeMap::new();
+    let default_at = |j: &urdf_rs::Joint| {
+        let (lo, hi) = (j.limit.lower, j.limit.upper);
+        if hi > lo && !(lo..=hi).contains(&0.0) {
+            if 0.0 < lo {
+                lo
+            } else {
+                hi
+            }
+        } else {
+            0.0
+        }
+    };
+    for j in &robot.joints {
+        if j.joint_type == JointType::Fixed || j.mimic.is_some() {
+            continue;
+        }
+        let kept = match &locks.keep {
+            Some(k) => k.contains(&j.name),
+            None => matches!(j.joint_type, JointType::Revolute | JointType::Continuous),
+        };
+        if let Some(&x) = locks.positions.get(&j.name) {
+            if kept && locks.keep.is_some() {
+                return Err(err(format!("joint `{}` is both kept (recorded) and locked", j.name)));
+            }
+            out.insert(j.name.clone(), x);
+        } else if !kept {
+            out.insert(j.name.clone(), default_at(j));
+        }
+    }
+    for j in robot.joints.iter().filter(|j| j.mimic.is_some()) {
+        let m = j.mimic.as_ref().expect("filtered");
+        let leader = out.get(&m.joint).copied().ok_or_else(|| {
+            err(format!(
+                "joint `{}` mimics `{}`, which moves: coupled joints are not a serial chain robotid can identify; lock `{}`",
+                j.name, m.joint, m.joint
+            ))
+        })?;
+        let x = locks
+            .positions
+            .get(&j.name)
+            .copied()
+            .unwrap_or(m.multiplier.unwrap_or(1.0) * leader + m.offset.unwrap_or(0.0));
+        out.insert(j.name.clone(), x);
+    }
+    Ok(out)
+}
+
+pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
     let err = |msg: String| Error::Robot {
         path: path.to_path_buf(),
         msg,
@@ -45,6 +153,17 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
         .map(|l| l.name.as_str())
         .filter(|l| !robot.joints.iter().any(|j| j.child.link == *l))
         .collect();
+    let locked = locked_positions(&robot, locks, path)?;
+    // A joint moves unless it is fixed or locked.
+    let moves = |j: &urdf_rs::Joint| j.joint_type != JointType::Fixed && !locked.contains_key(&j.name);
+    // The transform of a joint that does not move: its origin, and its
+    // motion at the locked position.
+    let rigid = |j: &urdf_rs::Joint| {
+        compose(
+            &pose(&j.origin),
+            &motion(j, locked.get(&j.name).copied().unwrap_or(0.0)),
+        )
+    };
     let [root] = roots[..] else {
         return Err(err(format!(
             "expected one root link, found {}: {:?}",
@@ -52,11 +171,15 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
             roots
         )));
     };
-    // Whether a link's subtree holds a moving joint (memoised walk).
-    fn moving_below<'a>(link: &'a str, children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>) -> bool {
+    // Whether a link's subtree holds a moving joint.
+    fn moving_below<'a>(
+        link: &'a str,
+        children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+        moves: &dyn Fn(&urdf_rs::Joint) -> bool,
+    ) -> bool {
         children.get(link).is_some_and(|js| {
             js.iter()
-                .any(|j| j.joint_type != JointType::Fixed || moving_below(&j.child.link, children))
+                .any(|j| moves(j) || moving_below(&j.child.link, children, moves))
         })
     }
     let inertial_of = |name: &str, frame: &Frame| -> Inertial {
@@ -85,10 +208,7 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
         let kids = children.get(link).cloned().unwrap_or_default();
         let mut next = None;
         for j in kids {
-            if j.mimic.is_some() {
-                return Err(err(format!("joint `{}`: mimic joints are not supported", j.name)));
-            }
-            if moving_below(&j.child.link, &children) || j.joint_type != JointType::Fixed {
+            if moving_below(&j.child.link, &children, &moves) || moves(j) {
                 if next.is_some() {
                     return Err(err(format!(
                         "link `{link}` branches into several moving chains; robotid handles serial chains"
@@ -98,8 +218,9 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
             } else if !model.links.is_empty() {
                 lump_fixed(
                     &j.child.link,
-                    compose(&frame, &pose(&j.origin)),
+                    compose(&frame, &rigid(j)),
                     &children,
+                    &rigid,
                     &inertial_of,
                     model.links.last_mut().expect("non-empty"),
                 );
@@ -107,10 +228,12 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
         }
         let Some(j) = next else { break };
         let origin = compose(&frame, &pose(&j.origin));
+        if !moves(j) {
+            frame = compose(&frame, &rigid(j));
+            link = &j.child.link;
+            continue;
+        }
         match &j.joint_type {
-            JointType::Fixed => {
-                frame = origin;
-            }
             JointType::Revolute | JointType::Continuous => {
                 let axis = Vector3::from(j.axis.xyz.0);
                 if !(axis.norm() > 0.0) {
@@ -142,8 +265,8 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
             }
             other => {
                 return Err(err(format!(
-                    "joint `{}`: {other:?} joints are not supported (revolute chains only)",
-                    j.name
+                    "joint `{}`: a moving {other:?} joint is not supported (revolute chains): lock it (`[lock] {} = position`) or leave it out of the recorded joints",
+                    j.name, j.name
                 )));
             }
         }
@@ -152,11 +275,12 @@ pub fn parse_urdf(text: &str, path: &Path) -> Result<Model> {
     // The tool point: follow a single chain of fixed links past the last
     // moving joint (e.g. a flange or `ee_link`).
     while let Some([j]) = children.get(link).map(Vec::as_slice) {
-        frame = compose(&frame, &pose(&j.origin));
+        frame = compose(&frame, &rigid(j));
         link = &j.child.link;
     }
     model.end_effector = frame.1;
     model.warnings = warnings;
+    model.locked = locked.into_iter().collect();
     if model.joints.is_empty() {
         return Err(err("no revolute joint found".into()));
     }
@@ -167,6 +291,7 @@ fn lump_fixed<'a>(
     link: &'a str,
     frame: Frame,
     children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    rigid: &dyn Fn(&urdf_rs::Joint) -> Frame,
     inertial_of: &dyn Fn(&str, &Frame) -> Inertial,
     into: &mut Inertial,
 ) {
@@ -174,8 +299,9 @@ fn lump_fixed<'a>(
     for j in children.get(link).cloned().unwrap_or_default() {
         lump_fixed(
             &j.child.link,
-            compose(&frame, &pose(&j.origin)),
+            compose(&frame, &rigid(j)),
             children,
+            rigid,
             inertial_of,
             into,
         );
