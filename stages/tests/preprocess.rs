@@ -473,3 +473,64 @@ fn bandwidth_of(p: &robotid_stages::stage::Periods) -> Option<f64> {
         .get(robotid_schemas::metadata::INVERSE_FILTER_BANDWIDTH_HZ)
         .and_then(|v| v.parse().ok())
 }
+
+/// A record that ends with the robot driving home (a ramp-down) keeps the
+/// periods before it, the same as the record without the ramp; `window_s`
+/// gives the same by hand; a period that fits nowhere is refused with the
+/// best match, where, and a window to try.
+#[test]
+fn align_finds_the_steady_stretch_before_a_ramp_down() {
+    use robotid_stages::simulation::synthetic::synthetic_recording;
+    let rate = 200.0;
+    let periodic = synthetic_recording(2, rate, 40.0, 10.0, 3);
+    // 3 s more: each joint drives from where it is to 0, linearly.
+    let mut ramped = periodic.clone();
+    let extra = (3.0 * rate) as usize;
+    let end = periodic.len();
+    for k in 0..extra {
+        ramped.time.push((end + k) as f64 / rate);
+        for j in 0..2 {
+            let last = periodic.q[j][end - 1];
+            ramped.q[j].push(last * (1.0 - (k + 1) as f64 / extra as f64));
+            ramped.effort[j].push(0.0);
+        }
+    }
+    let cfg = AlignConfig {
+        period_s: Some(10.0),
+        ..Default::default()
+    };
+    let reference = align(&periodic, &cfg, "periodic").unwrap();
+    let p = align(&ramped, &cfg, "ramped").unwrap();
+    assert_eq!(p.periods, reference.periods);
+    assert!(p.periods >= 3, "{} periods", p.periods);
+    assert_eq!(p.q, reference.q);
+    assert_eq!(p.torque, reference.torque);
+    assert!(
+        p.report.notes.iter().any(|n| n.contains("ramp-down")),
+        "{:?}",
+        p.report.notes
+    );
+    let by_hand = align(
+        &ramped,
+        &AlignConfig {
+            window_s: Some([0.0, 39.999]),
+            ..cfg.clone()
+        },
+        "ramped",
+    )
+    .unwrap();
+    assert_eq!(by_hand.q, reference.q);
+    let wrong = align(
+        &ramped,
+        &AlignConfig {
+            period_s: Some(7.3),
+            ..cfg
+        },
+        "ramped",
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&wrong, robotid_stages::Error::Data { msg, .. } if msg.contains("anywhere in the record") && msg.contains("window_s = [")),
+        "{wrong}"
+    );
+}

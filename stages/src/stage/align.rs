@@ -46,6 +46,9 @@ pub struct AlignConfig {
     /// file), relative to the pipeline file: the kept periods are rotated so
     /// that their first sample is the trajectory's time 0.
     pub reference_trajectory: Option<std::path::PathBuf>,
+    /// Only this part of the record, `[start, end]` in s from its first
+    /// sample (default: the longest steady stretch is found in all of it).
+    pub window_s: Option<[f64; 2]>,
 }
 
 fn default_gap() -> f64 {
@@ -64,6 +67,7 @@ impl Default for AlignConfig {
             max_gap_steps: default_gap(),
             steady_tolerance: default_steady(),
             reference_trajectory: None,
+            window_s: None,
         }
     }
 }
@@ -109,6 +113,14 @@ impl AlignConfig {
                 "max_gap_steps",
                 format!("must be ≥ 1 and finite, not {}", self.max_gap_steps),
             ));
+        }
+        if let Some([a, b]) = self.window_s {
+            if !(a >= 0.0 && b > a && b.is_finite()) {
+                out.push(Problem::new(
+                    "window_s",
+                    format!("must be [start, end] with 0 ≤ start < end, not [{a}, {b}]"),
+                ));
+            }
         }
         if !(self.steady_tolerance > 0.0 && self.steady_tolerance.is_finite()) {
             out.push(Problem::new(
@@ -215,6 +227,45 @@ fn median(v: &mut [f64]) -> f64 {
 
 /// Aligns `raw` (from `source`, named in errors).
 pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Periods> {
+    let Some([a, b]) = cfg.window_s else {
+        return align_all(raw, cfg, source);
+    };
+    let t0 = raw.time.first().copied().unwrap_or(0.0);
+    let lo = raw.time.partition_point(|&t| t - t0 < a);
+    let hi = raw.time.partition_point(|&t| t - t0 <= b);
+    if hi < lo + 4 {
+        return Err(Error::Data {
+            source_name: source.to_string(),
+            channel: "time".into(),
+            sample: None,
+            msg: format!(
+                "window_s = [{a}, {b}] holds {} samples (the record spans {:.3} s)",
+                hi.saturating_sub(lo),
+                raw.time.last().copied().unwrap_or(t0) - t0
+            ),
+        });
+    }
+    let cut = |c: &Vec<f64>| c[lo..hi].to_vec();
+    let window = RawSamples {
+        time: cut(&raw.time),
+        q: raw.q.iter().map(cut).collect(),
+        effort: raw.effort.iter().map(cut).collect(),
+        reference: raw.reference.as_ref().map(|r| r.iter().map(cut).collect()),
+        counts: None,
+        joints: raw.joints.clone(),
+        effort_kind: raw.effort_kind,
+        metadata: raw.metadata.clone(),
+    };
+    let mut p = align_all(&window, cfg, source)?;
+    p.report.dropped_s += window.time[0] - t0;
+    p.report
+        .notes
+        .push(format!("window_s: only [{a}, {b}] s of the record were used"));
+    Ok(p)
+}
+
+/// Aligns the whole of `raw`.
+fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Periods> {
     let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
         source_name: source.to_string(),
         channel: channel.to_string(),
@@ -353,39 +404,70 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         .sum::<f64>()
         .sqrt()
         .max(1e-300);
-    let steady_from = if m > n {
+    // The steady stretch: the longest run of windows where the positions
+    // repeat one period later (the latest of equal runs), start-up and
+    // ramp-down both left out. Its samples [steady_from, steady_to).
+    let (steady_from, steady_to) = if m > n {
         let lags = m - n;
         let d2: Vec<f64> = (0..lags)
             .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
             .collect();
         let w = (n / 10).clamp(1, lags);
-        let mut sum: f64 = d2[lags - w..].iter().sum();
-        let mut start = None;
-        // Walk the window back from the end while it stays steady.
-        let mut i = lags - w;
-        loop {
-            let r = (sum.max(0.0) / w as f64).sqrt() / scale;
-            if r > cfg.steady_tolerance {
-                break;
+        // r(i) for windows starting at 0..=lags − w, by a running sum.
+        let mut r = Vec::with_capacity(lags - w + 1);
+        let mut sum: f64 = d2[..w].iter().sum();
+        for i in 0..=lags - w {
+            if i > 0 {
+                sum += d2[i + w - 1] - d2[i - 1];
             }
-            start = Some(i);
-            if i == 0 {
-                break;
-            }
-            i -= 1;
-            sum += d2[i] - d2[i + w];
+            r.push((sum.max(0.0) / w as f64).sqrt() / scale);
         }
-        match start {
-            Some(s) => s,
+        let mut best: Option<(usize, usize)> = None;
+        let mut run: Option<usize> = None;
+        for (i, &ri) in r.iter().enumerate().chain(std::iter::once((r.len(), &f64::INFINITY))) {
+            match (ri <= cfg.steady_tolerance, run) {
+                (true, None) => run = Some(i),
+                (false, Some(a)) => {
+                    if best.is_none_or(|(ba, bb)| i - 1 - a >= bb - ba) {
+                        best = Some((a, i - 1));
+                    }
+                    run = None;
+                }
+                _ => {}
+            }
+        }
+        match best {
+            // Where the stretch stops before the record's end, its last
+            // window straddles the first unsteady samples: end at the last
+            // sample that still repeats the one a period before it.
+            Some((a, b)) if b + w + n < m => {
+                let e = |k: usize| (0..nj).map(|j| (q[j][k] - q[j][k - n]).powi(2)).sum::<f64>().sqrt() / scale;
+                let last = (b + n..b + w + n)
+                    .rev()
+                    .find(|&k| e(k) <= cfg.steady_tolerance)
+                    .unwrap_or(b + n);
+                (a, last + 1)
+            }
+            Some((a, b)) => (a, b + w + n),
             None => {
-                let r = (d2[lags - w..].iter().sum::<f64>() / w as f64).sqrt() / scale;
+                let (i_min, r_min) = r
+                    .iter()
+                    .enumerate()
+                    .min_by(|x, y| x.1.total_cmp(y.1))
+                    .map(|(i, v)| (i, *v))
+                    .unwrap_or((0, f64::INFINITY));
+                let at = grid0 + i_min as f64 * dt - t[0];
+                let r_end = r.last().copied().unwrap_or(f64::INFINITY);
                 return Err(data_err(
                     "q_*",
                     None,
                     format!(
-                        "the positions do not repeat with period {period} s: at the end of the record they differ from one period earlier by {:.2} % (tolerance {:.2} %); check the period",
-                        100.0 * r,
-                        100.0 * cfg.steady_tolerance
+                        "the positions do not repeat with period {period} s anywhere in the record: compared with themselves one period later (RMS over {w} samples, relative to their RMS variation), they differ by {:.2} % at best (at {at:.3} s) and by {:.2} % at the end; the tolerance is {:.2} %. Check the period; if only part of the record is periodic, give `window_s = [{:.3}, {:.3}]` around it",
+                        100.0 * r_min,
+                        100.0 * r_end,
+                        100.0 * cfg.steady_tolerance,
+                        at,
+                        (at + 2.0 * period).min(span),
                     ),
                 ));
             }
@@ -394,9 +476,9 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         report
             .notes
             .push("exactly one period recorded: the period could not be checked against the data".into());
-        0
+        (0, m)
     };
-    let kept = (m - steady_from) / n;
+    let kept = (steady_to - steady_from) / n;
     if kept == 0 {
         return Err(data_err(
             "time",
@@ -404,13 +486,19 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             format!(
                 "less than one full steady period: the start-up transient lasts until {:.3} s, leaving {:.3} s of the {period} s period",
                 grid0 + steady_from as f64 * dt - t[0],
-                (m - steady_from) as f64 * dt
+                (steady_to - steady_from) as f64 * dt
             ),
         ));
     }
-    let from = m - kept * n;
+    if steady_to < m {
+        report.notes.push(format!(
+            "the last {:.3} s do not repeat with the period (a ramp-down?): left out",
+            (m - steady_to) as f64 * dt
+        ));
+    }
+    let from = steady_to - kept * n;
     report.transient_periods = whole - kept;
-    let last = |j: usize| &q[j][m - n..];
+    let last = |j: usize| &q[j][steady_to - n..steady_to];
     report.period_change = (0..kept)
         .map(|k| {
             let p0 = from + k * n;
@@ -428,7 +516,7 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
                 / scale
         })
         .collect();
-    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..].to_vec()).collect::<Vec<_>>();
+    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..steady_to].to_vec()).collect::<Vec<_>>();
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
     if kept == 1 {
