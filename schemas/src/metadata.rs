@@ -59,6 +59,8 @@ pub const NOISE_PREFIX: &str = "robotid.noise";
 pub const NOISE_PER_SAMPLE: &str = "robotid.noise.per_sample";
 /// How the kinematics were differentiated: `fourier_fit`, `dft`, `filtered`.
 pub const DIFFERENTIATION: &str = "robotid.differentiation";
+/// Defaults a stage chose where the pipeline file is silent, with why.
+pub const DEFAULTS: &str = "robotid.defaults";
 /// The regressor configuration (JSON) a table was made with.
 pub const REGRESSOR_CONFIG: &str = "robotid.regressor_config";
 /// `chain` or `decoupled`.

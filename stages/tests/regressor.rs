@@ -173,7 +173,7 @@ fn truth_regression_recovers_the_axis() {
     model.friction[0].transition = 0.01;
     let rc = RegressorConfig {
         model: robotid_stages::dynamics::ModelKind::Decoupled,
-        rotor: false,
+        rotor: Some(false),
         ..Default::default()
     };
     let batch = regressor_table(&kin, None, None, &model, &rc, "truth").unwrap();

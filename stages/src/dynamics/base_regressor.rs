@@ -43,8 +43,9 @@ impl ModelKind {
 pub struct RegressorModel {
     pub model: ModelKind,
     pub friction: FrictionTerms,
-    /// Rotor inertia seen at each joint (Ia).
-    pub rotor: bool,
+    /// Rotor inertia seen at each joint (Ia) (default: when the robot file
+    /// declares its drives; a URDF alone does not).
+    pub rotor: Option<bool>,
     /// A constant torque offset per joint (Off).
     pub offset: bool,
     /// Coulomb transition velocity of the estimation model, rad/s: tanh(q̇/v)
@@ -58,14 +59,15 @@ pub struct RegressorModel {
     pub spring: Option<SpringConfig>,
 }
 
-/// The chain model with rotor inertia and symmetric friction (Swevers' and
-/// Bona's), sign(q̇) Coulomb unless the robot file says otherwise.
+/// The chain model with symmetric friction (Swevers' and Bona's), rotor
+/// inertia where the robot file declares drives, sign(q̇) Coulomb unless
+/// the robot file says otherwise.
 impl Default for RegressorModel {
     fn default() -> Self {
         RegressorModel {
             model: ModelKind::Chain,
             friction: FrictionTerms::Symmetric,
-            rotor: true,
+            rotor: None,
             offset: false,
             coulomb_transition_rad_s: None,
             spring: None,
@@ -100,7 +102,7 @@ impl RegressorModel {
             None => None,
         };
         Ok(RegressorTerms {
-            rotor: self.rotor,
+            rotor: self.rotor.unwrap_or(model.drives_declared),
             friction: self.friction,
             offset: self.offset,
             spring,

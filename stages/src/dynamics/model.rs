@@ -199,6 +199,10 @@ pub struct Model {
     /// Joints of the description locked out of the model, with their
     /// position (rad or m).
     pub locked: Vec<(String, f64)>,
+    /// Whether the description says anything of the drives (gear, torque
+    /// constant, encoder, rotor inertia): without that, rotor inertia is
+    /// not part of the default identification model.
+    pub drives_declared: bool,
 }
 
 impl Model {
@@ -215,6 +219,7 @@ impl Model {
             end_effector: Vector3::zeros(),
             warnings: Vec::new(),
             locked: Vec::new(),
+            drives_declared: false,
         }
     }
 

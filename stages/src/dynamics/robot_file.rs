@@ -237,12 +237,21 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
     if let Some(ee) = file.end_effector {
         model.end_effector = Vector3::from(ee);
     }
+    model.drives_declared = file.joints.iter().any(declares_drive);
     let mut names: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
     names.sort_unstable();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
         return Err(err(format!("joint name `{}` is used twice", w[0])));
     }
     Ok(model)
+}
+
+/// Whether a joint entry declares anything of its drive.
+fn declares_drive(e: &JointEntry) -> bool {
+    e.gear_ratio.is_some()
+        || e.torque_constant.is_some()
+        || e.encoder_counts_per_rev.is_some()
+        || e.rotor_inertia.is_some()
 }
 
 /// Drive, friction and limit keys of a joint entry, over the given defaults.

@@ -30,8 +30,9 @@ pub struct RegressorConfig {
     pub model: ModelKind,
     /// `none`, `symmetric` (Fv, Fc) or `asymmetric` (Bona eq. 2).
     pub friction: FrictionTerms,
-    /// Rotor inertia seen at each joint.
-    pub rotor: bool,
+    /// Rotor inertia seen at each joint (default: when the robot file
+    /// declares its drives).
+    pub rotor: Option<bool>,
     /// A constant torque offset per joint.
     pub offset: bool,
     /// Coulomb transition velocity of the estimation model, rad/s
@@ -157,9 +158,26 @@ impl Component for RegressorConfig {
 
     fn build(&self, ctx: &Context) -> Result<Box<dyn Stage>> {
         let model = ctx.model(Self::NAME)?;
+        let base = self.base_regressor(&model)?;
+        // The configuration as used: defaults resolved, and said.
+        let mut cfg = self.clone();
+        let mut defaults = Vec::new();
+        if cfg.rotor.is_none() {
+            cfg.rotor = Some(base.terms.rotor);
+            defaults.push(format!(
+                "rotor = {} (the robot file {} its drives)",
+                base.terms.rotor,
+                if model.drives_declared {
+                    "declares"
+                } else {
+                    "does not declare"
+                }
+            ));
+        }
         Ok(Box::new(Regressor {
-            base: self.base_regressor(&model)?,
-            cfg: self.clone(),
+            base,
+            cfg,
+            defaults,
             spectra: ctx.spectra.clone(),
         }))
     }
@@ -170,6 +188,8 @@ impl Component for RegressorConfig {
 pub struct Regressor {
     base: BaseRegressor,
     cfg: RegressorConfig,
+    /// Defaults the build chose, for the run summary and the metadata.
+    defaults: Vec<String>,
     spectra: Spectra,
 }
 
@@ -208,6 +228,14 @@ impl Stage for Regressor {
             rows.system.parameters(),
             rows.condition
         ));
+        for d in &self.defaults {
+            chain.report.notes.push(format!("regressor: default {d}"));
+        }
+        let mut rows = rows;
+        if !self.defaults.is_empty() {
+            rows.metadata
+                .insert(metadata::DEFAULTS.into(), self.defaults.join("; "));
+        }
         chain.regressor = Some(rows);
         Ok(())
     }
