@@ -17,6 +17,11 @@ for p in kuka_axis3 arm3 ur5 validation kuka_axis3_sweeps; do
 done
 if [ -d ../shared/realdata/kuka_lwr4 ]; then
   "$bin" run fixtures/pipelines/kuka_lwr4.toml --out out/kuka_lwr4 --timings --plot out/kuka_lwr4/plots
+  # The whole arm from file 1, validated on files 2 (same trajectory) and 3 (another).
+  "$bin" run fixtures/pipelines/kuka_lwr4_identify.toml --out out/kuka_lwr4_identify
+  "$bin" run fixtures/pipelines/kuka_lwr4_heldout.toml --out out/kuka_lwr4_heldout
+  "$bin" validate -p out/kuka_lwr4_identify/parameters.parquet \
+    out/kuka_lwr4_heldout/measurements_2/regressor.parquet out/kuka_lwr4_heldout/measurements_3/regressor.parquet
 fi
 # The KUKA estimate (kuka_axis3.toml ends with an `estimate` stage), checked
 # on the non-periodic validation run it never saw, and on its own data.
