@@ -380,3 +380,104 @@ fn bandwidth_of(p: &robotid_stages::stage::Periods) -> Option<f64> {
         .get(robotid_schemas::metadata::INVERSE_FILTER_BANDWIDTH_HZ)
         .and_then(|v| v.parse().ok())
 }
+
+/// A record of a ramp-in and 1.5 steady periods (common: the logger is
+/// stopped mid-period). Approach I fits the whole steady stretch, not one
+/// period of it: the KUKA axis's parameters come back, with a smaller
+/// variance than from the one period the averaging path would keep (std
+/// ZZ 0.102 against 0.141, Fv 0.177 against 0.234); the noise comes from
+/// the fit's residual, and the run says so. The 5-harmonic fit's own bias
+/// on this axis (ZZ −4 %, Fv +15 %: the robot's tracking-error harmonics,
+/// see fixtures/pipelines/kuka_axis3.toml) is the same either way.
+#[test]
+fn one_and_a_half_periods_are_fitted_whole() {
+    use robotid_stages::stage::estimate::EstimateConfig as EstimateStage;
+    use robotid_stages::stage::noise::NoiseConfig;
+    use robotid_stages::stage::{Chain, Component, Context, Stage};
+    let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
+    let (model, s) = simulate_torque(&cfg);
+    let robotid_stages::trajectory::Trajectory::Fourier(f) = &cfg.trajectory else {
+        panic!("periodic excitation")
+    };
+    let period = f.period();
+    let steady = align(&s.raw, &AlignConfig::default(), "full").unwrap().report.dropped_s;
+    let ctx = Context {
+        model: Some(std::sync::Arc::new(model.clone())),
+        ..Default::default()
+    };
+    let rc = RegressorConfig {
+        coulomb_transition_rad_s: Some(0.01),
+        ..Default::default()
+    };
+    let run = |periods: f64, whole_stretch: bool| {
+        let keep = s.raw.time.partition_point(|&t| t < steady + periods * period);
+        let mut raw = s.raw.clone();
+        raw.time.truncate(keep);
+        raw.q.iter_mut().for_each(|c| c.truncate(keep));
+        raw.effort.iter_mut().for_each(|c| c.truncate(keep));
+        raw.reference = None;
+        raw.counts = None;
+        let mut chain = Chain::from_raw("sim", "sim", raw);
+        let stages = [
+            AlignConfig::default().build(&ctx).unwrap(),
+            robotid_stages::stage::inverse_filter::InverseFilterConfig {
+                filter: cfg.measurement.filter,
+                zpk: None,
+                bandwidth_hz: 20.0,
+            }
+            .build(&ctx)
+            .unwrap(),
+            robotid_stages::stage::average::AverageConfig {}.build(&ctx).unwrap(),
+            NoiseConfig::default().build(&ctx).unwrap(),
+            robotid_stages::stage::differentiate::DifferentiateConfig {
+                method: Diff::FourierFit,
+                harmonics: None,
+                bandwidth_hz: None,
+                filter: None,
+            }
+            .build(&ctx)
+            .unwrap(),
+            rc.build(&ctx).unwrap(),
+        ];
+        for (i, st) in stages.iter().enumerate() {
+            st.run(&mut chain).unwrap();
+            if i == 0 && !whole_stretch {
+                // The averaging path: one whole period of the same record.
+                chain.periods.as_mut().unwrap().stretch = None;
+            }
+        }
+        let reducer = EstimateStage::default().reducer(&ctx).unwrap();
+        reducer.run(&mut chain).unwrap();
+        let part = chain.estimate.take().unwrap();
+        (
+            reducer.reduce(&[part], &Default::default()).unwrap().estimate,
+            chain.report.notes,
+        )
+    };
+    let (whole, notes) = run(1.5, true);
+    let (one, _) = run(1.5, false);
+    assert!(notes.iter().any(|n| n.contains("steady stretch of 1.5")), "{notes:?}");
+    assert!(notes.iter().any(|n| n.contains("fit_residual")), "{notes:?}");
+    let ratio = whole.rows as f64 / one.rows as f64;
+    assert!(ratio > 1.4, "{} rows against {}", whole.rows, one.rows);
+    let truth = rc.base_regressor(&model).unwrap().base_values(&model).unwrap();
+    let (sw, so) = (whole.std(), one.std());
+    for i in 0..truth.len() {
+        println!(
+            "{}: 1.5 periods {:.4} ± {:.4}, one period {:.4} ± {:.4}, truth {:.4}",
+            whole.names[i], whole.values[i], sw[i], one.values[i], so[i], truth[i]
+        );
+        assert!(
+            (whole.values[i] - truth[i]).abs() < 5.0 * sw[i] + 0.02 * truth[i].abs(),
+            "{}",
+            whole.names[i]
+        );
+        assert!(
+            sw[i] < so[i],
+            "{}: std {} is not below the one-period fit's {}",
+            whole.names[i],
+            sw[i],
+            so[i]
+        );
+    }
+}

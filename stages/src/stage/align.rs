@@ -22,7 +22,7 @@ use robotid_schemas::{metadata, RawSamples, TorqueChannel};
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-use super::{AlignReport, Chain, Component, Context, LintContext, Periods, Problem, Product, Stage};
+use super::{AlignReport, Chain, Component, Context, LintContext, Periods, Problem, Product, Stage, Stretch};
 use crate::{Error, Result};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -413,19 +413,27 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
             .collect();
         let w = (n / 10).clamp(1, lags);
-        // r(i) for windows starting at 0..=lags − w, by a running sum.
-        let mut r = Vec::with_capacity(lags - w + 1);
+        // One pass over the windows starting at 0..=lags − w, by a running
+        // sum: the runs of steady windows, the best and the last ratio.
+        let (mut best, mut run): (Option<(usize, usize)>, Option<usize>) = (None, None);
+        let (mut i_min, mut r_min, mut r_end) = (0, f64::INFINITY, f64::INFINITY);
         let mut sum: f64 = d2[..w].iter().sum();
-        for i in 0..=lags - w {
-            if i > 0 {
-                sum += d2[i + w - 1] - d2[i - 1];
+        for i in 0..=lags - w + 1 {
+            let r = if i <= lags - w {
+                if i > 0 {
+                    sum += d2[i + w - 1] - d2[i - 1];
+                }
+                (sum.max(0.0) / w as f64).sqrt() / scale
+            } else {
+                f64::INFINITY // closes a run that reaches the end
+            };
+            if i <= lags - w {
+                r_end = r;
+                if r < r_min {
+                    (i_min, r_min) = (i, r);
+                }
             }
-            r.push((sum.max(0.0) / w as f64).sqrt() / scale);
-        }
-        let mut best: Option<(usize, usize)> = None;
-        let mut run: Option<usize> = None;
-        for (i, &ri) in r.iter().enumerate().chain(std::iter::once((r.len(), &f64::INFINITY))) {
-            match (ri <= cfg.steady_tolerance, run) {
+            match (r <= cfg.steady_tolerance, run) {
                 (true, None) => run = Some(i),
                 (false, Some(a)) => {
                     if best.is_none_or(|(ba, bb)| i - 1 - a >= bb - ba) {
@@ -450,14 +458,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             }
             Some((a, b)) => (a, b + w + n),
             None => {
-                let (i_min, r_min) = r
-                    .iter()
-                    .enumerate()
-                    .min_by(|x, y| x.1.total_cmp(y.1))
-                    .map(|(i, v)| (i, *v))
-                    .unwrap_or((0, f64::INFINITY));
                 let at = grid0 + i_min as f64 * dt - t[0];
-                let r_end = r.last().copied().unwrap_or(f64::INFINITY);
                 return Err(data_err(
                     "q_*",
                     None,
@@ -516,6 +517,20 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
                 / scale
         })
         .collect();
+    // Fewer than two whole periods in a stretch that holds at least a tenth
+    // of a period more: keep the stretch too, for a fit over all of it.
+    let stretch = (kept < 2 && steady_to - steady_from >= kept * n + n / 10).then(|| {
+        let cut = |c: &Vec<&[f64]>| c.iter().map(|v| v[steady_from..steady_to].to_vec()).collect::<Vec<_>>();
+        report.notes.push(format!(
+            "a steady stretch of {:.2} periods: `differentiate` with `fourier_fit` fits all of it",
+            (steady_to - steady_from) as f64 / n as f64
+        ));
+        Stretch {
+            start_s: grid0 + steady_from as f64 * dt,
+            q: cut(&q),
+            torque: cut(&torque),
+        }
+    });
     let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..steady_to].to_vec()).collect::<Vec<_>>();
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
@@ -538,6 +553,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         q: keep(q),
         torque: keep(torque),
         reference: reference.map(keep),
+        stretch,
         report,
         metadata: md,
     })

@@ -86,8 +86,31 @@ pub struct Periods {
     /// N·m.
     pub torque: Vec<Vec<f64>>,
     pub reference: Option<Vec<Vec<f64>>>,
+    /// With fewer than two whole periods, the whole steady stretch when it
+    /// holds more (1.5 periods, say): `differentiate` fits all of it.
+    pub stretch: Option<Stretch>,
     pub report: AlignReport,
     pub metadata: BTreeMap<String, String>,
+}
+
+/// The steady stretch on the period grid, `[joint][sample]`, from its start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stretch {
+    /// Time of its first sample in the recording's clock, s.
+    pub start_s: f64,
+    pub q: Vec<Vec<f64>>,
+    /// N·m.
+    pub torque: Vec<Vec<f64>>,
+}
+
+impl Stretch {
+    pub fn len(&self) -> usize {
+        self.q.first().map_or(0, Vec::len)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 impl Periods {

@@ -123,6 +123,8 @@ pub fn decimate_periods(p: &mut Periods, cfg: &DecimateConfig, spectra: &Spectra
         *col = every(&apply_spectral(col, fs, true, &gain, spectra), cfg.factor);
     }
     p.samples_per_period = n / cfg.factor;
+    // Not carried through: the fit over the stretch uses the whole periods' rate.
+    p.stretch = None;
     p.metadata
         .insert(metadata::SAMPLE_RATE_HZ.into(), p.sample_rate_hz().to_string());
     Ok(())

@@ -146,6 +146,25 @@ impl Stage for Differentiate {
                 let raw = chain.raw()?;
                 differentiate_record(raw, Chain::record_rate(raw), f, &self.spectra)
             }
+            None if method == Differentiation::FourierFit
+                && chain
+                    .periods
+                    .as_ref()
+                    .is_some_and(|p| p.periods < 2 && p.stretch.is_some()) =>
+            {
+                // Fewer than two whole periods: Approach I over the whole
+                // steady stretch, whatever its length.
+                let h = chain.harmonics(self.cfg.harmonics.as_ref())?;
+                let p = chain.periods()?;
+                let s = p.stretch.as_ref().expect("checked");
+                let kin = fit_stretch(p, s, &h);
+                chain.report.notes.push(format!(
+                    "differentiate: Fourier fit over the steady stretch of {:.2} periods ({} samples), not one period",
+                    s.len() as f64 / p.samples_per_period as f64,
+                    s.len()
+                ));
+                kin
+            }
             None => {
                 let h = match method {
                     Differentiation::FourierFit => chain.harmonics(self.cfg.harmonics.as_ref())?,
@@ -252,6 +271,36 @@ pub fn differentiate(
         qd,
         qdd,
         torque: Some(mean.torque.clone()),
+        metadata: md,
+    }
+}
+
+/// Approach I on a steady stretch that is not a whole number of periods:
+/// the least-squares fit at the excited harmonics over all of it, its
+/// analytic derivatives at every sample, and the stretch's torque.
+pub fn fit_stretch(p: &super::Periods, s: &super::Stretch, harmonics: &[u32]) -> Kinematics {
+    let fs = p.sample_rate_hz();
+    let time: Vec<f64> = (0..s.len()).map(|k| k as f64 / fs).collect();
+    let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
+    for col in &s.q {
+        let (a, b, c) = fit_reference(&time, col, p.period_s, harmonics);
+        q.push(a);
+        qd.push(b);
+        qdd.push(c);
+    }
+    let mut md = p.metadata.clone();
+    md.insert(
+        metadata::DIFFERENTIATION.into(),
+        Differentiation::FourierFit.name().into(),
+    );
+    md.insert(metadata::PERIOD_START_S.into(), s.start_s.to_string());
+    Kinematics {
+        joints: p.joints.clone(),
+        time,
+        q,
+        qd,
+        qdd,
+        torque: Some(s.torque.clone()),
         metadata: md,
     }
 }

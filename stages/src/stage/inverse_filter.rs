@@ -178,6 +178,14 @@ pub fn inverse_filter_periods(p: &mut Periods, h: &dyn Fn(f64) -> Complex64, ban
     p.torque
         .par_iter_mut()
         .for_each(|col| *col = apply_table(col, fs, true, &table, spectra));
+    // The stretch is not a whole number of periods: the record-mode filter
+    // (mirror-extended, approximate near its ends).
+    if let Some(s) = &mut p.stretch {
+        let table = gain_table(extended_len(s.len(), fs, false), fs, &gain);
+        s.torque
+            .par_iter_mut()
+            .for_each(|col| *col = apply_table(col, fs, false, &table, spectra));
+    }
     p.metadata
         .insert(metadata::INVERSE_FILTER_BANDWIDTH_HZ.into(), bandwidth_hz.to_string());
 }

@@ -26,7 +26,7 @@ pub mod regressor;
 
 use std::path::Path;
 
-pub use chain::{AlignReport, Chain, ChannelNoise, Context, Facts, Periods, Product, Report};
+pub use chain::{AlignReport, Chain, ChannelNoise, Context, Facts, Periods, Product, Report, Stretch};
 
 use crate::dynamics::Model;
 use crate::Result;

@@ -90,6 +90,16 @@ impl Stage for Noise {
         let h = chain.harmonics(self.harmonics.as_ref())?;
         let bandwidth = chain.facts.inverse_filter_bandwidth_hz;
         let (table, summary) = noise(chain.periods()?, chain.mean()?, &h, bandwidth, &self.spectra);
+        if let Some(how) = table
+            .metadata
+            .get(metadata::NOISE_PER_SAMPLE)
+            .filter(|h| h.starts_with("fit_residual"))
+        {
+            chain
+                .report
+                .notes
+                .push(format!("noise: per-sample variances from the {how}"));
+        }
         chain.report.noise = summary;
         chain.noise = Some(table);
         Ok(())
@@ -147,6 +157,26 @@ pub fn noise(
         }
         summary.push(stats);
     }
+    // Fewer than two periods but a longer steady stretch: its samples are
+    // what `differentiate` fits and the regressor uses, and their noise is
+    // the residual of a least-squares Fourier fit over the stretch.
+    let stretch = p.stretch.as_ref().filter(|_| np < 2);
+    if let Some(s) = stretch {
+        let m = s.len();
+        let fs = p.sample_rate_hz();
+        let top = (bandwidth.unwrap_or(0.4 * fs).min(0.4 * fs) * p.period_s).floor() as u32;
+        let torque_lines: Vec<u32> = (1..=top.max(1)).collect();
+        let time: Vec<f64> = (0..m).map(|k| k as f64 / fs).collect();
+        let residual = |y: &[f64], lines: &[u32]| {
+            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, y, p.period_s, lines);
+            let dof = m.saturating_sub(1 + 2 * lines.len()).max(1);
+            y.iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64
+        };
+        for j in 0..p.joints.len() {
+            var_q[j] = vec![residual(&s.q[j], harmonics); m];
+            var_t[j] = vec![residual(&s.torque[j], &torque_lines); m];
+        }
+    }
     let mut md = mean.metadata.clone();
     for s in &summary {
         let key = |stat: &str| format!("{}.{}.{}.{stat}", metadata::NOISE_PREFIX, s.joint, s.channel);
@@ -159,11 +189,15 @@ pub fn noise(
     md.insert(
         metadata::NOISE_PER_SAMPLE.into(),
         if np > 1 {
-            "time_domain"
+            "time_domain".to_string()
+        } else if let Some(s) = stretch {
+            format!(
+                "fit_residual (least-squares Fourier fit over the steady stretch of {:.2} periods)",
+                s.len() as f64 / n as f64
+            )
         } else {
-            "frequency_domain (one period)"
-        }
-        .into(),
+            "frequency_domain (one period)".to_string()
+        },
     );
     (
         NoiseTable {

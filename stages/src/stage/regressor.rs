@@ -196,6 +196,17 @@ pub struct Regressor {
 impl Stage for Regressor {
     fn run(&self, chain: &mut Chain) -> Result<()> {
         let kin = chain.kinematics()?;
+        let one_period = chain
+            .periods
+            .as_ref()
+            .is_none_or(|p| p.samples_per_period == kin.time.len());
+        if self.cfg.band_limit_hz.is_some() && !one_period {
+            return Err(Error::setting(
+                "band_limit_hz",
+                "used on the kinematics of one averaged period",
+                format!("kinematics over {} samples, not one period: drop it", kin.time.len()),
+            ));
+        }
         let band = match self.cfg.band_limit_hz {
             Some(b) => Some((
                 b,
