@@ -93,7 +93,7 @@ impl Stage for Noise {
         if let Some(how) = table
             .metadata
             .get(metadata::NOISE_PER_SAMPLE)
-            .filter(|h| h.starts_with("fit_residual"))
+            .filter(|h| h.contains("fit_residual"))
         {
             chain
                 .report
@@ -157,24 +157,21 @@ pub fn noise(
         }
         summary.push(stats);
     }
-    // Fewer than two periods but a longer steady stretch: its samples are
-    // what `differentiate` fits and the regressor uses, and their noise is
-    // the residual of a least-squares Fourier fit over the stretch.
-    let stretch = p.stretch.as_ref().filter(|_| np < 2);
+    // Fewer than two periods but a longer steady stretch: the positions'
+    // noise is the residual of the least-squares Fourier fit at the excited
+    // harmonics over the stretch (what `fourier_fit` does with it); the
+    // torque's, with its many nonlinear harmonics, stays the non-excited
+    // lines' estimate.
+    let stretch = p.stretch.as_ref().filter(|_| np < 2 && !harmonics.is_empty());
     if let Some(s) = stretch {
         let m = s.len();
         let fs = p.sample_rate_hz();
-        let top = (bandwidth.unwrap_or(0.4 * fs).min(0.4 * fs) * p.period_s).floor() as u32;
-        let torque_lines: Vec<u32> = (1..=top.max(1)).collect();
         let time: Vec<f64> = (0..m).map(|k| k as f64 / fs).collect();
-        let residual = |y: &[f64], lines: &[u32]| {
-            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, y, p.period_s, lines);
-            let dof = m.saturating_sub(1 + 2 * lines.len()).max(1);
-            y.iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64
-        };
+        let dof = m.saturating_sub(1 + 2 * harmonics.len()).max(1);
         for j in 0..p.joints.len() {
-            var_q[j] = vec![residual(&s.q[j], harmonics); m];
-            var_t[j] = vec![residual(&s.torque[j], &torque_lines); m];
+            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, &s.q[j], p.period_s, harmonics);
+            let v = s.q[j].iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64;
+            var_q[j] = vec![v; n];
         }
     }
     let mut md = mean.metadata.clone();
@@ -192,7 +189,7 @@ pub fn noise(
             "time_domain".to_string()
         } else if let Some(s) = stretch {
             format!(
-                "fit_residual (least-squares Fourier fit over the steady stretch of {:.2} periods)",
+                "frequency_domain (one period) for torques; fit_residual for positions (least-squares Fourier fit over the steady stretch of {:.2} periods)",
                 s.len() as f64 / n as f64
             )
         } else {

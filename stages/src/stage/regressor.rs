@@ -356,9 +356,15 @@ pub fn regressor_rows(
         equations = Some(eq);
     }
     let b = DVector::from_fn(rows, |i, _| b_torque[i % n][i / n]);
+    // Per sample where the noise table has the kinematics' samples; its
+    // mean over the period where they span more (a fitted stretch).
     let var = DVector::from_fn(rows, |i, _| {
         noise
-            .and_then(|t| t.var_torque.get(i % n).and_then(|v| v.get(i / n)).copied())
+            .and_then(|t| t.var_torque.get(i % n))
+            .and_then(|v| match v.len() == samples {
+                true => v.get(i / n).copied(),
+                false => Some(v.iter().sum::<f64>() / v.len().max(1) as f64),
+            })
             .unwrap_or(f64::NAN)
     });
     let period_torques = periods
