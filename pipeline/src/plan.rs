@@ -352,6 +352,9 @@ pub fn source_kind(path: &Path) -> robotid_stages::Result<(Product, Option<bool>
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
+    if path.is_dir() {
+        return Ok((Product::Raw, None)); // a rosbag2 folder
+    }
     if robotid_stages::stage::read::TEXT_EXTENSIONS.contains(&ext.as_str()) {
         return Ok((Product::Raw, Some(false)));
     }
@@ -466,13 +469,14 @@ pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
             .map(|e| LOG_EXTENSIONS.contains(&e.to_string_lossy().to_ascii_lowercase().as_str()))
             .unwrap_or(false)
     };
-    let mut files: Vec<PathBuf> = if full.is_file() {
+    let bag = |p: &Path| p.is_dir() && p.join("metadata.yaml").is_file();
+    let mut files: Vec<PathBuf> = if full.is_file() || bag(&full) {
         vec![full.clone()]
     } else if full.is_dir() {
         std::fs::read_dir(&full)
             .map_err(|e| robotid_stages::Error::io(&full, e))?
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && is_log(p))
+            .filter(|p| (p.is_file() && is_log(p)) || bag(p))
             .collect()
     } else {
         let pattern = full.to_string_lossy().into_owned();
@@ -485,7 +489,7 @@ pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
                 )
             })?
             .filter_map(Result::ok)
-            .filter(|p| p.is_file())
+            .filter(|p| p.is_file() || bag(p))
             .collect()
     };
     files.sort();
@@ -497,7 +501,7 @@ pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
     }
     let unreadable: Vec<String> = files
         .iter()
-        .filter(|p| !is_log(p))
+        .filter(|p| !is_log(p) && !bag(p))
         .map(|p| p.display().to_string())
         .collect();
     if !unreadable.is_empty() {

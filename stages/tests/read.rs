@@ -537,3 +537,44 @@ fn ros2_joint_states_epoch_times_and_reordered_names() {
         "{e}"
     );
 }
+
+/// A rosbag2 folder (`metadata.yaml` and its split `.mcap` files) reads as
+/// one recording, the files in name order.
+#[test]
+fn a_rosbag2_folder_is_one_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let whole = read(&dir.path().join("rec.mcap"), &ReadConfig::default(), Some(&model)).unwrap();
+    // The same samples split in two bags.
+    let bag = dir.path().join("bag");
+    std::fs::create_dir(&bag).unwrap();
+    std::fs::write(
+        bag.join("metadata.yaml"),
+        "rosbag2_bagfile_information:\n  version: 9\n",
+    )
+    .unwrap();
+    let half = s.raw.len() / 2;
+    let split = |from: usize, to: usize| {
+        let mut r = s.raw.clone();
+        r.time = r.time[from..to].to_vec();
+        for c in
+            r.q.iter_mut()
+                .chain(r.effort.iter_mut())
+                .chain(r.reference.iter_mut().flatten())
+        {
+            *c = c[from..to].to_vec();
+        }
+        r.counts = r
+            .counts
+            .map(|cs| cs.into_iter().map(|c| c[from..to].to_vec()).collect());
+        r
+    };
+    let tpa: Vec<f64> = model.drives.iter().map(|d| d.joint_torque_per_amp()).collect();
+    robotid_stages::formats::mcap::write_recording_mcap(&bag.join("bag_0.mcap"), &split(0, half), &tpa).unwrap();
+    robotid_stages::formats::mcap::write_recording_mcap(&bag.join("bag_1.mcap"), &split(half, s.raw.len()), &tpa)
+        .unwrap();
+    let r = read(&bag, &ReadConfig::default(), Some(&model)).unwrap();
+    assert_eq!(r.time, whole.time);
+    assert_eq!(r.q, whole.q);
+    assert_eq!(r.effort, whole.effort);
+}

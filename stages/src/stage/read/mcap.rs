@@ -37,17 +37,48 @@ struct Series {
     reorders: usize,
 }
 
+/// The MCAP files of a recording: the file itself, or the `.mcap` files of
+/// a rosbag2 folder (`metadata.yaml` beside them) in name order.
+pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(path)
+        .map_err(|e| Error::io(path, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap")))
+        .collect();
+    files.sort();
+    if files.is_empty() {
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            msg: "a rosbag2 folder without .mcap files".into(),
+        });
+    }
+    Ok(files)
+}
+
 pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
     let source = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    // SAFETY: the file is opened read-only and robotid never writes to its
-    // inputs; a concurrent writer would be a misuse we cannot prevent.
-    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
-    let hash = sha256_hex(&map);
-    let fmt = |msg: String| Error::Format {
-        path: path.to_path_buf(),
+    let mut maps = Vec::new();
+    for f in bag_files(path)? {
+        let file = std::fs::File::open(&f).map_err(|e| Error::io(&f, e))?;
+        // SAFETY: the file is opened read-only and robotid never writes to
+        // its inputs; a concurrent writer would be a misuse we cannot prevent.
+        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(&f, e))?;
+        maps.push((f, map));
+    }
+    let hash = if maps.len() == 1 {
+        sha256_hex(&maps[0].1)
+    } else {
+        let parts: String = maps.iter().map(|(_, m)| sha256_hex(m)).collect();
+        sha256_hex(parts.as_bytes())
+    };
+    let fmt_at = |f: &Path, msg: String| Error::Format {
+        path: f.to_path_buf(),
         msg,
     };
+    let fmt = |msg: String| fmt_at(path, msg);
     if cfg.position.as_ref().is_some_and(|c| c.column.is_some())
         || cfg.effort.as_ref().is_some_and(|c| c.column.is_some())
     {
@@ -56,17 +87,21 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         ));
     }
     let mut metadata = BTreeMap::new();
-    for record in mcap::read::LinearReader::new(&map).map_err(|e| fmt(format!("not a readable MCAP file: {e}")))? {
-        match record {
-            Ok(mcap::records::Record::Metadata(m)) if m.name == "robotid" => {
-                for (k, v) in m.metadata {
-                    if k.starts_with("robotid.") && k != metadata::JOINTS {
-                        metadata.insert(k, v);
+    for (f, map) in &maps {
+        for record in
+            mcap::read::LinearReader::new(map).map_err(|e| fmt_at(f, format!("not a readable MCAP file: {e}")))?
+        {
+            match record {
+                Ok(mcap::records::Record::Metadata(m)) if m.name == "robotid" => {
+                    for (k, v) in m.metadata {
+                        if k.starts_with("robotid.") && k != metadata::JOINTS {
+                            metadata.insert(k, v);
+                        }
                     }
                 }
+                Ok(_) => {}
+                Err(e) => return Err(fmt_at(f, format!("corrupt or truncated: {e}"))),
             }
-            Ok(_) => {}
-            Err(e) => return Err(fmt(format!("corrupt or truncated: {e}"))),
         }
     }
     let pos = wanted(&cfg.position, "/joint_states", "position");
@@ -87,11 +122,20 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         })
         .collect();
     let mut seen_topics = BTreeMap::new();
-    let options = mcap::read::Options::ValidateChunkCrcs.into();
-    let stream = mcap::MessageStream::new_with_options(&map, options)
-        .map_err(|e| fmt(format!("not a readable MCAP file: {e}")))?;
-    for (count, message) in stream.enumerate() {
-        let message = message.map_err(|e| fmt(format!("corrupt or truncated after {count} messages: {e}")))?;
+    let messages = maps.iter().flat_map(|(f, map)| {
+        let options = mcap::read::Options::ValidateChunkCrcs.into();
+        match mcap::MessageStream::new_with_options(map, options) {
+            Ok(stream) => Box::new(stream.enumerate().map(move |(count, m)| {
+                m.map_err(|e| fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")))
+            })) as Box<dyn Iterator<Item = Result<mcap::Message>>>,
+            Err(e) => Box::new(std::iter::once(Err(fmt_at(
+                f,
+                format!("not a readable MCAP file: {e}"),
+            )))),
+        }
+    });
+    for message in messages {
+        let message = message?;
         let topic = &message.channel.topic;
         *seen_topics.entry(topic.clone()).or_insert(0usize) += 1;
         for (w, s) in specs.iter().zip(series.iter_mut()) {

@@ -245,10 +245,14 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             path: path.to_path_buf(),
             msg: "no joint names: give `joints` in the source or a robot file".into(),
         })?;
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
+    // A rosbag2 folder (metadata.yaml beside its .mcap files) is one recording.
+    let ext = if path.is_dir() {
+        "mcap".to_string()
+    } else {
+        path.extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default()
+    };
     let bytes_hash;
     let text = TEXT_EXTENSIONS.contains(&ext.as_str());
     let cols = match ext.as_str() {
