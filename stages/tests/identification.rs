@@ -481,3 +481,121 @@ fn one_and_a_half_periods_are_fitted_whole() {
         );
     }
 }
+
+/// Joint-wise experiments (Bona §3): three recordings of the 3-dof arm,
+/// each moving one joint while the others are held. One run over all three
+/// with `joint_wise` finds the moving joint of each and gives one table for
+/// all joints; each joint's friction comes from its own motion only and
+/// matches the robot's (held joints' rows would fit it to velocity noise).
+#[test]
+fn joint_wise_recordings_give_one_table_for_all_joints() {
+    use robotid_stages::stage::estimate::EstimateConfig as EstimateStage;
+    use robotid_stages::stage::noise::NoiseConfig;
+    use robotid_stages::stage::{Chain, Component, Context, Stage};
+    let (base_cfg, _) = SimConfig::load(&fixture("sims/arm3.toml")).unwrap();
+    let model = dynamics::load_robot(&base_cfg.robot).unwrap();
+    let ctx = Context {
+        model: Some(std::sync::Arc::new(model.clone())),
+        ..Default::default()
+    };
+    let rc = RegressorConfig {
+        model: dynamics::ModelKind::Decoupled,
+        friction: FrictionModel::Asymmetric,
+        rotor: Some(false),
+        offset: true,
+        coulomb_transition_rad_s: Some(0.01),
+        joint_wise: true,
+        ..Default::default()
+    };
+    let reducer = EstimateStage::default().reducer(&ctx).unwrap();
+    let mut parts = Vec::new();
+    for moving in 0..3 {
+        let mut cfg = base_cfg.clone();
+        cfg.disturbance = Default::default();
+        cfg.timing.jitter_std_s = 0.0;
+        let robotid_stages::trajectory::Trajectory::Fourier(f) = &mut cfg.trajectory else {
+            panic!("periodic excitation")
+        };
+        for j in (0..3).filter(|&j| j != moving) {
+            f.a[j].iter_mut().for_each(|c| *c = 0.0);
+            f.b[j].iter_mut().for_each(|c| *c = 0.0);
+        }
+        let (_, s) = simulate_torque(&cfg);
+        let mut chain = Chain::from_raw(format!("move_j{}", moving + 1), format!("move_j{}", moving + 1), s.raw);
+        let stages = [
+            AlignConfig::default().build(&ctx).unwrap(),
+            robotid_stages::stage::inverse_filter::InverseFilterConfig {
+                filter: cfg.measurement.filter,
+                zpk: None,
+                bandwidth_hz: 30.0,
+            }
+            .build(&ctx)
+            .unwrap(),
+            robotid_stages::stage::average::AverageConfig {}.build(&ctx).unwrap(),
+            NoiseConfig::default().build(&ctx).unwrap(),
+            robotid_stages::stage::differentiate::DifferentiateConfig {
+                method: Diff::Dft,
+                harmonics: None,
+                bandwidth_hz: Some(10.0),
+                filter: None,
+            }
+            .build(&ctx)
+            .unwrap(),
+            rc.build(&ctx).unwrap(),
+        ];
+        for st in &stages {
+            st.run(&mut chain).unwrap();
+        }
+        assert!(chain
+            .regressor
+            .as_ref()
+            .unwrap()
+            .system
+            .joint
+            .iter()
+            .all(|&j| j == moving));
+        reducer.run(&mut chain).unwrap();
+        parts.push(chain.estimate.take().unwrap());
+    }
+    let est = reducer.reduce(&parts, &Default::default()).unwrap().estimate;
+    assert_eq!(est.names.len(), 3 * 8, "{:?}", est.names);
+    let value = |name: &str| est.values[est.names.iter().position(|n| n == name).unwrap()];
+    for (joint, fv, fc) in [
+        ("j1", [12.0, 12.0], [18.0, 18.0]),
+        ("j2", [15.0, 13.0], [16.0, 12.0]),
+        ("j3", [8.0, 8.0], [10.0, 10.0]),
+    ] {
+        let got = [
+            value(&format!("Fv+_{joint}")),
+            value(&format!("Fv-_{joint}")),
+            value(&format!("Fc+_{joint}")),
+            value(&format!("Fc-_{joint}")),
+        ];
+        println!(
+            "{joint}: Fv± {:.3} {:.3} (truth {fv:?}), Fc± {:.3} {:.3} (truth {fc:?})",
+            got[0], got[1], got[2], got[3]
+        );
+        for (g, t) in got.iter().zip(fv.iter().chain(&fc)) {
+            assert!((g - t).abs() < 0.1 * t, "{joint}: {g} against {t}");
+        }
+    }
+    // A recording that moves two joints is refused by name.
+    let mut chain = Chain::from_raw("both", "both", simulate_torque(&base_cfg).1.raw);
+    let stages = [
+        AlignConfig::default().build(&ctx).unwrap(),
+        robotid_stages::stage::average::AverageConfig {}.build(&ctx).unwrap(),
+        robotid_stages::stage::differentiate::DifferentiateConfig {
+            method: Diff::Dft,
+            harmonics: None,
+            bandwidth_hz: Some(10.0),
+            filter: None,
+        }
+        .build(&ctx)
+        .unwrap(),
+    ];
+    for st in &stages {
+        st.run(&mut chain).unwrap();
+    }
+    let e = rc.build(&ctx).unwrap().run(&mut chain).unwrap_err();
+    assert!(e.to_string().contains("3 joints move"), "{e}");
+}

@@ -238,7 +238,7 @@ fn spring_terms_are_a_fourier_series_in_the_joint_angle() {
 fn decoupled_model_is_exact_for_one_joint_moving() {
     use robotid_stages::dynamics::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
     let model = dynamics::load_robot(&fixture("robots/arm3.toml")).unwrap();
-    let names = decoupled_names(&model, FrictionTerms::Asymmetric);
+    let names = decoupled_names(&model, FrictionTerms::Asymmetric, false);
     assert_eq!(&names[7..10], ["Mi_j2", "Gs_j2", "Gc_j2"]);
     let mut data = Data::new(&model);
     let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -248,7 +248,7 @@ fn decoupled_model_is_exact_for_one_joint_moving() {
         let q = [0.4, rng.random_range(-1.2..1.2), -0.3];
         let qd = [0.0, rng.random_range(-1.0..1.0), 0.0];
         let qdd = [0.0, rng.random_range(-3.0..3.0), 0.0];
-        decoupled_regressor(&model, &q, &qd, &qdd, FrictionTerms::Asymmetric, &mut phi);
+        decoupled_regressor(&model, &q, &qd, &qdd, FrictionTerms::Asymmetric, false, &mut phi);
         a.extend((7..14).map(|c| phi[(1, c)]));
         b.push(dynamics::rnea(&model, &mut data, &q, &qd, &qdd)[1]);
     }

@@ -158,19 +158,14 @@ impl BaseRegressor {
                 (terms.count(n), cols, Some(bp.map))
             }
             ModelKind::Decoupled => {
-                if terms.rotor || terms.offset || terms.spring.is_some() {
+                if terms.rotor || terms.spring.is_some() {
                     return Err(Error::setting(
                         "model = \"decoupled\"",
-                        "used with rotor = false, offset = false and no spring (its M·q̈ holds the rotor)",
-                        format!(
-                            "rotor = {}, offset = {}, spring = {}",
-                            terms.rotor,
-                            terms.offset,
-                            terms.spring.is_some()
-                        ),
+                        "used with rotor = false and no spring (its M·q̈ holds the rotor)",
+                        format!("rotor = {}, spring = {}", terms.rotor, terms.spring.is_some()),
                     ));
                 }
-                let names = decoupled_names(&model, terms.friction);
+                let names = decoupled_names(&model, terms.friction, terms.offset);
                 (
                     names.len(),
                     names
@@ -232,7 +227,15 @@ impl BaseRegressor {
         let nb = self.columns.len();
         match self.kind {
             ModelKind::Chain => regressor(&self.model, &mut ws.data, q, qd, qdd, self.terms, &mut ws.phi),
-            ModelKind::Decoupled => decoupled_regressor(&self.model, q, qd, qdd, self.terms.friction, &mut ws.phi),
+            ModelKind::Decoupled => decoupled_regressor(
+                &self.model,
+                q,
+                qd,
+                qdd,
+                self.terms.friction,
+                self.terms.offset,
+                &mut ws.phi,
+            ),
         }
         for j in 0..n {
             for (bi, (col, _, _)) in self.columns.iter().enumerate() {

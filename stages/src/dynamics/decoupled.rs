@@ -3,28 +3,34 @@
 //! an inverted pendulum and friction:
 //!   τ_i = M_i·q̈_i + k_i·sin(q_i + q_off,i) + friction(q̇_i),
 //! linear in [M_i, G_s = k·cos(q_off), G_c = k·sin(q_off), friction…] with
-//! columns [q̈_i, sin q_i, cos q_i, …] on row i only.
+//! columns [q̈_i, sin q_i, cos q_i, …] on row i only; optionally a torque
+//! offset F0 (`Off_<joint>`, column 1), which a torque sensor carries.
 
 use nalgebra::DMatrix;
 
 use super::torque_regressor::{friction_columns, friction_names};
 use super::{FrictionTerms, Model};
 
-fn per_joint(friction: FrictionTerms) -> usize {
-    3 + match friction {
-        FrictionTerms::None => 0,
-        FrictionTerms::Symmetric => 2,
-        FrictionTerms::Asymmetric => 4,
-    }
+fn per_joint(friction: FrictionTerms, offset: bool) -> usize {
+    3 + offset as usize
+        + match friction {
+            FrictionTerms::None => 0,
+            FrictionTerms::Symmetric => 2,
+            FrictionTerms::Asymmetric => 4,
+        }
 }
 
-/// Parameter names: `Mi_<joint>`, `Gs_<joint>`, `Gc_<joint>`, then friction.
-pub fn decoupled_names(model: &Model, friction: FrictionTerms) -> Vec<String> {
+/// Parameter names: `Mi_<joint>`, `Gs_<joint>`, `Gc_<joint>`, then
+/// friction, then `Off_<joint>` when `offset`.
+pub fn decoupled_names(model: &Model, friction: FrictionTerms, offset: bool) -> Vec<String> {
     let mut names = Vec::new();
     for j in &model.joints {
         let n = &j.name;
         names.extend([format!("Mi_{n}"), format!("Gs_{n}"), format!("Gc_{n}")]);
         names.extend(friction_names(friction, n));
+        if offset {
+            names.push(format!("Off_{n}"));
+        }
     }
     names
 }
@@ -37,10 +43,11 @@ pub fn decoupled_regressor(
     qd: &[f64],
     qdd: &[f64],
     friction: FrictionTerms,
+    offset: bool,
     out: &mut DMatrix<f64>,
 ) {
     let n = model.dof();
-    let per = per_joint(friction);
+    let per = per_joint(friction, offset);
     assert_eq!(
         out.shape(),
         (n, n * per),
@@ -53,7 +60,10 @@ pub fn decoupled_regressor(
         out[(i, c)] = qdd[i];
         out[(i, c + 1)] = s;
         out[(i, c + 2)] = co;
-        friction_columns(friction, &model.friction[i], qd[i], out, i, c + 3);
+        let k = friction_columns(friction, &model.friction[i], qd[i], out, i, c + 3);
+        if offset {
+            out[(i, c + 3 + k)] = 1.0;
+        }
     }
 }
 

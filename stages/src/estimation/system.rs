@@ -275,6 +275,20 @@ impl System {
         }
     }
 
+    /// Keeps only the rows of joint `joint` (index into `joints`); returns
+    /// the rows kept.
+    pub fn keep_joint(&mut self, joint: usize) -> Vec<usize> {
+        let rows: Vec<usize> = (0..self.rows()).filter(|&i| self.joint[i] == joint).collect();
+        self.a = self.a.select_rows(rows.iter());
+        self.b = self.b.select_rows(rows.iter());
+        self.var = self.var.select_rows(rows.iter());
+        self.recording = rows.iter().map(|&i| self.recording[i]).collect();
+        self.sample = rows.iter().map(|&i| self.sample[i]).collect();
+        self.joint = rows.iter().map(|&i| self.joint[i]).collect();
+        self.offsets = vec![0];
+        rows
+    }
+
     /// Moves known parameters to the right-hand side (b − A_k·θ_k) and drops
     /// their columns: friction from dedicated experiments, compensated
     /// before the inertial estimation (Bona §3.4). Their covariance is kept

@@ -51,6 +51,11 @@ pub struct RegressorConfig {
     /// with a non-causal FIR of taps −m1..m2 from the references to the
     /// command; torque and columns are projected on the references' span.
     pub projection: Option<ProjectionConfig>,
+    /// Joint-wise experiments (Bona §3: one joint moved per recording, the
+    /// others held): the joint that moves is found in each recording, and
+    /// only its rows enter the system (a held joint's rows would fit
+    /// friction to the velocity noise).
+    pub joint_wise: bool,
 }
 
 impl Default for RegressorConfig {
@@ -70,6 +75,7 @@ impl RegressorConfig {
             spring: m.spring,
             band_limit_hz: None,
             projection: None,
+            joint_wise: false,
         }
     }
 
@@ -389,7 +395,36 @@ pub fn regressor_rows(
         .iter()
         .map(|name| parameter_unit(name).to_string())
         .collect();
-    let mut system = System::from_matrices(base.names(), units, names, a, b, var);
+    let mut system = System::from_matrices(base.names(), units, names.clone(), a, b, var);
+    let mut period_torques = period_torques;
+    if cfg.joint_wise {
+        // The joint that moves: the one whose range is more than 5 % of
+        // the largest (and over a milliradian); exactly one must.
+        let range =
+            |c: &Vec<f64>| c.iter().fold(f64::MIN, |m, v| m.max(*v)) - c.iter().fold(f64::MAX, |m, v| m.min(*v));
+        let ranges: Vec<f64> = kin.q.iter().map(range).collect();
+        let top = ranges.iter().fold(0.0f64, |m, r| m.max(*r));
+        let moving: Vec<usize> = (0..n).filter(|&j| ranges[j] > (0.05 * top).max(1e-3)).collect();
+        let [j] = moving[..] else {
+            return Err(Error::Data {
+                source_name: recording.to_string(),
+                channel: "q_*".into(),
+                sample: None,
+                msg: format!(
+                    "joint_wise: {} joints move (ranges {}), a joint-wise recording moves one",
+                    moving.len(),
+                    names
+                        .iter()
+                        .zip(&ranges)
+                        .map(|(name, r)| format!("{name} {r:.3} rad"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        };
+        let keep = system.keep_joint(j);
+        period_torques = period_torques.map(|p| p.select_rows(keep.iter()));
+    }
     system.expressions = base.expressions();
     system.recordings = vec![recording.to_string()];
     system.periods = vec![period_torques];
