@@ -392,8 +392,7 @@ fn bandwidth_of(p: &robotid_stages::stage::Periods) -> Option<f64> {
 #[test]
 fn one_and_a_half_periods_are_fitted_whole() {
     use robotid_stages::stage::estimate::EstimateConfig as EstimateStage;
-    use robotid_stages::stage::noise::NoiseConfig;
-    use robotid_stages::stage::{Chain, Component, Context, Stage};
+    use robotid_stages::stage::{Chain, Context, Stage};
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
     let (model, s) = simulate_torque(&cfg);
     let robotid_stages::trajectory::Trajectory::Fourier(f) = &cfg.trajectory else {
@@ -418,27 +417,17 @@ fn one_and_a_half_periods_are_fitted_whole() {
         raw.reference = None;
         raw.counts = None;
         let mut chain = Chain::from_raw("sim", "sim", raw);
-        let stages = [
-            AlignConfig::default().build(&ctx).unwrap(),
-            robotid_stages::stage::inverse_filter::InverseFilterConfig {
-                filter: cfg.measurement.filter,
-                zpk: None,
-                bandwidth_hz: 20.0,
-            }
-            .build(&ctx)
-            .unwrap(),
-            robotid_stages::stage::average::AverageConfig {}.build(&ctx).unwrap(),
-            NoiseConfig::default().build(&ctx).unwrap(),
+        let stages = chain_stages(
+            &ctx,
+            cfg.measurement.filter.map(|f| (f, 20.0)),
             robotid_stages::stage::differentiate::DifferentiateConfig {
                 method: Diff::FourierFit,
                 harmonics: None,
                 bandwidth_hz: None,
                 filter: None,
-            }
-            .build(&ctx)
-            .unwrap(),
-            rc.build(&ctx).unwrap(),
-        ];
+            },
+            &rc,
+        );
         for (i, st) in stages.iter().enumerate() {
             st.run(&mut chain).unwrap();
             if i == 0 && !whole_stretch {
@@ -490,7 +479,6 @@ fn one_and_a_half_periods_are_fitted_whole() {
 #[test]
 fn joint_wise_recordings_give_one_table_for_all_joints() {
     use robotid_stages::stage::estimate::EstimateConfig as EstimateStage;
-    use robotid_stages::stage::noise::NoiseConfig;
     use robotid_stages::stage::{Chain, Component, Context, Stage};
     let (base_cfg, _) = SimConfig::load(&fixture("sims/arm3.toml")).unwrap();
     let model = dynamics::load_robot(&base_cfg.robot).unwrap();
@@ -522,27 +510,17 @@ fn joint_wise_recordings_give_one_table_for_all_joints() {
         }
         let (_, s) = simulate_torque(&cfg);
         let mut chain = Chain::from_raw(format!("move_j{}", moving + 1), format!("move_j{}", moving + 1), s.raw);
-        let stages = [
-            AlignConfig::default().build(&ctx).unwrap(),
-            robotid_stages::stage::inverse_filter::InverseFilterConfig {
-                filter: cfg.measurement.filter,
-                zpk: None,
-                bandwidth_hz: 30.0,
-            }
-            .build(&ctx)
-            .unwrap(),
-            robotid_stages::stage::average::AverageConfig {}.build(&ctx).unwrap(),
-            NoiseConfig::default().build(&ctx).unwrap(),
+        let stages = chain_stages(
+            &ctx,
+            cfg.measurement.filter.map(|f| (f, 30.0)),
             robotid_stages::stage::differentiate::DifferentiateConfig {
                 method: Diff::Dft,
                 harmonics: None,
                 bandwidth_hz: Some(10.0),
                 filter: None,
-            }
-            .build(&ctx)
-            .unwrap(),
-            rc.build(&ctx).unwrap(),
-        ];
+            },
+            &rc,
+        );
         for st in &stages {
             st.run(&mut chain).unwrap();
         }
@@ -598,4 +576,32 @@ fn joint_wise_recordings_give_one_table_for_all_joints() {
     }
     let e = rc.build(&ctx).unwrap().run(&mut chain).unwrap_err();
     assert!(e.to_string().contains("3 joints move"), "{e}");
+}
+
+/// The preprocessing chain's stages, built as a pipeline builds them:
+/// align, inverse filter (when given), average, noise, differentiate, regressor.
+fn chain_stages(
+    ctx: &robotid_stages::stage::Context,
+    filter: Option<(robotid_stages::signal::FilterSpec, f64)>,
+    differentiation: robotid_stages::stage::differentiate::DifferentiateConfig,
+    rc: &RegressorConfig,
+) -> Vec<Box<dyn robotid_stages::stage::Stage>> {
+    use robotid_stages::stage::Component;
+    let mut out = vec![AlignConfig::default().build(ctx).unwrap()];
+    if let Some((spec, bandwidth_hz)) = filter {
+        out.push(
+            InverseFilterConfig {
+                filter: Some(spec),
+                zpk: None,
+                bandwidth_hz,
+            }
+            .build(ctx)
+            .unwrap(),
+        );
+    }
+    out.push(robotid_stages::stage::average::AverageConfig {}.build(ctx).unwrap());
+    out.push(robotid_stages::stage::noise::NoiseConfig::default().build(ctx).unwrap());
+    out.push(differentiation.build(ctx).unwrap());
+    out.push(rc.build(ctx).unwrap());
+    out
 }

@@ -6,7 +6,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::summary::MAX_CONDITION;
+use super::summary::identifiable;
 use super::{Covariance, Estimate, Estimator, Summary, System};
 use crate::dynamics::RFactor;
 use crate::{Error, Result};
@@ -35,24 +35,7 @@ pub(super) fn solve(sys: &System, weights: Option<&DVector<f64>>) -> Result<Solu
         let b = DVector::from_fn(k, |i, _| sw(start + i) * sys.b[start + i]);
         acc.add_rows(&a, &b);
     }
-    let svd = acc.r.clone().svd(false, true);
-    let smax = svd.singular_values.max();
-    let (imin, smin) = svd.singular_values.argmin();
-    let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
-    if !(condition < MAX_CONDITION) {
-        let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();
-        let mut involved: Vec<(usize, f64)> = (0..p).filter(|&j| v[j].abs() > 0.05).map(|j| (j, v[j])).collect();
-        involved.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
-        return Err(Error::RankDeficient {
-            condition,
-            parameters: involved.iter().map(|(j, _)| sys.names[*j].clone()).collect(),
-            combination: involved
-                .iter()
-                .map(|(j, c)| format!("{c:+.2}·{}", sys.names[*j]))
-                .collect::<Vec<_>>()
-                .join(" "),
-        });
-    }
+    let condition = identifiable(&acc.r, &sys.names)?;
     let r_inv = acc.r.clone().try_inverse().ok_or_else(|| {
         Error::numerical(
             "least squares",

@@ -19,6 +19,33 @@ use super::{Covariance, Estimate, Estimator, System};
 use crate::dynamics::RFactor;
 use crate::{Error, Result};
 
+/// The condition number of a column-scaled R factor, or the parameters
+/// along its weakest direction when it is above [`MAX_CONDITION`].
+pub(super) fn identifiable(r: &DMatrix<f64>, names: &[String]) -> Result<f64> {
+    let svd = r.clone().svd(false, true);
+    let smax = svd.singular_values.max();
+    let (imin, smin) = svd.singular_values.argmin();
+    let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
+    if condition < MAX_CONDITION {
+        return Ok(condition);
+    }
+    let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();
+    let mut involved: Vec<(usize, f64)> = (0..names.len())
+        .filter(|&j| v[j].abs() > 0.05)
+        .map(|j| (j, v[j]))
+        .collect();
+    involved.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+    Err(Error::RankDeficient {
+        condition,
+        parameters: involved.iter().map(|(j, _)| names[*j].clone()).collect(),
+        combination: involved
+            .iter()
+            .map(|(j, c)| format!("{c:+.2}·{}", names[*j]))
+            .collect::<Vec<_>>()
+            .join(" "),
+    })
+}
+
 /// Above this condition number of the column-scaled system the parameters
 /// along the weakest direction are noise amplified by more than 1e10: that
 /// is not an identifiable model.
@@ -179,24 +206,7 @@ impl Summary {
         }
         let norms: Vec<f64> = (0..p).map(|j| self.factor.r.column(j).norm()).collect();
         let r = DMatrix::from_fn(p, p, |i, j| self.factor.r[(i, j)] / norms[j]);
-        let svd = r.clone().svd(false, true);
-        let smax = svd.singular_values.max();
-        let (imin, smin) = svd.singular_values.argmin();
-        let condition = if smin > 0.0 { smax / smin } else { f64::INFINITY };
-        if !(condition < MAX_CONDITION) {
-            let v = svd.v_t.as_ref().expect("asked for V").row(imin).transpose();
-            let mut involved: Vec<(usize, f64)> = (0..p).filter(|&j| v[j].abs() > 0.05).map(|j| (j, v[j])).collect();
-            involved.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
-            return Err(Error::RankDeficient {
-                condition,
-                parameters: involved.iter().map(|(j, _)| self.names[*j].clone()).collect(),
-                combination: involved
-                    .iter()
-                    .map(|(j, c)| format!("{c:+.2}·{}", self.names[*j]))
-                    .collect::<Vec<_>>()
-                    .join(" "),
-            });
-        }
+        let condition = identifiable(&r, &self.names)?;
         let r_inv = r.try_inverse().ok_or_else(|| {
             Error::numerical(
                 "least squares",

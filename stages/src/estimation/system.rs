@@ -57,6 +57,17 @@ fn str_col<'a>(label: &str, batch: &'a RecordBatch, name: &str) -> Result<&'a St
         .ok_or_else(|| Error::mismatch(format!("{label}: column `{name}`"), "a Utf8 column", "none"))
 }
 
+/// The index of `name` in `names`, appended when new.
+fn index_of(names: &mut Vec<String>, name: &str) -> usize {
+    match names.iter().position(|x| x == name) {
+        Some(k) => k,
+        None => {
+            names.push(name.to_string());
+            names.len() - 1
+        }
+    }
+}
+
 impl System {
     /// Stacks `regressor` tables (one per recording) with the same
     /// parameter columns.
@@ -150,14 +161,7 @@ impl System {
                 sys.var[at + i] = if var.is_null(i) { f64::NAN } else { var.value(i) };
                 sys.recording.push(r);
                 sys.sample.push(sample.value(i));
-                let jn = joint.value(i);
-                let ji = match sys.joints.iter().position(|x| x == jn) {
-                    Some(k) => k,
-                    None => {
-                        sys.joints.push(jn.to_string());
-                        sys.joints.len() - 1
-                    }
-                };
+                let ji = index_of(&mut sys.joints, joint.value(i));
                 sys.joint.push(ji);
             }
             at += t.num_rows();
@@ -214,14 +218,7 @@ impl System {
             out.recording.extend(s.recording.iter().map(|r| r + r0));
             out.sample.extend(&s.sample);
             for &j in &s.joint {
-                let name = &s.joints[j];
-                let ji = match out.joints.iter().position(|x| x == name) {
-                    Some(k) => k,
-                    None => {
-                        out.joints.push(name.clone());
-                        out.joints.len() - 1
-                    }
-                };
+                let ji = index_of(&mut out.joints, &s.joints[j]);
                 out.joint.push(ji);
             }
             out.recordings.extend(s.recordings.iter().cloned());

@@ -218,15 +218,7 @@ impl Stage for Reducer {
         let md = rows.table_metadata()?;
         let fix = |mut sys: System| -> Result<System> {
             sys.metadata = md.clone();
-            if let Some(k) = &self.known {
-                if sys.fix(k)?.is_empty() {
-                    return Err(Error::mismatch(
-                        "known: parameters",
-                        format!("some of the model's {:?}", sys.names),
-                        format!("{:?}", k.names),
-                    ));
-                }
-            }
+            self.fix_known(&mut sys)?;
             Ok(sys)
         };
         let weights = |sys: &System| -> Result<Option<DVector<f64>>> {
@@ -267,6 +259,21 @@ impl Stage for Reducer {
 }
 
 impl Reducer {
+    /// Moves the known parameters to the right-hand side; refused when
+    /// none of them is in the model.
+    fn fix_known(&self, sys: &mut System) -> Result<()> {
+        if let Some(k) = &self.known {
+            if sys.fix(k)?.is_empty() {
+                return Err(Error::mismatch(
+                    "known: parameters",
+                    format!("some of the model's {:?}", sys.names),
+                    format!("{:?}", k.names),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The noise on the regressor's inputs for maximum likelihood: the noise
     /// stage's position variance (mean over the period, per joint) through
     /// the differentiation's gains, with the regressor's Jacobians.
@@ -371,15 +378,7 @@ impl Reducer {
                 "method = \"ml\" runs as a pipeline's `estimate` stage",
             ));
         }
-        if let Some(k) = &self.known {
-            if sys.fix(k)?.is_empty() {
-                return Err(Error::mismatch(
-                    "known: parameters",
-                    format!("some of the model's {:?}", sys.names),
-                    format!("{:?}", k.names),
-                ));
-            }
-        }
+        self.fix_known(&mut sys)?;
         let w = match self.cfg.method {
             Estimator::Wls => Some(row_weights(&sys, self.cfg.weights)?),
             _ => None,
