@@ -324,6 +324,17 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             "no excitation period: set `period_s` in the align stage (the recording does not say)".into(),
         )
     })?;
+    // What the pipeline file left to the recording, said.
+    let mut defaults = Vec::new();
+    if cfg.sample_rate_hz.is_none() {
+        defaults.push(match md_f64(metadata::SAMPLE_RATE_HZ) {
+            Some(r) => format!("sample_rate_hz = {r} (the recording's {})", metadata::SAMPLE_RATE_HZ),
+            None => format!("sample_rate_hz = {fs} (1 / the median step)"),
+        });
+    }
+    if cfg.period_s.is_none() {
+        defaults.push(format!("period_s = {period} (the recording's {})", metadata::PERIOD_S));
+    }
     let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
     if n < 4 {
         return Err(data_err("time", None, format!("{n} samples per period is too few")));
@@ -541,6 +552,12 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     }
     let mut md = raw.metadata.clone();
     md.insert(metadata::PERIOD_S.into(), period.to_string());
+    if !defaults.is_empty() {
+        report
+            .notes
+            .extend(defaults.iter().map(|d| format!("align: default {d}")));
+        md.insert(metadata::DEFAULTS.into(), defaults.join("; "));
+    }
     md.insert(metadata::SAMPLE_RATE_HZ.into(), (n as f64 / period).to_string());
     md.insert(metadata::PERIODS.into(), kept.to_string());
     md.insert(metadata::PERIOD_START_S.into(), start.to_string());

@@ -249,6 +249,24 @@ impl Chain {
         if let Some(h) = given {
             return Ok(h.clone());
         }
+        self.recording_harmonics()
+    }
+
+    /// The harmonics the recording's provenance names, and a note that a
+    /// stage (`stage`) took them by default.
+    pub fn default_harmonics(&mut self, stage: &str, given: Option<&Vec<u32>>) -> Result<Vec<u32>> {
+        if let Some(h) = given {
+            return Ok(h.clone());
+        }
+        let h = self.recording_harmonics()?;
+        self.report.notes.push(format!(
+            "{stage}: default harmonics = {h:?} (the recording's {})",
+            metadata::HARMONICS
+        ));
+        Ok(h)
+    }
+
+    fn recording_harmonics(&self) -> Result<Vec<u32>> {
         let md = self.recording_metadata();
         let text = md
             .get(metadata::HARMONICS)

@@ -154,7 +154,7 @@ impl Stage for Differentiate {
             {
                 // Fewer than two whole periods: Approach I over the whole
                 // steady stretch, whatever its length.
-                let h = chain.harmonics(self.cfg.harmonics.as_ref())?;
+                let h = chain.default_harmonics("differentiate", self.cfg.harmonics.as_ref())?;
                 let p = chain.periods()?;
                 let s = p.stretch.as_ref().expect("checked");
                 let kin = fit_stretch(p, s, &h);
@@ -167,7 +167,9 @@ impl Stage for Differentiate {
             }
             None => {
                 let h = match method {
-                    Differentiation::FourierFit => chain.harmonics(self.cfg.harmonics.as_ref())?,
+                    Differentiation::FourierFit => {
+                        chain.default_harmonics("differentiate", self.cfg.harmonics.as_ref())?
+                    }
                     _ => Vec::new(),
                 };
                 let period = chain.period_s()?;

@@ -87,7 +87,7 @@ pub struct Noise {
 
 impl Stage for Noise {
     fn run(&self, chain: &mut Chain) -> Result<()> {
-        let h = chain.harmonics(self.harmonics.as_ref())?;
+        let h = chain.default_harmonics("noise", self.harmonics.as_ref())?;
         let bandwidth = chain.facts.inverse_filter_bandwidth_hz;
         let (table, summary) = noise(chain.periods()?, chain.mean()?, &h, bandwidth, &self.spectra);
         if let Some(how) = table

@@ -356,6 +356,7 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     convert("time", &time_unit, &mut t)?;
     [time] = t;
     convert("position", &unit(&cfg.position, "rad"), &mut position)?;
+    let explicit = cfg.effort.as_ref().is_some_and(|c| c.unit.is_some());
     let effort_unit = match (md.remove(metadata::READ_EFFORT_UNIT), cfg.effort.as_ref()) {
         (Some(u), _) => u,
         (None, Some(Channel { unit: Some(u), .. })) => u.clone(),
@@ -371,6 +372,17 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         })?,
         (None, None) => "A".to_string(),
     };
+    if !explicit {
+        let note = format!(
+            "read: default effort unit {effort_unit} (channels {})",
+            names[1].first().map(String::as_str).unwrap_or("?")
+        );
+        let all = match md.remove(metadata::READ_NOTES) {
+            Some(n) => format!("{n}; {note}"),
+            None => note,
+        };
+        md.insert(metadata::READ_NOTES.into(), all);
+    }
     convert("effort", &effort_unit, &mut effort)?;
     if let Some(r) = &mut reference {
         convert("reference", &unit(&cfg.reference, "rad"), r)?;
