@@ -578,3 +578,154 @@ fn a_rosbag2_folder_is_one_recording() {
     assert_eq!(r.q, whole.q);
     assert_eq!(r.effort, whole.effort);
 }
+
+/// ros2_control's logs: joint states as `DynamicJointState` interfaces
+/// (the motor current among them) and the trajectory controller's state,
+/// whose `reference` the Projection Method needs; read to the same samples
+/// as the JointState recording. Another message type is refused by name.
+#[test]
+fn ros2_control_dynamic_joint_state_and_controller_state() {
+    use robotid_stages::formats::cdr::{
+        encode_controller_state, encode_dynamic_joint_state, ControllerState, DynamicJointState, TrajectoryPoint,
+        CONTROLLER_STATE_NAME, DYNAMIC_JOINT_STATE_NAME, DYNAMIC_JOINT_STATE_SCHEMA,
+    };
+    const CONTROLLER_SCHEMA: &str = "std_msgs/Header header
+string[] joint_names
+trajectory_msgs/JointTrajectoryPoint reference
+trajectory_msgs/JointTrajectoryPoint feedback
+trajectory_msgs/JointTrajectoryPoint error
+trajectory_msgs/JointTrajectoryPoint output
+string[] multi_dof_joint_names
+================================================================================
+MSG: trajectory_msgs/JointTrajectoryPoint
+float64[] positions
+float64[] velocities
+float64[] accelerations
+float64[] effort
+builtin_interfaces/Duration time_from_start
+";
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let raw = &s.raw;
+    let joints = model.joint_names();
+    let bag = dir.path().join("control.mcap");
+    {
+        let file = std::io::BufWriter::new(std::fs::File::create(&bag).unwrap());
+        let mut out = mcap::WriteOptions::new().create(file).unwrap();
+        let ds = out
+            .add_schema(
+                DYNAMIC_JOINT_STATE_NAME,
+                "ros2msg",
+                DYNAMIC_JOINT_STATE_SCHEMA.as_bytes(),
+            )
+            .unwrap();
+        let cs = out
+            .add_schema(CONTROLLER_STATE_NAME, "ros2msg", CONTROLLER_SCHEMA.as_bytes())
+            .unwrap();
+        let ch_d = out
+            .add_channel(ds, "/dynamic_joint_states", "cdr", &BTreeMap::new())
+            .unwrap();
+        let ch_c = out
+            .add_channel(cs, "/controller_state", "cdr", &BTreeMap::new())
+            .unwrap();
+        let ts = out.add_schema("geometry_msgs/msg/Twist", "ros2msg", b"").unwrap();
+        let ch_t = out.add_channel(ts, "/cmd_vel", "cdr", &BTreeMap::new()).unwrap();
+        let mut buf = Vec::new();
+        for k in 0..raw.len() {
+            let ns = (raw.time[k] * 1e9).round() as u64;
+            // Interfaces in another order than the joints, and reversed joints.
+            let order: Vec<usize> = (0..joints.len()).rev().collect();
+            let d = DynamicJointState {
+                joint_names: order.iter().map(|&j| joints[j].clone()).collect(),
+                interfaces: order
+                    .iter()
+                    .map(|&j| {
+                        (
+                            vec!["current".into(), "position".into(), "velocity".into()],
+                            vec![raw.effort[j][k], raw.q[j][k], 0.0],
+                        )
+                    })
+                    .collect(),
+            };
+            encode_dynamic_joint_state(&d, (ns / 1_000_000_000) as i32, (ns % 1_000_000_000) as u32, &mut buf);
+            let header = |channel_id, sequence| mcap::records::MessageHeader {
+                channel_id,
+                sequence,
+                log_time: ns,
+                publish_time: ns,
+            };
+            out.write_to_known_channel(&header(ch_d, 2 * k as u32), &buf).unwrap();
+            if k == 0 {
+                out.write_to_known_channel(&header(ch_t, 0), &buf).unwrap();
+            }
+            let point = |v: Vec<f64>| TrajectoryPoint {
+                positions: v,
+                ..Default::default()
+            };
+            let reference: Vec<f64> = (0..joints.len())
+                .map(|j| raw.reference.as_ref().unwrap()[j][k])
+                .collect();
+            let c = ControllerState {
+                joint_names: joints.clone(),
+                points: vec![
+                    ("reference".into(), point(reference)),
+                    (
+                        "feedback".into(),
+                        point((0..joints.len()).map(|j| raw.q[j][k]).collect()),
+                    ),
+                ],
+            };
+            encode_controller_state(&c, CONTROLLER_SCHEMA, &mut buf);
+            out.write_to_known_channel(&header(ch_c, 2 * k as u32 + 1), &buf)
+                .unwrap();
+        }
+        out.finish().unwrap();
+    }
+    let channel = |topic: &str, field: &str| {
+        Some(Channel {
+            column: None,
+            topic: Some(topic.into()),
+            field: Some(field.into()),
+            unit: None,
+        })
+    };
+    let cfg = ReadConfig {
+        position: channel("/dynamic_joint_states", "position"),
+        effort: channel("/dynamic_joint_states", "current"),
+        reference: channel("/controller_state", "reference"),
+        ..Default::default()
+    };
+    let got = read(&bag, &cfg, Some(&model)).unwrap();
+    let expected = read(&dir.path().join("rec.csv"), &ReadConfig::default(), Some(&model)).unwrap();
+    assert_eq!(got.q, expected.q);
+    assert_eq!(
+        got.effort, expected.effort,
+        "currents, in A by their name, through the torque constants"
+    );
+    assert_eq!(got.reference, expected.reference);
+    let feedback = read(
+        &bag,
+        &ReadConfig {
+            position: channel("/controller_state", "feedback.positions"),
+            ..cfg.clone()
+        },
+        Some(&model),
+    )
+    .unwrap();
+    assert_eq!(feedback.q, expected.q);
+    // A message type robotid does not read is named.
+    let e = read(
+        &bag,
+        &ReadConfig {
+            position: channel("/cmd_vel", "position"),
+            ..cfg
+        },
+        Some(&model),
+    )
+    .map(|r| r.len())
+    .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, msg, .. } if channel.starts_with("/cmd_vel") && msg.contains("`geometry_msgs/msg/Twist` is not read")),
+        "{e}"
+    );
+}

@@ -75,14 +75,213 @@ impl Writer<'_> {
         self.out.extend_from_slice(s.as_bytes());
         self.out.push(0);
     }
+    fn f64_seq(&mut self, v: &[f64]) {
+        self.u32(v.len() as u32);
+        if !v.is_empty() {
+            self.align(8);
+            for x in v {
+                self.out.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+    }
+}
+
+/// ros2_control's `control_msgs/msg/DynamicJointState`: per joint, the
+/// names and values of its interfaces (`position`, `velocity`, `effort`,
+/// `current`, …).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DynamicJointState {
+    pub joint_names: Vec<String>,
+    /// Per joint: (interface names, values).
+    pub interfaces: Vec<(Vec<String>, Vec<f64>)>,
+}
+
+pub const DYNAMIC_JOINT_STATE_NAME: &str = "control_msgs/msg/DynamicJointState";
+pub const DYNAMIC_JOINT_STATE_SCHEMA: &str = "std_msgs/Header header
+string[] joint_names
+control_msgs/InterfaceValue[] interface_values
+================================================================================
+MSG: control_msgs/InterfaceValue
+string[] interface_names
+float64[] values
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+";
+
+/// A `trajectory_msgs/msg/JointTrajectoryPoint`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TrajectoryPoint {
+    pub positions: Vec<f64>,
+    pub velocities: Vec<f64>,
+    pub accelerations: Vec<f64>,
+    pub effort: Vec<f64>,
+}
+
+/// The joint trajectory controller's `control_msgs/msg/JointTrajectoryControllerState`:
+/// joint names and its trajectory points by field name (`reference`,
+/// `feedback`, `error`, `output`; older ROS: `desired`, `actual`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ControllerState {
+    pub joint_names: Vec<String>,
+    pub points: Vec<(String, TrajectoryPoint)>,
+}
+
+pub const CONTROLLER_STATE_NAME: &str = "control_msgs/msg/JointTrajectoryControllerState";
+
+/// The top-level fields of a `ros2msg` schema text: (type, name).
+pub fn schema_fields(schema: &str) -> Vec<(String, String)> {
+    schema
+        .lines()
+        .take_while(|l| !l.starts_with("===="))
+        .filter_map(|l| {
+            let l = l.split('#').next().unwrap_or("").trim();
+            let mut it = l.split_whitespace();
+            match (it.next(), it.next()) {
+                (Some(t), Some(n)) if !n.contains('=') => Some((t.to_string(), n.to_string())),
+                _ => None,
+            }
+        })
+        .collect()
+}
+
+pub fn encode_dynamic_joint_state(msg: &DynamicJointState, sec: i32, nanosec: u32, out: &mut Vec<u8>) {
+    out.clear();
+    out.extend_from_slice(&[0x00, 0x01, 0x00, 0x00]);
+    let mut w = Writer { out };
+    w.u32(sec as u32);
+    w.u32(nanosec);
+    w.string("");
+    w.u32(msg.joint_names.len() as u32);
+    for n in &msg.joint_names {
+        w.string(n);
+    }
+    w.u32(msg.interfaces.len() as u32);
+    for (names, values) in &msg.interfaces {
+        w.u32(names.len() as u32);
+        for n in names {
+            w.string(n);
+        }
+        w.f64_seq(values);
+    }
+}
+
+/// Encodes a controller state with the fields of `schema` (header,
+/// joint_names and trajectory points only).
+pub fn encode_controller_state(msg: &ControllerState, schema: &str, out: &mut Vec<u8>) {
+    out.clear();
+    out.extend_from_slice(&[0x00, 0x01, 0x00, 0x00]);
+    let mut w = Writer { out };
+    for (ty, name) in schema_fields(schema) {
+        match ty.as_str() {
+            "std_msgs/Header" => {
+                w.u32(0);
+                w.u32(0);
+                w.string("");
+            }
+            "string[]" => {
+                w.u32(msg.joint_names.len() as u32);
+                for n in &msg.joint_names {
+                    w.string(n);
+                }
+            }
+            "trajectory_msgs/JointTrajectoryPoint" => {
+                let p = msg
+                    .points
+                    .iter()
+                    .find(|(n, _)| *n == name)
+                    .map(|(_, p)| p.clone())
+                    .unwrap_or_default();
+                for v in [&p.positions, &p.velocities, &p.accelerations, &p.effort] {
+                    w.f64_seq(v);
+                }
+                w.u32(0);
+                w.u32(0);
+            }
+            _ => break,
+        }
+    }
 }
 
 /// Why a CDR message could not be decoded; `at` is the byte offset.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("CDR JointState: {what} at byte {at}")]
+#[error("CDR message: {what} at byte {at}")]
 pub struct CdrError {
     pub what: String,
     pub at: usize,
+}
+
+/// The reader past the 4-byte encapsulation header, refused unless it is
+/// little-endian CDR.
+fn reader(bytes: &[u8]) -> Result<Reader<'_>, CdrError> {
+    if bytes.len() < 4 {
+        return Err(CdrError {
+            what: "message shorter than the encapsulation header".into(),
+            at: 0,
+        });
+    }
+    if bytes[1] != 0x01 {
+        return Err(CdrError {
+            what: format!(
+                "unsupported encapsulation {:#04x}{:02x} (expected CDR little-endian)",
+                bytes[0], bytes[1]
+            ),
+            at: 0,
+        });
+    }
+    Ok(Reader { b: bytes, pos: 4 })
+}
+
+pub fn decode_dynamic_joint_state(bytes: &[u8]) -> Result<DynamicJointState, CdrError> {
+    let mut r = reader(bytes)?;
+    r.u32()?;
+    r.u32()?;
+    r.string()?;
+    let joint_names = r.string_seq()?;
+    let n = r.u32()? as usize;
+    let mut interfaces = Vec::with_capacity(n.min(4096));
+    for _ in 0..n {
+        interfaces.push((r.string_seq()?, r.f64_seq()?));
+    }
+    Ok(DynamicJointState {
+        joint_names,
+        interfaces,
+    })
+}
+
+/// Decodes a controller state by the fields its schema lists; fields after
+/// the last trajectory point are not read.
+pub fn decode_controller_state(bytes: &[u8], schema: &str) -> Result<ControllerState, CdrError> {
+    let mut r = reader(bytes)?;
+    let mut msg = ControllerState::default();
+    for (ty, name) in schema_fields(schema) {
+        match ty.as_str() {
+            "std_msgs/Header" => {
+                r.u32()?;
+                r.u32()?;
+                r.string()?;
+            }
+            "string[]" if name == "joint_names" => msg.joint_names = r.string_seq()?,
+            "trajectory_msgs/JointTrajectoryPoint" => {
+                let p = TrajectoryPoint {
+                    positions: r.f64_seq()?,
+                    velocities: r.f64_seq()?,
+                    accelerations: r.f64_seq()?,
+                    effort: r.f64_seq()?,
+                };
+                r.u32()?;
+                r.u32()?;
+                msg.points.push((name, p));
+            }
+            _ => break,
+        }
+    }
+    Ok(msg)
 }
 
 pub fn decode_joint_state(bytes: &[u8]) -> Result<JointState, CdrError> {
@@ -162,6 +361,14 @@ impl Reader<'_> {
             what: "string is not UTF-8".into(),
             at,
         })
+    }
+    fn string_seq(&mut self) -> Result<Vec<String>, CdrError> {
+        let n = self.u32()? as usize;
+        let mut out = Vec::with_capacity(n.min(4096));
+        for _ in 0..n {
+            out.push(self.string()?);
+        }
+        Ok(out)
     }
     fn f64_seq(&mut self) -> Result<Vec<f64>, CdrError> {
         let n = self.u32()? as usize;

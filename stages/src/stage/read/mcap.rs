@@ -9,7 +9,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use super::{Channel, Columns, ReadConfig};
-use crate::formats::cdr::decode_joint_state;
+use crate::formats::cdr::{
+    decode_controller_state, decode_dynamic_joint_state, decode_joint_state, CONTROLLER_STATE_NAME,
+    DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
+};
 use crate::formats::sha256_hex;
 use crate::{Error, Result};
 
@@ -56,6 +59,74 @@ pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
         });
     }
     Ok(files)
+}
+
+/// The joint names and the values of `field` in a CDR message of one of the
+/// types ROS 2 arms log: `sensor_msgs/msg/JointState` (`position`,
+/// `velocity`, `effort`), ros2_control's `control_msgs/msg/DynamicJointState`
+/// (any interface: `position`, `effort`, `current`, …) and the trajectory
+/// controller's `control_msgs/msg/JointTrajectoryControllerState`
+/// (`reference`, `feedback`, `error`, `output`, `desired`, `actual`: their
+/// positions, or `output.effort`-style for another part of the point).
+fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<String>, Vec<f64>), String> {
+    let schema = message
+        .channel
+        .schema
+        .as_ref()
+        .ok_or("a CDR channel without a schema: its message type is unknown")?;
+    match schema.name.as_str() {
+        JOINT_STATE_NAME => {
+            let js = decode_joint_state(&message.data).map_err(|e| e.to_string())?;
+            let values = match field {
+                "position" => js.position,
+                "velocity" => js.velocity,
+                "effort" => js.effort,
+                other => return Err(format!("JointState has no field `{other}` (position, velocity, effort)")),
+            };
+            Ok((js.name, values))
+        }
+        DYNAMIC_JOINT_STATE_NAME => {
+            let d = decode_dynamic_joint_state(&message.data).map_err(|e| e.to_string())?;
+            let values = d
+                .interfaces
+                .iter()
+                .zip(&d.joint_names)
+                .map(|((names, values), joint)| {
+                    names
+                        .iter()
+                        .position(|n| n == field)
+                        .and_then(|k| values.get(k).copied())
+                        .ok_or_else(|| format!("joint `{joint}` has no interface `{field}` (it has {names:?})"))
+                })
+                .collect::<std::result::Result<Vec<f64>, String>>()?;
+            Ok((d.joint_names, values))
+        }
+        CONTROLLER_STATE_NAME => {
+            let text = String::from_utf8_lossy(&schema.data);
+            let c = decode_controller_state(&message.data, &text).map_err(|e| e.to_string())?;
+            let (point, part) = field.split_once('.').unwrap_or((field, "positions"));
+            let p = c
+                .points
+                .iter()
+                .find(|(n, _)| n == point)
+                .map(|(_, p)| p)
+                .ok_or_else(|| {
+                    let have: Vec<&str> = c.points.iter().map(|(n, _)| n.as_str()).collect();
+                    format!("the controller state has no point `{point}` ({have:?})")
+                })?;
+            let values = match part {
+                "positions" => p.positions.clone(),
+                "velocities" => p.velocities.clone(),
+                "accelerations" => p.accelerations.clone(),
+                "effort" => p.effort.clone(),
+                other => return Err(format!("a trajectory point has no `{other}` (positions, velocities, accelerations, effort)")),
+            };
+            Ok((c.joint_names, values))
+        }
+        other => Err(format!(
+            "message type `{other}` is not read ({JOINT_STATE_NAME}, {DYNAMIC_JOINT_STATE_NAME}, {CONTROLLER_STATE_NAME})"
+        )),
+    }
 }
 
 pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
@@ -151,39 +222,26 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             };
             match message.channel.message_encoding.as_str() {
                 "cdr" => {
-                    let js = decode_joint_state(&message.data).map_err(|e| err(e.to_string()))?;
-                    let values = match w.field.as_str() {
-                        "position" => &js.position,
-                        "velocity" => &js.velocity,
-                        "effort" => &js.effort,
-                        other => {
-                            return Err(err(format!(
-                                "JointState has no field `{other}` (position, velocity, effort)"
-                            )))
-                        }
-                    };
+                    let (names, values) = decode_cdr(&message, &w.field).map_err(err)?;
                     // Names are matched on every message whose names differ
                     // from the last: a publisher that reorders its joints
                     // is followed, one that drops or repeats a name refused.
-                    if s.names != js.name {
-                        if let Some(d) = js.name.iter().enumerate().find(|(i, n)| js.name[..*i].contains(n)) {
+                    if s.names != names {
+                        if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
                             return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
                         }
                         let order = joints
                             .iter()
-                            .map(|j| js.name.iter().position(|n| n == j))
+                            .map(|j| names.iter().position(|n| n == j))
                             .collect::<Option<Vec<usize>>>()
                             .ok_or_else(|| {
-                                err(format!(
-                                    "joints {joints:?} not all in the message's names {:?}",
-                                    js.name
-                                ))
+                                err(format!("joints {joints:?} not all in the message's names {:?}", names))
                             })?;
                         if s.order.is_some() {
                             s.reorders += 1;
                         }
                         s.order = Some(order);
-                        s.names = js.name.clone();
+                        s.names = names;
                     }
                     let order = s.order.as_ref().expect("set");
                     for (j, &i) in order.iter().enumerate() {
