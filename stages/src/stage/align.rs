@@ -713,7 +713,7 @@ pub fn resample(t: &[f64], y: &[f64], grid: &[f64]) -> Vec<f64> {
 
 /// RMS over joints and samples of y_k minus its interpolation from the
 /// samples around it with y_k left out.
-fn leave_one_out_error(t: &[f64], q: &[Vec<f64>]) -> f64 {
+pub(crate) fn leave_one_out_error(t: &[f64], q: &[Vec<f64>]) -> f64 {
     let (mut sum, mut count) = (0.0, 0usize);
     for y in q {
         for k in (2..t.len() - 2).step_by(7) {

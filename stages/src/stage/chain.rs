@@ -296,6 +296,48 @@ impl Chain {
         }
     }
 
+    /// The raw samples on a uniform grid, for the stages that filter a
+    /// non-periodic record through its spectrum (which assumes one): a
+    /// record whose stamps jitter is resampled in place onto the grid of its
+    /// rate by cubic Hermite interpolation (as `align` does), and the run
+    /// says so with the interpolation error.
+    pub fn uniform_raw(&mut self) -> Result<&mut RawSamples> {
+        let raw = self
+            .raw
+            .as_mut()
+            .ok_or_else(|| absent(Product::Raw, "start from a raw log"))?;
+        let fs = Chain::record_rate(raw);
+        let dt = 1.0 / fs;
+        let t = &raw.time;
+        let t0 = t[0];
+        let uniform = t
+            .iter()
+            .enumerate()
+            .all(|(k, &ti)| ((ti - t0) - k as f64 * dt).abs() <= 1e-6 * dt);
+        if uniform || t.len() < 4 {
+            return Ok(self.raw.as_mut().expect("checked"));
+        }
+        let m = ((t[t.len() - 1] - t0) * fs + 1e-9).floor() as usize + 1;
+        let grid: Vec<f64> = (0..m).map(|k| t0 + k as f64 * dt).collect();
+        let error = crate::stage::align::leave_one_out_error(t, &raw.q);
+        let (steps_min, steps_max) = t
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .fold((f64::MAX, 0.0f64), |(a, b), s| (a.min(s), b.max(s)));
+        let res = |c: &mut Vec<f64>, t: &[f64]| *c = crate::stage::align::resample(t, c, &grid);
+        let time = raw.time.clone();
+        raw.q.iter_mut().for_each(|c| res(c, &time));
+        raw.effort.iter_mut().for_each(|c| res(c, &time));
+        raw.reference.iter_mut().flatten().for_each(|c| res(c, &time));
+        raw.counts = None;
+        raw.time = grid;
+        raw.metadata.insert(metadata::SAMPLE_RATE_HZ.into(), fs.to_string());
+        self.report.notes.push(format!(
+            "the record's stamps jitter (steps {steps_min:.6}..{steps_max:.6} s): resampled onto a uniform {fs} Hz grid by cubic Hermite interpolation before filtering, leave-one-out position error {error:.2e} rad"
+        ));
+        Ok(self.raw.as_mut().expect("checked"))
+    }
+
     /// A record's sample rate: its metadata's, else from its span.
     pub fn record_rate(raw: &RawSamples) -> f64 {
         raw.metadata

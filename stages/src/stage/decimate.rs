@@ -83,6 +83,9 @@ pub struct Decimate {
 
 impl Stage for Decimate {
     fn run(&self, chain: &mut Chain) -> Result<()> {
+        if chain.periods.is_none() && chain.raw.is_some() {
+            chain.uniform_raw()?;
+        }
         match (&mut chain.periods, &mut chain.raw) {
             (Some(p), _) => decimate_periods(p, &self.cfg, &self.spectra),
             (None, Some(raw)) => {

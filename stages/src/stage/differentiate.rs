@@ -143,7 +143,7 @@ impl Stage for Differentiate {
         let method = self.cfg.method;
         let kin = match &self.filter {
             Some(f) => {
-                let raw = chain.raw()?;
+                let raw = chain.uniform_raw()?;
                 differentiate_record(raw, Chain::record_rate(raw), f, &self.spectra)
             }
             None if method == Differentiation::FourierFit

@@ -141,6 +141,9 @@ pub struct InverseFilter {
 impl Stage for InverseFilter {
     fn run(&self, chain: &mut Chain) -> Result<()> {
         let bw = self.bandwidth_hz;
+        if chain.periods.is_none() && chain.raw.is_some() {
+            chain.uniform_raw()?;
+        }
         match (&mut chain.periods, &mut chain.raw) {
             (Some(p), _) => inverse_filter_periods(p, &*self.response, bw, &self.spectra),
             (None, Some(raw)) => {
