@@ -729,3 +729,38 @@ builtin_interfaces/Duration time_from_start
         "{e}"
     );
 }
+
+/// Positions logged in degrees but read as radians leave the joint limits:
+/// refused at the first such sample, with the unit named.
+#[test]
+fn degrees_read_as_radians_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let csv = std::fs::read_to_string(dir.path().join("rec.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let mut out = vec![header.join(",")];
+    for l in lines {
+        let f: Vec<String> = l
+            .split(',')
+            .zip(&header)
+            .map(|(v, h)| {
+                if h.starts_with("q_") {
+                    (v.parse::<f64>().unwrap().to_degrees()).to_string()
+                } else {
+                    v.to_string()
+                }
+            })
+            .collect();
+        out.push(f.join(","));
+    }
+    let p = dir.path().join("degrees.csv");
+    std::fs::write(&p, out.join("\n")).unwrap();
+    let e = read(&p, &ReadConfig::default(), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, sample: Some(_), msg, .. } if channel.starts_with("q_") && msg.contains("degrees read as radians")),
+        "{e}"
+    );
+}

@@ -397,6 +397,9 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     }
     check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
     check_finite(&source, &position, &names[0])?;
+    if let Some(m) = model {
+        check_limits(&source, &position, &names[0], &joints, m)?;
+    }
     check_finite(&source, &effort, &names[1])?;
     if let Some(r) = &reference {
         check_finite(&source, r, &names[2])?;
@@ -443,6 +446,39 @@ fn effort_unit_of(c: &Channel, columns: &[String]) -> Option<String> {
 fn hash_file(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     Ok(sha256_hex(&bytes))
+}
+
+/// Positions outside the robot's joint limits by more than a tenth of the
+/// range (and 0.05 rad): the wrong unit (degrees read as radians), the
+/// wrong joint, or a spike. Refused at the first such sample.
+fn check_limits(source: &str, q: &[Vec<f64>], names: &[String], joints: &[String], model: &Model) -> Result<()> {
+    for ((col, name), joint) in q.iter().zip(names).zip(joints) {
+        let Some(i) = model.joints.iter().position(|j| &j.name == joint) else {
+            continue;
+        };
+        let Some((lo, hi)) = model.limits[i].position else {
+            continue;
+        };
+        let margin = 0.1 * (hi - lo) + 0.05;
+        if let Some(k) = col.iter().position(|v| *v < lo - margin || *v > hi + margin) {
+            let top = col.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let hint = if top > 2.0 * std::f64::consts::PI && top < 400.0 {
+                format!("; the positions reach {top:.1}: degrees read as radians? give `unit = \"deg\"`")
+            } else {
+                String::new()
+            };
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: name.clone(),
+                sample: Some(k),
+                msg: format!(
+                    "position {} rad is outside joint `{joint}`'s limits [{lo}, {hi}] rad (by more than {margin:.3} rad){hint}",
+                    col[k]
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// The first NaN or infinity, named by channel and sample.
