@@ -21,6 +21,40 @@ pub struct JointResidue {
     pub ks: f64,
 }
 
+/// Whether the model explains a joint's torque down to its noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// The mean squared residue is within 20 % of the noise floor.
+    Adequate,
+    /// It is more: what the model leaves out dominates the noise.
+    ModelErrorDominates,
+    /// No noise floor to compare with (no `noise` stage before the regressor).
+    NoiseFloorUnknown,
+}
+
+impl Verdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Adequate => "adequate",
+            Verdict::ModelErrorDominates => "model error dominates",
+            Verdict::NoiseFloorUnknown => "noise floor unknown",
+        }
+    }
+}
+
+/// A residue this many times the noise floor still counts as adequate.
+pub const ADEQUATE_RATIO: f64 = 1.2;
+
+impl JointResidue {
+    pub fn verdict(&self) -> Verdict {
+        match self.noise_floor {
+            None => Verdict::NoiseFloorUnknown,
+            Some(f) if self.msr <= ADEQUATE_RATIO * f => Verdict::Adequate,
+            Some(_) => Verdict::ModelErrorDominates,
+        }
+    }
+}
+
 /// Residue statistics per joint of `sys` for torques `predicted`.
 pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
     let residue = &sys.b - predicted;
@@ -65,12 +99,12 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
 /// The residue table as text.
 pub fn table(stats: &[JointResidue]) -> String {
     let mut s = format!(
-        "{:<10} {:>7} {:>12} {:>14} {:>10} {:>12} {:>14} {:>9} {:>9} {:>7}\n",
+        "{:<10} {:>7} {:>12} {:>14} {:>10} {:>12} {:>14} {:>9} {:>9} {:>7}  verdict\n",
         "joint", "rows", "rms τ N·m", "MSR (N·m)²", "rel. %", "mean N·m", "noise floor", "skew", "kurt-3", "KS"
     );
     for r in stats {
         s.push_str(&format!(
-            "{:<10} {:>7} {:>12.4} {:>14.4e} {:>10.3} {:>12.3e} {:>14} {:>9.3} {:>9.3} {:>7.4}\n",
+            "{:<10} {:>7} {:>12.4} {:>14.4e} {:>10.3} {:>12.3e} {:>14} {:>9.3} {:>9.3} {:>7.4}  {}\n",
             r.joint,
             r.rows,
             r.measured_rms,
@@ -80,7 +114,8 @@ pub fn table(stats: &[JointResidue]) -> String {
             r.noise_floor.map_or("-".into(), |f| format!("{f:.4e}")),
             r.skewness,
             r.excess_kurtosis,
-            r.ks
+            r.ks,
+            r.verdict().name()
         ));
     }
     s

@@ -21,6 +21,10 @@ pub struct Args {
     /// a report into this folder.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Exit non-zero when the model error dominates the noise on any joint
+    /// (mean squared residue over 1.2× the noise floor).
+    #[arg(long)]
+    pub fail_on_inadequate: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -47,6 +51,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         sys.recordings.join(", ")
     );
     print!("{}", robotid::validation::table(&stats));
+    let inadequate: Vec<&str> = stats
+        .iter()
+        .filter(|s| s.verdict() == robotid::validation::Verdict::ModelErrorDominates)
+        .map(|s| s.joint.as_str())
+        .collect();
     if let Some(dir) = &args.plot {
         let files = robotid::plot::plot_validation(dir, &sys, &predicted, &stats).map_err(anyhow::Error::msg)?;
         println!(
@@ -57,6 +66,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .collect::<Vec<_>>()
                 .join(", ")
         );
+    }
+    if !inadequate.is_empty() {
+        let msg = format!(
+            "the model error dominates the noise on joint(s) {} (mean squared residue over {}× the noise floor)",
+            inadequate.join(", "),
+            robotid::validation::ADEQUATE_RATIO
+        );
+        if args.fail_on_inadequate {
+            bail!("{msg}");
+        }
+        println!("verdict: {msg}");
     }
     Ok(())
 }
