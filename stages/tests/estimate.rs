@@ -430,3 +430,25 @@ fn merged_summaries_equal_the_stacked_system() {
         }
     }
 }
+
+/// The physical fit refuses what would make it panic or spin: a NaN in the
+/// estimate, a weight that is not a positive number.
+#[test]
+fn physical_fit_refuses_nan_and_bad_weights() {
+    use robotid_stages::dynamics::parameter_names;
+    use robotid_stages::estimation::physically_consistent;
+    let (model, base, _, truth) = kuka();
+    let names = parameter_names(&base.model, base.terms);
+    let prior = standard_parameters(&model, base.terms);
+    let map = base.map().unwrap();
+    let cov = DMatrix::identity(truth.len(), truth.len()) * 1e-4;
+    let mut bad = truth.clone();
+    bad[1] = f64::NAN;
+    let e = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { .. }), "{e}");
+    for w in [-1.0, f64::NAN, 0.0] {
+        let e = physically_consistent(&names, &prior, map, &truth, &cov, w).unwrap_err();
+        assert!(matches!(e, Error::Setting { .. }), "{e}");
+    }
+    assert!(physically_consistent(&names, &prior, map, &truth, &cov, 1e-3).is_ok());
+}

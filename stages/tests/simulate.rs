@@ -248,3 +248,41 @@ fn bad_simulation_files_say_where() {
     let e = simulate(&cfg, &one_dof, &BTreeMap::new()).unwrap_err().to_string();
     assert!(e.contains("drives 3 joints") && e.contains("has 1"), "{e}");
 }
+
+/// A robot whose moving link has no inertia (a URDF link without
+/// `<inertial>`, a zero mass) cannot be integrated: refused with the joint,
+/// not a panic inside the integrator.
+#[test]
+fn a_link_without_inertia_is_refused_not_a_panic() {
+    let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
+    let mut model = dynamics::load_robot(&cfg.robot).unwrap();
+    model.links[0].mass = 0.0;
+    model.links[0].com = nalgebra::Vector3::zeros();
+    model.links[0].inertia_com = nalgebra::Matrix3::zeros();
+    model.drives[0].rotor_inertia = 0.0;
+    let e = simulate(&cfg, &model, &BTreeMap::new())
+        .map(|s| s.raw.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, robotid_stages::Error::Robot { msg, .. } if msg.contains("joint `a3`") && msg.contains("singular")),
+        "{e}"
+    );
+}
+
+/// Sizes from the file are bounded before anything is allocated: an
+/// infinite transient or 1e8 periods are refused with their key.
+#[test]
+fn absurd_sizes_are_refused_before_allocating() {
+    let path = fixture("sims/kuka_axis3.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    for (from, to, key) in [
+        ("periods = 6", "periods = 100000000", "`timing`"),
+        ("transient_s = 5.0", "transient_s = inf", "`timing.transient_s`"),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let e = SimConfig::parse(&text.replace(from, to), &path)
+            .map(|_| ())
+            .unwrap_err();
+        assert!(e.to_string().contains(key), "{e}");
+    }
+}

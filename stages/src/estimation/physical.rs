@@ -142,6 +142,23 @@ pub fn physically_consistent(
     prior_weight: f64,
 ) -> Result<PhysicalFit> {
     let ns = names.len();
+    if !(prior_weight > 0.0 && prior_weight.is_finite()) {
+        return Err(Error::setting("prior weight", "> 0 and finite", prior_weight));
+    }
+    if let Some(i) = (0..base_estimate.len()).find(|&i| !base_estimate[i].is_finite()) {
+        return Err(Error::NotFinite {
+            what: "the estimate".into(),
+            value: base_estimate[i],
+            at: format!("base parameter {i}"),
+        });
+    }
+    if let Some(i) = (0..base_covariance.len()).find(|&i| !base_covariance[i].is_finite()) {
+        return Err(Error::NotFinite {
+            what: "the estimate's covariance".into(),
+            value: base_covariance[i],
+            at: format!("entry {i}"),
+        });
+    }
     if map.ncols() != ns || prior.len() != ns || map.nrows() != base_estimate.len() {
         return Err(Error::mismatch(
             "physical fit: sizes of the map, prior and estimate",

@@ -233,6 +233,10 @@ impl PerJoint {
     }
 }
 
+/// The most samples one simulation may log (about 5 GB of f64 channels for
+/// a 6-joint arm).
+pub const MAX_SAMPLES: f64 = 5e7;
+
 impl SimConfig {
     /// Reads and checks a simulation file; the robot path is made absolute
     /// against the file's folder.
@@ -298,8 +302,30 @@ impl SimConfig {
         if t.steps_per_sample == 0 {
             errs.push(Problem::new("timing.steps_per_sample", "must be ≥ 1"));
         }
-        if !(t.transient_s >= 0.0) {
-            errs.push(Problem::new("timing.transient_s", "must be ≥ 0"));
+        if !(t.transient_s >= 0.0 && t.transient_s.is_finite()) {
+            errs.push(Problem::new(
+                "timing.transient_s",
+                format!("must be ≥ 0 and finite, not {}", t.transient_s),
+            ));
+        }
+        // The samples the run would make, bounded before anything is allocated.
+        let logged = match (&self.trajectory, t.periods) {
+            (Trajectory::Fourier(f), Some(p)) => p as f64 / f.base_frequency_hz,
+            (Trajectory::Waypoints(w), _) => w.duration(),
+            (Trajectory::Sweeps(s), _) => s.duration(),
+            _ => 0.0,
+        };
+        let samples = (t.transient_s + logged) * t.log_rate_hz;
+        if samples > MAX_SAMPLES {
+            errs.push(Problem::new(
+                "timing",
+                format!(
+                    "{:.3e} samples ({:.1} s at {} Hz) is more than {MAX_SAMPLES:.0e}: a shorter record, or fewer periods",
+                    samples,
+                    t.transient_s + logged,
+                    t.log_rate_hz
+                ),
+            ));
         }
         match (&self.trajectory, t.periods) {
             (Trajectory::Fourier(_), None) | (Trajectory::Fourier(_), Some(0)) => errs.push(Problem::new(

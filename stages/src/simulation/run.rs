@@ -59,6 +59,27 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
         )));
     }
     cfg.validate()?;
+    // The plant is integrated through M(q)⁻¹: a chain end without mass or
+    // inertia about its axis makes M singular. Refused here, naming the
+    // joint, rather than failing inside the integrator.
+    {
+        let mut data = crate::dynamics::Data::new(model);
+        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        cfg.trajectory.eval(0.0, &mut q, &mut qd, &mut qdd);
+        crate::dynamics::mass_matrix(model, &mut data, &q);
+        if let Some(j) = (0..n).find(|&j| {
+            let minor = data.mass.view((0, 0), (j + 1, j + 1)).clone_owned();
+            minor.cholesky().is_none()
+        }) {
+            return Err(Error::Robot {
+                path: cfg.robot.clone(),
+                msg: format!(
+                    "joint `{}`: the mass matrix is singular there (no mass or inertia about its axis beyond it, and no rotor): a simulation needs every moving link to have inertia (a URDF link without <inertial>?)",
+                    model.joints[j].name
+                ),
+            });
+        }
+    }
     let m = &cfg.measurement;
     let pos_std = m
         .position_noise_std_rad
