@@ -85,6 +85,8 @@ pub const ROWS: &str = "robotid.rows";
 pub const PIPELINE_FILE: &str = "robotid.pipeline_file";
 /// Recordings an estimate was made from, comma separated.
 pub const RECORDINGS: &str = "robotid.recordings";
+/// Recordings whose residue under the pooled estimate stands out, comma separated.
+pub const OUTLIERS: &str = "robotid.estimate.outliers";
 /// Parameters taken as known, comma separated.
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.

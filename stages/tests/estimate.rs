@@ -452,3 +452,38 @@ fn physical_fit_refuses_nan_and_bad_weights() {
     }
     assert!(physically_consistent(&names, &prior, map, &truth, &cov, 1e-3).is_ok());
 }
+
+/// One bad recording among several (its torque 30 % too large: a wrong
+/// torque constant) is named as an outlier by its residue under the pooled
+/// estimate; the good ones are not.
+#[test]
+fn an_outlier_recording_is_named() {
+    use robotid_stages::estimation::Summary;
+    use robotid_stages::stage::estimate::{EstimateConfig as EstimateStage, Part};
+    use robotid_stages::stage::Context;
+    let (_, base, kin, truth) = kuka();
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let noise = Normal::new(0.0, 0.5).unwrap();
+    let parts: Vec<Part> = (0..5)
+        .map(|r| {
+            let scale = if r == 3 { 1.3 } else { 1.0 };
+            let clean = base.matrix(&kin) * &truth;
+            let b = DVector::from_fn(clean.len(), |i, _| scale * clean[i] + noise.sample(&mut rng));
+            let mut sys = system(&base, &kin, b, 0.25);
+            sys.recordings = vec![format!("rec{r}")];
+            Part {
+                summary: Summary::of(&sys, None).unwrap(),
+                rows: None,
+                config: None,
+            }
+        })
+        .collect();
+    let reducer = EstimateStage::default().reducer(&Context::default()).unwrap();
+    let out = reducer.reduce(&parts, &Default::default()).unwrap();
+    assert_eq!(out.outliers, ["rec3"], "{:?}", out.residues);
+    let md = out.table.schema().metadata().clone();
+    assert_eq!(
+        md.get(robotid_schemas::metadata::OUTLIERS).map(String::as_str),
+        Some("rec3")
+    );
+}

@@ -105,6 +105,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some((est, path)) = built.estimate_all(&recordings, &out)? {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
         print!("{}", super::estimate::summary(&est.estimate, level));
+        if est.residues.len() > 1 {
+            for (name, rows, msr) in &est.residues {
+                println!("    residue of {name}: {msr:.4e} over {rows} rows");
+            }
+        }
+        if !est.outliers.is_empty() {
+            println!(
+                "warning: recording(s) {} fit the pooled estimate far worse than the others (over 3× their median residue): check them, or leave them out",
+                est.outliers.join(", ")
+            );
+        }
         println!("parameters in {}", path.display());
         if let Some(dir) = &args.plot {
             match robotid::report::write_run_report(&path, &recordings, dir) {

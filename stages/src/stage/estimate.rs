@@ -210,6 +210,13 @@ pub struct Outcome {
     pub table: RecordBatch,
     pub physical: Option<PhysicalFit>,
     pub known: Vec<String>,
+    /// Per recording: its name, rows and mean squared residue under the
+    /// pooled estimate (of the weighted rows for WLS).
+    pub residues: Vec<(String, usize, f64)>,
+    /// Recordings whose residue is over 3× the median of the others: a
+    /// recording that does not belong with them (another robot, a broken
+    /// channel, a wrong declaration).
+    pub outliers: Vec<String>,
 }
 
 impl Stage for Reducer {
@@ -359,6 +366,41 @@ impl Reducer {
             md.insert(metadata::PROJECTION_EQUATIONS.into(), e.to_string());
         }
         md.insert(metadata::RECORDINGS.into(), summary.recordings.join(","));
+        // Each recording's residue under the pooled estimate: ‖A_r θ − b_r‖²
+        // = ‖R_r θ − z_r‖² + its own residual, from its summary alone.
+        let theta = &est.values;
+        let residues: Vec<(String, usize, f64)> = parts
+            .iter()
+            .filter(|p| p.summary.names == est.names)
+            .map(|p| {
+                let f = &p.summary.factor;
+                let d = &f.r * theta - &f.z;
+                let msr = (d.norm_squared() + f.rss) / f.rows.max(1) as f64;
+                (p.summary.recordings.join(","), f.rows, msr)
+            })
+            .collect();
+        let outliers: Vec<String> = if residues.len() >= 3 {
+            residues
+                .iter()
+                .enumerate()
+                .filter(|(i, r)| {
+                    let mut others: Vec<f64> = residues
+                        .iter()
+                        .enumerate()
+                        .filter(|(j, _)| j != i)
+                        .map(|(_, o)| o.2)
+                        .collect();
+                    others.sort_by(f64::total_cmp);
+                    r.2 > 3.0 * others[others.len() / 2]
+                })
+                .map(|(_, r)| r.0.clone())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if !outliers.is_empty() {
+            md.insert(metadata::OUTLIERS.into(), outliers.join(","));
+        }
         md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
         let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
         Ok(Outcome {
@@ -366,6 +408,8 @@ impl Reducer {
             table,
             physical,
             known,
+            residues,
+            outliers,
         })
     }
 
