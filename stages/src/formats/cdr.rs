@@ -285,30 +285,11 @@ pub fn decode_controller_state(bytes: &[u8], schema: &str) -> Result<ControllerS
 }
 
 pub fn decode_joint_state(bytes: &[u8]) -> Result<JointState, CdrError> {
-    if bytes.len() < 4 {
-        return Err(CdrError {
-            what: "message shorter than the encapsulation header".into(),
-            at: 0,
-        });
-    }
-    if bytes[1] != 0x01 {
-        return Err(CdrError {
-            what: format!(
-                "unsupported encapsulation {:#04x}{:02x} (expected CDR little-endian)",
-                bytes[0], bytes[1]
-            ),
-            at: 0,
-        });
-    }
-    let mut r = Reader { b: bytes, pos: 4 };
+    let mut r = reader(bytes)?;
     let sec = r.u32()? as i32;
     let nanosec = r.u32()?;
     let frame_id = r.string()?;
-    let n = r.u32()? as usize;
-    let mut name = Vec::with_capacity(n.min(4096));
-    for _ in 0..n {
-        name.push(r.string()?);
-    }
+    let name = r.string_seq()?;
     let position = r.f64_seq()?;
     let velocity = r.f64_seq()?;
     let effort = r.f64_seq()?;
