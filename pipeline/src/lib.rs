@@ -5,6 +5,7 @@
 
 pub mod compare;
 pub mod error;
+pub mod output;
 pub mod pipeline;
 pub mod plan;
 pub mod plot;

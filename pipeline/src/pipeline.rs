@@ -186,6 +186,7 @@ impl Built {
     /// Tables go under `opts.out`, one folder per recording.
     pub fn run(&self, opts: &RunOptions) -> Result<RunReport> {
         let started = Instant::now();
+        let _lock = crate::output::prepare(&opts.out, &self.logs)?;
         let recordings = self.run_recordings(opts);
         let estimate = self.estimate_all(&recordings, &opts.out)?;
         let (estimate, parameters) = match estimate {

@@ -43,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         plot: args.plot.clone(),
     };
+    let _lock = robotid::output::prepare(&out, &built.logs)?;
     let recordings = built.run_recordings(&opts);
     println!(
         "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
