@@ -256,7 +256,29 @@ pub fn tables_of(
                     .map_err(robotid_schemas::SchemaError::from)?
             }
         };
+        refuse_infinities(&batch, kind, &chain.source)?;
         out.push((kind, batch));
     }
     Ok(out)
+}
+
+/// No infinity is written to a table (a sample of 1e200 A gives every
+/// variance = inf): refused with the table, column and row. NaN stays the
+/// schemas' "not known" (a spread with one period, a variance without a
+/// noise stage).
+fn refuse_infinities(batch: &RecordBatch, kind: TableKind, source: &str) -> robotid_stages::Result<()> {
+    use arrow::array::{Array, Float64Array};
+    for (i, field) in batch.schema().fields().iter().enumerate() {
+        let Some(col) = batch.column(i).as_any().downcast_ref::<Float64Array>() else {
+            continue;
+        };
+        if let Some(row) = (0..col.len()).find(|&r| col.value(r).is_infinite()) {
+            return Err(robotid_stages::Error::NotFinite {
+                what: format!("{source}: the `{kind}` table's column `{}`", field.name()),
+                value: col.value(row),
+                at: format!("row {row} (a sample far out of range upstream?)"),
+            });
+        }
+    }
+    Ok(())
 }

@@ -678,3 +678,27 @@ fn the_output_folder_is_guarded() {
     assert!(!out.join(LOCK).exists(), "released when the run ends");
     assert_eq!(std::fs::read(&log).unwrap(), before);
 }
+
+/// A single torque sample of 1e200 (finite) would make every spread and
+/// variance infinite: the tables are refused, naming the column and row.
+#[test]
+fn infinities_are_never_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let toml = "version = 1\n[source]\npath = \"x.parquet\"\n[read]\njoints = [\"j1\", \"j2\"]\n[[stage]]\nkind = \"align\"\nperiod_s = 10.0\n[[stage]]\nkind = \"average\"\n[output]\ntables = [\"period_mean\"]\n";
+    std::fs::write(dir.path().join("x.parquet"), b"").unwrap();
+    let pipeline = Pipeline::from_toml(toml, dir.path().join("p.toml")).unwrap();
+    let resolved = robotid::plan::Resolved {
+        model: None,
+        logs: vec![],
+        start: robotid_stages::stage::Product::Raw,
+    };
+    let built = pipeline.build_with(resolved).unwrap();
+    let mut raw = robotid_stages::simulation::synthetic::synthetic_recording(2, 100.0, 40.0, 10.0, 1);
+    raw.effort[1][1234] = 1e200;
+    let chain = built.run_raw("spike", raw).unwrap();
+    let e = built.tables(&chain).unwrap_err();
+    assert!(
+        matches!(&e, robotid_stages::Error::NotFinite { what, .. } if what.contains("torque_spread_j2")),
+        "{e}"
+    );
+}
