@@ -72,17 +72,14 @@ pub enum Error {
     },
     /// Every problem of a settings file or table, each with its key.
     #[error("{what}: {}", problems.iter().map(|p| if p.key.is_empty() { p.message.clone() } else { format!("`{}`: {}", p.key, p.message) }).collect::<Vec<_>>().join("; "))]
-    Problems {
-        what: String,
-        problems: Vec<crate::stage::Problem>,
-    },
+    Problems { what: String, problems: Vec<Problem> },
     /// A numerical method that could not do its work (with its reason).
     #[error("{method}: {msg}")]
     Numerical { method: &'static str, msg: String },
 }
 
-impl From<crate::stage::Problem> for Error {
-    fn from(p: crate::stage::Problem) -> Error {
+impl From<Problem> for Error {
+    fn from(p: Problem) -> Error {
         Error::Problems {
             what: "settings".into(),
             problems: vec![p],
@@ -138,6 +135,46 @@ impl Error {
                 source_name: source_name.to_string(),
                 source: Box::new(e),
             },
+        }
+    }
+}
+
+/// A problem of a setting: the key at fault and what is wrong. Settings
+/// files (pipeline, robot, simulation, excitation) report these.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// The key, e.g. `harmonics`, or `` for the stage as a whole.
+    pub key: String,
+    pub message: String,
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.key.is_empty() {
+            f.write_str(&self.message)
+        } else {
+            write!(f, "`{}`: {}", self.key, self.message)
+        }
+    }
+}
+
+impl Problem {
+    /// The same problem under a parent key (`filter` → `filter.order`).
+    pub fn under(self, parent: &str) -> Problem {
+        Problem {
+            key: if self.key.is_empty() {
+                parent.to_string()
+            } else {
+                format!("{parent}.{}", self.key)
+            },
+            message: self.message,
+        }
+    }
+
+    pub fn new(key: impl Into<String>, message: impl Into<String>) -> Problem {
+        Problem {
+            key: key.into(),
+            message: message.into(),
         }
     }
 }

@@ -4,7 +4,7 @@
 //! (`robot_file.rs`) or a URDF (`urdf.rs`); algorithms take `&Model` and a
 //! preallocated [`super::Data`].
 
-use crate::stage::Problem;
+use crate::Problem;
 use nalgebra::{Matrix3, Unit, Vector3};
 
 /// Rigid-body inertia of one link, in the link frame (the frame of the joint

@@ -4,7 +4,7 @@
 //! The format is documented in `docs/robot-file.md`.
 
 use super::urdf::Locks;
-use crate::stage::Problem;
+use crate::Problem;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Unit, Vector3};

@@ -28,7 +28,7 @@ pub use least_squares::{least_squares, solve_least_squares, stacked_least_square
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
 pub use physical::{physically_consistent, pseudo_inertia, PhysicalFit};
 pub use summary::{KnownPart, Summary, MAX_CONDITION};
-pub use system::{row_weights, Known, System};
+pub use system::{columns_of, row_weights, Known, System, PARAMETER_COLUMN, PERIOD_TORQUE};
 pub use table::{parameters_from_table, parameters_table, Parameters};
 
 /// Which estimator, chosen in the pipeline's `estimate` stage or on the

@@ -5,12 +5,28 @@
 use std::collections::BTreeMap;
 
 use arrow::array::{Array, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::Schema;
 use nalgebra::{DMatrix, DVector};
 use robotid_schemas::{metadata, TableKind};
 
 use super::Weights;
-use crate::stage::regressor::{columns_of, PARAMETER_COLUMN, PERIOD_TORQUE};
 use crate::{Error, Result};
+
+/// Field quantity of the parameter columns.
+pub const PARAMETER_COLUMN: &str = "regressor_column";
+/// Field quantity of the per-period torque columns.
+pub const PERIOD_TORQUE: &str = "period_torque";
+
+/// Indices of the columns of a `regressor` table whose field quantity is `quantity`.
+pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
+    schema
+        .fields()
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.metadata().get(metadata::QUANTITY).map(String::as_str) == Some(quantity))
+        .map(|(i, _)| i)
+        .collect()
+}
 
 /// A·θ = b with the bookkeeping to name rows.
 #[derive(Debug, Clone)]

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::Layout;
 use crate::dynamics::Model;
 use crate::dynamics::RegressorModel;
-use crate::stage::Problem;
+use crate::Problem;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -7,7 +7,7 @@
 //! |H(jωc)|² = ½; Chebyshev I has equiripple `ripple_db` in [0, ωc] and
 //! |H(jωc)|² = 1/(1+ε²) at the cutoff, with DC gain 1/√(1+ε²) for even order.
 
-use crate::stage::Problem;
+use crate::Problem;
 use std::f64::consts::PI;
 
 use rustfft::num_complex::Complex64;

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::signal::FilterSpec;
-use crate::stage::Problem;
 use crate::trajectory::Trajectory;
+use crate::Problem;
 use crate::{Error, Result};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

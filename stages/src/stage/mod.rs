@@ -29,50 +29,12 @@ use std::path::Path;
 pub use chain::{AlignReport, Chain, ChannelNoise, Context, Facts, Periods, Product, Report, Stretch};
 
 use crate::dynamics::Model;
+pub use crate::Problem;
 use crate::Result;
 
 /// A built stage: runs on one recording at a time, from many threads.
 pub trait Stage: Send + Sync {
     fn run(&self, chain: &mut Chain) -> Result<()>;
-}
-
-/// One problem found by `lint`: the key at fault and what is wrong.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    /// The key, e.g. `harmonics`, or `` for the stage as a whole.
-    pub key: String,
-    pub message: String,
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.key.is_empty() {
-            f.write_str(&self.message)
-        } else {
-            write!(f, "`{}`: {}", self.key, self.message)
-        }
-    }
-}
-
-impl Problem {
-    /// The same problem under a parent key (`filter` → `filter.order`).
-    pub fn under(self, parent: &str) -> Problem {
-        Problem {
-            key: if self.key.is_empty() {
-                parent.to_string()
-            } else {
-                format!("{parent}.{}", self.key)
-            },
-            message: self.message,
-        }
-    }
-
-    pub fn new(key: impl Into<String>, message: impl Into<String>) -> Problem {
-        Problem {
-            key: key.into(),
-            message: message.into(),
-        }
-    }
 }
 
 /// What `lint` knows about the rest of the pipeline, before any sample is read.

@@ -567,21 +567,7 @@ fn band_limit(a: &mut DMatrix<f64>, n: usize, samples: usize, period: f64, band:
     }
 }
 
-/// Field quantity of the parameter columns.
-pub const PARAMETER_COLUMN: &str = "regressor_column";
-/// Field quantity of the per-period torque columns.
-pub const PERIOD_TORQUE: &str = "period_torque";
-
-/// Indices of the columns of a `regressor` table whose field quantity is `quantity`.
-pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
-    schema
-        .fields()
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| f.metadata().get(metadata::QUANTITY).map(String::as_str) == Some(quantity))
-        .map(|(i, _)| i)
-        .collect()
-}
+pub use crate::estimation::{columns_of, PARAMETER_COLUMN, PERIOD_TORQUE};
 
 /// Reduces a `regressor` table to its R factor (`r_factor` table): one row
 /// per parameter with that row of R and of Qᵀb, folded in blocks of rows so

@@ -1,4 +1,4 @@
-use crate::stage::Problem;
+use crate::Problem;
 use std::f64::consts::PI;
 
 use serde::{Deserialize, Serialize};

@@ -63,7 +63,7 @@ impl Trajectory {
         }
     }
 
-    pub fn validate(&self) -> Result<(), crate::stage::Problem> {
+    pub fn validate(&self) -> Result<(), crate::Problem> {
         match self {
             Trajectory::Fourier(f) => f.validate(),
             Trajectory::Waypoints(w) => w.validate(),

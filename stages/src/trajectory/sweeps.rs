@@ -1,4 +1,4 @@
-use crate::stage::Problem;
+use crate::Problem;
 use serde::{Deserialize, Serialize};
 
 /// Dedicated experiments (Bona §3.2): one joint moves back and forth over a

@@ -1,4 +1,4 @@
-use crate::stage::Problem;
+use crate::Problem;
 use serde::{Deserialize, Serialize};
 
 /// One duration for every move, or a list with one per move.
