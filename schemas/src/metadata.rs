@@ -87,6 +87,9 @@ pub const PIPELINE_FILE: &str = "robotid.pipeline_file";
 pub const RECORDINGS: &str = "robotid.recordings";
 /// Recordings whose residue under the pooled estimate stands out, comma separated.
 pub const OUTLIERS: &str = "robotid.estimate.outliers";
+/// Parameters whose value physics forbids (negative friction, rotor or
+/// decoupled inertia), with their distance from zero in standard deviations.
+pub const IMPOSSIBLE: &str = "robotid.estimate.impossible";
 /// Parameters taken as known, comma separated.
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.

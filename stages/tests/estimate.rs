@@ -487,3 +487,21 @@ fn an_outlier_recording_is_named() {
         Some("rec3")
     );
 }
+
+/// A friction coefficient the data puts below zero is flagged with its
+/// distance in standard deviations; one that is positive is not.
+#[test]
+fn physically_impossible_values_are_flagged() {
+    let (_, base, kin, mut truth) = kuka();
+    let fv = base.names().iter().position(|n| n.starts_with("Fv")).unwrap();
+    truth[fv] = -2.0;
+    let b = base.matrix(&kin) * &truth;
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.3).unwrap();
+    let b = b.map(|x| x + noise.sample(&mut rng));
+    let est = least_squares(&system(&base, &kin, b, 0.09)).unwrap();
+    let flagged = est.impossible(&base.expressions());
+    assert_eq!(flagged.len(), 1, "{flagged:?}");
+    assert_eq!(flagged[0].0, base.names()[fv]);
+    assert!(flagged[0].2 < -5.0, "{flagged:?}");
+}

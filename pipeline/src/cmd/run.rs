@@ -111,6 +111,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 println!("    residue of {name}: {msr:.4e} over {rows} rows");
             }
         }
+        let expressions: Vec<String> = est
+            .table
+            .column_by_name("expression")
+            .and_then(|c| c.as_any().downcast_ref::<arrow::array::StringArray>())
+            .map(|c| {
+                (0..arrow::array::Array::len(c))
+                    .map(|i| c.value(i).to_string())
+                    .collect()
+            })
+            .unwrap_or_default();
+        for (name, value, z) in est.estimate.impossible(&expressions) {
+            println!(
+                "warning: {name} = {value:.6} is physically impossible (below zero by {:.1} standard deviations): the model or the data is at fault; `physical = true` forces consistency",
+                -z
+            );
+        }
         if !est.outliers.is_empty() {
             println!(
                 "warning: recording(s) {} fit the pooled estimate far worse than the others (over 3× their median residue): check them, or leave them out",

@@ -138,6 +138,31 @@ impl Estimate {
     }
 }
 
+impl Estimate {
+    /// Parameters whose value physics forbids, with their distance from
+    /// the bound in standard deviations: a rotor inertia, a viscous or
+    /// Coulomb friction coefficient, a decoupled inertia below zero, where
+    /// the base parameter is that standard parameter alone (its expression
+    /// is its name).
+    pub fn impossible(&self, expressions: &[String]) -> Vec<(String, f64, f64)> {
+        let std = self.std();
+        (0..self.values.len())
+            .filter(|&i| {
+                let n = &self.names[i];
+                let alone = expressions.get(i).is_none_or(|e| e == n);
+                alone && ["Ia_", "Fv", "Fc", "Mi_"].iter().any(|p| n.starts_with(p)) && self.values[i] < 0.0
+            })
+            .map(|i| {
+                (
+                    self.names[i].clone(),
+                    self.values[i],
+                    self.values[i] / std[i].max(1e-300),
+                )
+            })
+            .collect()
+    }
+}
+
 /// The quantile of Student's t with `dof` degrees of freedom (the normal
 /// quantile for very many, where the two agree to 1e-6).
 pub fn student_t_quantile(p: f64, dof: usize) -> f64 {

@@ -402,6 +402,17 @@ impl Reducer {
             md.insert(metadata::OUTLIERS.into(), outliers.join(","));
         }
         md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
+        let impossible = est.impossible(&summary.expressions);
+        if !impossible.is_empty() {
+            md.insert(
+                metadata::IMPOSSIBLE.into(),
+                impossible
+                    .iter()
+                    .map(|(n, v, z)| format!("{n} = {v} ({z:.1} σ)"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
+        }
         let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
         Ok(Outcome {
             estimate: est,
