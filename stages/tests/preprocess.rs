@@ -589,3 +589,29 @@ fn filtered_differentiation_of_jittered_stamps() {
     println!("velocity error against the jitter-free twin: resampled {resampled:.2e}, as if uniform {naive:.2e}");
     assert!(resampled < 0.01 && resampled * 5.0 < naive, "{resampled} {naive}");
 }
+
+/// Messages point at the cause: a recording's bad rate names its key, and
+/// times in the wrong unit are named as such.
+#[test]
+fn wrong_time_units_and_rates_are_named() {
+    use robotid_schemas::metadata;
+    use robotid_stages::simulation::synthetic::synthetic_recording;
+    let cfg = AlignConfig {
+        period_s: Some(10.0),
+        ..Default::default()
+    };
+    let mut raw = synthetic_recording(1, 150.0, 40.0, 10.0, 1);
+    raw.metadata.insert(metadata::SAMPLE_RATE_HZ.into(), "-150".into());
+    let e = align(&raw, &cfg, "r").unwrap_err().to_string();
+    assert!(e.contains(metadata::SAMPLE_RATE_HZ) && e.contains("-150"), "{e}");
+    raw.metadata.remove(metadata::SAMPLE_RATE_HZ);
+    for (scale, hint) in [
+        (1e3, "times in ms declared as s?"),
+        (1e9, "times in ns, us or ms declared as s?"),
+    ] {
+        let mut r = raw.clone();
+        r.time.iter_mut().for_each(|t| *t *= scale);
+        let e = align(&r, &cfg, "r").unwrap_err().to_string();
+        assert!(e.contains(hint), "{e}");
+    }
+}

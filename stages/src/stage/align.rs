@@ -297,18 +297,43 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     let max_step = steps.iter().copied().fold(0.0, f64::max);
     let med = median(&mut steps);
     let md_f64 = |key: &str| raw.metadata.get(key).and_then(|v| v.parse::<f64>().ok());
+    if let Some(r) = md_f64(metadata::SAMPLE_RATE_HZ).filter(|r| !(*r > 0.0 && r.is_finite())) {
+        if cfg.sample_rate_hz.is_none() {
+            return Err(data_err(
+                "time",
+                None,
+                format!(
+                    "the recording's `{}` is {r}: give `sample_rate_hz` in the align stage",
+                    metadata::SAMPLE_RATE_HZ
+                ),
+            ));
+        }
+    }
     let fs = cfg
         .sample_rate_hz
         .or_else(|| md_f64(metadata::SAMPLE_RATE_HZ))
         .unwrap_or(1.0 / med);
     let step = 1.0 / fs;
+    // Steps of hours or of microseconds are a time unit declared wrong
+    // more often than a real rate.
+    let unit_hint = if med > 60.0 {
+        format!(
+            " (the median step is {med:.4e} s: times in ns, us or ms declared as s? give the time channel's `unit`)"
+        )
+    } else if med < 1e-6 {
+        format!(
+            " (the median step is {med:.4e} s: times in s declared as ms, us or ns? give the time channel's `unit`)"
+        )
+    } else {
+        String::new()
+    };
     for k in 1..t.len() {
         if t[k] - t[k - 1] > cfg.max_gap_steps * step {
             return Err(data_err(
                 "time",
                 Some(k),
                 format!(
-                    "gap of {:.6} s ({:.1} nominal steps) before t = {} s; at most {} steps are tolerated",
+                    "gap of {:.6} s ({:.1} nominal steps of {step:.4e} s) before t = {} s; at most {} steps are tolerated{unit_hint}",
                     t[k] - t[k - 1],
                     (t[k] - t[k - 1]) / step,
                     t[k],
@@ -337,7 +362,18 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     }
     let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
     if n < 4 {
-        return Err(data_err("time", None, format!("{n} samples per period is too few")));
+        return Err(data_err(
+            "time",
+            None,
+            format!(
+                "{n} samples per period ({period} s at {fs} Hz) is too few; at least 4 are needed{}",
+                if unit_hint.is_empty() && period * fs < 4.0 && med > 1e-3 * period {
+                    format!(" (the median step is {med:.4e} s: times in ms declared as s?)")
+                } else {
+                    unit_hint.clone()
+                }
+            ),
+        ));
     }
     let dt = period / n as f64;
     // Deviation of the stamps from a uniform grid of step dt through the first sample.
