@@ -217,6 +217,8 @@ pub fn tables_of(
         md
     };
     let mut out = Vec::new();
+    // The regressor table is made once, for itself and its R factor.
+    let mut regressor: Option<RecordBatch> = None;
     for &kind in kinds {
         let batch = match kind {
             TableKind::RawSamples => {
@@ -243,7 +245,10 @@ pub fn tables_of(
                 m.to_record_batch()?
             }
             TableKind::Regressor | TableKind::RFactor => {
-                let full = chain.regressor()?.to_record_batch()?;
+                let full = match &regressor {
+                    Some(t) => t.clone(),
+                    None => regressor.insert(chain.regressor()?.to_record_batch()?).clone(),
+                };
                 let b = if kind == TableKind::RFactor {
                     r_factor_table(&full)?
                 } else {

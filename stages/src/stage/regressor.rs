@@ -376,20 +376,6 @@ pub fn regressor_rows(
     let period_torques = periods
         .filter(|p| p.periods >= 2 && p.samples_per_period == samples)
         .map(|p| DMatrix::from_fn(rows, p.periods, |i, pi| p.torque[i % n][pi * samples + i / n]));
-    // Condition number of the column-normalised A (Swevers' criterion).
-    let mut scaled = a.clone();
-    for mut c in scaled.column_iter_mut() {
-        let norm = c.norm();
-        if norm > 0.0 {
-            c /= norm;
-        }
-    }
-    let sv = scaled.singular_values();
-    let condition = if sv.min() > 0.0 {
-        sv.max() / sv.min()
-    } else {
-        f64::INFINITY
-    };
     let units = base
         .names()
         .iter()
@@ -425,6 +411,7 @@ pub fn regressor_rows(
         let keep = system.keep_joint(j);
         period_torques = period_torques.map(|p| p.select_rows(keep.iter()));
     }
+    let condition = normalised_condition(&system.a);
     system.expressions = base.expressions();
     system.recordings = vec![recording.to_string()];
     system.periods = vec![period_torques];
@@ -438,6 +425,23 @@ pub fn regressor_rows(
         robot: model.name.clone(),
         metadata: kin.metadata.clone(),
     })
+}
+
+/// Condition number of the column-normalised A (Swevers' criterion), over
+/// the columns the rows excite: a joint-wise recording excites only its
+/// joint's parameters, which the other recordings complete.
+fn normalised_condition(a: &DMatrix<f64>) -> f64 {
+    let excited: Vec<usize> = (0..a.ncols()).filter(|&c| a.column(c).norm() > 0.0).collect();
+    let scaled = DMatrix::from_fn(a.nrows(), excited.len(), |i, k| {
+        let c = a.column(excited[k]);
+        c[i] / c.norm()
+    });
+    let sv = scaled.singular_values();
+    if !sv.is_empty() && sv.min() > 0.0 {
+        sv.max() / sv.min()
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// The base regressor of `kin` for `model` as a `regressor` table (the
