@@ -43,9 +43,10 @@ pub struct RegressorConfig {
     /// Band-limit every regressor column, over the period, to the band the
     /// torque was inverse-filtered to (lines above are zeroed), so that both
     /// sides of A·θ = b see the same band: the Coulomb columns' sharp edges
-    /// have energy above it that the torque lost. On the simulated KUKA axis
-    /// the effect is small (the estimates move by under 0.05 σ); the
-    /// derivative band matters more there. Periodic kinematics only, Hz.
+    /// have energy above it that the torque lost. The columns are computed
+    /// on a grid 16 times finer first, so that those edges do not alias into
+    /// the band (with exact sign friction, the residual then reaches the
+    /// noise floor; tests/band_limit.rs). Periodic kinematics only, Hz.
     pub band_limit_hz: Option<f64>,
     /// Closed-loop data: the Projection Method (`estimation/projection.rs`)
     /// with a non-causal FIR of taps −m1..m2 from the references to the
