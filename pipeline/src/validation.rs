@@ -21,29 +21,7 @@ pub struct JointResidue {
     pub ks: f64,
 }
 
-/// Whether the model explains a joint's torque down to its noise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
-    /// The mean squared residue is within 20 % of the noise floor.
-    Adequate,
-    /// It is more: what the model leaves out dominates the noise.
-    ModelErrorDominates,
-    /// No noise floor to compare with (no `noise` stage before the regressor).
-    NoiseFloorUnknown,
-}
-
-impl Verdict {
-    pub fn name(self) -> &'static str {
-        match self {
-            Verdict::Adequate => "adequate",
-            Verdict::ModelErrorDominates => "model error dominates",
-            Verdict::NoiseFloorUnknown => "noise floor unknown",
-        }
-    }
-}
-
-/// A residue this many times the noise floor still counts as adequate.
-pub const ADEQUATE_RATIO: f64 = 1.2;
+pub use robotid_stages::estimation::{Verdict, ADEQUATE_RATIO};
 
 impl JointResidue {
     pub fn verdict(&self) -> Verdict {

@@ -90,6 +90,12 @@ pub const OUTLIERS: &str = "robotid.estimate.outliers";
 /// Parameters whose value physics forbids (negative friction, rotor or
 /// decoupled inertia), with their distance from zero in standard deviations.
 pub const IMPOSSIBLE: &str = "robotid.estimate.impossible";
+/// Per joint, the fit's residue against the noise floor and the verdict
+/// (JSON: joint, rows, msr, noise_floor, ratio, verdict).
+pub const ADEQUACY: &str = "robotid.estimate.adequacy";
+/// Present when the covariance was widened by the excess residual variance
+/// of the joints where model error dominates: which joints, and why.
+pub const WIDENED: &str = "robotid.estimate.covariance_widened";
 /// Parameters taken as known, comma separated.
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.

@@ -97,6 +97,43 @@ pub fn load_system(paths: &[PathBuf]) -> anyhow::Result<System> {
     Ok(System::from_tables(&tables)?)
 }
 
+/// The adequacy verdicts as text: per joint, the residue against the noise
+/// floor of the torque fitted, and what the intervals did about it.
+pub fn adequacy(est: &Estimate) -> String {
+    if est.adequacy.is_empty() {
+        return String::new();
+    }
+    let mut s = format!(
+        "model adequacy (mean squared residue of the fit against the noise floor of the fitted torque):\n{:<12} {:>8} {:>12} {:>12} {:>8}  verdict\n",
+        "joint", "rows", "residue", "noise floor", "ratio"
+    );
+    for a in &est.adequacy {
+        s.push_str(&format!(
+            "{:<12} {:>8} {:>12.4e} {:>12} {:>8}  {}\n",
+            a.joint,
+            a.rows,
+            a.msr,
+            a.noise_floor.map_or("-".into(), |f| format!("{f:.4e}")),
+            a.ratio().map_or("-".into(), |r| format!("{r:.2}")),
+            a.verdict().name()
+        ));
+    }
+    let bad: Vec<&str> = est.inadequate().iter().map(|a| a.joint.as_str()).collect();
+    if est.widened {
+        s.push_str(&format!(
+            "intervals widened: model error dominates on {} (over {}× the floor); the periods' spread sees only the noise, so the excess residual variance is added to it\n",
+            bad.join(", "),
+            robotid_stages::estimation::ADEQUATE_RATIO
+        ));
+    } else if !bad.is_empty() {
+        s.push_str(&format!(
+            "model error dominates on {}: the intervals come from the residual, which holds it as if it were white noise\n",
+            bad.join(", ")
+        ));
+    }
+    s
+}
+
 /// The parameter table as text: value, std, relative std and interval.
 pub fn summary(est: &Estimate, level: f64) -> String {
     let std = est.std();
@@ -115,6 +152,7 @@ pub fn summary(est: &Estimate, level: f64) -> String {
             String::new()
         }
     );
+    s.push_str(&adequacy(est));
     s.push_str(&format!(
         "{:<14} {:>14} {:>12} {:>8} {:>30}  unit\n",
         "parameter",

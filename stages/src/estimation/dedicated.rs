@@ -214,6 +214,8 @@ pub fn gravity_friction(kin: &Kinematics, cfg: &SweepConfig) -> Result<GravityFr
             rows: m,
             iterations: 1,
             covariance_from: Covariance::Residual,
+            adequacy: Vec::new(),
+            widened: false,
         },
     })
 }

@@ -100,6 +100,22 @@ pub fn stacked_least_squares(sys: &System, weights: Option<&DVector<f64>>, covar
         let g_ak = &s.inverse_normal * (sys.a.transpose() * wak);
         cov += &g_ak * ck * g_ak.transpose();
     }
+    let moments = super::joint_moments(sys, weights);
+    let found = super::adequacy(
+        &moments,
+        &s.theta,
+        &s.inverse_normal,
+        m as f64 / sys.equations().max(1) as f64,
+    );
+    let mut dof = dof;
+    let widened = match super::adequacy::widen(&moments, &found, &s.inverse_normal) {
+        Some(extra) if use_periods => {
+            dof = super::adequacy::combined_dof(&cov, dof, &extra, sys.equations().saturating_sub(p).max(1));
+            cov += extra;
+            true
+        }
+        _ => false,
+    };
     Ok(Estimate {
         names: sys.names.clone(),
         units: sys.units.clone(),
@@ -116,6 +132,8 @@ pub fn stacked_least_squares(sys: &System, weights: Option<&DVector<f64>>, covar
         } else {
             Covariance::Residual
         },
+        adequacy: found,
+        widened,
     })
 }
 

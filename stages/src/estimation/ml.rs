@@ -182,6 +182,12 @@ pub fn maximum_likelihood(
     let residual_variance = 2.0 * current.cost / dof as f64;
     let values = DVector::from_fn(p, |j, _| theta[j] / norms[j]);
     let covariance = DMatrix::from_fn(p, p, |i, j| residual_variance * inv[(i, j)] / (norms[i] * norms[j]));
+    let found = super::adequacy(
+        &super::joint_moments(sys, Some(weights)),
+        &values,
+        &DMatrix::from_fn(p, p, |i, j| inv[(i, j)] / (norms[i] * norms[j])),
+        rows as f64 / sys.equations().max(1) as f64,
+    );
     Ok(Estimate {
         names: sys.names.clone(),
         units: sys.units.clone(),
@@ -194,6 +200,8 @@ pub fn maximum_likelihood(
         rows,
         iterations,
         covariance_from: super::Covariance::Residual,
+        adequacy: found,
+        widened: false,
     })
 }
 

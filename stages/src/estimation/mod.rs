@@ -9,6 +9,7 @@
 //! `parameters` table. Also the Projection Method (`projection`) and the
 //! dedicated experiments (`dedicated`).
 
+mod adequacy;
 pub mod dedicated;
 mod least_squares;
 mod ml;
@@ -24,6 +25,7 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 
 use crate::{Error, Result};
 
+pub use adequacy::{adequacy, joint_moments, JointAdequacy, JointMoments, Verdict, ADEQUATE_RATIO};
 pub use least_squares::{least_squares, solve_least_squares, stacked_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
 pub use physical::{physically_consistent, pseudo_inertia, PhysicalFit};
@@ -124,9 +126,22 @@ pub struct Estimate {
     pub iterations: usize,
     /// How the covariance was obtained (`periods` or `residual`).
     pub covariance_from: Covariance,
+    /// Per joint: the residue against the noise floor, and the verdict.
+    pub adequacy: Vec<JointAdequacy>,
+    /// The covariance was widened by the excess residual variance of the
+    /// joints where model error dominates (`adequacy::widen`).
+    pub widened: bool,
 }
 
 impl Estimate {
+    /// The joints where model error dominates.
+    pub fn inadequate(&self) -> Vec<&JointAdequacy> {
+        self.adequacy
+            .iter()
+            .filter(|a| a.verdict() == Verdict::ModelErrorDominates)
+            .collect()
+    }
+
     pub fn std(&self) -> DVector<f64> {
         DVector::from_fn(self.values.len(), |i, _| self.covariance[(i, i)].max(0.0).sqrt())
     }

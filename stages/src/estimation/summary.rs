@@ -15,6 +15,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
+use super::adequacy::{adequacy, combined_dof, joint_moments, merge_moments, widen, JointMoments};
 use super::{Covariance, Estimate, Estimator, System};
 use crate::dynamics::RFactor;
 use crate::{Error, Result};
@@ -77,6 +78,8 @@ pub struct Summary {
     /// Per recording, Aᵀ·W·D (parameters × periods); None without periods.
     pub period_moments: Vec<Option<DMatrix<f64>>>,
     pub known: Option<KnownPart>,
+    /// Per joint, the moments the adequacy verdicts need.
+    pub joints: Vec<JointMoments>,
     pub weighted: bool,
     /// The first recording's provenance (regressor configuration, robot).
     pub metadata: BTreeMap<String, String>,
@@ -142,6 +145,7 @@ impl Summary {
             equations: sys.equations(),
             period_moments,
             known,
+            joints: joint_moments(sys, weights),
             weighted: weights.is_some(),
             metadata: sys.metadata.clone(),
         })
@@ -177,6 +181,7 @@ impl Summary {
                 ))
             }
         }
+        merge_moments(&mut self.joints, &other.joints)?;
         self.factor.merge(&other.factor);
         self.column_max.zip_apply(&other.column_max, |a, b| *a = a.max(b));
         self.equations += other.equations;
@@ -251,6 +256,22 @@ impl Summary {
             let g_ak = &inverse_normal * &k.cross;
             cov += &g_ak * &k.covariance * g_ak.transpose();
         }
+        let found = adequacy(
+            &self.joints,
+            &theta,
+            &inverse_normal,
+            m as f64 / self.equations.max(1) as f64,
+        );
+        let mut dof = dof;
+        let widened = match widen(&self.joints, &found, &inverse_normal) {
+            // The residual already holds the model error (as white noise).
+            Some(extra) if use_periods => {
+                dof = combined_dof(&cov, dof, &extra, self.equations.saturating_sub(p).max(1));
+                cov += extra;
+                true
+            }
+            _ => false,
+        };
         Ok(Estimate {
             names: self.names.clone(),
             units: self.units.clone(),
@@ -267,6 +288,8 @@ impl Summary {
             } else {
                 Covariance::Residual
             },
+            adequacy: found,
+            widened,
         })
     }
 }

@@ -98,6 +98,24 @@ impl EstimateConfig {
     }
 }
 
+/// The adequacy verdicts as JSON, for the table's metadata.
+pub fn adequacy_json(found: &[crate::estimation::JointAdequacy]) -> String {
+    let rows: Vec<serde_json::Value> = found
+        .iter()
+        .map(|a| {
+            serde_json::json!({
+                "joint": a.joint,
+                "rows": a.rows,
+                "msr": a.msr,
+                "noise_floor": a.noise_floor,
+                "ratio": a.ratio(),
+                "verdict": a.verdict().name(),
+            })
+        })
+        .collect();
+    serde_json::Value::Array(rows).to_string()
+}
+
 /// A `parameters` table's values and covariance, to be taken as known.
 pub fn load_known(path: &std::path::Path) -> Result<Known> {
     let batch = read_parquet(path)?;
@@ -411,6 +429,20 @@ impl Reducer {
                     .map(|(n, v, z)| format!("{n} = {v} ({z:.1} σ)"))
                     .collect::<Vec<_>>()
                     .join(", "),
+            );
+        }
+        md.insert(metadata::ADEQUACY.into(), adequacy_json(&est.adequacy));
+        if est.widened {
+            md.insert(
+                metadata::WIDENED.into(),
+                format!(
+                    "model error dominates on {}: the excess residual variance added to the periods' spread",
+                    est.inadequate()
+                        .iter()
+                        .map(|a| a.joint.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
             );
         }
         let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
