@@ -5,6 +5,7 @@
 # inside the cargo target folder (so CI's reused target keeps them).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+bash scripts/setup.sh
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/pyenv"
 # Rebuilt when the requirements change (their hash is stamped in the venv).

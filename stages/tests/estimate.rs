@@ -6,7 +6,7 @@
 use robotid_tests::fixture;
 
 use nalgebra::{DMatrix, DVector};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use robotid_schemas::Kinematics;
@@ -292,7 +292,7 @@ fn physically_consistent_standard_parameters() {
             .enumerate()
             .map(|(i, v)| if i % 10 == 9 { *v } else { v * 1.2 })
             .collect();
-        let fit = physically_consistent(&names, &off, map, &truth, &cov, 1e-3).unwrap();
+        let fit = physically_consistent(&names, &off, map, &truth, &cov, Some(1e-3)).unwrap();
         println!(
             "{robot}: χ² {:.2e}, iterations {}, min eigenvalues {:?}",
             fit.chi2, fit.iterations, fit.min_eigen
@@ -314,7 +314,7 @@ fn physically_consistent_standard_parameters() {
         let fv = base.names().iter().position(|n| n.starts_with("Fv")).unwrap();
         let mut bad = truth.clone();
         bad[fv] = -1.0;
-        let fit = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap();
         assert!(
             fit.base[fv] >= 0.0 && fit.base[fv] < 1e-3,
             "{robot}: Fv {}",
@@ -330,7 +330,7 @@ fn physically_consistent_standard_parameters() {
         // Inconsistent: the first base inertia negative.
         let mut bad = truth.clone();
         bad[0] = -0.5 * truth[0].abs();
-        let fit = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap();
         println!(
             "{robot}: negative inertia → {:.4} (χ² {:.1}), {} iterations",
             fit.base[0], fit.chi2, fit.iterations
@@ -342,6 +342,77 @@ fn physically_consistent_standard_parameters() {
             assert!(e >= -1e-9, "{robot}: link {l} eigenvalue {e}");
         }
         assert!(fit.base[0] >= -1e-9, "{robot}: {}", fit.base[0]);
+        // The optimum, checked by brute force: with a vanishing prior the
+        // fit minimises χ² over the feasible set, so no feasible point
+        // nearby (random steps, and the segment to the a-priori model) has
+        // a lower χ². The set is convex, so local is global.
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-9)).unwrap();
+        let l_inv = cov.map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
+        let chi2 = |t: &[f64]| {
+            let d = map * DVector::from_column_slice(t) - &bad;
+            (0..nb).map(|i| d[i] * d[i] * l_inv[(i, i)]).sum::<f64>()
+        };
+        let feasible = |t: &[f64]| {
+            (0..model.dof()).all(|l| pseudo_inertia(&t[10 * l..10 * l + 10]).symmetric_eigenvalues().min() >= 0.0)
+                && names
+                    .iter()
+                    .zip(t)
+                    .all(|(n, v)| !(n.starts_with("F") || n.starts_with("Ia")) || *v >= 0.0)
+        };
+        let best = chi2(&fit.standard);
+        assert!(
+            (best - fit.chi2).abs() <= 1e-6 * best.max(1.0),
+            "{best} vs {}",
+            fit.chi2
+        );
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut tried = 0;
+        for k in 0..4000 {
+            let step = 10f64.powi(-(k % 4) - 3);
+            let moved: Vec<f64> = fit
+                .standard
+                .iter()
+                .zip(&names)
+                .map(|(v, n)| {
+                    let t = v + step * v.abs().max(1e-3) * rng.random_range(-1.0..1.0);
+                    if n.starts_with('F') || n.starts_with("Ia") {
+                        t.max(0.0)
+                    } else {
+                        t
+                    }
+                })
+                .collect();
+            // The optimum sits on the boundary: pull the step just far
+            // enough toward the (strictly feasible) a-priori model.
+            let inside = [0.0, 1e-5, 1e-4, 1e-3, 1e-2, 0.1].iter().find_map(|&e| {
+                let t: Vec<f64> = moved.iter().zip(&prior).map(|(a, b)| (1.0 - e) * a + e * b).collect();
+                feasible(&t).then_some(t)
+            });
+            if let Some(t) = inside {
+                tried += 1;
+                assert!(
+                    chi2(&t) >= best * (1.0 - 1e-6) - 1e-9,
+                    "{robot}: a feasible point with χ² {} < {best}",
+                    chi2(&t)
+                );
+            }
+        }
+        for k in 1..=20 {
+            let s = k as f64 / 20.0;
+            let t: Vec<f64> = fit
+                .standard
+                .iter()
+                .zip(&prior)
+                .map(|(a, b)| (1.0 - s) * a + s * b)
+                .collect();
+            assert!(
+                chi2(&t) >= best * (1.0 - 1e-6) - 1e-9,
+                "{robot}: toward the prior, χ² {} < {best}",
+                chi2(&t)
+            );
+        }
+        println!("{robot}: χ² {best:.4} at the optimum, {tried} feasible neighbours all higher");
+        assert!(tried > 100, "{robot}: only {tried} feasible neighbours");
     }
 }
 
@@ -444,13 +515,13 @@ fn physical_fit_refuses_nan_and_bad_weights() {
     let cov = DMatrix::identity(truth.len(), truth.len()) * 1e-4;
     let mut bad = truth.clone();
     bad[1] = f64::NAN;
-    let e = physically_consistent(&names, &prior, map, &bad, &cov, 1e-3).unwrap_err();
+    let e = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap_err();
     assert!(matches!(e, Error::NotFinite { .. }), "{e}");
     for w in [-1.0, f64::NAN, 0.0] {
-        let e = physically_consistent(&names, &prior, map, &truth, &cov, w).unwrap_err();
+        let e = physically_consistent(&names, &prior, map, &truth, &cov, Some(w)).unwrap_err();
         assert!(matches!(e, Error::Setting { .. }), "{e}");
     }
-    assert!(physically_consistent(&names, &prior, map, &truth, &cov, 1e-3).is_ok());
+    assert!(physically_consistent(&names, &prior, map, &truth, &cov, Some(1e-3)).is_ok());
 }
 
 /// One bad recording among several (its torque 30 % too large: a wrong

@@ -125,6 +125,11 @@ pub fn adequacy(est: &Estimate) -> String {
             bad.join(", "),
             robotid_stages::estimation::ADEQUATE_RATIO
         ));
+    } else if !bad.is_empty() && est.covariance_from == robotid_stages::estimation::Covariance::Bootstrap {
+        s.push_str(&format!(
+            "model error dominates on {}: the physical fit's intervals come from a parametric bootstrap of the base estimate's covariance\n",
+            bad.join(", ")
+        ));
     } else if !bad.is_empty() {
         s.push_str(&format!(
             "model error dominates on {}: the intervals come from the residual, which holds it as if it were white noise\n",

@@ -17,10 +17,11 @@ pub struct Args {
     /// Output URDF.
     #[arg(long, short, default_value = "identified.urdf")]
     pub out: PathBuf,
-    /// Weight of the pull towards the a-priori model, relative to the data
-    /// (χ² units per squared relative deviation).
-    #[arg(long, default_value_t = 1e-3)]
-    pub prior_weight: f64,
+    /// Weight of the pull of the inertial parameters towards the a-priori
+    /// model, relative to the data (χ² units per squared deviation of one
+    /// a-priori scale); chosen by Mallows' C_p when not given.
+    #[arg(long)]
+    pub prior_weight: Option<f64>,
 }
 
 /// Physically consistent standard parameters closest to the a-priori model
@@ -42,9 +43,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )
     .map_err(anyhow::Error::msg)?;
     println!(
-        "physically consistent fit: χ² = {:.3} against the estimate's covariance ({} base parameters), {} iterations",
+        "physically consistent fit: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, {} interior-point iterations",
         fit.chi2,
         params.names.len(),
+        fit.prior_weight,
+        if fit.chosen { " (chosen by C_p)" } else { "" },
         fit.iterations
     );
     for (l, j) in base.model.joints.iter().enumerate() {

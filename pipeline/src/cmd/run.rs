@@ -106,6 +106,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some((est, path)) = built.estimate_all(&recordings, &out)? {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
         print!("{}", super::estimate::summary(&est.estimate, level));
+        if let Some(fit) = &est.physical {
+            println!(
+                "physically consistent: χ² = {:.4} from the unconstrained estimate, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalue per link {:?}",
+                fit.chi2,
+                fit.prior_weight,
+                if fit.chosen { " (chosen by Mallows' C_p)" } else { "" },
+                fit.dof,
+                fit.min_eigen.iter().map(|e| format!("{e:.2e}")).collect::<Vec<_>>()
+            );
+        }
         if est.residues.len() > 1 {
             for (name, rows, msr) in &est.residues {
                 println!("    residue of {name}: {msr:.4e} over {rows} rows");

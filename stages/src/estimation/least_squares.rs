@@ -83,7 +83,7 @@ pub fn stacked_least_squares(sys: &System, weights: Option<&DVector<f64>>, covar
             ))
         }
         Covariance::Periods => true,
-        Covariance::Residual => false,
+        Covariance::Residual | Covariance::Bootstrap => false,
         Covariance::Auto => have_periods,
     };
     let (mut cov, dof) = if use_periods {

@@ -28,7 +28,7 @@ use crate::{Error, Result};
 pub use adequacy::{adequacy, joint_moments, JointAdequacy, JointMoments, Verdict, ADEQUATE_RATIO};
 pub use least_squares::{least_squares, solve_least_squares, stacked_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
-pub use physical::{physically_consistent, pseudo_inertia, PhysicalFit};
+pub use physical::{bootstrap_covariance, physically_consistent, pseudo_inertia, PhysicalFit, BOOTSTRAP_DRAWS};
 pub use summary::{KnownPart, Summary, MAX_CONDITION};
 pub use system::{columns_of, row_weights, Known, System, PARAMETER_COLUMN, PERIOD_TORQUE};
 pub use table::{parameters_from_table, parameters_table, Parameters};
@@ -85,6 +85,9 @@ pub enum Covariance {
     Periods,
     /// σ̂²(AᵀA)⁻¹ from the residual: assumes white noise, m − p degrees of freedom.
     Residual,
+    /// The physically consistent estimate's: a parametric bootstrap of its
+    /// fit (reported, not a setting).
+    Bootstrap,
 }
 
 impl Covariance {
@@ -93,6 +96,7 @@ impl Covariance {
             Covariance::Auto => "auto",
             Covariance::Periods => "periods",
             Covariance::Residual => "residual",
+            Covariance::Bootstrap => "bootstrap",
         }
     }
 }

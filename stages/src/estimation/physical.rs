@@ -4,22 +4,31 @@
 //! standard parameters, θ_b = K·θ, and may describe no real body. Each
 //! link's 10 inertial parameters are physically consistent iff its
 //! pseudo-inertia J = [[½tr(I)·1 − I, h], [hᵀ, m]] is positive
-//! semidefinite (Wensing, Kim & Slotine 2017) — the LMI an SDP would
-//! impose. Here J = U·Uᵀ with U upper triangular (Rucker & Wensing 2022),
-//! which satisfies it by construction; rotor inertias and friction
-//! coefficients are squares. The fit minimises
+//! semidefinite (Wensing, Kim & Slotine 2017); rotor inertias and friction
+//! coefficients are ≥ 0. Those are the only constraints. The fit is the
+//! convex problem
 //!
-//!   (K θ(x) − θ̂_b)ᵀ Σ⁻¹ (K θ(x) − θ̂_b) + λ Σ_i ((θ_i(x) − θ_prior,i)/s_i)²
+//!   min (K θ − θ̂_b)ᵀ Σ⁻¹ (K θ − θ̂_b) + λ Σ_inertial ((θ_i − θ_prior,i)/s_i)²
+//!   s.t. J_l(θ) ⪰ 0 per link, Ia, Fv, Fc ≥ 0,
 //!
-//! by Levenberg–Marquardt: the first term is least squares on the data
-//! itself (for a linear model ‖Aθ − b‖² = (θ − θ̂)ᵀAᵀA(θ − θ̂) + rss), the
-//! small second one picks, among the standard sets with the same base
-//! values, the one closest to the a-priori model (CAD, data sheet). This
-//! avoids an SDP solver (clarabel's semidefinite cones need a system
-//! BLAS/LAPACK) and yields the standard parameters a URDF needs.
+//! solved by clarabel's interior point method with one 4×4 PSD cone per
+//! link. The first term is least squares on the data itself (for a linear
+//! model ‖Aθ − b‖² = (θ − θ̂)ᵀAᵀA(θ − θ̂) + rss); the second picks, among
+//! the standard sets with nearly the same base values, the one closest to
+//! the a-priori model (CAD, data sheet), with s_i the link's a-priori
+//! scale (mass m, m·L, m·L² for L its radius of gyration or centre-of-mass
+//! distance). Friction, offsets and springs feel no prior: the data decide
+//! them. λ is chosen, unless given, by Mallows' C_p = χ² + 2·df(λ) over a
+//! grid (GCV's form when the rows far outnumber the parameters), df the
+//! trace of the fit's hat matrix in the whitened base space.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, PSDTriangleConeT, SolverStatus, SupportedConeT,
+};
+use nalgebra::{DMatrix, DVector, Matrix4};
 
 use crate::{Error, Result};
-use nalgebra::{DMatrix, DVector, Matrix4};
 
 /// The fit's outcome.
 #[derive(Debug, Clone)]
@@ -32,12 +41,16 @@ pub struct PhysicalFit {
     /// consistent, large when consistency costs a lot of fit.
     pub chi2: f64,
     /// Smallest eigenvalue of each link's pseudo-inertia in the a-priori
-    /// model and in the fit (≥ 0 up to round-off).
+    /// model and in the fit (≥ 0 when the a-priori model is consistent).
     pub min_eigen_prior: Vec<f64>,
     pub min_eigen: Vec<f64>,
-    /// Levenberg–Marquardt iterations; 0 when the unconstrained solution
-    /// was already consistent.
+    /// Interior-point iterations of the solve that was kept.
     pub iterations: usize,
+    /// The prior weight λ used, and whether it was chosen by C_p.
+    pub prior_weight: f64,
+    pub chosen: bool,
+    /// Effective degrees of freedom of the fit (≤ base parameters).
+    pub dof: f64,
 }
 
 /// What each standard parameter is, by name prefix.
@@ -75,75 +88,27 @@ pub fn pseudo_inertia(t: &[f64]) -> Matrix4<f64> {
     j
 }
 
-fn from_pseudo_inertia(j: &Matrix4<f64>) -> [f64; 10] {
-    let sigma = j.fixed_view::<3, 3>(0, 0).into_owned();
-    let i = nalgebra::Matrix3::identity() * sigma.trace() - sigma;
-    crate::dynamics::inertial_parameters(&i, &nalgebra::Vector3::new(j[(0, 3)], j[(1, 3)], j[(2, 3)]), j[(3, 3)])
-}
+/// The largest number of standard parameters the solver is given: far
+/// above any arm (a 7-link arm with asymmetric friction has about 110).
+const MAX_PARAMETERS: usize = 2000;
 
-/// Upper-triangular U with J = U·Uᵀ (J made positive definite first).
-fn upper_factor(j: &Matrix4<f64>) -> [f64; 10] {
-    let scale = j.trace().abs().max(1e-9);
-    let mut jj = *j;
-    let min = j.symmetric_eigenvalues().min();
-    if min < 1e-9 * scale {
-        jj += Matrix4::identity() * (1e-9 * scale - min);
-    }
-    // Reverse the order, take the lower Cholesky factor, reverse back.
-    let p = Matrix4::from_fn(|r, c| if r + c == 3 { 1.0 } else { 0.0 });
-    let l = (p * jj * p).cholesky().expect("made positive definite").l();
-    let u = p * l * p;
-    let mut x = [0.0; 10];
-    let mut k = 0;
-    for r in 0..4 {
-        for c in r..4 {
-            x[k] = u[(r, c)];
-            k += 1;
-        }
-    }
-    x
-}
-
-fn from_upper(x: &[f64]) -> Matrix4<f64> {
-    let mut u = Matrix4::zeros();
-    let mut k = 0;
-    for r in 0..4 {
-        for c in r..4 {
-            u[(r, c)] = x[k];
-            k += 1;
-        }
-    }
-    u * u.transpose()
-}
-
-/// Standard parameters from the optimisation variables.
-fn theta_of(x: &[f64], kinds: &[Kind], links: usize) -> Vec<f64> {
-    let mut t = Vec::with_capacity(kinds.len());
-    for l in 0..links {
-        t.extend(from_pseudo_inertia(&from_upper(&x[10 * l..10 * l + 10])));
-    }
-    for (i, k) in kinds.iter().enumerate().skip(10 * links) {
-        t.push(match k {
-            Kind::NonNegative => x[i] * x[i],
-            _ => x[i],
-        });
-    }
-    t
-}
+/// λ tried when none is given: C_p picks among them.
+const PRIOR_WEIGHTS: [f64; 8] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0];
 
 /// Fits physically consistent standard parameters (names in regressor
-/// order, the first 10·links inertial) to a base estimate.
+/// order, the first 10·links inertial) to a base estimate. `prior_weight`:
+/// λ, or None to choose it by C_p.
 pub fn physically_consistent(
     names: &[String],
     prior: &[f64],
     map: &DMatrix<f64>,
     base_estimate: &DVector<f64>,
     base_covariance: &DMatrix<f64>,
-    prior_weight: f64,
+    prior_weight: Option<f64>,
 ) -> Result<PhysicalFit> {
     let ns = names.len();
-    if !(prior_weight > 0.0 && prior_weight.is_finite()) {
-        return Err(Error::setting("prior weight", "> 0 and finite", prior_weight));
+    if let Some(w) = prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
+        return Err(Error::setting("prior weight", "> 0 and finite", w));
     }
     if let Some(i) = (0..base_estimate.len()).find(|&i| !base_estimate[i].is_finite()) {
         return Err(Error::NotFinite {
@@ -159,183 +124,384 @@ pub fn physically_consistent(
             at: format!("entry {i}"),
         });
     }
-    if map.ncols() != ns || prior.len() != ns || map.nrows() != base_estimate.len() {
+    if let Some(i) = (0..prior.len()).find(|&i| !prior[i].is_finite()) {
+        return Err(Error::NotFinite {
+            what: "the a-priori model".into(),
+            value: prior[i],
+            at: names.get(i).cloned().unwrap_or_default(),
+        });
+    }
+    if map.ncols() != ns || prior.len() != ns || map.nrows() != base_estimate.len() || ns > MAX_PARAMETERS {
         return Err(Error::mismatch(
             "physical fit: sizes of the map, prior and estimate",
-            format!("{} × {} map, {ns} prior values", base_estimate.len(), ns),
+            format!(
+                "{} × {} map, {ns} prior values (at most {MAX_PARAMETERS})",
+                base_estimate.len(),
+                ns
+            ),
             format!("{} × {} map, {} prior values", map.nrows(), map.ncols(), prior.len()),
         ));
     }
-    let kinds: Vec<Kind> = names.iter().map(|n| kind(n)).collect();
-    let links = kinds.iter().take_while(|k| **k == Kind::Inertial).count() / 10;
-    // Σ⁻¹ᐟ² by Cholesky (a small ridge if the covariance is singular).
-    let nb = base_estimate.len();
-    let ridge = 1e-12 * (0..nb).map(|i| base_covariance[(i, i)]).fold(0.0, f64::max).max(1e-300);
-    let chol = (base_covariance + DMatrix::identity(nb, nb) * ridge)
-        .cholesky()
-        .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive definite"))?;
-    let l_inv = chol
-        .l()
-        .solve_lower_triangular(&DMatrix::identity(nb, nb))
-        .ok_or_else(|| Error::numerical("physical fit", "singular covariance factor"))?;
-    // Scale of each standard parameter for the prior term: its own size,
-    // or a tenth of the largest in its link.
-    let scale: Vec<f64> = (0..ns)
-        .map(|i| {
-            let group_max = if i < 10 * links {
-                prior[10 * (i / 10)..10 * (i / 10) + 10]
-                    .iter()
-                    .fold(0.0f64, |a, v| a.max(v.abs()))
-            } else {
-                prior[i].abs()
-            };
-            prior[i].abs().max(0.1 * group_max).max(1e-6)
-        })
-        .collect();
-    let w = prior_weight.sqrt();
-    let residual = |x: &[f64]| -> DVector<f64> {
-        let t = theta_of(x, &kinds, links);
-        let d = map * DVector::from_column_slice(&t) - base_estimate;
-        let r1 = &l_inv * d;
-        DVector::from_fn(nb + ns, |i, _| {
-            if i < nb {
-                r1[i]
-            } else {
-                let k = i - nb;
-                w * (t[k] - prior[k]) / scale[k]
-            }
-        })
+    let problem = Problem::new(names, prior, map, base_estimate, base_covariance)?;
+    let fits: Vec<(f64, Solved)> = match prior_weight {
+        Some(w) => vec![(w, problem.solve(w)?)],
+        None => PRIOR_WEIGHTS
+            .iter()
+            .map(|&w| problem.solve(w).map(|s| (w, s)))
+            .collect::<Result<_>>()?,
     };
-    // Without constraints the objective is a quadratic in θ: solve it in
-    // closed form. When that is already consistent it is the answer.
-    let mut stacked = DMatrix::zeros(nb + ns, ns);
-    stacked.view_mut((0, 0), (nb, ns)).copy_from(&(&l_inv * map));
-    let mut rhs = DVector::zeros(nb + ns);
-    rhs.rows_mut(0, nb).copy_from(&(&l_inv * base_estimate));
-    for k in 0..ns {
-        stacked[(nb + k, k)] = w / scale[k];
-        rhs[nb + k] = w * prior[k] / scale[k];
-    }
-    let free = stacked
-        .svd(true, true)
-        .solve(&rhs, 1e-14)
-        .map_err(|e| Error::numerical("physical fit", e))?;
-    let free: Vec<f64> = free.iter().copied().collect();
-    let consistent = (0..links)
-        .all(|l| pseudo_inertia(&free[10 * l..10 * l + 10]).symmetric_eigenvalues().min() >= 0.0)
-        && (10 * links..ns).all(|i| kinds[i] != Kind::NonNegative || free[i] >= 0.0);
-    if consistent {
-        return Ok(finish(&free, None, &kinds, links, map, &l_inv, base_estimate, prior, 0));
-    }
-    // Otherwise Levenberg–Marquardt on the factors, from the closed-form
-    // solution pushed into the feasible set (pseudo-inertia eigenvalues
-    // clipped, negative friction set to zero).
-    let mut x: Vec<f64> = Vec::with_capacity(ns);
-    for l in 0..links {
-        let j = pseudo_inertia(&free[10 * l..10 * l + 10]);
-        let e = j.symmetric_eigen();
-        let floor = 1e-6 * e.eigenvalues.amax().max(1e-12);
-        let clipped = e.eigenvalues.map(|v| v.max(floor));
-        let jf = e.eigenvectors * Matrix4::from_diagonal(&clipped) * e.eigenvectors.transpose();
-        x.extend(upper_factor(&jf));
-    }
-    for i in 10 * links..ns {
-        x.push(match kinds[i] {
-            Kind::NonNegative => free[i].max(0.0).sqrt().max(1e-6),
-            _ => free[i],
-        });
-    }
-    let mut r = residual(&x);
-    let mut cost = r.norm_squared();
-    let mut mu = 1e-3;
-    let mut iterations = 0;
-    let mut converged = false;
-    for it in 1..=500 {
-        iterations = it;
-        // Jacobian by central differences.
-        let mut jac = DMatrix::zeros(nb + ns, ns);
-        for k in 0..ns {
-            let h = 1e-6 * x[k].abs().max(1e-3);
-            let mut xp = x.clone();
-            xp[k] += h;
-            let mut xm = x.clone();
-            xm[k] -= h;
-            let d = (residual(&xp) - residual(&xm)) / (2.0 * h);
-            jac.set_column(k, &d);
-        }
-        let jtj = jac.transpose() * &jac;
-        let g = jac.transpose() * &r;
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj.clone();
-            for d in 0..ns {
-                a[(d, d)] += mu * jtj[(d, d)].max(1e-12);
+    // C_p = χ² + 2·df: the fit's distance from the data plus twice what it
+    // spends on them.
+    let (weight, best) = fits
+        .into_iter()
+        .min_by(|a, b| (a.1.chi2 + 2.0 * a.1.dof).total_cmp(&(b.1.chi2 + 2.0 * b.1.dof)))
+        .expect("at least one weight");
+    let mut standard: Vec<f64> = (0..ns).map(|i| best.x[i] * problem.scale[i]).collect();
+    // The interior point stops within its tolerance (1e-8) of a boundary,
+    // possibly just outside: a link left there is mixed with its a-priori
+    // self by the least amount that makes it consistent (λ_min is concave,
+    // so t = −e/(e_prior − e) suffices), moving it by ~1e-8 of itself.
+    for l in 0..problem.links {
+        let span = 10 * l..10 * l + 10;
+        let e = pseudo_inertia(&standard[span.clone()]).symmetric_eigenvalues().min();
+        let e_prior = pseudo_inertia(&prior[span.clone()]).symmetric_eigenvalues().min();
+        if e < 0.0 && e_prior > 0.0 {
+            let t = (-e / (e_prior - e)) * (1.0 + 1e-6);
+            for i in span {
+                standard[i] = (1.0 - t) * standard[i] + t * prior[i];
             }
-            let Some(step) = a.lu().solve(&(-&g)) else {
-                mu *= 10.0;
-                continue;
-            };
-            let cand: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-            let rc = residual(&cand);
-            let c = rc.norm_squared();
-            if c < cost {
-                let rel = (cost - c) / cost.max(1e-300);
-                x = cand;
-                r = rc;
-                cost = c;
-                mu = (mu * 0.3).max(1e-12);
-                improved = true;
-                converged = rel < 1e-12;
-                break;
-            }
-            mu *= 10.0;
-        }
-        if !improved || converged {
-            break;
         }
     }
-    Ok(finish(
-        &[],
-        Some(&x),
-        &kinds,
-        links,
-        map,
-        &l_inv,
-        base_estimate,
-        prior,
-        iterations,
-    ))
-}
-
-#[allow(clippy::too_many_arguments)]
-fn finish(
-    theta: &[f64],
-    x: Option<&[f64]>,
-    kinds: &[Kind],
-    links: usize,
-    map: &DMatrix<f64>,
-    l_inv: &DMatrix<f64>,
-    base_estimate: &DVector<f64>,
-    prior: &[f64],
-    iterations: usize,
-) -> PhysicalFit {
-    let standard = match x {
-        Some(x) => theta_of(x, kinds, links),
-        None => theta.to_vec(),
-    };
+    for i in 10 * problem.links..ns {
+        if problem.kinds[i] == Kind::NonNegative {
+            standard[i] = standard[i].max(0.0);
+        }
+    }
     let base = map * DVector::from_column_slice(&standard);
-    let chi2 = (l_inv * (&base - base_estimate)).norm_squared();
     let eig = |t: &[f64]| {
-        (0..links)
+        (0..problem.links)
             .map(|l| pseudo_inertia(&t[10 * l..10 * l + 10]).symmetric_eigenvalues().min())
             .collect()
     };
-    PhysicalFit {
+    Ok(PhysicalFit {
         min_eigen_prior: eig(prior),
         min_eigen: eig(&standard),
         standard,
         base,
-        chi2,
-        iterations,
+        chi2: best.chi2,
+        iterations: best.iterations,
+        prior_weight: weight,
+        chosen: prior_weight.is_none(),
+        dof: best.dof,
+    })
+}
+
+/// Draws of the base estimate for [`bootstrap_covariance`]: 200 put the
+/// standard deviations within ±5 % (1/√(2·200)).
+pub const BOOTSTRAP_DRAWS: usize = 200;
+
+/// The covariance of the physically consistent estimate itself, by a
+/// parametric bootstrap: the base estimate drawn from N(θ̂_b, Σ) (seeded,
+/// one generator per draw, so the result is the same at any thread
+/// count), each draw fitted with the same λ, the base values' spread
+/// taken. Where a constraint is active the spread is narrower than Σ's
+/// (a parameter held at its bound moves less), and the distribution is
+/// not Gaussian there; elsewhere it is Σ.
+pub fn bootstrap_covariance(
+    names: &[String],
+    prior: &[f64],
+    map: &DMatrix<f64>,
+    base_estimate: &DVector<f64>,
+    base_covariance: &DMatrix<f64>,
+    prior_weight: f64,
+) -> Result<DMatrix<f64>> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    use rayon::prelude::*;
+    let problem = Problem::new(names, prior, map, base_estimate, base_covariance)?;
+    let nb = base_estimate.len();
+    let chol = base_covariance
+        .clone()
+        .cholesky()
+        .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive definite"))?;
+    let l = chol.l();
+    let draws: Vec<DVector<f64>> = (0..BOOTSTRAP_DRAWS)
+        .into_par_iter()
+        .map(|k| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(k as u64);
+            let z = DVector::from_fn(nb, |_, _| StandardNormal.sample(&mut rng));
+            let drawn = base_estimate + &l * z;
+            let p = problem.with_estimate(&drawn);
+            let solved = p.solve(prior_weight)?;
+            let standard = DVector::from_fn(names.len(), |i, _| solved.x[i] * problem.scale[i]);
+            Ok(map * standard)
+        })
+        .collect::<Result<_>>()?;
+    let mean = draws.iter().fold(DVector::zeros(nb), |a, d| a + d) / draws.len() as f64;
+    let mut cov = DMatrix::zeros(nb, nb);
+    for d in &draws {
+        let e = d - &mean;
+        cov.ger(1.0 / (draws.len() - 1) as f64, &e, &e, 1.0);
+    }
+    Ok(cov)
+}
+
+/// The problem in scaled variables x = θ/s, whitened: ‖X x − y‖² with
+/// X = L⁻¹·K·S and y = L⁻¹·θ̂ (Σ = L·Lᵀ).
+#[derive(Clone)]
+struct Problem {
+    links: usize,
+    /// L⁻¹ (Σ = L·Lᵀ), to whiten another estimate.
+    l_inv: DMatrix<f64>,
+    /// Per variable, what λ is multiplied by (0 off the inertial ones).
+    prior_weight: Vec<f64>,
+    kinds: Vec<Kind>,
+    scale: Vec<f64>,
+    x_prior: Vec<f64>,
+    /// XᵀX and Xᵀy.
+    h: DMatrix<f64>,
+    g: DVector<f64>,
+    y: DVector<f64>,
+    x: DMatrix<f64>,
+}
+
+struct Solved {
+    x: Vec<f64>,
+    chi2: f64,
+    dof: f64,
+    iterations: usize,
+}
+
+impl Problem {
+    fn new(
+        names: &[String],
+        prior: &[f64],
+        map: &DMatrix<f64>,
+        base_estimate: &DVector<f64>,
+        base_covariance: &DMatrix<f64>,
+    ) -> Result<Problem> {
+        let ns = names.len();
+        let nb = base_estimate.len();
+        let kinds: Vec<Kind> = names.iter().map(|n| kind(n)).collect();
+        let links = kinds.iter().take_while(|k| **k == Kind::Inertial).count() / 10;
+        // Σ = L·Lᵀ by Cholesky (a small ridge if the covariance is singular).
+        let ridge = 1e-12 * (0..nb).map(|i| base_covariance[(i, i)]).fold(0.0, f64::max).max(1e-300);
+        let chol = (base_covariance + DMatrix::identity(nb, nb) * ridge)
+            .cholesky()
+            .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive definite"))?;
+        let l = chol.l();
+        let heaviest = (0..links).map(|l| prior[10 * l + 9].abs()).fold(0.0, f64::max).max(1.0);
+        // The prior's scale of each parameter (what λ weighs deviations in).
+        let mut prior_scale = vec![1.0; ns];
+        for l in 0..links {
+            let t = &prior[10 * l..10 * l + 10];
+            let m = t[9].abs().max(1e-3 * heaviest);
+            let trace = (t[0] + t[3] + t[5]).abs();
+            let h = (t[6] * t[6] + t[7] * t[7] + t[8] * t[8]).sqrt();
+            let len = (trace / (2.0 * m)).sqrt().max(h / m).max(0.01);
+            for (k, s) in prior_scale[10 * l..10 * l + 10].iter_mut().enumerate() {
+                *s = match k {
+                    9 => m,
+                    6..=8 => m * len,
+                    _ => m * len * len,
+                };
+            }
+        }
+        let mut x = l
+            .solve_lower_triangular(map)
+            .ok_or_else(|| Error::numerical("physical fit", "singular covariance factor"))?;
+        let y = l
+            .solve_lower_triangular(base_estimate)
+            .ok_or_else(|| Error::numerical("physical fit", "singular covariance factor"))?;
+        // The variables' own scale: one unit is one standard deviation's
+        // worth of information where the data inform the parameter (so the
+        // solver sees a well-scaled problem: information spans 1e8 between
+        // a mass moment and a Coulomb level), the prior's scale elsewhere.
+        let mut scale = prior_scale.clone();
+        for (i, s) in scale.iter_mut().enumerate() {
+            let info = x.column(i).norm();
+            if info * prior_scale[i] > 1e-3 {
+                *s = 1.0 / info;
+            }
+            x.column_mut(i).scale_mut(*s);
+        }
+        // λ weighs (θ − θ_prior)/prior_scale; in these variables that is
+        // (x − x_prior)·scale/prior_scale.
+        let prior_weight: Vec<f64> = (0..ns)
+            .map(|i| {
+                if kinds[i] == Kind::Inertial {
+                    (scale[i] / prior_scale[i]).powi(2)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let h = x.transpose() * &x;
+        let g = x.transpose() * &y;
+        let x_prior = (0..ns).map(|i| prior[i] / scale[i]).collect();
+        let l_inv = l
+            .solve_lower_triangular(&DMatrix::identity(nb, nb))
+            .ok_or_else(|| Error::numerical("physical fit", "singular covariance factor"))?;
+        Ok(Problem {
+            l_inv,
+            prior_weight,
+            links,
+            kinds,
+            scale,
+            x_prior,
+            h,
+            g,
+            y,
+            x,
+        })
+    }
+
+    /// The same problem for another base estimate.
+    fn with_estimate(&self, base_estimate: &DVector<f64>) -> Problem {
+        let mut p = self.clone();
+        p.y = &self.l_inv * base_estimate;
+        p.g = self.x.transpose() * &p.y;
+        p
+    }
+
+    /// The diagonal of the regularisation: λ on the inertial parameters,
+    /// plus a vanishing 1e-9 (of one standard deviation's information) on
+    /// every one, so that what no data touch stays at its prior.
+    fn regularisation(&self, weight: f64) -> Vec<f64> {
+        self.prior_weight.iter().map(|w| weight * w + 1e-9).collect()
+    }
+
+    fn solve(&self, weight: f64) -> Result<Solved> {
+        let ns = self.kinds.len();
+        let d = self.regularisation(weight);
+        // The unconstrained optimum x_u = (XᵀX + D)⁻¹(Xᵀy + D·x_prior); the
+        // solver works on the step δ = x − x_u, whose objective δᵀ(XᵀX + D)δ
+        // is the χ² the constraints cost: no large constant to lose
+        // precision against (‖y‖² is often 1e10).
+        let normal = &self.h + DMatrix::from_diagonal(&DVector::from_vec(d.clone()));
+        let chol = normal.clone().cholesky().ok_or_else(|| {
+            Error::numerical("physical fit", "the regularised normal matrix is not positive definite")
+        })?;
+        let x_u = chol.solve(&(&self.g + DVector::from_fn(ns, |i, _| d[i] * self.x_prior[i])));
+        // Objective scaled to a unit largest diagonal (the solver's
+        // tolerances and regularisation are absolute).
+        let unit = 1.0 / (0..ns).map(|i| normal[(i, i)]).fold(0.0, f64::max).max(1e-300);
+        let (mut pi, mut pj, mut pv) = (Vec::new(), Vec::new(), Vec::new());
+        for c in 0..ns {
+            for r in 0..=c {
+                let v = 2.0 * unit * normal[(r, c)];
+                if v != 0.0 {
+                    pi.push(r);
+                    pj.push(c);
+                    pv.push(v);
+                }
+            }
+        }
+        let p = CscMatrix::new_from_triplets(ns, ns, pi, pj, pv);
+        let q = vec![0.0; ns];
+        // Constraints s = b − A·x in the cones: per link svec(J(S·x)) in a
+        // PSD cone (upper triangle by columns, off-diagonals ×√2), then
+        // x_i ≥ 0 for rotor inertia and friction.
+        let (mut ai, mut aj, mut av) = (Vec::new(), Vec::new(), Vec::new());
+        let mut row = 0;
+        let mut cones: Vec<SupportedConeT<f64>> = Vec::new();
+        for l in 0..self.links {
+            for k in 0..10 {
+                let mut unit = [0.0; 10];
+                unit[k] = self.scale[10 * l + k];
+                let e = pseudo_inertia(&unit);
+                let mut at = row;
+                for c in 0..4 {
+                    for r in 0..=c {
+                        let v = if r == c {
+                            e[(r, c)]
+                        } else {
+                            std::f64::consts::SQRT_2 * e[(r, c)]
+                        };
+                        if v != 0.0 {
+                            ai.push(at);
+                            aj.push(10 * l + k);
+                            av.push(-v);
+                        }
+                        at += 1;
+                    }
+                }
+            }
+            row += 10;
+            cones.push(PSDTriangleConeT(4));
+        }
+        let nonneg: Vec<usize> = (0..ns).filter(|&i| self.kinds[i] == Kind::NonNegative).collect();
+        for (k, &i) in nonneg.iter().enumerate() {
+            ai.push(row + k);
+            aj.push(i);
+            av.push(-1.0);
+        }
+        row += nonneg.len();
+        if !nonneg.is_empty() {
+            cones.push(NonnegativeConeT(nonneg.len()));
+        }
+        // s = b − A·δ = −A·(x_u + δ): b = −A·x_u.
+        let mut b = vec![0.0; row];
+        for k in 0..ai.len() {
+            b[ai[k]] -= av[k] * x_u[aj[k]];
+        }
+        let a = CscMatrix::new_from_triplets(row, ns, ai, aj, av);
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .max_iter(500)
+            .time_limit(30.0)
+            .build()
+            .map_err(|e| Error::numerical("physical fit", format!("solver settings: {e:?}")))?;
+        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
+            .map_err(|e| Error::numerical("physical fit", format!("the problem as clarabel sees it: {e:?}")))?;
+        solver.solve();
+        let status = solver.solution.status;
+        if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
+            return Err(Error::numerical(
+                "physical fit",
+                format!(
+                    "the semidefinite program ended {status:?} after {} iterations (λ = {weight})",
+                    solver.solution.iterations
+                ),
+            ));
+        }
+        let x: Vec<f64> = (0..ns).map(|i| x_u[i] + solver.solution.x[i]).collect();
+        let xv = DVector::from_column_slice(&x);
+        let chi2 = (&self.x * &xv - &self.y).norm_squared();
+        // df = tr((XᵀX + D)⁻¹ XᵀX), the unconstrained hat's trace.
+        let dof = chol.solve(&self.h).trace();
+        Ok(Solved {
+            x,
+            chi2,
+            dof,
+            iterations: solver.solution.iterations as usize,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One link observed directly (K = 1, Σ = 1): a consistent estimate
+    /// comes back unchanged, an inconsistent one moves onto the boundary.
+    #[test]
+    fn one_link_observed_directly() {
+        let names: Vec<String> = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"]
+            .iter()
+            .map(|n| format!("{n}_l"))
+            .collect();
+        // A 2 kg rod along x, 0.5 m long, centre of mass at 0.25 m.
+        let prior = [0.01, 0.0, 0.0, 0.17, 0.0, 0.17, 0.5, 0.0, 0.0, 2.0];
+        let map = DMatrix::identity(10, 10);
+        let cov = DMatrix::identity(10, 10) * 1e-4;
+        let est = DVector::from_column_slice(&prior);
+        let fit = physically_consistent(&names, &prior, &map, &est, &cov, Some(1e-6)).unwrap();
+        assert!((&fit.base - &est).amax() < 1e-6, "{}", fit.base);
+        let mut bad = est.clone();
+        bad[0] = -0.05;
+        let fit = physically_consistent(&names, &prior, &map, &bad, &cov, Some(1e-6)).unwrap();
+        assert!(fit.min_eigen[0] > -1e-8, "{:?}", fit.min_eigen);
+        assert!((fit.base[9] - 2.0).abs() < 0.1, "{}", fit.base);
     }
 }

@@ -194,6 +194,25 @@ impl Summary {
         self.names.len()
     }
 
+    /// The per-joint adequacy of other values of the parameters (a
+    /// constrained estimate's): their residue against the noise floor.
+    pub fn adequacy_at(&self, theta: &DVector<f64>) -> Result<Vec<super::JointAdequacy>> {
+        let p = self.parameters();
+        let norms: Vec<f64> = (0..p).map(|j| self.factor.r.column(j).norm().max(1e-300)).collect();
+        let r = DMatrix::from_fn(p, p, |i, j| self.factor.r[(i, j)] / norms[j]);
+        let r_inv = r
+            .try_inverse()
+            .ok_or_else(|| Error::numerical("adequacy", "the R factor is singular"))?;
+        let inv_scaled = &r_inv * r_inv.transpose();
+        let inverse_normal = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] / (norms[i] * norms[j]));
+        Ok(adequacy(
+            &self.joints,
+            theta,
+            &inverse_normal,
+            self.factor.rows as f64 / self.equations.max(1) as f64,
+        ))
+    }
+
     /// The estimate: column-scaled R, rank judged on its singular values,
     /// θ = R⁻¹z, and the chosen covariance.
     pub fn solve(&self, covariance: Covariance) -> Result<Estimate> {
@@ -233,7 +252,7 @@ impl Summary {
                 ))
             }
             Covariance::Periods => true,
-            Covariance::Residual => false,
+            Covariance::Residual | Covariance::Bootstrap => false,
             Covariance::Auto => have_periods,
         };
         let (mut cov, dof) = if use_periods {

@@ -17,8 +17,9 @@ use super::differentiate::Differentiation;
 use super::{Chain, Component, Context, LintContext, Problem, Product, Stage};
 use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
 use crate::estimation::{
-    input_noise, maximum_likelihood, parameters_from_table, parameters_table, physically_consistent, row_weights,
-    Covariance, Estimate, Estimator, InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Weights,
+    bootstrap_covariance, input_noise, maximum_likelihood, parameters_from_table, parameters_table,
+    physically_consistent, row_weights, Covariance, Estimate, Estimator, InputNoise, Known, MlOptions, Options,
+    PhysicalFit, Summary, System, Weights, BOOTSTRAP_DRAWS,
 };
 use crate::formats::parquet::read_parquet;
 use crate::stage::regressor::RegressorConfig;
@@ -48,9 +49,16 @@ pub struct EstimateConfig {
     /// Replace the estimate by the nearest physically consistent one
     /// (`estimation/physical.rs`: every link's pseudo-inertia positive
     /// semidefinite, friction and rotor inertia ≥ 0), in the metric of its
-    /// covariance, the robot file as the a-priori model. The covariance is kept.
+    /// covariance, the robot file as the a-priori model; solved as the
+    /// semidefinite program it is. Its covariance comes from a parametric
+    /// bootstrap, its adequacy from its own residue.
     #[serde(default)]
     pub physical: bool,
+    /// With `physical`: the weight of the pull of the inertial parameters
+    /// towards the robot file (χ² units per squared a-priori scale).
+    /// Chosen by Mallows' C_p when not given.
+    #[serde(default)]
+    pub prior_weight: Option<f64>,
 }
 
 fn default_confidence() -> f64 {
@@ -66,6 +74,7 @@ impl Default for EstimateConfig {
             covariance: Covariance::Auto,
             known: None,
             physical: false,
+            prior_weight: None,
         }
     }
 }
@@ -86,6 +95,21 @@ impl EstimateConfig {
             out.push(Problem::new(
                 "confidence",
                 format!("must be in (0, 1), not {}", self.confidence),
+            ));
+        }
+        if self.covariance == Covariance::Bootstrap {
+            out.push(Problem::new(
+                "covariance",
+                "\"bootstrap\" is how the physical fit's covariance is made, not a setting: use auto, periods or residual",
+            ));
+        }
+        if let Some(w) = self.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
+            out.push(Problem::new("prior_weight", format!("must be > 0 and finite, not {w}")));
+        }
+        if self.prior_weight.is_some() && !self.physical {
+            out.push(Problem::new(
+                "prior_weight",
+                "applies to the physical fit: set `physical = true`",
             ));
         }
         if self.physical && self.known.is_some() {
@@ -367,8 +391,12 @@ impl Reducer {
                 .config
                 .clone()
                 .ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
-            let (fit, note) = physical_fit(&rc.base_regressor(model)?, &est)?;
+            let (fit, covariance, note) = physical_fit(&rc.base_regressor(model)?, &est, self.cfg.prior_weight)?;
             est.values = fit.base.clone();
+            est.covariance = covariance;
+            est.covariance_from = Covariance::Bootstrap;
+            est.widened = false;
+            est.adequacy = summary.adequacy_at(&est.values)?;
             md.insert(metadata::PHYSICAL.into(), note);
             physical = Some(fit);
         }
@@ -481,7 +509,12 @@ impl Reducer {
 
 /// The physically consistent estimate nearest `est` (robot file as the
 /// a-priori model), and a note saying what it cost.
-fn physical_fit(base: &BaseRegressor, est: &Estimate) -> Result<(PhysicalFit, String)> {
+/// Its covariance by a parametric bootstrap.
+fn physical_fit(
+    base: &BaseRegressor,
+    est: &Estimate,
+    prior_weight: Option<f64>,
+) -> Result<(PhysicalFit, nalgebra::DMatrix<f64>, String)> {
     let map = match (base.kind, base.map()) {
         (ModelKind::Chain, Some(map)) => map,
         _ => {
@@ -501,10 +534,19 @@ fn physical_fit(base: &BaseRegressor, est: &Estimate) -> Result<(PhysicalFit, St
     }
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
-    let fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, 1e-3)?;
+    let fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, prior_weight)?;
     let note = format!(
-        "nearest physically consistent estimate: χ² = {:.4} against the covariance, {} iterations, smallest pseudo-inertia eigenvalues {:?}",
-        fit.chi2, fit.iterations, fit.min_eigen
+        "physically consistent estimate (semidefinite program): χ² = {:.4} against the covariance, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalues {:?}",
+        fit.chi2,
+        fit.prior_weight,
+        if fit.chosen { " chosen by C_p" } else { "" },
+        fit.dof,
+        fit.min_eigen
     );
-    Ok((fit, note))
+    let covariance = bootstrap_covariance(&names, &prior, map, &est.values, &est.covariance, fit.prior_weight)?;
+    Ok((
+        fit,
+        covariance,
+        format!("{note}; covariance from {BOOTSTRAP_DRAWS} bootstrap draws"),
+    ))
 }
