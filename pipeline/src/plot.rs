@@ -357,17 +357,32 @@ pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) ->
 /// Measured (grey) and predicted (blue) torque per joint, row by row.
 pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebra::DVector<f64>) -> Result<String> {
     let nj = sys.joints.len();
+    // Recordings one after another on the time axis.
+    let mut offset = vec![0.0; sys.recordings.len()];
+    let mut end = 0.0f64;
+    for r in 0..sys.recordings.len() {
+        offset[r] = end;
+        let last = (0..sys.rows())
+            .filter(|&i| sys.recording[i] == r)
+            .map(|i| sys.time[i])
+            .fold(f64::MIN, f64::max);
+        if last > f64::MIN {
+            end += last;
+        }
+    }
     let rows_of = |j: usize| (0..sys.rows()).filter(move |&i| sys.joint[i] == j);
+    let at = |i: usize| offset[sys.recording[i]] + sys.time[i];
     figure_svg(nj, 1, |areas| {
         for j in 0..nj {
-            let measured: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, sys.b[i])).collect();
-            let pred: Vec<(f64, f64)> = rows_of(j).enumerate().map(|(k, i)| (k as f64, predicted[i])).collect();
+            let measured: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), sys.b[i])).collect();
+            let pred: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), predicted[i])).collect();
+            let residue: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), sys.b[i] - predicted[i])).collect();
             chart(
                 &areas[j],
                 &format!("{}: measured and predicted torque", sys.joints[j]),
-                "sample",
+                "time, s",
                 "N·m",
-                &[(measured, GREY, "measured"), (pred, BLUE_, "predicted")],
+                &[(measured, GREY, "measured"), (pred, BLUE_, "predicted"), (residue, ORANGE, "residue")],
                 &[],
             )?;
         }

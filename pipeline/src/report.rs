@@ -42,6 +42,55 @@ fn noise_by_joint(sys: &System) -> Option<Vec<Vec<f64>>> {
     any.then_some(out)
 }
 
+/// `value ± std` rounded to the uncertainty: the std to two significant
+/// digits, the value to the same decimal place (scientific notation, one
+/// exponent for both, outside 1e-3 ≤ |x| < 1e5).
+pub fn rounded(value: f64, std: f64) -> (String, String) {
+    if !(std.is_finite() && std > 0.0 && value.is_finite()) {
+        return (format!("{value:.6}"), format!("{std:.2e}"));
+    }
+    let place = std.log10().floor() as i32 - 1; // the std's second digit
+    let top = value.abs().max(std).log10().floor() as i32;
+    if (-3..5).contains(&top) {
+        let decimals = (-place).max(0) as usize;
+        (format!("{value:.decimals$}"), format!("{std:.decimals$}"))
+    } else {
+        let decimals = (top - place).max(1) as usize;
+        let scale = 10f64.powi(top);
+        (
+            format!("{:.decimals$}e{top}", value / scale),
+            format!("{:.decimals$}e{top}", std / scale),
+        )
+    }
+}
+
+/// A verdict as a coloured badge.
+fn badge(verdict: &str) -> String {
+    let class = match verdict {
+        "adequate" => "ok",
+        "model error dominates" => "bad",
+        _ => "unk",
+    };
+    format!("<span class=\"{class}\">{}</span>", esc(verdict))
+}
+
+/// A JSON object's fields as `key = value; …` (what a person reads), the
+/// text itself when it is not one.
+fn readable(json: &str) -> String {
+    match serde_json::from_str::<serde_json::Value>(json) {
+        Ok(serde_json::Value::Object(m)) => m
+            .iter()
+            .filter(|(_, v)| !v.is_null())
+            .map(|(k, v)| match v {
+                serde_json::Value::String(s) => format!("{k} = {s}"),
+                other => format!("{k} = {other}"),
+            })
+            .collect::<Vec<_>>()
+            .join("; "),
+        _ => json.to_string(),
+    }
+}
+
 /// The report's HTML. `expressions` are the parameters' regrouping
 /// expressions (the table's `expression` column).
 pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String> {
@@ -50,12 +99,106 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
     let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
     let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
     let mut h = String::new();
-    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}svg{max-width:100%;height:auto}.note{color:#555}</style></head><body>\n");
+    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}</style></head><body>\n");
     h.push_str(&format!(
         "<h1>Identification of <code>{}</code></h1>\n",
         esc(md(metadata::ROBOT))
     ));
-    h.push_str("<table>\n");
+    // The verdicts first: is the model adequate where it was fitted, and
+    // on every data set shown?
+    h.push_str("<h2>Verdicts</h2>\n");
+    // Per data set and joint: (residue / noise floor, verdict).
+    let mut columns: Vec<(String, Vec<(String, Option<f64>, String)>)> = Vec::new();
+    if let Some(found) = params
+        .metadata
+        .get(metadata::ADEQUACY)
+        .and_then(|j| serde_json::from_str::<Vec<serde_json::Value>>(j).ok())
+    {
+        let cells = found
+            .iter()
+            .map(|a| {
+                (
+                    a.get("joint").and_then(|v| v.as_str()).unwrap_or("?").to_string(),
+                    a.get("ratio").and_then(serde_json::Value::as_f64),
+                    a.get("verdict").and_then(|v| v.as_str()).unwrap_or("-").to_string(),
+                )
+            })
+            .collect();
+        columns.push(("the fit".into(), cells));
+    }
+    let mut set_stats = Vec::new();
+    for set in sets {
+        let sys = set.sys;
+        if sys.names != params.names {
+            return Err(Error::Stage(robotid_stages::Error::mismatch(
+                format!("{}: parameters", set.title),
+                format!("{:?} (the estimate's)", params.names),
+                format!("{:?}", sys.names),
+            )));
+        }
+        let predicted: DVector<f64> = &sys.a * &params.values;
+        let stats = residues(sys, &predicted);
+        columns.push((
+            set.title.to_string(),
+            stats
+                .iter()
+                .map(|r| (r.joint.clone(), r.noise_floor.map(|f| r.msr / f), r.verdict().name().to_string()))
+                .collect(),
+        ));
+        set_stats.push((predicted, stats));
+    }
+    let mut joints: Vec<String> = Vec::new();
+    for (_, cells) in &columns {
+        for (j, _, _) in cells {
+            if !joints.contains(j) {
+                joints.push(j.clone());
+            }
+        }
+    }
+    h.push_str("<p class=\"note\">Each cell: the mean squared residue over the noise floor of the torque, and what it means (adequate up to 1.2).</p>\n<table>\n<tr><th>joint</th>");
+    for (title, _) in &columns {
+        h.push_str(&format!("<th>{}</th>", esc(title)));
+    }
+    h.push_str("</tr>\n");
+    for j in &joints {
+        h.push_str(&format!("<tr><td class=\"l\">{}</td>", esc(j)));
+        for (_, cells) in &columns {
+            match cells.iter().find(|c| &c.0 == j) {
+                Some((_, ratio, verdict)) => h.push_str(&format!(
+                    "<td>{} {}</td>",
+                    ratio.map_or("".into(), |r| format!("{r:.2}×")),
+                    badge(verdict)
+                )),
+                None => h.push_str("<td></td>"),
+            }
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    for (key, what) in [
+        (metadata::WIDENED, "Intervals widened"),
+        (metadata::IMPOSSIBLE, "Physically impossible values"),
+        (metadata::OUTLIERS, "Recordings that fit far worse than the others"),
+    ] {
+        if let Some(v) = params.metadata.get(key).filter(|v| !v.is_empty()) {
+            h.push_str(&format!("<p class=\"warn\"><b>{what}:</b> {}</p>\n", esc(v)));
+        }
+    }
+    h.push_str("<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th>");
+    h.push_str(&format!("<th>{:.1} % interval</th><th>unit</th></tr>\n", 100.0 * level));
+    for i in 0..params.names.len() {
+        let (v, s) = (params.values[i], params.std[i]);
+        let (value, std) = rounded(v, s);
+        let (lo, _) = rounded(v - t * s, s);
+        let (hi, _) = rounded(v + t * s, s);
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{value}</td><td>{std}</td><td>[{lo}, {hi}]</td><td class=\"l\">{}</td></tr>\n",
+            esc(&params.names[i]),
+            esc(expressions.get(i).map(String::as_str).unwrap_or("")),
+            esc(&params.units[i])
+        ));
+    }
+    h.push_str("</table>\n<h2>How it was made</h2>\n<table>\n");
     for (k, v) in [
         ("parameters", source.to_string()),
         ("estimator", md(metadata::ESTIMATE_METHOD).to_string()),
@@ -70,60 +213,44 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
         ("rows", md(metadata::ESTIMATE_ROWS).to_string()),
         (
             "condition number (column-scaled)",
-            md(metadata::CONDITION_NUMBER).to_string(),
+            md(metadata::CONDITION_NUMBER)
+                .parse::<f64>()
+                .map_or_else(|_| md(metadata::CONDITION_NUMBER).to_string(), |c| format!("{c:.4}")),
         ),
         (
-            "residual variance",
-            md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(),
+            "residual variance, (N·m)²",
+            md(metadata::ESTIMATE_RESIDUAL_VARIANCE)
+                .parse::<f64>()
+                .map_or_else(|_| md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(), |v| format!("{v:.4e}")),
         ),
-        ("recordings", md(metadata::RECORDINGS).to_string()),
+        ("recordings", md(metadata::RECORDINGS).replace(',', ", ")),
         ("model", md(metadata::MODEL).to_string()),
-        ("regressor configuration", md(metadata::REGRESSOR_CONFIG).to_string()),
+        ("regressor", readable(md(metadata::REGRESSOR_CONFIG))),
         ("known parameters", md(metadata::KNOWN).to_string()),
         ("physical consistency", md(metadata::PHYSICAL).to_string()),
         ("pipeline SHA-256", md(metadata::CONFIG_SHA256).to_string()),
         ("written by", md(metadata::GENERATOR).to_string()),
     ] {
-        h.push_str(&format!("<tr><th>{k}</th><td class=\"l\">{}</td></tr>\n", esc(&v)));
-    }
-    h.push_str("</table>\n<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th><th>std %</th>");
-    h.push_str(&format!("<th>{:.1} % interval</th><th>unit</th></tr>\n", 100.0 * level));
-    for i in 0..params.names.len() {
-        let (v, s) = (params.values[i], params.std[i]);
-        h.push_str(&format!(
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{v:.6}</td><td>{s:.3e}</td><td>{:.3}</td><td>[{:.6}, {:.6}]</td><td class=\"l\">{}</td></tr>\n",
-            esc(&params.names[i]),
-            esc(expressions.get(i).map(String::as_str).unwrap_or("")),
-            100.0 * s / v.abs(),
-            v - t * s,
-            v + t * s,
-            esc(&params.units[i])
-        ));
+        if v != "-" && !v.is_empty() {
+            h.push_str(&format!("<tr><th>{k}</th><td class=\"l\">{}</td></tr>\n", esc(&v)));
+        }
     }
     h.push_str("</table>\n");
-    for set in sets {
+    for (set, (predicted, stats)) in sets.iter().zip(&set_stats) {
         let sys = set.sys;
-        if sys.names != params.names {
-            return Err(Error::Stage(robotid_stages::Error::mismatch(
-                format!("{}: parameters", set.title),
-                format!("{:?} (the estimate's)", params.names),
-                format!("{:?}", sys.names),
-            )));
-        }
-        let predicted: DVector<f64> = &sys.a * &params.values;
-        let stats = residues(sys, &predicted);
         h.push_str(&format!(
-            "<h2>{}</h2>\n<p class=\"note\">{}</p>\n<pre>{}</pre>\n",
+            "<h2 id=\"{}\">{}</h2>\n<p class=\"note\">{}</p>\n<pre>{}</pre>\n",
+            set.title.to_lowercase().replace(' ', "-"),
             esc(set.title),
             esc(&sys.recordings.join(", ")),
-            esc(&table(&stats))
+            esc(&table(stats))
         ));
         h.push_str("<h3>Measured and predicted torque</h3>\n");
-        h.push_str(&torques_svg(sys, &predicted)?);
+        h.push_str(&torques_svg(sys, predicted)?);
         h.push_str("\n<h3>Residue density against a Gaussian</h3>\n");
         h.push_str(&density_svg(
             &sys.joints,
-            &residues_by_joint(sys, &predicted),
+            &residues_by_joint(sys, predicted),
             "residue",
         )?);
         if let Some(noise) = noise_by_joint(sys) {

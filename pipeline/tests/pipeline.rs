@@ -13,6 +13,57 @@ use robotid_stages::dynamics::load_robot;
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_tests::{bytes_of, fixture, workspace};
 
+/// Renders a page in headless Chromium (installed by scripts/setup.sh):
+/// the DOM it built holds the page's verdicts and figures, and its
+/// screenshot is not blank (a blank 1100 × 1400 page compresses to ~7 kB;
+/// this one, with tables and curves, to well over 100 kB).
+fn rendered_in_a_browser(html: &Path) {
+    let Some(chromium) = ["chromium", "chromium-browser"]
+        .iter()
+        .find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
+    else {
+        println!("skipped: no Chromium here (bash scripts/setup.sh installs it)");
+        return;
+    };
+    let profile = tempfile::tempdir().unwrap();
+    let png = html.with_extension("png");
+    let url = format!("file://{}", html.canonicalize().unwrap().display());
+    let browser = |extra: &[&str]| {
+        let out = Command::new(chromium)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-quic",
+                "--no-first-run",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--hide-scrollbars",
+                "--window-size=1100,1400",
+            ])
+            .arg(format!("--user-data-dir={}", profile.path().display()))
+            .args(extra)
+            .arg(&url)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "chromium: {}", String::from_utf8_lossy(&out.stderr));
+        out.stdout
+    };
+    let dom = String::from_utf8(browser(&["--dump-dom"])).unwrap();
+    assert!(dom.contains("Verdicts") && dom.contains("class=\"ok\""), "verdicts not rendered");
+    assert_eq!(dom.matches("<svg").count(), 5, "figures in the rendered page");
+    browser(&[&format!("--screenshot={}", png.display())]);
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let (w, h) = (
+        u32::from_be_bytes(bytes[16..20].try_into().unwrap()),
+        u32::from_be_bytes(bytes[20..24].try_into().unwrap()),
+    );
+    assert_eq!((w, h), (1100, 1400));
+    assert!(bytes.len() > 100_000, "screenshot of {} bytes: a blank page?", bytes.len());
+}
+
 /// Runs a pipeline as `robotid run` does, through the library API: its
 /// recordings, then its `estimate` stage if it has one and all succeeded.
 fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<RecordingResult> {
@@ -422,6 +473,10 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     // Excitation: torques, residues, noise; validation: torques, residues.
     assert_eq!(page.matches("<svg").count(), 5);
     assert!(page.contains("95.0 % interval") && page.contains("ZZ_a3 + Ia_a3"));
+    // The verdicts lead, and no raw JSON is shown.
+    assert!(page.find("Verdicts").unwrap() < page.find("Parameters").unwrap());
+    assert!(!page.contains("{\""), "raw JSON in the report");
+    rendered_in_a_browser(&html);
     // `robotid export`: a URDF whose model reproduces the estimate's base
     // parameters (the KUKA has no rotor inertia to lose in URDF).
     let urdf = out.join("identified.urdf");

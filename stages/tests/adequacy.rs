@@ -68,6 +68,7 @@ fn recording(base: &BaseRegressor, theta: &DVector<f64>, rng: &mut ChaCha8Rng, m
         var: DVector::from_element(rows, f64::NAN),
         recording: vec![0; rows],
         sample: (0..rows).map(|i| (i / n) as i64).collect(),
+        time: (0..rows).map(|i| (i / n) as f64 * PERIOD / SAMPLES as f64).collect(),
         joint: (0..rows).map(|i| i % n).collect(),
         recordings: vec!["mc".into()],
         joints: kin.joints.clone(),

@@ -43,6 +43,8 @@ pub struct System {
     pub recording: Vec<usize>,
     pub sample: Vec<i64>,
     pub joint: Vec<usize>,
+    /// Per row: the sample's time, s (for pictures).
+    pub time: Vec<f64>,
     pub recordings: Vec<String>,
     pub joints: Vec<String>,
     /// Per recording: its first row and, when the table carries them, the
@@ -116,6 +118,7 @@ impl System {
             recording: Vec::with_capacity(rows),
             sample: Vec::with_capacity(rows),
             joint: Vec::with_capacity(rows),
+            time: Vec::with_capacity(rows),
             recordings: Vec::new(),
             joints: Vec::new(),
             offsets: Vec::new(),
@@ -162,6 +165,7 @@ impl System {
             let b = f64_col(label, t, "torque")?;
             let var = f64_col(label, t, "torque_var")?;
             let joint = str_col(label, t, "joint")?;
+            let time = f64_col(label, t, "time")?;
             let sample = t
                 .column_by_name("sample")
                 .and_then(|c| c.as_any().downcast_ref::<Int64Array>())
@@ -177,6 +181,7 @@ impl System {
                 sys.var[at + i] = if var.is_null(i) { f64::NAN } else { var.value(i) };
                 sys.recording.push(r);
                 sys.sample.push(sample.value(i));
+                sys.time.push(time.value(i));
                 let ji = index_of(&mut sys.joints, joint.value(i));
                 sys.joint.push(ji);
             }
@@ -211,6 +216,7 @@ impl System {
             recording: Vec::with_capacity(rows),
             sample: Vec::with_capacity(rows),
             joint: Vec::with_capacity(rows),
+            time: Vec::with_capacity(rows),
             recordings: Vec::new(),
             offsets: Vec::new(),
             periods: Vec::new(),
@@ -233,6 +239,7 @@ impl System {
             let r0 = out.recordings.len();
             out.recording.extend(s.recording.iter().map(|r| r + r0));
             out.sample.extend(&s.sample);
+            out.time.extend(&s.time);
             for &j in &s.joint {
                 let ji = index_of(&mut out.joints, &s.joints[j]);
                 out.joint.push(ji);
@@ -278,6 +285,7 @@ impl System {
             recording: vec![0; m],
             sample: (0..m).map(|i| (i / n) as i64).collect(),
             joint: (0..m).map(|i| i % n).collect(),
+            time: (0..m).map(|i| (i / n) as f64).collect(),
             recordings: vec!["(matrices)".into()],
             joints,
             offsets: vec![0],
@@ -297,6 +305,7 @@ impl System {
         self.var = self.var.select_rows(rows.iter());
         self.recording = rows.iter().map(|&i| self.recording[i]).collect();
         self.sample = rows.iter().map(|&i| self.sample[i]).collect();
+        self.time = rows.iter().map(|&i| self.time[i]).collect();
         self.joint = rows.iter().map(|&i| self.joint[i]).collect();
         self.offsets = vec![0];
         rows

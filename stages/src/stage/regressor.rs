@@ -383,6 +383,7 @@ pub fn regressor_rows(
         .map(|name| parameter_unit(name).to_string())
         .collect();
     let mut system = System::from_matrices(base.names(), units, names.clone(), a, b, var);
+    system.time = (0..rows).map(|i| kin.time[i / n]).collect();
     let mut period_torques = period_torques;
     if cfg.joint_wise {
         // The joint that moves: the one whose range is more than 5 % of
