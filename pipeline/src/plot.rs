@@ -382,7 +382,11 @@ pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebr
                 &format!("{}: measured and predicted torque", sys.joints[j]),
                 "time, s",
                 "N·m",
-                &[(measured, GREY, "measured"), (pred, BLUE_, "predicted"), (residue, ORANGE, "residue")],
+                &[
+                    (measured, GREY, "measured"),
+                    (pred, BLUE_, "predicted"),
+                    (residue, ORANGE, "residue"),
+                ],
                 &[],
             )?;
         }

@@ -142,7 +142,13 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
             set.title.to_string(),
             stats
                 .iter()
-                .map(|r| (r.joint.clone(), r.noise_floor.map(|f| r.msr / f), r.verdict().name().to_string()))
+                .map(|r| {
+                    (
+                        r.joint.clone(),
+                        r.noise_floor.map(|f| r.msr / f),
+                        r.verdict().name().to_string(),
+                    )
+                })
                 .collect(),
         ));
         set_stats.push((predicted, stats));
@@ -219,9 +225,10 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
         ),
         (
             "residual variance, (N·m)²",
-            md(metadata::ESTIMATE_RESIDUAL_VARIANCE)
-                .parse::<f64>()
-                .map_or_else(|_| md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(), |v| format!("{v:.4e}")),
+            md(metadata::ESTIMATE_RESIDUAL_VARIANCE).parse::<f64>().map_or_else(
+                |_| md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(),
+                |v| format!("{v:.4e}"),
+            ),
         ),
         ("recordings", md(metadata::RECORDINGS).replace(',', ", ")),
         ("model", md(metadata::MODEL).to_string()),

@@ -18,10 +18,12 @@ use robotid_tests::{bytes_of, fixture, workspace};
 /// screenshot is not blank (a blank 1100 × 1400 page compresses to ~7 kB;
 /// this one, with tables and curves, to well over 100 kB).
 fn rendered_in_a_browser(html: &Path) {
-    let Some(chromium) = ["chromium", "chromium-browser"]
-        .iter()
-        .find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
-    else {
+    let Some(chromium) = ["chromium", "chromium-browser"].iter().find(|c| {
+        Command::new(c)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    }) else {
         println!("skipped: no Chromium here (bash scripts/setup.sh installs it)");
         return;
     };
@@ -47,11 +49,18 @@ fn rendered_in_a_browser(html: &Path) {
             .arg(&url)
             .output()
             .unwrap();
-        assert!(out.status.success(), "chromium: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "chromium: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         out.stdout
     };
     let dom = String::from_utf8(browser(&["--dump-dom"])).unwrap();
-    assert!(dom.contains("Verdicts") && dom.contains("class=\"ok\""), "verdicts not rendered");
+    assert!(
+        dom.contains("Verdicts") && dom.contains("class=\"ok\""),
+        "verdicts not rendered"
+    );
     assert_eq!(dom.matches("<svg").count(), 5, "figures in the rendered page");
     browser(&[&format!("--screenshot={}", png.display())]);
     let bytes = std::fs::read(&png).unwrap();
@@ -61,7 +70,11 @@ fn rendered_in_a_browser(html: &Path) {
         u32::from_be_bytes(bytes[20..24].try_into().unwrap()),
     );
     assert_eq!((w, h), (1100, 1400));
-    assert!(bytes.len() > 100_000, "screenshot of {} bytes: a blank page?", bytes.len());
+    assert!(
+        bytes.len() > 100_000,
+        "screenshot of {} bytes: a blank page?",
+        bytes.len()
+    );
 }
 
 /// Runs a pipeline as `robotid run` does, through the library API: its

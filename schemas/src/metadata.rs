@@ -96,6 +96,12 @@ pub const ADEQUACY: &str = "robotid.estimate.adequacy";
 /// Present when the covariance was widened by the excess residual variance
 /// of the joints where model error dominates: which joints, and why.
 pub const WIDENED: &str = "robotid.estimate.covariance_widened";
+/// Base parameters whose standard deviation exceeds their a-priori size
+/// (robot file), with both.
+pub const UNIDENTIFIED: &str = "robotid.estimate.unidentified";
+/// The essential parameters (Pham & Gautier), and those dropped to reach
+/// them with their relative standard deviations.
+pub const ESSENTIAL: &str = "robotid.estimate.essential";
 /// Parameters taken as known, comma separated.
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.

@@ -84,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     write_parquet(&args.out, &out.table)?;
     print!("{}", summary(&out.estimate, cfg.confidence));
+    print!("{}", findings(&out));
     println!("parameters in {}", args.out.display());
     Ok(())
 }
@@ -95,6 +96,32 @@ pub fn load_system(paths: &[PathBuf]) -> anyhow::Result<System> {
         tables.push((p.display().to_string(), read_parquet(p)?));
     }
     Ok(System::from_tables(&tables)?)
+}
+
+/// What the reduce found beside the estimate: parameters not identified
+/// at their physical size, and the essential set.
+pub fn findings(out: &robotid_stages::stage::estimate::Outcome) -> String {
+    let mut s = String::new();
+    for u in &out.unidentified {
+        s.push_str(&format!(
+            "warning: {} = {:.4e} ± {:.2e} is not identified: its standard deviation exceeds its a-priori size {:.2e} (robot file); the data carry too little of it to tell it from zero at its physical size\n",
+            u.name, u.value, u.std, u.scale
+        ));
+    }
+    if let Some(e) = out.essential.as_ref().filter(|e| !e.dropped.is_empty()) {
+        s.push_str(&format!(
+            "essential parameters (Pham & Gautier): {} of {}; dropped, least informative first: {} (residual sum of squares ×{:.4} without them)\n",
+            e.kept.len(),
+            e.kept.len() + e.dropped.len(),
+            e.dropped
+                .iter()
+                .map(|(n, r)| format!("{n} ({:.0} %)", 100.0 * r))
+                .collect::<Vec<_>>()
+                .join(", "),
+            e.rss_ratio
+        ));
+    }
+    s
 }
 
 /// The adequacy verdicts as text: per joint, the residue against the noise

@@ -137,6 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 -z
             );
         }
+        print!("{}", super::estimate::findings(&est));
         if !est.outliers.is_empty() {
             println!(
                 "warning: recording(s) {} fit the pooled estimate far worse than the others (over 3× their median residue): check them, or leave them out",

@@ -67,9 +67,49 @@ fn format_coefficient(x: f64) -> String {
     t.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// The a-priori size of each standard parameter from the robot file: per
+/// link m, m·L and m·L² for its mass, first moments and inertias, with L
+/// the larger of its radius of gyration and centre-of-mass distance (at
+/// least 1 cm), m at least 1e-3 of the heaviest link's; for the others
+/// (rotor inertia, friction, offsets) their value when the robot file
+/// gives one, else 1 in SI units.
+pub fn prior_scales(names: &[String], prior: &[f64]) -> Vec<f64> {
+    let links = names.iter().take_while(|n| is_inertial(n)).count() / 10;
+    let heaviest = (0..links).map(|l| prior[10 * l + 9].abs()).fold(0.0, f64::max).max(1.0);
+    let mut scale: Vec<f64> = prior.iter().map(|v| if *v != 0.0 { v.abs() } else { 1.0 }).collect();
+    for l in 0..links {
+        let t = &prior[10 * l..10 * l + 10];
+        let m = t[9].abs().max(1e-3 * heaviest);
+        let trace = (t[0] + t[3] + t[5]).abs();
+        let h = (t[6] * t[6] + t[7] * t[7] + t[8] * t[8]).sqrt();
+        let len = (trace / (2.0 * m)).sqrt().max(h / m).max(0.01);
+        for (k, s) in scale[10 * l..10 * l + 10].iter_mut().enumerate() {
+            *s = match k {
+                9 => m,
+                6..=8 => m * len,
+                _ => m * len * len,
+            };
+        }
+    }
+    scale
+}
+
+/// Whether a standard parameter is one of a link's 10 inertial ones.
+pub fn is_inertial(name: &str) -> bool {
+    matches!(
+        name.split('_').next().unwrap_or(""),
+        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "MX" | "MY" | "MZ" | "M"
+    )
+}
+
+/// Below this fraction of the largest torque a parameter of its a-priori
+/// size makes, its column counts as absent.
+pub const PHYSICAL_FLOOR: f64 = 1e-6;
+
 /// Base parameters of `model` with the regressor `terms`, from `samples`
 /// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
 /// accelerations in ±5 rad/s²).
+
 pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
     let n = model.dof();
     let p = terms.count(n);
@@ -84,13 +124,21 @@ pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, see
         w.rows_mut(s * n, n).copy_from(&phi);
     }
     let norms: Vec<f64> = (0..p).map(|c| w.column(c).norm()).collect();
-    let scale = norms.iter().copied().fold(0.0, f64::max);
+    // Identifiability in physical units: the torque a parameter of its
+    // a-priori size makes. One under 1e-6 of the largest is below any
+    // torque sensor's resolution (a joint axis µrad off vertical gives its
+    // link's first moments such a gravity column): unidentifiable, however
+    // independent its direction.
+    let names = parameter_names(model, terms);
+    let sizes = prior_scales(&names, &super::standard_parameters(model, terms));
+    let physical: Vec<f64> = (0..p).map(|c| norms[c] * sizes[c]).collect();
+    let scale = physical.iter().copied().fold(0.0, f64::max);
     let tol = 1e-8;
     // Restricted pivoting: Gram–Schmidt (twice, for stability) in declared order.
     let mut basis: Vec<DVector<f64>> = Vec::new();
     let (mut base, mut dependent, mut unidentifiable) = (Vec::new(), Vec::new(), Vec::new());
     for c in 0..p {
-        if norms[c] <= 1e-12 * scale {
+        if physical[c] <= PHYSICAL_FLOOR * scale || norms[c] == 0.0 {
             unidentifiable.push(c);
             continue;
         }
@@ -143,7 +191,7 @@ pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, see
         sv.get(r).copied().unwrap_or(0.0),
     );
     BaseParameters {
-        names: parameter_names(model, terms),
+        names,
         base,
         unidentifiable,
         map,

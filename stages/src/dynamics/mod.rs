@@ -18,7 +18,7 @@ mod torque_regressor;
 mod urdf;
 mod urdf_export;
 
-pub use base_parameters::{base_parameters, BaseParameters};
+pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
 pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};

@@ -11,6 +11,7 @@
 
 mod adequacy;
 pub mod dedicated;
+mod identifiability;
 mod least_squares;
 mod ml;
 mod physical;
@@ -26,9 +27,13 @@ use statrs::distribution::{ContinuousCDF, StudentsT};
 use crate::{Error, Result};
 
 pub use adequacy::{adequacy, joint_moments, JointAdequacy, JointMoments, Verdict, ADEQUATE_RATIO};
+pub use identifiability::{essential_parameters, unidentified, Essential, Unidentified};
 pub use least_squares::{least_squares, solve_least_squares, stacked_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
-pub use physical::{bootstrap_covariance, physically_consistent, pseudo_inertia, PhysicalFit, BOOTSTRAP_DRAWS};
+pub use physical::{
+    bootstrap_covariance, is_inertial, physically_consistent, prior_scales, pseudo_inertia, PhysicalFit,
+    BOOTSTRAP_DRAWS,
+};
 pub use summary::{KnownPart, Summary, MAX_CONDITION};
 pub use system::{columns_of, row_weights, Known, System, PARAMETER_COLUMN, PERIOD_TORQUE};
 pub use table::{parameters_from_table, parameters_table, Parameters};

@@ -88,6 +88,10 @@ pub fn pseudo_inertia(t: &[f64]) -> Matrix4<f64> {
     j
 }
 
+pub use crate::dynamics::prior_scales;
+
+pub use crate::dynamics::is_inertial;
+
 /// The largest number of standard parameters the solver is given: far
 /// above any arm (a 7-link arm with asymmetric friction has about 110).
 const MAX_PARAMETERS: usize = 2000;
@@ -290,23 +294,7 @@ impl Problem {
             .cholesky()
             .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive definite"))?;
         let l = chol.l();
-        let heaviest = (0..links).map(|l| prior[10 * l + 9].abs()).fold(0.0, f64::max).max(1.0);
-        // The prior's scale of each parameter (what λ weighs deviations in).
-        let mut prior_scale = vec![1.0; ns];
-        for l in 0..links {
-            let t = &prior[10 * l..10 * l + 10];
-            let m = t[9].abs().max(1e-3 * heaviest);
-            let trace = (t[0] + t[3] + t[5]).abs();
-            let h = (t[6] * t[6] + t[7] * t[7] + t[8] * t[8]).sqrt();
-            let len = (trace / (2.0 * m)).sqrt().max(h / m).max(0.01);
-            for (k, s) in prior_scale[10 * l..10 * l + 10].iter_mut().enumerate() {
-                *s = match k {
-                    9 => m,
-                    6..=8 => m * len,
-                    _ => m * len * len,
-                };
-            }
-        }
+        let prior_scale = prior_scales(names, prior);
         let mut x = l
             .solve_lower_triangular(map)
             .ok_or_else(|| Error::numerical("physical fit", "singular covariance factor"))?;

@@ -17,9 +17,9 @@ use super::differentiate::Differentiation;
 use super::{Chain, Component, Context, LintContext, Problem, Product, Stage};
 use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
 use crate::estimation::{
-    bootstrap_covariance, input_noise, maximum_likelihood, parameters_from_table, parameters_table,
-    physically_consistent, row_weights, Covariance, Estimate, Estimator, InputNoise, Known, MlOptions, Options,
-    PhysicalFit, Summary, System, Weights, BOOTSTRAP_DRAWS,
+    bootstrap_covariance, essential_parameters, input_noise, maximum_likelihood, parameters_from_table,
+    parameters_table, physically_consistent, row_weights, unidentified, Covariance, Essential, Estimate, Estimator,
+    InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Unidentified, Weights, BOOTSTRAP_DRAWS,
 };
 use crate::formats::parquet::read_parquet;
 use crate::stage::regressor::RegressorConfig;
@@ -259,7 +259,15 @@ pub struct Outcome {
     /// recording that does not belong with them (another robot, a broken
     /// channel, a wrong declaration).
     pub outliers: Vec<String>,
+    /// Base parameters the data cannot tell at their physical size.
+    pub unidentified: Vec<Unidentified>,
+    /// The essential parameters (least squares only).
+    pub essential: Option<Essential>,
 }
+
+/// Dropping parameters for the essential set stops when every relative
+/// standard deviation is under this: two standard deviations from zero.
+pub const ESSENTIAL_MAX_RELATIVE_STD: f64 = 0.5;
 
 impl Stage for Reducer {
     fn run(&self, chain: &mut Chain) -> Result<()> {
@@ -379,7 +387,54 @@ impl Reducer {
                 maximum_likelihood(&sys, &w, &noise, &MlOptions::default())?
             }
         };
+        let essential = matches!(self.cfg.method, Estimator::Ols | Estimator::Wls)
+            .then(|| essential_parameters(&summary, ESSENTIAL_MAX_RELATIVE_STD));
+        let unidentified = match (&self.model, &first.config) {
+            (Some(model), Some(rc)) => {
+                let base = rc.base_regressor(model)?;
+                match (base.kind, base.map()) {
+                    (ModelKind::Chain, Some(map)) if base.names() == est.names => {
+                        let names = parameter_names(&base.model, base.terms);
+                        let prior = standard_parameters(&base.model, base.terms);
+                        unidentified(&est, map, &names, &prior)
+                    }
+                    _ => Vec::new(),
+                }
+            }
+            _ => Vec::new(),
+        };
         let mut md = summary.metadata.clone();
+        if !unidentified.is_empty() {
+            md.insert(
+                metadata::UNIDENTIFIED.into(),
+                unidentified
+                    .iter()
+                    .map(|u| {
+                        format!(
+                            "{} = {:.4e} ± {:.2e} (a-priori size {:.2e})",
+                            u.name, u.value, u.std, u.scale
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
+        }
+        if let Some(e) = &essential {
+            md.insert(
+                metadata::ESSENTIAL.into(),
+                format!(
+                    "{} of {} essential (residual sum of squares ×{:.4}); dropped: {}",
+                    e.kept.len(),
+                    summary.names.len(),
+                    e.rss_ratio,
+                    e.dropped
+                        .iter()
+                        .map(|(n, r)| format!("{n} ({:.0} % relative std)", 100.0 * r))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            );
+        }
         let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
         let mut physical = None;
         if self.cfg.physical {
@@ -481,6 +536,8 @@ impl Reducer {
             known,
             residues,
             outliers,
+            unidentified,
+            essential,
         })
     }
 
