@@ -109,7 +109,6 @@ pub const PHYSICAL_FLOOR: f64 = 1e-6;
 /// Base parameters of `model` with the regressor `terms`, from `samples`
 /// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
 /// accelerations in ±5 rad/s²).
-
 pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
     let n = model.dof();
     let p = terms.count(n);
