@@ -64,6 +64,9 @@ pub fn rounded(value: f64, std: f64) -> (String, String) {
     }
 }
 
+/// One joint's verdict on one data set: joint, residue / noise floor, verdict.
+type VerdictCell = (String, Option<f64>, String);
+
 /// A verdict as a coloured badge.
 fn badge(verdict: &str) -> String {
     let class = match verdict {
@@ -108,7 +111,7 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
     // on every data set shown?
     h.push_str("<h2>Verdicts</h2>\n");
     // Per data set and joint: (residue / noise floor, verdict).
-    let mut columns: Vec<(String, Vec<(String, Option<f64>, String)>)> = Vec::new();
+    let mut columns: Vec<(String, Vec<VerdictCell>)> = Vec::new();
     if let Some(found) = params
         .metadata
         .get(metadata::ADEQUACY)
