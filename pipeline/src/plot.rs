@@ -311,7 +311,7 @@ pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) ->
         r.push_str(&format!("- timestamp jitter (RMS off a uniform grid): {j:.2e} s\n"));
     }
     if !o.noise.is_empty() {
-        r.push_str("\n| joint | channel | variance, time domain | variance, frequency domain | skewness | excess kurtosis | KS p-value |\n|---|---|---|---|---|---|---|\n");
+        r.push_str("\n| joint | channel | variance, time domain | variance, frequency domain | skewness | excess kurtosis | KS p-value | band edge / middle |\n|---|---|---|---|---|---|---|---|\n");
         for c in &o.noise {
             let ChannelNoise {
                 joint,
@@ -321,10 +321,12 @@ pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) ->
                 skewness,
                 excess_kurtosis,
                 ks_p_value,
+                band_edge_ratio,
                 ..
             } = c;
+            let edge = band_edge_ratio.map_or("-".into(), |r| format!("{r:.2}"));
             r.push_str(&format!(
-                "| {joint} | {channel} | {var_time:.3e} | {var_freq:.3e} | {skewness:.3} | {excess_kurtosis:.3} | {ks_p_value:.3} |\n"
+                "| {joint} | {channel} | {var_time:.3e} | {var_freq:.3e} | {skewness:.3} | {excess_kurtosis:.3} | {ks_p_value:.3} | {edge} |\n"
             ));
         }
     }

@@ -778,3 +778,69 @@ fn infinities_are_never_written() {
         "{e}"
     );
 }
+
+/// Declarations the data contradict, on the simulated KUKA axis (its
+/// recorder: Chebyshev I, order 8, 20 Hz; effort: motor current in A):
+/// each says so with its numbers, where today they pass silently.
+#[test]
+fn wrong_declarations_are_named_with_their_numbers() {
+    let ws = workspace(&["kuka_axis3"]);
+    let file = ws.path().join("pipelines/kuka_axis3.toml");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let right = "filter = { family = \"chebyshev1\", order = 8, cutoff_hz = 20.0, ripple_db = 0.5 }";
+    let notes_of = |label: &str, edited: String| {
+        assert_ne!(edited, text, "{label}: the edit applies");
+        let f = ws.path().join(format!("pipelines/{label}.toml"));
+        std::fs::write(&f, edited).unwrap();
+        let out = ws.path().join(label);
+        let r = run_pipeline(&f, &out, None);
+        let outcome = r[0].outcome.as_ref().unwrap();
+        let est =
+            robotid_stages::estimation::parameters_from_table(&read_parquet(&out.join("parameters.parquet")).unwrap())
+                .unwrap();
+        (
+            outcome.report.notes.join("\n"),
+            est.metadata.get(metadata::ADEQUACY).cloned().unwrap_or_default(),
+        )
+    };
+    // The right declarations: no warning, an adequate fit.
+    let (notes, adequacy) = notes_of("right", text.replace("method = \"ols\"", "method = \"ols\"\n"));
+    assert!(!notes.contains("warning"), "{notes}");
+    assert!(adequacy.contains("\"adequate\""), "{adequacy}");
+    // Butterworth 4 for Chebyshev 8: the noise tilts up at the band edge
+    // (×1.53) and the fit is 7.9× its noise floor.
+    let (notes, adequacy) = notes_of(
+        "butterworth",
+        text.replace(
+            right,
+            "filter = { family = \"butterworth\", order = 4, cutoff_hz = 20.0 }",
+        ),
+    );
+    assert!(
+        notes.contains("torque noise is 1.5") && notes.contains("anti-alias filter"),
+        "{notes}"
+    );
+    assert!(adequacy.contains("model error dominates"), "{adequacy}");
+    // A 10 Hz cutoff for 20 Hz: the inverse filter blows the edge up.
+    let (notes, _) = notes_of(
+        "cutoff",
+        text.replace(
+            right,
+            "filter = { family = \"chebyshev1\", order = 8, cutoff_hz = 10.0, ripple_db = 0.5 }",
+        ),
+    );
+    assert!(notes.contains("anti-alias filter"), "{notes}");
+    // The motor current declared as joint torque: 1/72 of what the robot
+    // file predicts (gear 80 × torque constant 0.9 N·m/A = 72).
+    let (notes, _) = notes_of(
+        "current",
+        text.replace(
+            "field = \"current\", unit = \"A\"",
+            "field = \"current\", unit = \"N*m\"",
+        ),
+    );
+    assert!(
+        notes.contains("measured torques are 0.01") && notes.contains("N·m at the joint"),
+        "{notes}"
+    );
+}

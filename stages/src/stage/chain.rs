@@ -132,6 +132,14 @@ pub struct ChannelNoise {
     pub excess_kurtosis: f64,
     pub ks_distance: f64,
     pub ks_p_value: f64,
+    /// Inverse-filtered torque: the noise power in the top fifth of the
+    /// band over that in its middle (0.3–0.7 of it). White noise through
+    /// the right filter and its inverse is flat there (≈ 1); a wrong
+    /// declared filter (family, order, cutoff) tilts it at the edge.
+    pub band_edge_ratio: Option<f64>,
+    /// The ratio is further from 1 than the scatter of its two means allows
+    /// (4σ of its logarithm, and at least 25 %).
+    pub band_edge_tilted: bool,
 }
 
 /// Facts one stage hands to a later one.

@@ -100,6 +100,19 @@ impl Stage for Noise {
                 .notes
                 .push(format!("noise: per-sample variances from the {how}"));
         }
+        for c in &summary {
+            let Some(r) = c.band_edge_ratio.filter(|_| c.band_edge_tilted) else {
+                continue;
+            };
+            let b = bandwidth.unwrap_or(f64::NAN);
+            chain.report.notes.push(format!(
+                "the {} torque noise is {r:.2}× as strong at {:.1}–{b:.1} Hz as at {:.1}–{:.1} Hz: after the right inverse filter, white noise is flat up to the band edge; check the declared anti-alias filter (family, order, cutoff) against the recorder's",
+                c.joint,
+                0.8 * b,
+                0.3 * b,
+                0.7 * b
+            ));
+        }
         chain.report.noise = summary;
         chain.noise = Some(table);
         Ok(())
@@ -134,6 +147,7 @@ pub fn noise(
             let bw = if channel == "torque" { bandwidth } else { None };
             let var_freq = frequency_variance(col, np, p.period_s, harmonics, bw, spectra);
             let (skewness, excess_kurtosis, ks_distance, ks_p_value) = normality(col, mean_col, np);
+            let edge = bw.and_then(|b| band_edge(col, np, p.period_s, harmonics, b, spectra));
             let stats = ChannelNoise {
                 joint: p.joints[j].clone(),
                 channel,
@@ -143,6 +157,8 @@ pub fn noise(
                 excess_kurtosis,
                 ks_distance,
                 ks_p_value,
+                band_edge_ratio: edge.map(|e| e.0),
+                band_edge_tilted: edge.is_some_and(|e| e.1),
             };
             (stats, if np > 1 { per_sample } else { vec![var_freq; n] })
         })
@@ -239,6 +255,46 @@ fn frequency_variance(
     // Lines carrying noise over the whole circle: all M, or 2·k_max + 1 when band-limited.
     let carried = if bandwidth.is_some() { 2 * k_max + 1 } else { m };
     mean_power * carried as f64 / (m as f64 * m as f64) / np as f64
+}
+
+/// The noise lines' mean power in the top fifth of the band `bandwidth`
+/// over that in 0.3–0.7 of it, and whether that is a tilt: a line's power
+/// is exponentially distributed, so the logarithm of a ratio of means over
+/// n₁ and n₂ lines scatters by √(1/n₁ + 1/n₂); beyond 4 of those (and
+/// 25 %) it is not chance. None with fewer than 20 lines on a side.
+fn band_edge(
+    col: &[f64],
+    np: usize,
+    period: f64,
+    harmonics: &[u32],
+    bandwidth: f64,
+    spectra: &Spectra,
+) -> Option<(f64, bool)> {
+    let spec = spectra.forward(col);
+    let df = 1.0 / (np as f64 * period);
+    let top = (col.len() - 1) / 2;
+    let noise_line = |k: usize| {
+        if np > 1 {
+            !k.is_multiple_of(np)
+        } else {
+            !harmonics.contains(&(k as u32))
+        }
+    };
+    let mean_power = |lo: f64, hi: f64| {
+        let lines: Vec<f64> = ((lo / df).ceil() as usize..=((hi / df).floor() as usize).min(top))
+            .filter(|&k| k > 0 && noise_line(k))
+            .map(|k| spec[k].norm_sqr())
+            .collect();
+        (lines.len() >= 20).then(|| (lines.iter().sum::<f64>() / lines.len() as f64, lines.len() as f64))
+    };
+    let (middle, n_middle) = mean_power(0.3 * bandwidth, 0.7 * bandwidth)?;
+    let (edge, n_edge) = mean_power(0.8 * bandwidth, bandwidth)?;
+    if middle <= 0.0 {
+        return None;
+    }
+    let ratio = edge / middle;
+    let scatter = (1.0 / n_middle + 1.0 / n_edge).sqrt();
+    Some((ratio, ratio.ln().abs() > (4.0 * scatter).max(1.25f64.ln())))
 }
 
 /// Skewness, excess kurtosis, KS distance and p-value of the residuals

@@ -249,6 +249,9 @@ impl Stage for Regressor {
         for d in &self.defaults {
             chain.report.notes.push(format!("regressor: default {d}"));
         }
+        if let Some(note) = torque_against_robot_file(&self.base, &rows.system) {
+            chain.report.notes.push(note);
+        }
         let mut rows = rows;
         if !self.defaults.is_empty() {
             rows.metadata
@@ -256,6 +259,38 @@ impl Stage for Regressor {
         }
         chain.regressor = Some(rows);
         Ok(())
+    }
+}
+
+/// The measured torques against those the robot file predicts for the same
+/// motion (its own parameters through the same regressor): b ≈ k·τ_file
+/// with k = bᵀτ/τᵀτ and their correlation. A robot file is rarely exact,
+/// but it is not off by a factor of 3: a k far from 1 where the two
+/// correlate says the torque is not in N·m at the joint (current read as
+/// torque, a missing gear ratio or torque constant); a strong negative
+/// correlation says a joint or channel is reversed. None when nothing is
+/// wrong or the file cannot tell (no inertias, no correlation).
+pub fn torque_against_robot_file(base: &BaseRegressor, sys: &System) -> Option<String> {
+    let theta = base.base_values(&base.model)?;
+    if theta.len() != sys.parameters() || theta.iter().all(|v| *v == 0.0) {
+        return None;
+    }
+    let predicted = &sys.a * theta;
+    let (bb, pp, bp) = (sys.b.norm_squared(), predicted.norm_squared(), sys.b.dot(&predicted));
+    if !(bb > 0.0 && pp > 0.0) {
+        return None;
+    }
+    let (k, corr) = (bp / pp, bp / (bb * pp).sqrt());
+    if corr > 0.5 && !(1.0 / 3.0..=3.0).contains(&k) {
+        Some(format!(
+            "warning: the measured torques are {k:.3}× those the robot file predicts for this motion (correlation {corr:.2}): is the effort in N·m at the joint? (current read as torque, a gear ratio or torque constant missing or applied twice)"
+        ))
+    } else if corr < -0.5 {
+        Some(format!(
+            "warning: the measured torques run against those the robot file predicts for this motion (correlation {corr:.2}, scale {k:.3}): a joint axis or the effort's sign reversed?"
+        ))
+    } else {
+        None
     }
 }
 
