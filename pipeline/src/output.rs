@@ -1,25 +1,32 @@
-//! The output folder of a run: refused where it would write among the
-//! inputs, held by one run at a time (a lock file naming the process), and
-//! cleared of what a killed run left half-written.
+//! The output folder of a run, written all at once or not at all.
+//!
+//! A run writes everything (tables, the estimate, pictures, the report)
+//! into a staging folder inside `--out`, `.robotid-staging-<pid>`, and
+//! [`Staging::commit`] moves it into place when every step succeeded. A run
+//! that fails removes its staging folder, so the output folder is as it
+//! was. A run killed before its commit leaves a staging folder that the
+//! next run removes; one killed during its commit (after the `COMMIT`
+//! marker) is finished by the next run: each file move is a rename, so a
+//! reader sees either the old set or the new. One run at a time holds the
+//! folder (an OS lock on `.robotid.lock`, released even by kill -9); a
+//! second is refused with the first's process id. `--out` where the inputs
+//! are is refused.
 
+use std::fs::{File, OpenOptions, TryLockError};
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
 /// Name of the lock file in an output folder.
 pub const LOCK: &str = ".robotid.lock";
-
-/// Holds an output folder for one run; released when dropped.
-#[derive(Debug)]
-pub struct OutputLock {
-    path: PathBuf,
-}
-
-impl Drop for OutputLock {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.path);
-    }
-}
+/// Prefix of a run's staging folder inside the output folder.
+pub const STAGING: &str = ".robotid-staging-";
+/// Written into the staging folder when its moves begin.
+const COMMIT: &str = "COMMIT";
+/// Inside the staging folder: what goes to the `--plot` folder, and that
+/// folder's path (a run finishing another's commit needs it).
+const PLOTS: &str = ".plots";
+const PLOT_TARGET: &str = ".plot-target";
 
 fn output_error(out: &Path, msg: String) -> Error {
     Error::Output {
@@ -28,19 +35,141 @@ fn output_error(out: &Path, msg: String) -> Error {
     }
 }
 
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+    move |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// A run's hold on its output folder: the lock, and the staging folder its
+/// writers use. Dropped without [`commit`](Staging::commit), it removes
+/// what it staged (and the output folder, if it made it and left it empty).
+#[derive(Debug)]
+pub struct Staging {
+    out: PathBuf,
+    dir: PathBuf,
+    plot: Option<PathBuf>,
+    lock: Option<(File, PathBuf)>,
+    created_out: bool,
+    created_plot: bool,
+    committed: bool,
+}
+
+impl Staging {
+    /// Where the run writes what belongs in `--out`.
+    pub fn staged_out(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Where the run writes what belongs in the `--plot` folder.
+    pub fn staged_plot(&self) -> Option<PathBuf> {
+        self.plot.as_ref().map(|_| self.dir.join(PLOTS))
+    }
+
+    /// Moves everything staged into place; the run's outputs appear.
+    pub fn commit(mut self) -> Result<()> {
+        std::fs::write(self.dir.join(COMMIT), b"").map_err(io(&self.dir))?;
+        finish(&self.dir, &self.out)?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+        if let Some((_, path)) = self.lock.take() {
+            // Unlinked while still held: a waiting run re-checks the path.
+            let _ = std::fs::remove_file(&path);
+        }
+        // Folders this run made and left empty (remove_dir only takes those).
+        if self.created_out {
+            let _ = std::fs::remove_dir(&self.out);
+        }
+        if let (true, Some(plot)) = (self.created_plot, &self.plot) {
+            let _ = std::fs::remove_dir(plot);
+        }
+    }
+}
+
+/// Where a staged file will be after the commit.
+pub fn placed(staged: &Path, staging: &Staging, opts: &crate::RunOptions) -> PathBuf {
+    if let (Some(from), Some(to)) = (staging.staged_plot(), &opts.plot) {
+        if let Ok(rest) = staged.strip_prefix(&from) {
+            return to.join(rest);
+        }
+    }
+    match staged.strip_prefix(staging.staged_out()) {
+        Ok(rest) => opts.out.join(rest),
+        Err(_) => staged.to_path_buf(),
+    }
+}
+
+/// Moves a committed staging folder's contents into `out` (and its plots
+/// into their folder), then removes it. Each move is a rename; files
+/// already moved are gone from the staging folder, so this can be resumed.
+fn finish(dir: &Path, out: &Path) -> Result<()> {
+    if let Ok(plot) = std::fs::read_to_string(dir.join(PLOT_TARGET)) {
+        let staged = dir.join(PLOTS);
+        if staged.exists() {
+            move_tree(&staged, Path::new(plot.trim_end_matches('\n')))?;
+        }
+    }
+    for entry in std::fs::read_dir(dir).map_err(io(dir))?.flatten() {
+        let name = entry.file_name();
+        if name == COMMIT || name == PLOTS || name == PLOT_TARGET {
+            continue;
+        }
+        move_tree(&entry.path(), &out.join(&name))?;
+    }
+    std::fs::remove_dir_all(dir).map_err(io(dir))
+}
+
+/// Moves a file or folder tree to `to`, file by file (replacing files,
+/// merging folders); across file systems by copy and remove.
+fn move_tree(from: &Path, to: &Path) -> Result<()> {
+    if from.is_dir() {
+        std::fs::create_dir_all(to).map_err(io(to))?;
+        for entry in std::fs::read_dir(from).map_err(io(from))?.flatten() {
+            move_tree(&entry.path(), &to.join(entry.file_name()))?;
+        }
+        return Ok(());
+    }
+    if std::fs::rename(from, to).is_err() {
+        // Another file system: copy beside the target, then rename.
+        let tmp = to.with_extension(format!("robotid-copy-{}", std::process::id()));
+        std::fs::copy(from, &tmp).map_err(io(&tmp))?;
+        std::fs::rename(&tmp, to).map_err(io(to))?;
+        std::fs::remove_file(from).map_err(io(from))?;
+    }
+    Ok(())
+}
+
 /// Whether a process of this id runs (Linux: its /proc entry).
 fn alive(pid: u32) -> bool {
     Path::new("/proc").join(pid.to_string()).exists()
 }
 
-/// Checks `out` against the logs, takes its lock, and removes the temporary
-/// files a killed run left (`.<name>.tmp-<pid>` of a process that is gone).
-pub fn prepare(out: &Path, logs: &[PathBuf]) -> Result<OutputLock> {
+/// Checks `out` against the logs, takes its lock, deals with what a killed
+/// run left (finishes a commit it began, removes a staging folder it did
+/// not commit, and `.<name>.tmp-<pid>` files of gone processes), and makes
+/// this run's staging folder. `plot`: the `--plot` folder, if any.
+pub fn prepare(out: &Path, plot: Option<&Path>, logs: &[PathBuf]) -> Result<Staging> {
     let canon = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
-    std::fs::create_dir_all(out).map_err(|source| Error::Io {
-        path: out.to_path_buf(),
-        source,
-    })?;
+    let created_out = !out.exists();
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let mut staging = Staging {
+        out: out.to_path_buf(),
+        dir: out.join(format!("{STAGING}{}", std::process::id())),
+        plot: plot.map(Path::to_path_buf),
+        lock: None,
+        created_out,
+        created_plot: false,
+        committed: false,
+    };
     let out_c = canon(out);
     for log in logs {
         let log_c = canon(log);
@@ -59,38 +188,88 @@ pub fn prepare(out: &Path, logs: &[PathBuf]) -> Result<OutputLock> {
             ));
         }
     }
-    let lock = out.join(LOCK);
-    for _ in 0..2 {
-        match std::fs::OpenOptions::new().write(true).create_new(true).open(&lock) {
-            Ok(mut f) => {
-                use std::io::Write;
-                let _ = writeln!(f, "{}", std::process::id());
-                clean_leftovers(out);
-                return Ok(OutputLock { path: lock });
+    staging.lock = Some(lock(out)?);
+    recover(out)?;
+    std::fs::create_dir_all(&staging.dir).map_err(io(&staging.dir))?;
+    if let Some(plot) = plot {
+        // The pictures' folder must take them at the commit: tried now,
+        // before any work, so that the commit cannot fail half-way there.
+        staging.created_plot = !plot.exists();
+        std::fs::create_dir_all(plot).map_err(io(plot))?;
+        let probe = plot.join(format!(".robotid-probe-{}", std::process::id()));
+        std::fs::write(&probe, b"").map_err(io(plot))?;
+        let _ = std::fs::remove_file(&probe);
+        let target = std::path::absolute(plot).map_err(io(plot))?;
+        std::fs::write(staging.dir.join(PLOT_TARGET), format!("{}\n", target.display())).map_err(io(&staging.dir))?;
+    }
+    Ok(staging)
+}
+
+/// Takes the output folder's lock: an OS lock on `.robotid.lock`, which
+/// holds this process id for the message a second run gets.
+fn lock(out: &Path) -> Result<(File, PathBuf)> {
+    let path = out.join(LOCK);
+    loop {
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io(&path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(TryLockError::WouldBlock) => {
+                let pid = std::fs::read_to_string(&path).unwrap_or_default();
+                return Err(output_error(
+                    out,
+                    format!(
+                        "another robotid run (process {}) is writing here; wait for it or give another --out",
+                        pid.trim()
+                    ),
+                ));
             }
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                let pid = std::fs::read_to_string(&lock)
-                    .ok()
-                    .and_then(|t| t.trim().parse::<u32>().ok());
-                match pid {
-                    Some(p) if alive(p) && p != std::process::id() => {
-                        return Err(output_error(
-                            out,
-                            format!(
-                                "another robotid run (process {p}) is writing here; wait for it or give another --out"
-                            ),
-                        ))
-                    }
-                    // A killed run's lock: taken over.
-                    _ => {
-                        let _ = std::fs::remove_file(&lock);
-                    }
-                }
-            }
-            Err(source) => return Err(Error::Io { path: lock, source }),
+            Err(TryLockError::Error(e)) => return Err(Error::Io { path, source: e }),
+        }
+        // The holder before us may have unlinked the file it held: the lock
+        // counts only on the file the path still names.
+        use std::os::unix::fs::MetadataExt;
+        let same = match (file.metadata(), std::fs::metadata(&path)) {
+            (Ok(a), Ok(b)) => a.ino() == b.ino() && a.dev() == b.dev(),
+            _ => false,
+        };
+        if !same {
+            continue;
+        }
+        use std::io::{Seek, Write};
+        file.set_len(0).map_err(io(&path))?;
+        file.seek(std::io::SeekFrom::Start(0)).map_err(io(&path))?;
+        writeln!(file, "{}", std::process::id()).map_err(io(&path))?;
+        return Ok((file, path));
+    }
+}
+
+/// What killed runs left in `out`: staging folders (finished if their
+/// commit began, removed if not) and `.<name>.tmp-<pid>` files of
+/// processes that are gone. Called with the lock held.
+fn recover(out: &Path) -> Result<()> {
+    for entry in std::fs::read_dir(out).map_err(io(out))?.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name.strip_prefix(STAGING).and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        if pid == std::process::id() || alive(pid) {
+            continue;
+        }
+        let dir = entry.path();
+        if dir.join(COMMIT).exists() {
+            finish(&dir, out)?;
+        } else {
+            std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
         }
     }
-    Err(output_error(out, "could not take the output folder's lock".into()))
+    clean_leftovers(out);
+    Ok(())
 }
 
 /// Removes `.<name>.tmp-<pid>` files of processes that are gone, anywhere

@@ -183,16 +183,39 @@ impl Built {
     }
 
     /// Every recording, then the estimate when the pipeline has one.
-    /// Tables go under `opts.out`, one folder per recording.
+    /// Tables go under `opts.out`, one folder per recording, all at once
+    /// when everything succeeded; when a recording fails nothing is written
+    /// (the report says which and why).
     pub fn run(&self, opts: &RunOptions) -> Result<RunReport> {
         let started = Instant::now();
-        let _lock = crate::output::prepare(&opts.out, &self.logs)?;
-        let recordings = self.run_recordings(opts);
-        let estimate = self.estimate_all(&recordings, &opts.out)?;
+        let staging = crate::output::prepare(&opts.out, opts.plot.as_deref(), &self.logs)?;
+        let staged = RunOptions {
+            out: staging.staged_out().to_path_buf(),
+            plot: staging.staged_plot(),
+            ..opts.clone()
+        };
+        let mut recordings = self.run_recordings(&staged);
+        if recordings.iter().any(|r| r.outcome.is_err()) {
+            // Nothing is written: the staging folder goes with `staging`.
+            return Ok(RunReport {
+                recordings,
+                estimate: None,
+                parameters: None,
+                seconds: started.elapsed().as_secs_f64(),
+            });
+        }
+        let estimate = self.estimate_all(&recordings, staging.staged_out())?;
+        let placed = |p: &Path| crate::output::placed(p, &staging, opts);
         let (estimate, parameters) = match estimate {
-            Some((e, p)) => (Some(e), Some(p)),
+            Some((e, p)) => (Some(e), Some(placed(&p))),
             None => (None, None),
         };
+        for r in &mut recordings {
+            if let Ok(o) = &mut r.outcome {
+                o.files = o.files.iter().map(|f| placed(f)).collect();
+            }
+        }
+        staging.commit()?;
         Ok(RunReport {
             recordings,
             estimate,

@@ -721,40 +721,6 @@ fn real_kuka_lwr4_identified_on_one_file_and_validated_on_the_others() {
     assert!(errors[2] <= 1.2 * errors[0], "{errors:?}");
 }
 
-/// The output folder: refused where the inputs are, held by one run at a
-/// time (the other process named), and cleared of a killed run's leftovers.
-#[test]
-fn the_output_folder_is_guarded() {
-    use robotid::output::{prepare, LOCK};
-    let ws = workspace(&["kuka_axis3"]);
-    let log = ws.path().join("recordings/kuka_axis3/kuka_axis3.mcap");
-    let before = std::fs::read(&log).unwrap();
-    // --out where the log is.
-    let e = prepare(&ws.path().join("recordings/kuka_axis3"), std::slice::from_ref(&log)).unwrap_err();
-    assert!(
-        matches!(&e, robotid::Error::Output { msg, .. } if msg.contains("holds the input")),
-        "{e}"
-    );
-    // A live process holds the folder: refused, naming it.
-    let out = ws.path().join("out");
-    std::fs::create_dir_all(&out).unwrap();
-    let other = std::os::unix::process::parent_id();
-    std::fs::write(out.join(LOCK), format!("{other}\n")).unwrap();
-    let e = prepare(&out, std::slice::from_ref(&log)).unwrap_err();
-    assert!(e.to_string().contains(&format!("process {other}")), "{e}");
-    // A killed run's lock and half-written table: taken over and removed.
-    let dead = 4_194_303; // above Linux's pid_max
-    std::fs::write(out.join(LOCK), format!("{dead}\n")).unwrap();
-    std::fs::create_dir_all(out.join("kuka_axis3")).unwrap();
-    let leftover = out.join(format!("kuka_axis3/.kinematics.parquet.tmp-{dead}"));
-    std::fs::write(&leftover, b"half").unwrap();
-    let lock = prepare(&out, std::slice::from_ref(&log)).unwrap();
-    assert!(!leftover.exists());
-    drop(lock);
-    assert!(!out.join(LOCK).exists(), "released when the run ends");
-    assert_eq!(std::fs::read(&log).unwrap(), before);
-}
-
 /// A single torque sample of 1e200 (finite) would make every spread and
 /// variance infinite: the tables are refused, naming the column and row.
 #[test]

@@ -37,13 +37,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
     });
-    let opts = RunOptions {
+    // Everything is written into a staging folder and appears at the end,
+    // or not at all (robotid::output).
+    let staging = robotid::output::prepare(&out, args.plot.as_deref(), &built.logs)?;
+    let final_opts = RunOptions {
         out: out.clone(),
         threads: args.threads,
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         plot: args.plot.clone(),
     };
-    let _lock = robotid::output::prepare(&out, &built.logs)?;
+    let opts = RunOptions {
+        out: staging.staged_out().to_path_buf(),
+        plot: staging.staged_plot(),
+        ..final_opts.clone()
+    };
+    let placed = |p: &std::path::Path| robotid::output::placed(p, &staging, &final_opts);
     let recordings = built.run_recordings(&opts);
     println!(
         "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
@@ -101,9 +109,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out.display()
     );
     if failed > 0 {
-        bail!("{failed} recording(s) failed (see above); their tables were not written");
+        bail!("{failed} recording(s) failed (see above); nothing was written (a run's outputs appear together or not at all)");
     }
-    if let Some((est, path)) = built.estimate_all(&recordings, &out)? {
+    if let Some((est, path)) = built.estimate_all(&recordings, staging.staged_out())? {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
         print!("{}", super::estimate::summary(&est.estimate, level));
         if let Some(fit) = &est.physical {
@@ -144,13 +152,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 est.outliers.join(", ")
             );
         }
-        println!("parameters in {}", path.display());
-        if let Some(dir) = &args.plot {
-            match robotid::report::write_run_report(&path, &recordings, dir) {
-                Ok(report) => println!("report in {}", report.display()),
+        println!("parameters in {}", placed(&path).display());
+        if let Some(dir) = staging.staged_plot() {
+            match robotid::report::write_run_report(&path, &recordings, &dir) {
+                Ok(report) => println!("report in {}", placed(&report).display()),
                 Err(e) => eprintln!("warning: no report: {e}"),
             }
         }
     }
+    staging.commit()?;
     Ok(())
 }

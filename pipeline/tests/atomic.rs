@@ -1,0 +1,227 @@
+//! A run's outputs appear together or not at all (`robotid::output`): the
+//! output folder is refused where the inputs are and held by one run at a
+//! time; a failing run leaves it byte-identical; a run killed at any point
+//! leaves the visible set as it was, and the next run cleans up (or
+//! finishes a commit that had begun); two runs started together never mix.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use robotid::output::{prepare, LOCK, STAGING};
+use robotid_tests::{bytes_of, workspace};
+
+fn robotid(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap()
+}
+
+/// The files a reader sees: everything but the run's hidden bookkeeping.
+fn visible(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    bytes_of(dir)
+        .into_iter()
+        .filter(|(k, _)| !k.starts_with(STAGING) && k != LOCK)
+        .collect()
+}
+
+#[test]
+fn the_output_folder_is_guarded_and_recovered() {
+    let ws = workspace(&["kuka_axis3"]);
+    let log = ws.path().join("recordings/kuka_axis3/kuka_axis3.mcap");
+    let before = std::fs::read(&log).unwrap();
+    // --out where the log is.
+    let e = prepare(
+        &ws.path().join("recordings/kuka_axis3"),
+        None,
+        std::slice::from_ref(&log),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, robotid::Error::Output { msg, .. } if msg.contains("holds the input")),
+        "{e}"
+    );
+    // A run holds the folder: a second is refused, naming its process.
+    let out = ws.path().join("out");
+    let first = prepare(&out, None, std::slice::from_ref(&log)).unwrap();
+    let e = prepare(&out, None, std::slice::from_ref(&log)).unwrap_err();
+    assert!(
+        e.to_string().contains(&format!("process {}", std::process::id())),
+        "{e}"
+    );
+    drop(first);
+    assert!(!out.exists(), "a run that made the folder and wrote nothing removes it");
+    // A killed run's leftovers: an uncommitted staging folder and a
+    // half-written table are removed; a committed one is finished.
+    let dead = 4_194_303; // above Linux's pid_max
+    std::fs::create_dir_all(out.join("kuka_axis3")).unwrap();
+    std::fs::write(out.join("kuka_axis3/old.parquet"), b"old").unwrap();
+    let uncommitted = out.join(format!("{STAGING}{dead}"));
+    std::fs::create_dir_all(uncommitted.join("kuka_axis3")).unwrap();
+    std::fs::write(uncommitted.join("kuka_axis3/old.parquet"), b"new, never committed").unwrap();
+    let leftover = out.join(format!("kuka_axis3/.kinematics.parquet.tmp-{dead}"));
+    std::fs::write(&leftover, b"half").unwrap();
+    drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
+    assert!(!leftover.exists() && !uncommitted.exists());
+    assert_eq!(std::fs::read(out.join("kuka_axis3/old.parquet")).unwrap(), b"old");
+    let committed = out.join(format!("{STAGING}{}", dead - 1));
+    std::fs::create_dir_all(committed.join("kuka_axis3")).unwrap();
+    std::fs::write(committed.join("kuka_axis3/old.parquet"), b"new, committed").unwrap();
+    std::fs::write(committed.join("COMMIT"), b"").unwrap();
+    drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
+    assert!(!committed.exists());
+    assert_eq!(
+        std::fs::read(out.join("kuka_axis3/old.parquet")).unwrap(),
+        b"new, committed"
+    );
+    assert!(!out.join(LOCK).exists(), "released when the run ends");
+    assert_eq!(std::fs::read(&log).unwrap(), before);
+}
+
+/// A recording that fails, an unwritable picture folder, a `known` table
+/// that cannot be read: exit 1, and the output folder byte-identical.
+#[test]
+fn a_failing_run_leaves_the_output_folder_as_it_was() {
+    let ws = workspace(&["kuka_axis3"]);
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let out = ws.path().join("out");
+    let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let before = bytes_of(&out);
+    assert!(before.len() >= 6, "{:?}", before.keys());
+    let text = std::fs::read_to_string(&pipeline).unwrap();
+    // The estimate fails after every table is made: its `known` table is garbage.
+    std::fs::write(ws.path().join("garbage.parquet"), b"not parquet").unwrap();
+    let failing = ws.path().join("pipelines/failing.toml");
+    std::fs::write(
+        &failing,
+        text.replace("method = \"ols\"", "method = \"ols\"\nknown = \"../garbage.parquet\""),
+    )
+    .unwrap();
+    let o = robotid(&["run", failing.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("garbage.parquet"));
+    assert_eq!(bytes_of(&out), before, "a failed estimate left traces");
+    // A picture folder that cannot be written: refused before any work.
+    let blocked = ws.path().join("blocked");
+    std::fs::write(&blocked, b"a file where the folder would be").unwrap();
+    let o = robotid(&[
+        "run",
+        pipeline.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--plot",
+        blocked.join("plots").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert_eq!(bytes_of(&out), before, "an unwritable --plot left traces");
+    // A recording that fails (its log truncated) in a fresh folder: none made.
+    let log = ws.path().join("recordings/kuka_axis3/kuka_axis3.mcap");
+    let bytes = std::fs::read(&log).unwrap();
+    std::fs::write(&log, &bytes[..bytes.len() / 3]).unwrap();
+    let fresh = ws.path().join("fresh");
+    let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", fresh.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("nothing was written"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!fresh.exists(), "a failed run made its output folder");
+}
+
+/// kill -9 at random points of 20 runs: each time the visible outputs are
+/// the old set or (if the commit had begun and the next run finishes it)
+/// the new one, never a mixture; the next run's start leaves no trace.
+#[test]
+fn killed_runs_leave_the_old_outputs_or_the_new() {
+    let ws = workspace(&["kuka_axis3"]);
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let out = ws.path().join("out");
+    let log = ws.path().join("recordings/kuka_axis3/kuka_axis3.mcap");
+    // The old set: another configuration's outputs (so old ≠ new).
+    let other = ws.path().join("pipelines/other.toml");
+    let text = std::fs::read_to_string(&pipeline).unwrap();
+    std::fs::write(&other, text.replace("confidence = 0.95", "confidence = 0.9")).unwrap();
+    let o = robotid(&["run", other.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success());
+    let old = visible(&out);
+    // The new set, and how long a run takes.
+    let new_out = ws.path().join("new");
+    let t = Instant::now();
+    let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", new_out.to_str().unwrap()]);
+    assert!(o.status.success());
+    let full = t.elapsed();
+    let new = visible(&new_out);
+    let (mut as_old, mut as_new) = (0, 0);
+    let trials = 20;
+    for k in 0..trials {
+        // Spread the kills over the whole run, commit included.
+        let at = full.mul_f64((k as f64 + 0.5) / trials as f64 * 1.1);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .args(["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(at);
+        let _ = child.kill(); // SIGKILL
+        let _ = child.wait();
+        let seen = visible(&out);
+        // What a reader sees right after the kill: the old set, or the new
+        // set partly moved in (the commit had begun; the next run finishes it).
+        drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
+        let after = bytes_of(&out);
+        if after == old {
+            as_old += 1;
+            assert_eq!(seen, old, "trial {k}: changed, then back?");
+        } else {
+            assert_eq!(after, new, "trial {k}: neither the old outputs nor the new");
+            as_new += 1;
+            // Back to the old set for the next trial.
+            std::fs::remove_dir_all(&out).unwrap();
+            let o = robotid(&["run", other.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+            assert!(o.status.success());
+        }
+    }
+    println!("{trials} kill -9 trials: {as_old} left the old outputs, {as_new} the new (commit done or finished by the next run)");
+    assert!(as_old > 0, "no kill landed before the commit");
+}
+
+/// Two runs started together into one folder: one is refused naming the
+/// other's process (or they run one after the other); the folder holds one
+/// run's complete outputs.
+#[test]
+fn concurrent_runs_never_mix() {
+    let ws = workspace(&["kuka_axis3"]);
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let out = ws.path().join("out");
+    let reference = ws.path().join("reference");
+    assert!(
+        robotid(&["run", pipeline.to_str().unwrap(), "--out", reference.to_str().unwrap()])
+            .status
+            .success()
+    );
+    let expected = visible(&reference);
+    let mut refused = 0;
+    for _ in 0..5 {
+        let spawn = || {
+            Command::new(env!("CARGO_BIN_EXE_robotid"))
+                .args(["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        };
+        let (a, b) = (spawn(), spawn());
+        for o in [a.wait_with_output().unwrap(), b.wait_with_output().unwrap()] {
+            if !o.status.success() {
+                let err = String::from_utf8_lossy(&o.stderr);
+                assert!(err.contains("another robotid run (process"), "{err}");
+                refused += 1;
+            }
+        }
+        assert_eq!(visible(&out), expected);
+        assert!(bytes_of(&out).keys().all(|k| !k.starts_with(STAGING) && k != LOCK));
+    }
+    println!("5 pairs of concurrent runs: {refused} refused, the folder whole every time");
+}
