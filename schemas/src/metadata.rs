@@ -102,6 +102,10 @@ pub const UNIDENTIFIED: &str = "robotid.estimate.unidentified";
 /// The essential parameters (Pham & Gautier), and those dropped to reach
 /// them with their relative standard deviations.
 pub const ESSENTIAL: &str = "robotid.estimate.essential";
+/// CRC-32 of a table's content (its columns' values, names and metadata,
+/// this key aside), checked on reading: a flipped bit anywhere in the data
+/// is refused instead of read.
+pub const CONTENT_CRC32: &str = "robotid.content_crc32";
 /// Parameters taken as known, comma separated.
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.

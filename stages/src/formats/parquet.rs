@@ -5,12 +5,84 @@ use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::properties::WriterProperties;
 
+use robotid_schemas::metadata::CONTENT_CRC32;
+
 use super::write_atomic;
 use crate::{Error, Result};
 
+/// CRC-32 of a batch's content: every column's name, metadata and values
+/// (validity included), and the schema metadata but [`CONTENT_CRC32`]
+/// itself. Computed from the values, so it does not depend on how a writer
+/// laid them out.
+pub fn content_crc32(batch: &RecordBatch) -> u32 {
+    use arrow::array::{Array, AsArray};
+    use arrow::datatypes::ToByteSlice;
+    use arrow::datatypes::{DataType, Float64Type, Int64Type};
+    let mut h = crc32fast::Hasher::new();
+    let schema = batch.schema();
+    let mut md: Vec<(&String, &String)> = schema
+        .metadata()
+        .iter()
+        .filter(|(k, _)| k.as_str() != CONTENT_CRC32)
+        .collect();
+    md.sort();
+    for (k, v) in md {
+        h.update(k.as_bytes());
+        h.update(&[0]);
+        h.update(v.as_bytes());
+        h.update(&[0]);
+    }
+    for (field, column) in schema.fields().iter().zip(batch.columns()) {
+        h.update(field.name().as_bytes());
+        let mut fmd: Vec<_> = field.metadata().iter().collect();
+        fmd.sort();
+        for (k, v) in fmd {
+            h.update(k.as_bytes());
+            h.update(v.as_bytes());
+        }
+        if column.null_count() > 0 {
+            for i in 0..column.len() {
+                h.update(&[column.is_null(i) as u8]);
+            }
+        }
+        match column.data_type() {
+            DataType::Float64 => h.update(column.as_primitive::<Float64Type>().values().as_ref().to_byte_slice()),
+            DataType::Int64 => h.update(column.as_primitive::<Int64Type>().values().as_ref().to_byte_slice()),
+            DataType::Utf8 => {
+                for v in column.as_string::<i32>().iter() {
+                    let v = v.unwrap_or("");
+                    h.update(&(v.len() as u64).to_le_bytes());
+                    h.update(v.as_bytes());
+                }
+            }
+            // Other types (none in robotid's tables): their display form.
+            _ => {
+                let text = arrow::util::display::ArrayFormatter::try_new(column.as_ref(), &Default::default())
+                    .map(|f| {
+                        (0..column.len())
+                            .map(|i| f.value(i).to_string())
+                            .collect::<Vec<_>>()
+                            .join("\u{1}")
+                    })
+                    .unwrap_or_default();
+                h.update(text.as_bytes());
+            }
+        }
+    }
+    h.finalize()
+}
+
 /// Writes one record batch as a Parquet file (zstd), atomically. The Arrow
-/// schema, with its field and schema metadata, is stored in the file.
+/// schema, with its field and schema metadata, is stored in the file, with
+/// the content's CRC-32 ([`CONTENT_CRC32`]) that [`read_parquet`] checks.
 pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
+    let mut md = batch.schema().metadata().clone();
+    md.insert(CONTENT_CRC32.to_string(), format!("{:08x}", content_crc32(batch)));
+    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
+    let batch = &RecordBatch::try_new(schema, batch.columns().to_vec()).map_err(|e| Error::Format {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })?;
     let props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
         .build();
@@ -26,7 +98,9 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     })
 }
 
-/// Reads a whole Parquet file into one record batch.
+/// Reads a whole Parquet file into one record batch. A file robotid wrote
+/// is refused when its content no longer matches its CRC-32; pages that
+/// carry a CRC (pyarrow's `write_page_checksum`) are checked by the reader.
 pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let fmt = |msg: String| Error::Format {
@@ -39,5 +113,14 @@ pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
     let schema = builder.schema().clone();
     let reader = builder.with_batch_size(65536).build().map_err(|e| fmt(e.to_string()))?;
     let batches = reader.collect::<Result<Vec<_>, _>>().map_err(|e| fmt(e.to_string()))?;
-    arrow::compute::concat_batches(&schema, &batches).map_err(|e| fmt(e.to_string()))
+    let batch = arrow::compute::concat_batches(&schema, &batches).map_err(|e| fmt(e.to_string()))?;
+    if let Some(stored) = schema.metadata().get(CONTENT_CRC32) {
+        let found = format!("{:08x}", content_crc32(&batch));
+        if *stored != found {
+            return Err(fmt(format!(
+                "corrupt: its content's CRC-32 is {found}, written as {stored} (a changed byte on disk or in transfer); restore it or make it again"
+            )));
+        }
+    }
+    Ok(batch)
 }
