@@ -764,3 +764,60 @@ fn degrees_read_as_radians_are_refused() {
         "{e}"
     );
 }
+
+/// Rewrites column `column` of the simulated CSV at data line `sample`.
+fn with_sample(dir: &Path, column: &str, sample: usize, value: f64) -> std::path::PathBuf {
+    let csv = std::fs::read_to_string(dir.join("rec.csv")).unwrap();
+    let mut lines: Vec<String> = csv.lines().map(str::to_string).collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let c = header.iter().position(|h| *h == column).unwrap();
+    let mut f: Vec<String> = lines[1 + sample].split(',').map(str::to_string).collect();
+    f[c] = value.to_string();
+    lines[1 + sample] = f.join(",");
+    let p = dir.join(format!("{column}_{sample}.csv"));
+    std::fs::write(&p, lines.join("\n")).unwrap();
+    p
+}
+
+/// A position spike of 1000 rad inside the joint limits' margin would be
+/// caught by the limits; one of 0.5 rad on a smooth motion, and a current
+/// sample of 1e200 A, are refused at their sample too — or, with
+/// `spikes = "repair"`, replaced with a note. Before, the first dropped
+/// periods with only a note and the second made every spread infinite.
+#[test]
+fn spikes_and_impossible_torques_are_refused_at_their_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let k = 1234;
+    let q = s.raw.q[1][k];
+    let p = with_sample(dir.path(), "q_j2", k, q + 0.5);
+    let e = read(&p, &ReadConfig::default(), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, sample: Some(at), msg, .. } if channel == "q_j2" && *at == k && msg.contains("isolated spike")),
+        "{e}"
+    );
+    let repaired = read(
+        &p,
+        &ReadConfig {
+            spikes: robotid_stages::stage::read::Spikes::Repair,
+            ..Default::default()
+        },
+        Some(&model),
+    )
+    .unwrap();
+    assert!((repaired.q[1][k] - q).abs() < 1e-3, "{} vs {q}", repaired.q[1][k]);
+    assert!(repaired.metadata["robotid.read.notes"].contains("isolated spikes replaced"));
+    // The clean recording: no spike anywhere (smooth motion, encoder steps).
+    assert!(read(&dir.path().join("rec.csv"), &ReadConfig::default(), Some(&model)).is_ok());
+    // 1e200 A of current: beyond 3× the joint's torque limit.
+    let p = with_sample(dir.path(), "current_j3", 77, 1e200);
+    let e = read(&p, &ReadConfig::default(), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { channel, sample: Some(77), msg, .. } if channel == "current_j3" && msg.contains("limit of 600")),
+        "{e}"
+    );
+}

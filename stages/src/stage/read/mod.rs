@@ -118,6 +118,56 @@ pub struct ReadConfig {
     /// dropped with a note instead of refused.
     #[serde(default)]
     pub drop_truncated_last_line: bool,
+    /// Isolated spikes (a sample far from both neighbours, which agree):
+    /// `refuse` (default: an error naming the sample) or `repair` (each
+    /// replaced by its neighbours' mean, with a note counting them).
+    #[serde(default)]
+    pub spikes: Spikes,
+    /// Torques beyond this multiple of the robot file's torque limit are
+    /// refused at their sample (default 3; a current read in the wrong
+    /// unit, a corrupt value).
+    pub max_torque_factor: Option<f64>,
+}
+
+/// What the read stage does with an isolated spike.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Spikes {
+    #[default]
+    Refuse,
+    Repair,
+}
+
+/// Default of `max_torque_factor`.
+pub const MAX_TORQUE_FACTOR: f64 = 3.0;
+
+/// The samples of `col` that are isolated spikes: far (T) from both
+/// neighbours, on the same side of them, while the neighbours agree
+/// (within T/4). T is 50× the median step (a signal's own steps, noise
+/// included, are seldom 10× it) and at least 1e-3 of the column's range
+/// (so that encoder counts on a slow motion are not spikes).
+pub fn spikes(col: &[f64]) -> Vec<usize> {
+    let n = col.len();
+    if n < 5 {
+        return Vec::new();
+    }
+    let mut steps: Vec<f64> = col.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let mid = steps.len() / 2;
+    let median = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    // The range without the spikes themselves: from the 1st to 99th percentile.
+    let mut sorted = col.to_vec();
+    let lo = *sorted.select_nth_unstable_by(n / 100, f64::total_cmp).1;
+    let hi = *sorted.select_nth_unstable_by(n - 1 - n / 100, f64::total_cmp).1;
+    let t = (50.0 * median).max(1e-3 * (hi - lo));
+    if !(t > 0.0) {
+        return Vec::new();
+    }
+    (1..n - 1)
+        .filter(|&k| {
+            let (d1, d2) = (col[k] - col[k - 1], col[k] - col[k + 1]);
+            d1.abs() > t && d2.abs() > t && d1.signum() == d2.signum() && (col[k + 1] - col[k - 1]).abs() < t / 4.0
+        })
+        .collect()
 }
 
 /// Extensions of the delimited-text logs (all read alike).
@@ -190,6 +240,12 @@ impl ReadConfig {
         }
         if self.joints.as_ref().is_some_and(|j| j.is_empty()) {
             out.push(Problem::new("joints", "is empty: name the recorded joints"));
+        }
+        if let Some(f) = self.max_torque_factor.filter(|f| !(*f >= 1.0 && f.is_finite())) {
+            out.push(Problem::new(
+                "max_torque_factor",
+                format!("must be a finite multiple ≥ 1 of the torque limits, not {f}"),
+            ));
         }
         out
     }
@@ -404,6 +460,56 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     if let Some(r) = &reference {
         check_finite(&source, r, &names[2])?;
     }
+    if let Some(m) = model {
+        check_torques(
+            &source,
+            &effort,
+            &names[1],
+            &joints,
+            m,
+            cfg.max_torque_factor.unwrap_or(MAX_TORQUE_FACTOR),
+        )?;
+    }
+    let mut repaired = Vec::new();
+    for (cols, channel_names) in [(&mut position, &names[0]), (&mut effort, &names[1])] {
+        for (col, name) in cols.iter_mut().zip(channel_names) {
+            let found = spikes(col);
+            let Some(&k) = found.first() else { continue };
+            if cfg.spikes == Spikes::Refuse {
+                return Err(Error::Data {
+                    source_name: source.clone(),
+                    channel: name.clone(),
+                    sample: Some(k),
+                    msg: format!(
+                        "{} is an isolated spike (its neighbours read {} and {}){}: a corrupt sample; `spikes = \"repair\"` in [read] replaces such samples by their neighbours' mean, with a note",
+                        col[k],
+                        col[k - 1],
+                        col[k + 1],
+                        if found.len() > 1 { format!("; {} such samples in this channel", found.len()) } else { String::new() }
+                    ),
+                });
+            }
+            for &k in &found {
+                col[k] = 0.5 * (col[k - 1] + col[k + 1]);
+            }
+            repaired.push(format!(
+                "{name}: {} at sample(s) {:?}",
+                found.len(),
+                &found[..found.len().min(5)]
+            ));
+        }
+    }
+    if !repaired.is_empty() {
+        let note = format!(
+            "isolated spikes replaced by their neighbours' mean ({})",
+            repaired.join("; ")
+        );
+        let all = match md.remove(metadata::READ_NOTES) {
+            Some(n) => format!("{n}; {note}"),
+            None => note,
+        };
+        md.insert(metadata::READ_NOTES.into(), all);
+    }
     md.insert(
         metadata::SOURCE_FILE.into(),
         path.file_name()
@@ -473,6 +579,38 @@ fn check_limits(source: &str, q: &[Vec<f64>], names: &[String], joints: &[String
                 sample: Some(k),
                 msg: format!(
                     "position {} rad is outside joint `{joint}`'s limits [{lo}, {hi}] rad (by more than {margin:.3} rad){hint}",
+                    col[k]
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Torques beyond `factor` times the joint's torque limit in the robot
+/// file, refused at the first such sample.
+fn check_torques(
+    source: &str,
+    tau: &[Vec<f64>],
+    names: &[String],
+    joints: &[String],
+    model: &Model,
+    factor: f64,
+) -> Result<()> {
+    for ((col, name), joint) in tau.iter().zip(names).zip(joints) {
+        let Some(i) = model.joints.iter().position(|j| &j.name == joint) else {
+            continue;
+        };
+        let Some(limit) = model.limits[i].torque.filter(|l| *l > 0.0) else {
+            continue;
+        };
+        if let Some(k) = col.iter().position(|v| v.abs() > factor * limit) {
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: name.clone(),
+                sample: Some(k),
+                msg: format!(
+                    "torque {:.6e} N·m is beyond {factor}× joint `{joint}`'s limit of {limit} N·m: a corrupt sample or the wrong unit (current read as torque, a torque constant too large); `max_torque_factor` in [read] sets the bound",
                     col[k]
                 ),
             });
