@@ -821,3 +821,73 @@ fn spikes_and_impossible_torques_are_refused_at_their_sample() {
         "{e}"
     );
 }
+
+/// An MCAP whose summary was damaged after writing: the messages are
+/// read, and a warning says the file was changed; a channel whose schema
+/// is named JointState but defines other fields is refused.
+#[test]
+fn mcap_summary_damage_is_reported_and_foreign_schemas_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let path = dir.path().join("rec.mcap");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let clean = read(&path, &ReadConfig::default(), Some(&model)).unwrap();
+    assert!(!clean
+        .metadata
+        .get("robotid.read.notes")
+        .is_some_and(|n| n.contains("summary")));
+    // Footer: opcode, length, summary_start (u64), summary_offset_start,
+    // summary_crc, then the 8-byte magic.
+    let n = bytes.len();
+    let footer = n - 8 - (1 + 8 + 8 + 8 + 4);
+    let start = u64::from_le_bytes(bytes[footer + 9..footer + 17].try_into().unwrap()) as usize;
+    assert!(start > 0 && start < footer);
+    for b in &mut bytes[start + 9..start + 40] {
+        *b ^= 0x5a;
+    }
+    let damaged = dir.path().join("damaged.mcap");
+    std::fs::write(&damaged, &bytes).unwrap();
+    let r = read(&damaged, &ReadConfig::default(), Some(&model)).unwrap();
+    assert_eq!(r.q, clean.q, "the messages themselves are intact");
+    let notes = &r.metadata["robotid.read.notes"];
+    assert!(notes.contains("damaged.mcap") && notes.contains("summary"), "{notes}");
+    // A JointState-named schema with other fields.
+    use robotid_stages::formats::cdr::{encode_joint_state, JointState};
+    let foreign = dir.path().join("foreign.mcap");
+    let mut w = mcap::WriteOptions::new()
+        .create(std::io::BufWriter::new(std::fs::File::create(&foreign).unwrap()))
+        .unwrap();
+    let schema = w
+        .add_schema("sensor_msgs/msg/JointState", "ros2msg", b"float64 x\nfloat64 y")
+        .unwrap();
+    let channel = w
+        .add_channel(schema, "/joint_states", "cdr", &Default::default())
+        .unwrap();
+    let mut buf = Vec::new();
+    for k in 0..10u64 {
+        let msg = JointState {
+            name: vec!["j1".into(), "j2".into(), "j3".into()],
+            position: vec![0.1; 3],
+            velocity: vec![0.0; 3],
+            effort: vec![1.0; 3],
+            ..Default::default()
+        };
+        encode_joint_state(&msg, &mut buf);
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: k as u32,
+                log_time: k * 1_000_000,
+                publish_time: k * 1_000_000,
+            },
+            &buf,
+        )
+        .unwrap();
+    }
+    w.finish().unwrap();
+    drop(w);
+    let e = read(&foreign, &ReadConfig::default(), Some(&model))
+        .map(|r| r.len())
+        .unwrap_err();
+    assert!(e.to_string().contains("does not define its fields"), "{e}");
+}

@@ -76,6 +76,17 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
         .ok_or("a CDR channel without a schema: its message type is unknown")?;
     match schema.name.as_str() {
         JOINT_STATE_NAME => {
+            // The schema's text, when given, must define JointState's
+            // arrays: a channel named so but laid out otherwise would
+            // decode into other numbers.
+            let text = String::from_utf8_lossy(&schema.data);
+            if !schema.data.is_empty()
+                && !["string[] name", "float64[] position", "float64[] effort"].iter().all(|f| text.contains(f))
+            {
+                return Err(format!(
+                    "the channel's schema is named {JOINT_STATE_NAME} but does not define its fields (string[] name, float64[] position, velocity, effort)"
+                ));
+            }
             let js = decode_joint_state(&message.data).map_err(|e| e.to_string())?;
             let values = match field {
                 "position" => js.position,
@@ -170,6 +181,8 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                         }
                     }
                 }
+                // The summary after it is checked below, as a warning.
+                Ok(mcap::records::Record::DataEnd(_)) => break,
                 Ok(_) => {}
                 Err(e) => return Err(fmt_at(f, format!("corrupt or truncated: {e}"))),
             }
@@ -194,7 +207,16 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         .collect();
     let mut seen_topics = BTreeMap::new();
     let messages = maps.iter().flat_map(|(f, map)| {
-        let options = mcap::read::Options::ValidateChunkCrcs.into();
+        // The messages end at the data-end record: the summary after it
+        // is checked on its own (a warning), the end magic here (a file
+        // cut short is refused).
+        if !map.ends_with(mcap::MAGIC) {
+            return Box::new(std::iter::once(Err(fmt_at(
+                f,
+                "truncated: it does not end with the MCAP magic (a copy or a recording cut short)".into(),
+            )))) as Box<dyn Iterator<Item = Result<mcap::Message>>>;
+        }
+        let options = mcap::read::Options::ValidateChunkCrcs | mcap::read::Options::IgnoreEndMagic;
         match mcap::MessageStream::new_with_options(map, options) {
             Ok(stream) => Box::new(stream.enumerate().map(move |(count, m)| {
                 m.map_err(|e| fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")))
@@ -320,17 +342,37 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             .to_string(),
     );
     let time: Vec<f64> = base.iter().map(|&ns| (ns - t0) as f64).collect();
-    let notes: Vec<String> = specs
-        .iter()
-        .zip(&series)
-        .filter(|(_, s)| s.reorders > 0)
-        .map(|(w, s)| {
-            format!(
-                "{}: the publisher changed its joint names or order {} time(s); matched by name on every message",
-                w.topic, s.reorders
-            )
-        })
-        .collect();
+    let mut notes: Vec<String> = Vec::new();
+    // The summary (index and statistics at the end) is not needed to read
+    // the messages, but a damaged or inconsistent one says the file was
+    // changed or cut: said, not ignored.
+    for (f, map) in &maps {
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match mcap::read::Summary::read(map) {
+            Err(e) => notes.push(format!(
+                "warning: {name}: its summary section is unreadable ({e}); the messages were read from the data section"
+            )),
+            Ok(None) => {}
+            Ok(Some(summary)) => {
+                let seen: usize = seen_topics.values().sum();
+                let counted = summary.stats.as_ref().map(|st| st.message_count as usize);
+                if let Some(count) = counted.filter(|c| maps.len() == 1 && *c != seen) {
+                    notes.push(format!(
+                        "warning: {name}: its summary counts {count} messages, the file holds {seen}: the file was changed or cut after it was written"
+                    ));
+                }
+            }
+        }
+    }
+    notes.extend(specs.iter().zip(&series).filter(|(_, s)| s.reorders > 0).map(|(w, s)| {
+        format!(
+            "{}: the publisher changed its joint names or order {} time(s); matched by name on every message",
+            w.topic, s.reorders
+        )
+    }));
     if !notes.is_empty() {
         metadata.insert(metadata::READ_NOTES.into(), notes.join("; "));
     }

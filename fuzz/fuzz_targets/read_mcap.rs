@@ -1,0 +1,13 @@
+//! The read stage on arbitrary .mcap bytes: an error or samples, never a
+//! panic, an abort or a hang.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+use robotid_stages::stage::read::{read, ReadConfig};
+
+#[path = "common.rs"]
+mod common;
+
+fuzz_target!(|data: &[u8]| {
+    let path = common::as_file(data, "log.mcap");
+    let _ = read(&path, &ReadConfig::default(), None);
+});
