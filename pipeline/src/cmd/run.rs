@@ -102,7 +102,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     println!(
-        "{} of {} recording(s) done in {:.2} s; tables in {}",
+        "{} of {} recording(s) done in {:.2} s; output folder {}",
         recordings.len() - failed,
         recordings.len(),
         started.elapsed().as_secs_f64(),

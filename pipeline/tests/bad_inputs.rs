@@ -1,0 +1,249 @@
+//! The bad-input campaign as tests: each class of input that once made
+//! robotid panic, hang, write partial outputs or read corrupt data as
+//! valid, made here from the bundled examples. Each must exit non-zero
+//! with a message naming the place (file, and key, channel or sample), in
+//! seconds, and leave the output folder and the inputs byte-identical.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use robotid_tests::{bytes_of, workspace};
+
+struct Case {
+    name: &'static str,
+    args: Vec<String>,
+    /// Every one of these must be in the message.
+    says: Vec<String>,
+}
+
+fn run(args: &[String]) -> (bool, String, Duration) {
+    let t = Instant::now();
+    let o = Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap();
+    (
+        o.status.success(),
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        ),
+        t.elapsed(),
+    )
+}
+
+fn edit(from: &Path, to: &Path, pairs: &[(&str, &str)]) {
+    let mut text = std::fs::read_to_string(from).unwrap();
+    for (a, b) in pairs {
+        assert!(text.contains(a), "{}: no `{a}`", from.display());
+        text = text.replace(a, b);
+    }
+    std::fs::write(to, text).unwrap();
+}
+
+#[test]
+fn every_class_of_bad_input_is_refused_cleanly() {
+    let ws = workspace(&["kuka_axis3"]);
+    let w = ws.path();
+    let s = |p: &Path| p.display().to_string();
+    let out = w.join("out");
+    let pipeline = w.join("pipelines/kuka_axis3.toml");
+    // A good run first: the folder every failing run must leave alone.
+    let (ok, text, _) = run(&["run".into(), s(&pipeline), "--out".into(), s(&out)]);
+    assert!(ok, "{text}");
+    let mut cases = Vec::new();
+    let sim = w.join("sims/kuka_axis3.toml");
+    let robot = w.join("robots/kuka_axis3.toml");
+    // Simulation settings that once aborted or panicked.
+    for (name, from, to, key) in [
+        (
+            "transient_s = inf",
+            "transient_s = 5.0",
+            "transient_s = inf",
+            "transient_s",
+        ),
+        ("periods = 1e8", "periods = 6", "periods = 100000000", "periods"),
+    ] {
+        let f = w.join(format!("sims/{}.toml", name.replace([' ', '='], "_")));
+        edit(&sim, &f, &[(from, to)]);
+        cases.push(Case {
+            name,
+            args: vec!["simulate".into(), s(&f), "--out".into(), s(&out)],
+            says: vec![f.file_name().unwrap().to_string_lossy().into_owned(), key.into()],
+        });
+    }
+    // A zero-mass link: the mass matrix is singular.
+    let massless = w.join("robots/massless.toml");
+    let text = std::fs::read_to_string(&robot).unwrap();
+    let mass_line = text.lines().find(|l| l.starts_with("mass")).unwrap().to_string();
+    edit(&robot, &massless, &[(&mass_line, "mass = 0.0")]);
+    let inertia_line = text.lines().find(|l| l.starts_with("inertia")).unwrap().to_string();
+    edit(
+        &massless,
+        &massless,
+        &[(&inertia_line, "inertia = { ixx = 0.0, iyy = 0.0, izz = 0.0 }")],
+    );
+    let sim_massless = w.join("sims/massless.toml");
+    edit(
+        &sim,
+        &sim_massless,
+        &[("../robots/kuka_axis3.toml", "../robots/massless.toml")],
+    );
+    cases.push(Case {
+        name: "a link without mass or inertia",
+        args: vec!["simulate".into(), s(&sim_massless), "--out".into(), s(&out)],
+        says: vec!["mass".into()],
+    });
+    // Pipeline settings that passed lint, then aborted.
+    let huge = w.join("pipelines/huge.toml");
+    edit(
+        &pipeline,
+        &huge,
+        &[("kind = \"align\"", "kind = \"align\"\nsamples_per_period = 2000000000")],
+    );
+    cases.push(Case {
+        name: "samples_per_period = 2e9",
+        args: vec!["run".into(), s(&huge), "--out".into(), s(&out)],
+        says: vec!["huge.toml".into(), "samples_per_period".into()],
+    });
+    // Export with a NaN parameter, and with a negative or NaN prior weight.
+    let params = out.join("parameters.parquet");
+    for (name, extra) in [("prior weight −1", "-1"), ("prior weight NaN", "NaN")] {
+        cases.push(Case {
+            name,
+            args: vec![
+                "export".into(),
+                "--robot".into(),
+                s(&robot),
+                "-p".into(),
+                s(&params),
+                "-o".into(),
+                s(&out.join("x.urdf")),
+                format!("--prior-weight={extra}"),
+            ],
+            says: vec!["prior weight".into()],
+        });
+    }
+    // A truncated MCAP, a Parquet table with a flipped bit.
+    let log = w.join("recordings/kuka_axis3/kuka_axis3.mcap");
+    let bytes = std::fs::read(&log).unwrap();
+    let cut = w.join("cut/kuka_axis3.mcap");
+    std::fs::create_dir_all(cut.parent().unwrap()).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let cut_pipeline = w.join("pipelines/cut.toml");
+    edit(
+        &pipeline,
+        &cut_pipeline,
+        &[("../recordings/kuka_axis3/kuka_axis3.mcap", "../cut/kuka_axis3.mcap")],
+    );
+    cases.push(Case {
+        name: "a truncated MCAP",
+        args: vec!["run".into(), s(&cut_pipeline), "--out".into(), s(&out)],
+        says: vec!["cut/kuka_axis3.mcap".into()],
+    });
+    let table = out.join("kuka_axis3/regressor.parquet");
+    let mut t = std::fs::read(&table).unwrap();
+    let at = t.len() / 2;
+    t[at] ^= 0x04;
+    let flipped = w.join("flipped.parquet");
+    std::fs::write(&flipped, &t).unwrap();
+    cases.push(Case {
+        name: "a Parquet table with a flipped bit",
+        args: vec!["estimate".into(), s(&flipped), "-o".into(), s(&out.join("p.parquet"))],
+        says: vec!["flipped.parquet".into()],
+    });
+    // Text logs: nanoseconds declared as seconds, a bad byte, a spike.
+    let csv = w.join("csv");
+    std::fs::create_dir_all(&csv).unwrap();
+    let rows: Vec<String> = (0..3000)
+        .map(|k| {
+            let t = k as f64 / 150.0;
+            format!(
+                "{},{},{}",
+                (t * 1e9) as i64,
+                0.3 * (0.6283 * t).sin(),
+                100.0 * (0.6283 * t).cos()
+            )
+        })
+        .collect();
+    std::fs::write(
+        csv.join("ns.csv"),
+        format!("time,q_a3,torque_a3\n{}\n", rows.join("\n")),
+    )
+    .unwrap();
+    let text_pipeline = |name: &str, log: &str| {
+        let p = w.join(format!("pipelines/{name}.toml"));
+        std::fs::write(
+            &p,
+            format!(
+                "version = 1\nrobot = \"../robots/kuka_axis3.toml\"\n[source]\npath = \"../csv/{log}\"\n[read]\neffort = {{ column = \"torque_{{joint}}\", unit = \"N*m\" }}\n[[stage]]\nkind = \"align\"\nperiod_s = 10.0\n[[stage]]\nkind = \"average\"\n[output]\ntables = [\"period_mean\"]\n"
+            ),
+        )
+        .unwrap();
+        p
+    };
+    cases.push(Case {
+        name: "nanoseconds declared as seconds",
+        args: vec!["run".into(), s(&text_pipeline("ns", "ns.csv")), "--out".into(), s(&out)],
+        says: vec!["ns.csv".into(), "ns".into()],
+    });
+    let mut bad = std::fs::read(csv.join("ns.csv")).unwrap();
+    let line5 = bad.iter().enumerate().filter(|(_, b)| **b == b'\n').nth(4).unwrap().0 + 3;
+    bad[line5] = 0xff;
+    std::fs::write(csv.join("utf8.csv"), &bad).unwrap();
+    cases.push(Case {
+        name: "a byte that is not UTF-8",
+        args: vec![
+            "run".into(),
+            s(&text_pipeline("utf8", "utf8.csv")),
+            "--out".into(),
+            s(&out),
+        ],
+        says: vec!["utf8.csv".into(), "line 6".into()],
+    });
+    let seconds: Vec<String> = rows
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let f: Vec<&str> = r.split(',').collect();
+            let q: f64 = f[1].parse::<f64>().unwrap() + if k == 1500 { 0.8 } else { 0.0 };
+            format!("{},{q},{}", k as f64 / 150.0, f[2])
+        })
+        .collect();
+    std::fs::write(
+        csv.join("spike.csv"),
+        format!("time,q_a3,torque_a3\n{}\n", seconds.join("\n")),
+    )
+    .unwrap();
+    cases.push(Case {
+        name: "a position spike",
+        args: vec![
+            "run".into(),
+            s(&text_pipeline("spike", "spike.csv")),
+            "--out".into(),
+            s(&out),
+        ],
+        says: vec!["spike.csv".into(), "q_a3".into(), "1500".into(), "spike".into()],
+    });
+    let before_out = bytes_of(&out);
+    let inputs = [w.join("recordings"), w.join("csv"), w.join("robots"), w.join("sims")];
+    let before_in: Vec<_> = inputs.iter().map(|d| bytes_of(d)).collect();
+    for c in &cases {
+        let (ok, text, took) = run(&c.args);
+        println!(
+            "{:<36} {:>6.2} s  {}",
+            c.name,
+            took.as_secs_f64(),
+            text.lines().last().unwrap_or("")
+        );
+        assert!(!ok, "{}: exit 0\n{text}", c.name);
+        assert!(!text.contains("panicked"), "{}: panic\n{text}", c.name);
+        for needle in &c.says {
+            assert!(text.contains(needle.as_str()), "{}: no `{needle}` in\n{text}", c.name);
+        }
+        assert!(took < Duration::from_secs(30), "{}: took {took:?}", c.name);
+        assert_eq!(bytes_of(&out), before_out, "{}: the output folder changed", c.name);
+    }
+    for (d, before) in inputs.iter().zip(&before_in) {
+        assert_eq!(&bytes_of(d), before, "{}: an input changed", d.display());
+    }
+}
