@@ -1,14 +1,4 @@
-//! The read stage on arbitrary .parquet bytes: an error or samples, never a
-//! panic, an abort or a hang.
+//! `robotid::fuzz::read_parquet` on arbitrary bytes: it must return, never panic,
+//! abort or hang.
 #![no_main]
-use libfuzzer_sys::fuzz_target;
-use robotid_stages::stage::read::{read, ReadConfig};
-
-#[path = "common.rs"]
-mod common;
-
-fuzz_target!(|data: &[u8]| {
-    let path = common::as_file(data, "log.parquet");
-    let _ = read(&path, &ReadConfig::default(), None);
-});
-// (robotid's own tables go through the same reader: formats::parquet.)
+libfuzzer_sys::fuzz_target!(|data: &[u8]| robotid::fuzz::read_parquet(data));

@@ -5,6 +5,7 @@
 
 pub mod compare;
 pub mod error;
+pub mod fuzz;
 pub mod output;
 pub mod pipeline;
 pub mod plan;

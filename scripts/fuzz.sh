@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Fuzzes robotid's readers with cargo fuzz (libFuzzer, address sanitizer):
+# text logs, MCAP, Parquet, pipeline files, robot files (TOML and URDF),
+# simulation files. Usage: bash scripts/fuzz.sh [SECONDS per target, 60]
+# [TARGET...]. Seeds are in fuzz/seeds/<target>; the corpus grows in
+# fuzz/corpus/<target> (not committed); a crash is written to
+# fuzz/artifacts/<target>/ — copy it into fuzz/regressions/<target>/ and
+# commit it, where pipeline/tests/fuzz_regressions.rs replays it on every
+# test run. The machine's stable toolchain takes libFuzzer's nightly flags
+# with RUSTC_BOOTSTRAP=1.
+set -euo pipefail
+cd "$(dirname "$0")/../fuzz"
+command -v cargo-fuzz > /dev/null || cargo install cargo-fuzz --locked
+export RUSTC_BOOTSTRAP=1
+export CARGO_TARGET_DIR="${CARGO_FUZZ_TARGET_DIR:-$HOME/.cache/robotid/fuzz-target}"
+seconds="${1:-60}"
+shift || true
+targets=("$@")
+[ ${#targets[@]} -gt 0 ] || targets=(read_text read_mcap read_parquet pipeline_toml robot_file simulation_toml)
+for t in "${targets[@]}"; do
+  mkdir -p "corpus/$t" "seeds/$t"
+  echo "== $t for $seconds s"
+  cargo fuzz run -O "$t" "corpus/$t" "seeds/$t" -- \
+    -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=4096 -print_final_stats=1 2>&1 \
+    | grep -E "^(stat::number_of_executed_units|stat::peak_rss_mb|#[0-9]+ +DONE)|cov:|ERROR|panicked|SUMMARY" | tail -4
+done
