@@ -10,8 +10,11 @@ use robotid_stages::dynamics::{load_robot, mass_matrix, rnea, Data};
 use robotid_stages::simulation::SimConfig;
 use robotid_stages::stage::read::{read, ReadConfig};
 
+/// A fuzz entry point.
+pub type Target = fn(&[u8]);
+
 /// The targets by name, as in fuzz/Cargo.toml.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+pub const TARGETS: &[(&str, Target)] = &[
     ("read_text", read_text),
     ("read_mcap", read_mcap),
     ("read_parquet", read_parquet),
