@@ -10,7 +10,6 @@ use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use robotid_schemas::Kinematics;
 use robotid_stages::dynamics::{load_robot, BaseRegressor};
 use robotid_stages::estimation::{least_squares, stacked_least_squares, Covariance, System, Verdict};
 use robotid_stages::stage::regressor::RegressorConfig;
@@ -25,31 +24,12 @@ const PERIOD: f64 = 10.0;
 /// + noise.
 fn recording(base: &BaseRegressor, theta: &DVector<f64>, rng: &mut ChaCha8Rng, model_error: f64, noise: f64) -> System {
     let n = base.model.dof();
-    let w = std::f64::consts::TAU / PERIOD;
-    let mut kin = Kinematics {
-        joints: base.model.joint_names(),
-        time: (0..SAMPLES).map(|i| i as f64 * PERIOD / SAMPLES as f64).collect(),
-        q: vec![vec![0.0; SAMPLES]; n],
-        qd: vec![vec![0.0; SAMPLES]; n],
-        qdd: vec![vec![0.0; SAMPLES]; n],
-        torque: None,
-        metadata: Default::default(),
-    };
-    for j in 0..n {
-        for h in 1..=5 {
-            let (a, b) = (
-                rng.random_range(-0.4..0.4) / h as f64,
-                rng.random_range(-0.4..0.4) / h as f64,
-            );
-            let hw = h as f64 * w;
-            for i in 0..SAMPLES {
-                let (s, c) = (hw * kin.time[i]).sin_cos();
-                kin.q[j][i] += (a * s + b * c) / hw;
-                kin.qd[j][i] += a * c - b * s;
-                kin.qdd[j][i] += -hw * (a * s + b * c);
-            }
-        }
-    }
+    let kin = robotid_tests::fourier_kinematics(base.model.joint_names(), SAMPLES, PERIOD, |_, h| {
+        (
+            rng.random_range(-0.4..0.4) / h as f64,
+            rng.random_range(-0.4..0.4) / h as f64,
+        )
+    });
     let a = base.matrix(&kin);
     let rows = a.nrows();
     let exact = &a * theta;

@@ -23,36 +23,13 @@ const BAND: f64 = 20.0;
 /// A 5-harmonic excitation at 0.1 Hz per joint, exact derivatives, on `len`
 /// samples of one period.
 fn kinematics(n: usize, len: usize) -> Kinematics {
-    let w = std::f64::consts::TAU / PERIOD;
-    let coef = |j: usize, h: usize| {
+    let names = (1..=n).map(|j| format!("j{j}")).collect();
+    robotid_tests::fourier_kinematics(names, len, PERIOD, |j, h| {
         (
             0.35 / h as f64 * (1.0 + 0.3 * j as f64),
             0.2 * ((j + h) % 3) as f64 - 0.2,
         )
-    };
-    let mut k = Kinematics {
-        joints: (1..=n).map(|j| format!("j{j}")).collect(),
-        time: (0..len).map(|i| i as f64 * PERIOD / len as f64).collect(),
-        q: vec![vec![0.0; len]; n],
-        qd: vec![vec![0.0; len]; n],
-        qdd: vec![vec![0.0; len]; n],
-        torque: None,
-        metadata: Default::default(),
-    };
-    for j in 0..n {
-        for i in 0..len {
-            let t = k.time[i];
-            for h in 1..=5 {
-                let (a, b) = coef(j, h);
-                let hw = h as f64 * w;
-                let (s, c) = (hw * t).sin_cos();
-                k.q[j][i] += a * s / hw + b * c / hw;
-                k.qd[j][i] += a * c - b * s;
-                k.qdd[j][i] += -a * hw * s - b * hw * c;
-            }
-        }
-    }
-    k
+    })
 }
 
 /// Keeps the DFT lines at or below the band of each joint's series (length
@@ -74,6 +51,15 @@ fn per_joint(a: &DMatrix<f64>, theta: &DVector<f64>, n: usize) -> Vec<Vec<f64>> 
         .collect()
 }
 
+/// The reference: the torque on a 64× finer grid, band-limited, per joint.
+fn reference_torque(base: &BaseRegressor, theta: &DVector<f64>, spectra: &Spectra) -> Vec<Vec<f64>> {
+    let n = base.model.dof();
+    per_joint(&base.matrix(&kinematics(n, SAMPLES * 64)), theta, n)
+        .iter()
+        .map(|t| band_limited(t, spectra))
+        .collect()
+}
+
 fn model() -> (Model, BaseRegressor, RegressorConfig, DVector<f64>) {
     let model = load_robot(&fixture("robots/arm3.toml")).unwrap();
     let cfg = RegressorConfig {
@@ -92,12 +78,7 @@ fn exact_coulomb_friction_is_band_limited_without_aliasing() {
     let (model, base, cfg, theta) = model();
     let n = model.dof();
     let spectra = Spectra::new();
-    // The reference: the torque on a 64× finer grid, band-limited.
-    let fine = kinematics(n, SAMPLES * 64);
-    let reference: Vec<Vec<f64>> = per_joint(&base.matrix(&fine), &theta, n)
-        .iter()
-        .map(|t| band_limited(t, &spectra))
-        .collect();
+    let reference = reference_torque(&base, &theta, &spectra);
     let mut kin = kinematics(n, SAMPLES);
     kin.torque = Some(reference.clone());
     let rows = regressor_rows(
@@ -162,11 +143,7 @@ fn exact_coulomb_friction_leaves_the_residual_at_the_noise_floor() {
     let (model, base, cfg, theta) = model();
     let n = model.dof();
     let spectra = Spectra::new();
-    let fine = kinematics(n, SAMPLES * 64);
-    let reference: Vec<Vec<f64>> = per_joint(&base.matrix(&fine), &theta, n)
-        .iter()
-        .map(|t| band_limited(t, &spectra))
-        .collect();
+    let reference = reference_torque(&base, &theta, &spectra);
     // Band-limited white noise of 0.4 N·m per sample (after averaging; a
     // hundredth of these joints' torque, a tenth of a real one's noise),
     // a seeded generator.

@@ -11,7 +11,6 @@ use nalgebra::DVector;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use robotid_schemas::Kinematics;
 use robotid_stages::dynamics::{load_robot, parameter_names, standard_parameters};
 use robotid_stages::estimation::{essential_parameters, least_squares, unidentified, Summary, System};
 use robotid_stages::stage::regressor::RegressorConfig;
@@ -43,31 +42,12 @@ fn a_nearly_vertical_axis_leaves_first_moments_unidentified() {
     let n = model.dof();
     let samples = 2000;
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let w = std::f64::consts::TAU / 10.0;
-    let mut kin = Kinematics {
-        joints: model.joint_names(),
-        time: (0..samples).map(|i| i as f64 * 10.0 / samples as f64).collect(),
-        q: vec![vec![0.0; samples]; n],
-        qd: vec![vec![0.0; samples]; n],
-        qdd: vec![vec![0.0; samples]; n],
-        torque: None,
-        metadata: Default::default(),
-    };
-    for j in 0..n {
-        for h in 1..=5 {
-            let (a, b) = (
-                rng.random_range(-0.4..0.4) / h as f64,
-                rng.random_range(-0.4..0.4) / h as f64,
-            );
-            let hw = h as f64 * w;
-            for i in 0..samples {
-                let (s, c) = (hw * kin.time[i]).sin_cos();
-                kin.q[j][i] += (a * s + b * c) / hw;
-                kin.qd[j][i] += a * c - b * s;
-                kin.qdd[j][i] += -hw * (a * s + b * c);
-            }
-        }
-    }
+    let kin = robotid_tests::fourier_kinematics(model.joint_names(), samples, 10.0, |_, h| {
+        (
+            rng.random_range(-0.4..0.4) / h as f64,
+            rng.random_range(-0.4..0.4) / h as f64,
+        )
+    });
     let a = base.matrix(&kin);
     let truth = base.base_values(&model).unwrap();
     let noise = Normal::new(0.0, 0.5).unwrap();

@@ -96,3 +96,38 @@ pub fn bytes_of(dir: &Path) -> BTreeMap<String, Vec<u8>> {
 pub fn python() -> String {
     std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
 }
+
+/// One period of a 5-harmonic Fourier trajectory per joint, with exact
+/// velocities and accelerations, on `samples` samples: `coefficient(j, h)`
+/// gives joint j's (sine, cosine) velocity amplitudes of harmonic h.
+pub fn fourier_kinematics(
+    joints: Vec<String>,
+    samples: usize,
+    period: f64,
+    mut coefficient: impl FnMut(usize, usize) -> (f64, f64),
+) -> robotid_schemas::Kinematics {
+    let n = joints.len();
+    let w = std::f64::consts::TAU / period;
+    let mut k = robotid_schemas::Kinematics {
+        joints,
+        time: (0..samples).map(|i| i as f64 * period / samples as f64).collect(),
+        q: vec![vec![0.0; samples]; n],
+        qd: vec![vec![0.0; samples]; n],
+        qdd: vec![vec![0.0; samples]; n],
+        torque: None,
+        metadata: Default::default(),
+    };
+    for j in 0..n {
+        for h in 1..=5 {
+            let (a, b) = coefficient(j, h);
+            let hw = h as f64 * w;
+            for i in 0..samples {
+                let (s, c) = (hw * k.time[i]).sin_cos();
+                k.q[j][i] += (a * s + b * c) / hw;
+                k.qd[j][i] += a * c - b * s;
+                k.qdd[j][i] += -hw * (a * s + b * c);
+            }
+        }
+    }
+    k
+}
