@@ -26,7 +26,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from("out").join(args.config.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
     });
-    let written = write_simulation(&out, &cfg.output.name, &cfg.output.formats, &sim, &model)?;
+    // Every format or none: staged, then moved into place (robotid::output).
+    let staging = robotid::output::prepare(&out, None, &[])?;
+    let written = write_simulation(staging.staged_out(), &cfg.output.name, &cfg.output.formats, &sim, &model)?;
+    staging.commit()?;
     let gt = &sim.ground_truth;
     println!(
         "simulated {} ({} joints): {} samples at {} Hz over {:.2} s, {} dropped, start phase {:.4} s, in {:.2} s",
@@ -43,7 +46,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("note: {n}");
     }
     for f in &written.files {
-        println!("wrote {}", f.display());
+        println!("wrote {}", out.join(f.file_name().unwrap_or_default()).display());
     }
     Ok(())
 }
