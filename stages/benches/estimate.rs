@@ -59,4 +59,37 @@ fn bench(c: &mut Criterion) {
 }
 
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+/// The physically consistent fit of the UR5 (6 links, 64 base, 90
+/// standard parameters) from a base estimate made inconsistent: one
+/// semidefinite program at a fixed prior weight, the C_p choice over 8
+/// weights, and the 200-draw bootstrap of its covariance.
+fn physical(c: &mut Criterion) {
+    use robotid_stages::dynamics::{load_robot, parameter_names, standard_parameters};
+    use robotid_stages::estimation::{bootstrap_covariance, physically_consistent};
+    use robotid_stages::stage::regressor::RegressorConfig;
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+    let model = load_robot(&path).unwrap();
+    let base = RegressorConfig::default().base_regressor(&model).unwrap();
+    let map = base.map().unwrap().clone();
+    let names = parameter_names(&base.model, base.terms);
+    let prior = standard_parameters(&base.model, base.terms);
+    let mut est = base.base_values(&model).unwrap();
+    est[0] = -0.5 * est[0].abs();
+    let cov = DMatrix::from_diagonal(&est.map(|v| (1e-2 * v.abs()).max(1e-4).powi(2)));
+    let mut g = c.benchmark_group("physical_ur5");
+    g.sample_size(10);
+    g.bench_function("sdp_fixed_weight", |b| {
+        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, Some(1e-3)).unwrap())
+    });
+    g.bench_function("sdp_weight_by_cp", |b| {
+        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, None).unwrap())
+    });
+    g.bench_function("bootstrap_200", |b| {
+        b.iter(|| bootstrap_covariance(&names, &prior, &map, &est, &cov, 1e-3).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(physical_fit, physical);
+criterion_main!(benches, physical_fit);

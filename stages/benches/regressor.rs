@@ -35,7 +35,7 @@ criterion_group!(benches, bench);
 /// the build step, against the stage built once per run.
 fn stage(c: &mut Criterion) {
     use robotid_schemas::Kinematics;
-    use robotid_stages::stage::regressor::{regressor_table, RegressorConfig};
+    use robotid_stages::stage::regressor::{regressor_rows, regressor_table, RegressorConfig};
     use robotid_stages::stage::{Chain, Component, Context};
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
     let model = dynamics::load_robot(&path).unwrap();
@@ -82,6 +82,16 @@ fn stage(c: &mut Criterion) {
             built.run(&mut chain).unwrap();
             chain.regressor.unwrap().to_record_batch().unwrap()
         })
+    });
+    // Band-limited to 20 Hz: the columns on a 16× finer grid first (no
+    // aliasing of sign(q̇)); the price of that, against the plain rows.
+    let base = cfg.base_regressor(&model).unwrap();
+    let spectra = robotid_stages::signal::Spectra::new();
+    g.bench_function("rows", |b| {
+        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench").unwrap())
+    });
+    g.bench_function("rows_band_limited_16x", |b| {
+        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, Some((20.0, period)), &spectra, "bench").unwrap())
     });
     g.finish();
 }
