@@ -468,11 +468,9 @@ pub fn regressor_rows(
 /// the columns the rows excite: a joint-wise recording excites only its
 /// joint's parameters, which the other recordings complete.
 fn normalised_condition(a: &DMatrix<f64>) -> f64 {
-    let excited: Vec<usize> = (0..a.ncols()).filter(|&c| a.column(c).norm() > 0.0).collect();
-    let scaled = DMatrix::from_fn(a.nrows(), excited.len(), |i, k| {
-        let c = a.column(excited[k]);
-        c[i] / c.norm()
-    });
+    let norms: Vec<f64> = (0..a.ncols()).map(|c| a.column(c).norm()).collect();
+    let excited: Vec<usize> = (0..a.ncols()).filter(|&c| norms[c] > 0.0).collect();
+    let scaled = DMatrix::from_fn(a.nrows(), excited.len(), |i, k| a[(i, excited[k])] / norms[excited[k]]);
     let sv = scaled.singular_values();
     if !sv.is_empty() && sv.min() > 0.0 {
         sv.max() / sv.min()
