@@ -28,7 +28,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     // Every format or none: staged, then moved into place (robotid::output).
     let staging = robotid::output::prepare(&out, None, &[])?;
-    let written = write_simulation(staging.staged_out(), &cfg.output.name, &cfg.output.formats, &sim, &model)?;
+    let written = write_simulation(
+        staging.staged_out(),
+        &cfg.output.name,
+        &cfg.output.formats,
+        &sim,
+        &model,
+    )?;
     staging.commit()?;
     let gt = &sim.ground_truth;
     println!(

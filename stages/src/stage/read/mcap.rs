@@ -140,6 +140,93 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
     }
 }
 
+/// The messages of a mapped MCAP file up to its data-end record, chunks
+/// decompressed with their CRCs checked. Like `mcap::MessageStream`, but
+/// every record, inside a chunk too, is bounded by the file's length: that
+/// reader takes a corrupt record length inside a chunk at its word and
+/// allocates it (a fuzzed file asked for 352 GB, and the process aborted).
+struct BoundedMessages<'a> {
+    buf: &'a [u8],
+    reader: mcap::sans_io::LinearReader,
+    channels: mcap::read::ChannelAccumulator<'static>,
+    done: bool,
+}
+
+impl<'a> BoundedMessages<'a> {
+    fn new(buf: &'a [u8]) -> Self {
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(buf.len());
+        BoundedMessages {
+            buf,
+            reader: mcap::sans_io::LinearReader::new_with_options(options),
+            channels: Default::default(),
+            done: false,
+        }
+    }
+}
+
+impl Iterator for BoundedMessages<'_> {
+    type Item = std::result::Result<mcap::Message<'static>, mcap::McapError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        use mcap::records::Record;
+        use mcap::sans_io::LinearReadEvent;
+        while !self.done {
+            let event = self.reader.next_event()?;
+            let record = match event {
+                Ok(LinearReadEvent::ReadRequest(need)) => {
+                    let len = need.min(self.buf.len());
+                    self.reader.insert(len).copy_from_slice(&self.buf[..len]);
+                    self.reader.notify_read(len);
+                    self.buf = &self.buf[len..];
+                    continue;
+                }
+                Ok(LinearReadEvent::Record { data, opcode }) => {
+                    mcap::parse_record(opcode, data).map(|r| r.into_owned())
+                }
+                Err(e) => Err(e),
+            };
+            let step = match record {
+                Ok(Record::Schema { header, data }) => self.channels.add_schema(header, data).map(|_| None),
+                Ok(Record::Channel(c)) => self.channels.add_channel(c).map(|_| None),
+                Ok(Record::Message { header, data }) => match self.channels.get(header.channel_id) {
+                    Some(channel) => Ok(Some(mcap::Message {
+                        channel,
+                        sequence: header.sequence,
+                        log_time: header.log_time,
+                        publish_time: header.publish_time,
+                        data,
+                    })),
+                    None => Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id)),
+                },
+                Ok(Record::DataEnd(_)) => {
+                    self.done = true;
+                    Ok(None)
+                }
+                Ok(_) => Ok(None),
+                Err(e) => Err(e),
+            };
+            match step {
+                Ok(Some(m)) => return Some(Ok(m)),
+                Ok(None) => {}
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+        None
+    }
+}
+
+/// A chunk may declare at most this many times its stored size, and at
+/// most MAX_CHUNK_BYTES, uncompressed (zstd and lz4 on sensor data reach
+/// 10–50×; writers make chunks of a few MB).
+const MAX_CHUNK_RATIO: u64 = 2000;
+const MAX_CHUNK_BYTES: u64 = 1 << 33;
+
 pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
     let source = path.display().to_string();
     let mut maps = Vec::new();
@@ -183,6 +270,27 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                 }
                 // The summary after it is checked below, as a warning.
                 Ok(mcap::records::Record::DataEnd(_)) => break,
+                // A chunk's declared size is what the decoder allocates
+                // before decompressing: a corrupt one could ask for
+                // terabytes. Bounded by what the data can hold.
+                Ok(mcap::records::Record::Chunk { header, data }) => {
+                    let declared = header.uncompressed_size;
+                    let stored = data.len() as u64;
+                    let bound = if header.compression.is_empty() {
+                        stored
+                    } else {
+                        (MAX_CHUNK_RATIO * stored).clamp(1 << 26, MAX_CHUNK_BYTES)
+                    };
+                    if declared > bound {
+                        return Err(fmt_at(
+                            f,
+                            format!(
+                                "corrupt: a chunk of {stored} bytes ({}) declares {declared} bytes uncompressed (at most {bound} here)",
+                                if header.compression.is_empty() { "uncompressed" } else { header.compression.as_str() }
+                            ),
+                        ));
+                    }
+                }
                 Ok(_) => {}
                 Err(e) => return Err(fmt_at(f, format!("corrupt or truncated: {e}"))),
             }
@@ -216,16 +324,9 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                 "truncated: it does not end with the MCAP magic (a copy or a recording cut short)".into(),
             )))) as Box<dyn Iterator<Item = Result<mcap::Message>>>;
         }
-        let options = mcap::read::Options::ValidateChunkCrcs | mcap::read::Options::IgnoreEndMagic;
-        match mcap::MessageStream::new_with_options(map, options) {
-            Ok(stream) => Box::new(stream.enumerate().map(move |(count, m)| {
-                m.map_err(|e| fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")))
-            })) as Box<dyn Iterator<Item = Result<mcap::Message>>>,
-            Err(e) => Box::new(std::iter::once(Err(fmt_at(
-                f,
-                format!("not a readable MCAP file: {e}"),
-            )))),
-        }
+        Box::new(BoundedMessages::new(map).enumerate().map(move |(count, m)| {
+            m.map_err(|e| fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")))
+        })) as Box<dyn Iterator<Item = Result<mcap::Message>>>
     });
     for message in messages {
         let message = message?;
