@@ -17,10 +17,21 @@ seconds="${1:-60}"
 shift || true
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=(read_text read_mcap read_parquet pipeline_toml robot_file simulation_toml)
+failed=()
 for t in "${targets[@]}"; do
   mkdir -p "corpus/$t" "seeds/$t"
   echo "== $t for $seconds s"
-  cargo fuzz run -O "$t" "corpus/$t" "seeds/$t" -- \
-    -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=4096 -print_final_stats=1 2>&1 \
-    | grep -E "^(stat::number_of_executed_units|stat::peak_rss_mb|#[0-9]+ +DONE)|cov:|ERROR|panicked|SUMMARY" | tail -4
+  # A crash ends this target's run (its input is in artifacts/$t); the
+  # other targets still run.
+  if ! cargo fuzz run -O "$t" "corpus/$t" "seeds/$t" -- \
+    -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=4096 -malloc_limit_mb=4096 \
+    -print_final_stats=1 > "/tmp/robotid-fuzz-$t.log" 2>&1; then
+    failed+=("$t")
+  fi
+  grep -E "^(stat::number_of_executed_units|stat::peak_rss_mb|#[0-9]+ +DONE)|ERROR|panicked|SUMMARY" \
+    "/tmp/robotid-fuzz-$t.log" | tail -4
 done
+if [ ${#failed[@]} -gt 0 ]; then
+  echo "crashed: ${failed[*]} (inputs in fuzz/artifacts/; logs in /tmp/robotid-fuzz-*.log)"
+  exit 1
+fi
