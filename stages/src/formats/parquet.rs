@@ -98,10 +98,48 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     })
 }
 
+thread_local! {
+    static GUARDED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs Parquet decoding, turning a panic inside the parquet crate into an
+/// error naming the file: it `expect`s on some corrupt inputs (a data page
+/// that says dictionary-encoded with no dictionary page before it, found by
+/// fuzzing). Such a panic is not printed; any other still is.
+pub(crate) fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !GUARDED.with(|g| g.get()) {
+                previous(info);
+            }
+        }));
+    });
+    GUARDED.with(|g| g.set(true));
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    GUARDED.with(|g| g.set(false));
+    outcome.unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(Error::Format {
+            path: path.to_path_buf(),
+            msg: format!("corrupt: the Parquet decoder gave up ({msg})"),
+        })
+    })
+}
+
 /// Reads a whole Parquet file into one record batch. A file robotid wrote
 /// is refused when its content no longer matches its CRC-32; pages that
 /// carry a CRC (pyarrow's `write_page_checksum`) are checked by the reader.
 pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
+    guarded(path, || read_unguarded(path))
+}
+
+fn read_unguarded(path: &Path) -> Result<RecordBatch> {
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let fmt = |msg: String| Error::Format {
         path: path.to_path_buf(),

@@ -15,6 +15,10 @@ use super::{Columns, ReadConfig};
 use crate::{Error, Result};
 
 pub(crate) fn read_parquet_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    crate::formats::parquet::guarded(path, || read_log(path, cfg, joints))
+}
+
+fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     let source = path.display().to_string();
     let fmt = |msg: String| Error::Format {
         path: path.to_path_buf(),
@@ -35,7 +39,9 @@ pub(crate) fn read_parquet_log(path: &Path, cfg: &ReadConfig, joints: &[String])
     wanted.dedup();
     let indices: Vec<usize> = wanted.iter().map(|w| schema.index_of(w).expect("resolved")).collect();
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
-    let rows = builder.metadata().file_metadata().num_rows().max(0) as usize;
+    // The row count is the file's word: no more than its bytes can hold.
+    let bytes = std::fs::metadata(path).map(|m| m.len() as usize).unwrap_or(0);
+    let rows = (builder.metadata().file_metadata().num_rows().max(0) as usize).min(bytes);
     let reader = builder
         .with_projection(mask)
         .with_batch_size(65536)
