@@ -143,6 +143,17 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(format!("invalid XML: {e}")))?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
     let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    if let Some((j, link)) = robot
+        .joints
+        .iter()
+        .flat_map(|j| [(j, &j.parent.link), (j, &j.child.link)])
+        .find(|(_, l)| !links.contains_key(l.as_str()))
+    {
+        return Err(err(format!(
+            "joint `{}` names link `{link}`, which the URDF does not define",
+            j.name
+        )));
+    }
     let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
     for j in &robot.joints {
         children.entry(j.parent.link.as_str()).or_default().push(j);
