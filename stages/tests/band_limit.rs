@@ -60,6 +60,21 @@ fn reference_torque(base: &BaseRegressor, theta: &DVector<f64>, spectra: &Spectr
         .collect()
 }
 
+/// Today's main: the columns computed at the samples, then band-limited.
+fn at_samples_band_limited(base: &BaseRegressor, kin: &Kinematics, spectra: &Spectra) -> DMatrix<f64> {
+    let n = base.model.dof();
+    let mut a = base.matrix(kin);
+    for c in 0..a.ncols() {
+        for j in 0..n {
+            let col: Vec<f64> = (0..SAMPLES).map(|k| a[(k * n + j, c)]).collect();
+            for (k, v) in band_limited(&col, spectra).into_iter().enumerate() {
+                a[(k * n + j, c)] = v;
+            }
+        }
+    }
+    a
+}
+
 fn model() -> (Model, BaseRegressor, RegressorConfig, DVector<f64>) {
     let model = load_robot(&fixture("robots/arm3.toml")).unwrap();
     let cfg = RegressorConfig {
@@ -94,20 +109,7 @@ fn exact_coulomb_friction_is_band_limited_without_aliasing() {
     .unwrap();
     let stage = per_joint(&rows.system.a, &theta, n);
     // Today's main: the columns at the samples, band-limited afterwards.
-    let at_samples = base.matrix(&kin);
-    let naive: Vec<Vec<f64>> = (0..base.parameters())
-        .map(|c| {
-            (0..n)
-                .flat_map(|j| {
-                    let col: Vec<f64> = (0..SAMPLES).map(|k| at_samples[(k * n + j, c)]).collect();
-                    band_limited(&col, &spectra)
-                })
-                .collect()
-        })
-        .collect();
-    let naive = DMatrix::from_fn(SAMPLES * n, base.parameters(), |r, c| {
-        naive[c][(r % n) * SAMPLES + r / n]
-    });
+    let naive = at_samples_band_limited(&base, &kin, &spectra);
     let naive = per_joint(&naive, &theta, n);
     let ms = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / x.len() as f64;
     for j in 0..n {
@@ -191,15 +193,7 @@ fn exact_coulomb_friction_leaves_the_residual_at_the_noise_floor() {
     )
     .unwrap();
     let mut naive = rows.system.clone();
-    let at_samples = base.matrix(&kin);
-    for c in 0..base.parameters() {
-        for j in 0..n {
-            let col: Vec<f64> = (0..SAMPLES).map(|k| at_samples[(k * n + j, c)]).collect();
-            for (k, v) in band_limited(&col, &spectra).into_iter().enumerate() {
-                naive.a[(k * n + j, c)] = v;
-            }
-        }
-    }
+    naive.a = at_samples_band_limited(&base, &kin, &spectra);
     // The floor: the same fit's residual when the torque is the model's
     // plus the same noise.
     let mut noise_only = rows.system.clone();

@@ -132,29 +132,6 @@ pub(crate) fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T
     })
 }
 
-/// Refuses a file whose metadata declares more values than its bytes can
-/// plausibly hold: a corrupt row count (or a crafted run-length bomb) would
-/// otherwise have the reader decode billions of values. The bound, 10 000
-/// values per stored byte, is far above what run-length or dictionary
-/// encoding gives real recordings.
-pub(crate) fn check_size(path: &Path, metadata: &parquet::file::metadata::ParquetMetaData) -> Result<()> {
-    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
-    let columns = metadata.file_metadata().schema_descr().num_columns().max(1) as u64;
-    let declared: u64 = metadata
-        .row_groups()
-        .iter()
-        .map(|g| g.num_rows().max(0) as u64)
-        .sum::<u64>()
-        .max(metadata.file_metadata().num_rows().max(0) as u64);
-    if declared.saturating_mul(columns) > bytes.saturating_mul(10_000).max(1 << 20) {
-        return Err(Error::Format {
-            path: path.to_path_buf(),
-            msg: format!("corrupt: it declares {declared} rows of {columns} columns in {bytes} bytes"),
-        });
-    }
-    Ok(())
-}
-
 /// Reads a whole Parquet file into one record batch. A file robotid wrote
 /// is refused when its content no longer matches its CRC-32; pages that
 /// carry a CRC (pyarrow's `write_page_checksum`) are checked by the reader.
@@ -170,7 +147,6 @@ fn read_unguarded(path: &Path) -> Result<RecordBatch> {
     };
     let builder =
         parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| fmt(e.to_string()))?;
-    check_size(path, builder.metadata())?;
     // The builder's schema carries the stored Arrow metadata.
     let schema = builder.schema().clone();
     let reader = builder.with_batch_size(65536).build().map_err(|e| fmt(e.to_string()))?;

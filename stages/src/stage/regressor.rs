@@ -631,9 +631,12 @@ fn band_limited_matrix(
     let mut series = vec![0.0; samples];
     for r in 0..OVERSAMPLING {
         // x(t + τ) with τ = r·T/(N·L): line l turns by e^{2πi·l·r/(N·L)}.
-        let turn = |l: usize| Complex64::from_polar(1.0, std::f64::consts::TAU * (l * r) as f64 / fine_len);
+        // Once per copy, not per joint, column and line.
+        let turns: Vec<Complex64> = (0..=samples / 2)
+            .map(|l| Complex64::from_polar(1.0, std::f64::consts::TAU * (l * r) as f64 / fine_len))
+            .collect();
         let shift = |spec: &Vec<Complex64>| -> Vec<f64> {
-            let s: Vec<Complex64> = spec.iter().enumerate().map(|(l, v)| v * turn(l)).collect();
+            let s: Vec<Complex64> = spec.iter().zip(&turns).map(|(v, t)| v * t).collect();
             spectra.inverse(&s, samples)
         };
         for j in 0..n {
@@ -650,7 +653,7 @@ fn band_limited_matrix(
                 let y = spectra.forward(&series);
                 let out = &mut acc[(j * cols + c) * (keep + 1)..][..keep + 1];
                 for (l, o) in out.iter_mut().enumerate() {
-                    *o += y[l] * turn(l).conj();
+                    *o += y[l] * turns[l].conj();
                 }
             }
         }

@@ -26,7 +26,6 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
     };
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| fmt(e.to_string()))?;
-    crate::formats::parquet::check_size(path, builder.metadata())?;
     let schema = builder.schema().clone();
     let header: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
     let mapping = resolve(&header, cfg, joints, &source)?;
