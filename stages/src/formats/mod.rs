@@ -8,6 +8,7 @@ pub mod cdr;
 pub mod csv;
 pub mod mcap;
 pub mod parquet;
+mod thrift;
 
 pub use atomic::write_atomic;
 

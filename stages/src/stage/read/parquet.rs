@@ -7,7 +7,6 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use arrow::array::{Array, Float64Array, Int64Array};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ProjectionMask;
 
 use super::text::{into_columns, resolve};
@@ -24,8 +23,8 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
         path: path.to_path_buf(),
         msg,
     };
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| fmt(e.to_string()))?;
+    let builder = crate::formats::parquet::open(path)?;
+    let bytes = std::fs::metadata(path).map(|m| m.len() as usize).unwrap_or(0);
     let schema = builder.schema().clone();
     let header: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
     let mapping = resolve(&header, cfg, joints, &source)?;
@@ -40,7 +39,6 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
     let indices: Vec<usize> = wanted.iter().map(|w| schema.index_of(w).expect("resolved")).collect();
     let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
     // The row count is the file's word: no more than its bytes can hold.
-    let bytes = std::fs::metadata(path).map(|m| m.len() as usize).unwrap_or(0);
     let rows = (builder.metadata().file_metadata().num_rows().max(0) as usize).min(bytes);
     let reader = builder
         .with_projection(mask)
