@@ -12,6 +12,7 @@ pub mod plan;
 pub mod plot;
 pub mod report;
 pub mod run;
+pub mod summaries;
 pub mod validation;
 
 pub use error::{Error, Problems, Result};

@@ -169,6 +169,22 @@ impl Built {
         Ok(())
     }
 
+    /// One recording read and run through every stage, nothing written;
+    /// `progress` is told "read", then each stage's name.
+    pub fn run_log(
+        &self,
+        log: &Path,
+        name: &str,
+        mut progress: impl FnMut(&'static str),
+    ) -> robotid_stages::Result<Chain> {
+        let t = Instant::now();
+        progress("read");
+        let mut chain = crate::run::start_chain(self, log, name)?;
+        chain.report.timings.push(("read".into(), t.elapsed().as_secs_f64()));
+        self.run_stages(&mut chain, progress)?;
+        Ok(chain)
+    }
+
     /// The tables the pipeline writes for a finished chain.
     pub fn tables(&self, chain: &Chain) -> robotid_stages::Result<Vec<(TableKind, RecordBatch)>> {
         tables_of(chain, &self.plan.tables, &self.provenance())

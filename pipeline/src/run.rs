@@ -150,12 +150,7 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
 }
 
 fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &ProgressBar) -> crate::Result<Outcome> {
-    let t = Instant::now();
-    bar.set_message("read");
-    let mut chain = start_chain(built, log, name)?;
-    chain.report.timings.push(("read".into(), t.elapsed().as_secs_f64()));
-    bar.inc(1);
-    built.run_stages(&mut chain, |stage| {
+    let mut chain = built.run_log(log, name, |stage| {
         bar.set_message(stage);
         bar.inc(1);
     })?;

@@ -10,7 +10,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RFactor {
     /// Upper triangular, p × p.
     pub r: DMatrix<f64>,

@@ -70,7 +70,7 @@ impl JointAdequacy {
 }
 
 /// One joint's sufficient statistics.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct JointMoments {
     pub joint: String,
     pub rows: usize,

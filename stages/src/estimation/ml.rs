@@ -25,7 +25,7 @@ use super::{Estimate, Estimator, System};
 
 /// Noise on the regressor's inputs: rows come in groups of `n` (one sample:
 /// one row per joint), and each group has `inputs` noisy variables.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct InputNoise {
     /// Rows per group (joints).
     pub n: usize,

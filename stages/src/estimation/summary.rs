@@ -53,7 +53,7 @@ pub(super) fn identifiable(r: &DMatrix<f64>, names: &[String]) -> Result<f64> {
 pub const MAX_CONDITION: f64 = 1e10;
 
 /// The known parameters' part of a summary.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct KnownPart {
     pub names: Vec<String>,
     /// Σ Aᵀ·W·A_k (parameters × known).
@@ -63,7 +63,7 @@ pub struct KnownPart {
 }
 
 /// Sufficient statistics of one or more recordings' least squares.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Summary {
     pub names: Vec<String>,
     pub units: Vec<String>,

@@ -29,7 +29,7 @@ pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
 }
 
 /// A·θ = b with the bookkeeping to name rows.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct System {
     pub names: Vec<String>,
     pub units: Vec<String>,

@@ -235,13 +235,58 @@ pub struct Reducer {
 }
 
 /// One recording's part of an estimate.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Part {
     pub summary: Summary,
     /// Maximum likelihood keeps its rows and their input noise.
     pub rows: Option<(System, Option<InputNoise>)>,
     /// The regressor configuration the rows were made with.
     pub config: Option<RegressorConfig>,
+}
+
+impl Part {
+    /// Adds another recording's part (for a reduce done in steps: the
+    /// result solves to what the parts solve to together, in this order).
+    pub fn merge(&mut self, other: &Part) -> Result<()> {
+        if self.config != other.config {
+            return Err(Error::mismatch(
+                format!("{}: regressor configuration", other.summary.recordings.join(", ")),
+                format!("{:?} (that of {})", self.config, self.summary.recordings.join(", ")),
+                format!("{:?}", other.config),
+            ));
+        }
+        self.rows = match (self.rows.take(), &other.rows) {
+            (None, None) => None,
+            (Some((a, na)), Some((b, nb))) => {
+                let noise = InputNoise::stack(na.into_iter().chain(nb.clone()));
+                Some((System::stack(&[&a, b])?, noise))
+            }
+            _ => {
+                return Err(Error::mismatch(
+                    "parts to merge: regressor rows",
+                    "kept in every part (method = \"ml\") or in none",
+                    "kept in some",
+                ))
+            }
+        };
+        self.summary.merge(&other.summary)
+    }
+
+    /// The part as bytes (CBOR: exact doubles, NaN included), to travel
+    /// between processes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        ciborium::into_writer(self, &mut out).expect("writing to memory");
+        out
+    }
+
+    /// The part back from [`Part::to_bytes`]; `what` names the bytes' origin.
+    pub fn from_bytes(bytes: &[u8], what: &str) -> Result<Part> {
+        ciborium::from_reader(bytes).map_err(|e| Error::Format {
+            path: what.into(),
+            msg: format!("not a robotid summary ({e})"),
+        })
+    }
 }
 
 /// What the reduce gives: the estimate, its `parameters` table and what

@@ -1,0 +1,192 @@
+//! Identification as a map and a reduce, for engines that move Arrow
+//! tables between processes (Ray, Spark, the Python package): each
+//! recording becomes a one-row `summary` table ([`Built::summarize`]),
+//! summaries merge in any grouping ([`merge`]), and a merged summary
+//! solves to the `parameters` table `robotid run` writes ([`Built::solve`]).
+//!
+//! A row carries the estimate stage's sufficient statistics (R factor,
+//! Qᵀb, RSS, the periods' moments, per-joint moments; the rows themselves
+//! for maximum likelihood) as CBOR in its `summary` column, next to
+//! readable columns to group and check by.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use arrow::array::{Array, ArrayRef, BinaryArray, ListArray, RecordBatch, StringArray, UInt64Array};
+use arrow::datatypes::{DataType, Field, Schema};
+use robotid_schemas::metadata;
+use robotid_stages::stage::estimate::{Outcome as Estimated, Part};
+
+use crate::error::{Error, Result};
+use crate::pipeline::Built;
+
+/// The `robotid.table` value of a summary table.
+pub const TABLE_NAME: &str = "summary";
+
+fn field(name: &str, ty: DataType, description: &str) -> Field {
+    Field::new(name, ty, false).with_metadata(HashMap::from([("description".to_string(), description.to_string())]))
+}
+
+fn schema(config_sha256: &str) -> Schema {
+    Schema::new(vec![
+        field(
+            "recordings",
+            DataType::List(Arc::new(Field::new_list_field(DataType::Utf8, false))),
+            "the recordings folded into this row, in order",
+        ),
+        field("robot_sha256", DataType::Utf8, "SHA-256 of the robot file"),
+        field("config_sha256", DataType::Utf8, "SHA-256 of the pipeline file"),
+        field("rows", DataType::UInt64, "regressor rows folded in"),
+        field("parameters", DataType::UInt64, "base parameters estimated"),
+        field(
+            "summary",
+            DataType::Binary,
+            "the estimate stage's sufficient statistics (CBOR; robotid.merge and robotid.solve read it)",
+        ),
+    ])
+    .with_metadata(HashMap::from([
+        (metadata::TABLE.to_string(), TABLE_NAME.to_string()),
+        (metadata::VERSION.to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        (metadata::CONFIG_SHA256.to_string(), config_sha256.to_string()),
+    ]))
+}
+
+/// One row holding `part`.
+pub fn summary_batch(part: &Part, config_sha256: &str) -> Result<RecordBatch> {
+    let s = &part.summary;
+    let robot = s.metadata.get(metadata::ROBOT_SHA256).cloned().unwrap_or_default();
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(string_list(&s.recordings)),
+        Arc::new(StringArray::from(vec![robot])),
+        Arc::new(StringArray::from(vec![config_sha256.to_string()])),
+        Arc::new(UInt64Array::from(vec![s.factor.rows as u64])),
+        Arc::new(UInt64Array::from(vec![s.parameters() as u64])),
+        Arc::new(BinaryArray::from_vec(vec![&part.to_bytes()])),
+    ];
+    RecordBatch::try_new(Arc::new(schema(config_sha256)), columns).map_err(|e| Error::Output {
+        what: "summary table".into(),
+        msg: e.to_string(),
+    })
+}
+
+/// One list of strings, as a one-row list array.
+fn string_list(values: &[String]) -> ListArray {
+    ListArray::new(
+        Arc::new(Field::new_list_field(DataType::Utf8, false)),
+        arrow::buffer::OffsetBuffer::from_lengths([values.len()]),
+        Arc::new(StringArray::from(values.to_vec())),
+        None,
+    )
+}
+
+fn refused(what: &str, msg: impl Into<String>) -> Error {
+    Error::Stage(robotid_stages::Error::Format {
+        path: what.into(),
+        msg: msg.into(),
+    })
+}
+
+/// The parts in `batches`, row by row, in order; every row must come from
+/// one pipeline and robot.
+pub fn parts(batches: &[RecordBatch]) -> Result<(Vec<Part>, String)> {
+    let mut out = Vec::new();
+    let mut seen: Option<(String, String, String)> = None;
+    for (b, batch) in batches.iter().enumerate() {
+        let what = format!("summary table {b}");
+        let col = |name: &str| {
+            batch
+                .column_by_name(name)
+                .ok_or_else(|| refused(&what, format!("no column `{name}`: not a robotid summary table")))
+        };
+        let blobs = col("summary")?
+            .as_any()
+            .downcast_ref::<BinaryArray>()
+            .ok_or_else(|| refused(&what, "column `summary` is not Binary"))?;
+        let strings = |name: &str| -> Result<StringArray> {
+            col(name)?
+                .as_any()
+                .downcast_ref::<StringArray>()
+                .cloned()
+                .ok_or_else(|| refused(&what, format!("column `{name}` is not Utf8")))
+        };
+        let (robot, config) = (strings("robot_sha256")?, strings("config_sha256")?);
+        for r in 0..batch.num_rows() {
+            if blobs.is_null(r) {
+                return Err(refused(&what, format!("row {r} has no summary")));
+            }
+            let part = Part::from_bytes(blobs.value(r), &format!("{what}, row {r}"))?;
+            let first = part.summary.recordings.first().cloned().unwrap_or_default();
+            let key = (robot.value(r).to_string(), config.value(r).to_string());
+            match &seen {
+                None => seen = Some((key.0, key.1, first)),
+                Some((robot0, config0, name0)) => {
+                    if *config0 != key.1 {
+                        return Err(refused(
+                            &what,
+                            format!("row {r} ({first}) was made by pipeline {} and {name0} by {config0}: summaries merge only within one pipeline", key.1),
+                        ));
+                    }
+                    if *robot0 != key.0 {
+                        return Err(refused(
+                            &what,
+                            format!("row {r} ({first}) is of robot file {} and {name0} of {robot0}: group the summaries by robot first", key.0),
+                        ));
+                    }
+                }
+            }
+            out.push(part);
+        }
+    }
+    let config = seen.map(|s| s.1).ok_or_else(|| refused("summaries", "none given"))?;
+    Ok((out, config))
+}
+
+/// Summaries merged, in the order given, into one row.
+pub fn merge(batches: &[RecordBatch]) -> Result<RecordBatch> {
+    let (parts, config) = parts(batches)?;
+    let mut it = parts.into_iter();
+    let mut all = it.next().expect("parts() refuses none");
+    for p in it {
+        all.merge(&p).map_err(Error::Stage)?;
+    }
+    summary_batch(&all, &config)
+}
+
+impl Built {
+    /// One recording through every stage to its row of sufficient
+    /// statistics. Needs an `estimate` stage.
+    pub fn summarize(&self, log: &Path, name: &str) -> Result<RecordBatch> {
+        if self.reducer.is_none() {
+            return Err(refused(
+                &self.plan.file.display().to_string(),
+                "the pipeline has no `estimate` stage: there is nothing to summarize",
+            ));
+        }
+        let mut chain = self.run_log(log, name, |_| {})?;
+        let part = chain.estimate.take().expect("the estimate stage made its part");
+        summary_batch(&part, &self.plan.hash)
+    }
+
+    /// Solves merged (or unmerged: they are merged in order) summaries
+    /// made by this pipeline: the estimate and its `parameters` table.
+    pub fn solve(&self, summaries: &[RecordBatch]) -> Result<Estimated> {
+        let reducer = self.reducer.as_ref().ok_or_else(|| {
+            refused(
+                &self.plan.file.display().to_string(),
+                "the pipeline has no `estimate` stage to solve with",
+            )
+        })?;
+        let (parts, config) = parts(summaries)?;
+        if config != self.plan.hash {
+            return Err(refused(
+                "summaries",
+                format!(
+                    "made by pipeline {config}, not by this one ({}): solve with the pipeline that made them",
+                    self.plan.hash
+                ),
+            ));
+        }
+        self.estimate(reducer, &parts)
+    }
+}
