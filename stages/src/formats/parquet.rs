@@ -84,8 +84,23 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
         path: path.to_path_buf(),
         msg: e.to_string(),
     })?;
+    // The table's keys also as the file's own key-value metadata, where
+    // readers that do not decode the Arrow schema (DuckDB's
+    // parquet_kv_metadata, polars' read_parquet_metadata) find them.
+    let mut keys: Vec<_> = batch
+        .schema()
+        .metadata()
+        .iter()
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect();
+    keys.sort();
+    let keys = keys
+        .into_iter()
+        .map(|(k, v)| parquet::file::metadata::KeyValue::new(k, v))
+        .collect();
     let props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
+        .set_key_value_metadata(Some(keys))
         .build();
     let fmt = |e: parquet::errors::ParquetError| Error::Format {
         path: path.to_path_buf(),

@@ -1,0 +1,39 @@
+"""robotid from Python: dynamic identification of robot arms.
+
+A pipeline file (docs/pipeline-file.md) says how recordings become
+regressor rows and an estimate. From Python:
+
+    import robotid
+    p = robotid.Pipeline.from_path("fixtures/pipelines/kuka_axis3.toml")
+    tables = p.run_recording(p.recordings[0])        # {"kinematics": pyarrow.Table, ...}
+    parts = [p.summarize(r) for r in p.recordings]   # one row each
+    parameters = robotid.solve(robotid.merge(parts), p)
+
+`summarize` is the map and `merge` the reduce of identification: summaries
+merge in any grouping, on any machine, and solve to the parameters
+`robotid run` estimates from the same recordings (robotid.ray runs it on a
+Ray cluster). Errors are `RobotidError`, with `file`, `channel`, `sample`
+and `stage` saying where.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence, Union
+
+import pyarrow as pa
+
+from ._robotid import Pipeline, RobotidError, __version__, merge
+
+Summaries = Union[pa.RecordBatch, pa.Table, Sequence[pa.RecordBatch]]
+
+
+def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
+    """The `parameters` table from summaries made by `pipeline` (merged in
+    the order given): values, standard deviations, intervals and the
+    covariance, as `robotid run` writes them."""
+    if isinstance(summaries, tuple):
+        summaries = list(summaries)
+    return pipeline.solve(summaries)
+
+
+__all__ = ["Pipeline", "RobotidError", "merge", "solve", "__version__"]

@@ -1,0 +1,49 @@
+"""Type stubs of the native module (python/src/lib.rs)."""
+
+from os import PathLike
+from typing import Dict, List, Optional, Sequence, Union
+
+import pyarrow as pa
+
+__version__: str
+
+Recording = Union[str, PathLike, bytes]
+Summaries = Union[pa.RecordBatch, pa.Table, Sequence[pa.RecordBatch]]
+
+class RobotidError(Exception):
+    """A robotid error; where it sits, when known."""
+
+    file: Optional[str]
+    channel: Optional[str]
+    sample: Optional[int]
+    stage: Optional[str]
+
+class Pipeline:
+    """A built pipeline: robot loaded, recordings found, stages ready."""
+
+    @staticmethod
+    def from_toml(text: str, base_dir: Union[str, PathLike]) -> Pipeline:
+        """A pipeline from its TOML text; relative paths resolve against `base_dir`."""
+    @staticmethod
+    def from_path(path: Union[str, PathLike]) -> Pipeline:
+        """A pipeline from its file."""
+    @property
+    def recordings(self) -> List[str]:
+        """The recordings the pipeline's `[source]` names."""
+    @property
+    def config_sha256(self) -> str:
+        """SHA-256 of the pipeline text (in every table's metadata)."""
+    @property
+    def file(self) -> str:
+        """The pipeline file's path."""
+    def run_recording(self, recording: Recording, name: Optional[str] = None) -> Dict[str, pa.Table]:
+        """Every table the pipeline writes for one recording, by kind.
+        Bytes are a recording's file content; `name`'s extension (else the
+        content) says its format."""
+    def summarize(self, recording: Recording, name: Optional[str] = None) -> pa.RecordBatch:
+        """One recording's row of sufficient statistics (needs an `estimate` stage)."""
+    def solve(self, summaries: Summaries) -> pa.Table:
+        """The `parameters` table from summaries this pipeline made."""
+
+def merge(summaries: Summaries) -> pa.RecordBatch:
+    """Summaries merged, in order, into one row."""

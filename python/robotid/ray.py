@@ -1,0 +1,145 @@
+"""Identification on Ray Data: recordings are summarized in parallel
+(`Pipeline.summarize`), the summaries of each group merged by an
+aggregation whose combine step is `robotid.merge`, and each group solved
+(`robotid.solve`). The parameters equal `robotid run`'s on the same
+recordings to round-off, for any partitioning.
+
+    import ray, robotid.ray
+    ray.init()                                   # or ray.init(address="auto")
+    params = robotid.ray.identify(
+        ["fleet/robot=arm3/r01.parquet", "fleet/robot=ur5/r01.parquet", ...],
+        {"arm3": "pipelines/arm3.toml", "ur5": "pipelines/ur5.toml"},
+    )                                            # {"arm3": pyarrow.Table, "ur5": ...}
+
+Workers read the recordings and pipeline files by path: on a cluster the
+paths must be visible to every node (a shared file system).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+from typing import Dict, Iterable, Mapping, Optional, Union
+
+import pyarrow as pa
+
+from . import Pipeline, RobotidError, merge, solve
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+@functools.lru_cache(maxsize=16)
+def _pipeline(path: str) -> Pipeline:
+    """One built pipeline per worker process and file."""
+    return Pipeline.from_path(path)
+
+
+def _ipc(batch: pa.RecordBatch) -> bytes:
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, batch.schema) as w:
+        w.write_batch(batch)
+    return sink.getvalue().to_pybytes()
+
+
+def _from_ipc(data: bytes) -> pa.RecordBatch:
+    return pa.ipc.open_stream(data).read_next_batch()
+
+
+def group_of(path: PathLike, key: str = "robot") -> Optional[str]:
+    """The value of a hive-style folder `key=value` in `path`, if any."""
+    m = re.search(rf"(?:^|[/\\]){re.escape(key)}=([^/\\]+)", os.fspath(path))
+    return m.group(1) if m else None
+
+
+def _summarize(batch: pa.Table, group_by: str) -> pa.Table:
+    rows = []
+    for key, path, pipeline in zip(
+        batch[group_by].to_pylist(), batch["path"].to_pylist(), batch["pipeline"].to_pylist()
+    ):
+        s = _pipeline(pipeline).summarize(path)
+        t = pa.Table.from_batches([s])
+        rows.append(t.append_column(group_by, pa.array([key], pa.string())))
+    return pa.concat_tables(rows)
+
+
+def _merge_summaries():
+    from ray.data.aggregate import AggregateFnV2
+    from ray.data.block import BlockAccessor
+
+    class MergeSummaries(AggregateFnV2):
+        """Summaries merged by `robotid.merge`; the accumulator is the
+        merged one-row summary as Arrow IPC bytes (b"" before any)."""
+
+        def __init__(self):
+            super().__init__("summary", zero_factory=lambda: b"", on=None, ignore_nulls=False)
+
+        def aggregate_block(self, block) -> bytes:
+            table = BlockAccessor.for_block(block).to_arrow()
+            return _ipc(merge(table.to_batches()))
+
+        def combine(self, current: bytes, new: bytes) -> bytes:
+            if not current:
+                return new
+            if not new:
+                return current
+            return _ipc(merge([_from_ipc(current), _from_ipc(new)]))
+
+        def finalize(self, accumulator: bytes) -> bytes:
+            return accumulator
+
+    return MergeSummaries()
+
+
+def identify(
+    recordings: Iterable[PathLike],
+    pipelines: Union[PathLike, Mapping[str, PathLike]],
+    group_by: str = "robot",
+    *,
+    summaries_per_task: int = 1,
+) -> Dict[str, pa.Table]:
+    """The `parameters` table of each group of recordings.
+
+    A recording's group is the value of its `group_by=value` folder
+    (hive-style), else the only pipeline's. `pipelines` maps each group to
+    its pipeline file, or is one pipeline file for every recording."""
+    import ray.data
+
+    if isinstance(pipelines, Mapping):
+        files = {k: os.path.abspath(os.fspath(v)) for k, v in pipelines.items()}
+    else:
+        files = None
+        single = os.path.abspath(os.fspath(pipelines))
+    items = []
+    for r in recordings:
+        path = os.path.abspath(os.fspath(r))
+        key = group_of(path, group_by)
+        if files is None:
+            key = key if key is not None else "all"
+            pipeline = single
+        else:
+            if key is None and len(files) == 1:
+                key = next(iter(files))
+            if key not in files:
+                raise RobotidError(
+                    f"{path}: group {key!r} has no pipeline (given for: {', '.join(sorted(files))}); "
+                    f"put the recording under a `{group_by}=<name>` folder"
+                )
+            pipeline = files[key]
+        items.append({group_by: key, "path": path, "pipeline": pipeline})
+    if not items:
+        raise RobotidError("no recordings given")
+    ds = ray.data.from_items(items)
+    summaries = ds.map_batches(
+        _summarize,
+        fn_kwargs={"group_by": group_by},
+        batch_format="pyarrow",
+        batch_size=summaries_per_task,
+    )
+    merged = summaries.groupby(group_by).aggregate(_merge_summaries()).take_all()
+    pipeline_of = {it[group_by]: it["pipeline"] for it in items}
+    out = {}
+    for row in merged:
+        key = row[group_by]
+        out[key] = solve(_from_ipc(row["summary"]), _pipeline(pipeline_of[key]))
+    return dict(sorted(out.items()))

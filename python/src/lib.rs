@@ -1,0 +1,299 @@
+//! `robotid._robotid`: the native half of the Python package, thin over
+//! the `Pipeline` API. Tables cross as Arrow through the C data interface
+//! (no copy); the GIL is released while Rust works. `robotid/__init__.py`
+//! is the documented face.
+
+use std::path::{Path, PathBuf};
+
+use arrow::array::RecordBatch;
+use arrow::pyarrow::{FromPyArrow, IntoPyArrow, Table, ToPyArrow};
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList};
+use robotid::{Built, Pipeline as Plan};
+
+pyo3::create_exception!(
+    _robotid,
+    RobotidError,
+    PyException,
+    "A robotid error. `file`, `channel`, `sample` and `stage` say where, when known (else None)."
+);
+
+/// Where an error sits, as the CLI names it.
+#[derive(Default)]
+struct Place {
+    file: Option<String>,
+    channel: Option<String>,
+    sample: Option<usize>,
+    stage: Option<String>,
+}
+
+fn place_of_stage_error(e: &robotid_stages::Error, place: &mut Place) {
+    use robotid_stages::Error as E;
+    match e {
+        E::Stage {
+            stage,
+            source_name,
+            source,
+        } => {
+            place.stage = Some(stage.to_string());
+            place.file.get_or_insert_with(|| source_name.clone());
+            place_of_stage_error(source, place);
+        }
+        E::Data {
+            source_name,
+            channel,
+            sample,
+            ..
+        } => {
+            place.file = Some(source_name.clone());
+            place.channel = Some(channel.clone());
+            place.sample = *sample;
+        }
+        E::Robot { path, .. } | E::Config { path, .. } | E::Io { path, .. } | E::Format { path, .. } => {
+            place.file = Some(path.display().to_string());
+        }
+        _ => {}
+    }
+}
+
+fn py_error(e: robotid::Error) -> PyErr {
+    py_error_in(e, None)
+}
+
+/// `e` as a Python exception; a recording given as bytes is named by its
+/// name, not by its scratch file.
+fn py_error_in(e: robotid::Error, rec: Option<(&Recording, &str)>) -> PyErr {
+    let mut place = Place::default();
+    match &e {
+        robotid::Error::Stage(s) => place_of_stage_error(s, &mut place),
+        robotid::Error::Io { path, .. } => place.file = Some(path.display().to_string()),
+        robotid::Error::Problems(p) => place.file = p.0.first().map(|x| x.file.display().to_string()),
+        _ => {}
+    }
+    let mut message = e.to_string();
+    if let Some((Recording::Bytes { path, .. }, name)) = rec {
+        let scratch = path.display().to_string();
+        let given = format!("<bytes {name}>");
+        message = message.replace(&scratch, &given);
+        if place.file.as_deref() == Some(scratch.as_str()) {
+            place.file = Some(given);
+        }
+    }
+    let err = RobotidError::new_err(message);
+    Python::attach(|py| {
+        let value = err.value(py);
+        // Setting attributes on a fresh exception cannot fail.
+        let _ = value.setattr("file", place.file);
+        let _ = value.setattr("channel", place.channel);
+        let _ = value.setattr("sample", place.sample);
+        let _ = value.setattr("stage", place.stage);
+    });
+    err
+}
+
+/// A recording given as a path, or as bytes (written to a scratch file
+/// named `name`, whose extension says the format; guessed from the bytes
+/// when `name` has none).
+enum Recording {
+    Path(PathBuf),
+    /// The scratch folder lives as long as the recording.
+    Bytes {
+        _scratch: tempfile::TempDir,
+        path: PathBuf,
+    },
+}
+
+impl Recording {
+    fn new(obj: &Bound<'_, PyAny>, name: Option<&str>) -> PyResult<Recording> {
+        if let Ok(b) = obj.cast::<PyBytes>() {
+            let data = b.as_bytes();
+            let ext = if data.starts_with(b"\x89MCAP") {
+                "mcap"
+            } else if data.starts_with(b"PAR1") {
+                "parquet"
+            } else {
+                "csv"
+            };
+            let file = match name {
+                Some(n) if Path::new(n).extension().is_some() => n.to_string(),
+                Some(n) => format!("{n}.{ext}"),
+                None => format!("recording.{ext}"),
+            };
+            let dir = tempfile::tempdir().map_err(|e| RobotidError::new_err(format!("scratch folder: {e}")))?;
+            let path = dir.path().join(Path::new(&file).file_name().unwrap_or_default());
+            std::fs::write(&path, data).map_err(|e| RobotidError::new_err(format!("{}: {e}", path.display())))?;
+            return Ok(Recording::Bytes { _scratch: dir, path });
+        }
+        let path: PathBuf = obj.extract()?;
+        Ok(Recording::Path(path))
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Recording::Path(p) | Recording::Bytes { path: p, .. } => p,
+        }
+    }
+
+    fn name(&self, given: Option<&str>) -> String {
+        given
+            .map(|n| {
+                Path::new(n)
+                    .file_stem()
+                    .map_or(n.to_string(), |s| s.to_string_lossy().into_owned())
+            })
+            .unwrap_or_else(|| {
+                self.path()
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default()
+            })
+    }
+}
+
+/// One batch or a list of batches (pyarrow RecordBatch or Table).
+fn batches(obj: &Bound<'_, PyAny>) -> PyResult<Vec<RecordBatch>> {
+    let one = |o: &Bound<'_, PyAny>| -> PyResult<Vec<RecordBatch>> {
+        if let Ok(b) = RecordBatch::from_pyarrow_bound(o) {
+            return Ok(vec![b]);
+        }
+        Ok(Table::from_pyarrow_bound(o)?.into_inner().0)
+    };
+    if let Ok(list) = obj.cast::<PyList>() {
+        let mut out = Vec::new();
+        for item in list.iter() {
+            out.extend(one(&item)?);
+        }
+        return Ok(out);
+    }
+    one(obj)
+}
+
+fn table<'py>(py: Python<'py>, batch: RecordBatch) -> PyResult<Bound<'py, PyAny>> {
+    let schema = batch.schema();
+    Table::try_new(vec![batch], schema)
+        .map_err(|e| RobotidError::new_err(e.to_string()))?
+        .into_pyarrow(py)
+}
+
+/// A pipeline, built: robot loaded, recordings found, stages ready.
+#[pyclass(module = "robotid._robotid", frozen)]
+struct Pipeline {
+    built: Built,
+}
+
+#[pymethods]
+impl Pipeline {
+    /// A pipeline from its TOML text; relative paths in it resolve against
+    /// `base_dir`.
+    #[staticmethod]
+    fn from_toml(py: Python<'_>, text: &str, base_dir: PathBuf) -> PyResult<Pipeline> {
+        let file = base_dir.join("pipeline.toml");
+        let text = text.to_string();
+        py.detach(move || {
+            let built = Plan::from_toml(&text, file).and_then(|p| p.build()).map_err(py_error)?;
+            Ok(Pipeline { built })
+        })
+    }
+
+    /// A pipeline from its file.
+    #[staticmethod]
+    fn from_path(py: Python<'_>, path: PathBuf) -> PyResult<Pipeline> {
+        py.detach(move || {
+            let built = Plan::from_path(path).and_then(|p| p.build()).map_err(py_error)?;
+            Ok(Pipeline { built })
+        })
+    }
+
+    /// The recordings the pipeline's `[source]` names.
+    #[getter]
+    fn recordings(&self) -> Vec<PathBuf> {
+        self.built.logs.clone()
+    }
+
+    /// SHA-256 of the pipeline text (in every table's metadata).
+    #[getter]
+    fn config_sha256(&self) -> String {
+        self.built.plan.hash.clone()
+    }
+
+    /// The pipeline file's path.
+    #[getter]
+    fn file(&self) -> PathBuf {
+        self.built.plan.file.clone()
+    }
+
+    /// Every table the pipeline writes for one recording, by kind.
+    #[pyo3(signature = (recording, name=None))]
+    fn run_recording<'py>(
+        &self,
+        py: Python<'py>,
+        recording: &Bound<'py, PyAny>,
+        name: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let rec = Recording::new(recording, name)?;
+        let name = rec.name(name);
+        let tables = py
+            .detach(|| {
+                let chain = self.built.run_log(rec.path(), &name, |_| {})?;
+                self.built.tables(&chain)
+            })
+            .map_err(|e| py_error_in(robotid::Error::Stage(e), Some((&rec, &name))))?;
+        let out = PyDict::new(py);
+        for (kind, batch) in tables {
+            out.set_item(kind.name(), table(py, batch)?)?;
+        }
+        Ok(out)
+    }
+
+    /// One recording's row of sufficient statistics (needs an `estimate`
+    /// stage).
+    #[pyo3(signature = (recording, name=None))]
+    fn summarize<'py>(
+        &self,
+        py: Python<'py>,
+        recording: &Bound<'py, PyAny>,
+        name: Option<&str>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let rec = Recording::new(recording, name)?;
+        let name = rec.name(name);
+        let batch = py
+            .detach(|| self.built.summarize(rec.path(), &name))
+            .map_err(|e| py_error_in(e, Some((&rec, &name))))?;
+        batch.to_pyarrow(py)
+    }
+
+    /// Solves summaries made by this pipeline (merged in the order given):
+    /// the `parameters` table.
+    fn solve<'py>(&self, py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let input = batches(summaries)?;
+        let est = py.detach(|| self.built.solve(&input)).map_err(py_error)?;
+        table(py, est.table)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Pipeline({:?}, {} recording(s), config {})",
+            self.built.plan.file.display().to_string(),
+            self.built.logs.len(),
+            &self.built.plan.hash[..12.min(self.built.plan.hash.len())]
+        )
+    }
+}
+
+/// Summaries merged, in order, into one row.
+#[pyfunction]
+fn merge<'py>(py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let input = batches(summaries)?;
+    let merged = py.detach(|| robotid::summaries::merge(&input)).map_err(py_error)?;
+    merged.to_pyarrow(py)
+}
+
+#[pymodule]
+fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Pipeline>()?;
+    m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add("RobotidError", m.py().get_type::<RobotidError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,72 @@
+"""Shared fixtures: the repository, the robotid binary, and a small fleet
+of simulated recordings of two robots (made once per test session)."""
+
+import os
+import pathlib
+import re
+import subprocess
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+FIXTURES = ROOT / "fixtures"
+PER_ROBOT = 12
+
+
+def robotid_bin() -> str:
+    if "ROBOTID_BIN" in os.environ:
+        return os.environ["ROBOTID_BIN"]
+    target = os.environ.get("CARGO_TARGET_DIR", str(ROOT / "target"))
+    return os.path.join(target, "debug", "robotid")
+
+
+def robotid(*args, check=True):
+    return subprocess.run([robotid_bin(), *map(str, args)], capture_output=True, text=True, check=check)
+
+
+PIPELINE_TAIL = """
+[[stage]]
+kind = "regressor"
+friction = "symmetric"
+
+[[stage]]
+kind = "estimate"
+method = "ols"
+
+[output]
+tables = ["kinematics"]
+"""
+
+
+def _pipeline(robot: str, fleet: pathlib.Path) -> pathlib.Path:
+    """The fixture pipeline of `robot`, reading the fleet's recordings, with
+    a regressor and an estimate."""
+    text = (FIXTURES / "pipelines" / f"{robot}.toml").read_text()
+    text = text.split("[output]")[0]
+    text = re.sub(r'robot = "[^"]*"', f'robot = "{FIXTURES / "robots" / (robot + ".toml")}"', text, count=1)
+    text = re.sub(r'(\[source\]\s*\npath = )"[^"]*"', rf'\1"robot={robot}/{robot}_[0-9][0-9].parquet"', text)
+    path = fleet / f"{robot}.toml"
+    path.write_text(text + PIPELINE_TAIL)
+    return path
+
+
+@pytest.fixture(scope="session")
+def fleet(tmp_path_factory):
+    """12 arm3 and 12 UR5 recordings (own seeds), hive-style folders, and a
+    pipeline per robot: {"root", "recordings": [...], "pipelines": {robot: path}}."""
+    root = tmp_path_factory.mktemp("fleet")
+    recordings = []
+    for robot in ["arm3", "ur5"]:
+        sim = (FIXTURES / "sims" / f"{robot}.toml").read_text()
+        sim = re.sub(r'robot = "[^"]*"', f'robot = "{FIXTURES / "robots" / (robot + ".toml")}"', sim, count=1)
+        for i in range(PER_ROBOT):
+            name = f"{robot}_{i:02d}"
+            text = re.sub(r"^seed = \d+", f"seed = {1000 + i}", sim, flags=re.M)
+            text = re.sub(r'^name = "[^"]*"', f'name = "{name}"\nformats = ["parquet"]', text, flags=re.M)
+            cfg = root / "sims" / f"{name}.toml"
+            cfg.parent.mkdir(exist_ok=True)
+            cfg.write_text(text)
+            robotid("simulate", cfg, "--out", root / f"robot={robot}")
+            recordings.append(root / f"robot={robot}" / f"{name}.parquet")
+    pipelines = {r: _pipeline(r, root) for r in ["arm3", "ur5"]}
+    return {"root": root, "recordings": recordings, "pipelines": pipelines}

@@ -1,0 +1,39 @@
+"""Identification on a local Ray cluster equals `robotid run`."""
+
+import pyarrow.parquet as pq
+import pytest
+
+from conftest import PER_ROBOT, robotid as cli
+from test_package import largest_relative_difference
+
+ray = pytest.importorskip("ray")
+import robotid.ray  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+def test_ray_identify_equals_the_command_line_for_two_robots(fleet, local_ray, tmp_path):
+    recordings = fleet["recordings"]
+    assert len(recordings) == 2 * PER_ROBOT
+    expected = {}
+    for robot, pipeline in fleet["pipelines"].items():
+        cli("run", pipeline, "--out", tmp_path / robot)
+        expected[robot] = pq.read_table(tmp_path / robot / "parameters.parquet")
+    # Two partitionings: one recording per task, and five.
+    for per_task in [1, 5]:
+        found = robotid.ray.identify(recordings[::-1], fleet["pipelines"], summaries_per_task=per_task)
+        assert sorted(found) == ["arm3", "ur5"]
+        for robot, table in found.items():
+            d = largest_relative_difference(table, expected[robot])
+            print(f"{robot}, {per_task} per task: largest relative difference {d:.1e}")
+            assert d < 1e-10, (robot, d)
+
+
+def test_a_recording_without_a_pipeline_is_refused(fleet):
+    with pytest.raises(robotid.RobotidError, match="has no pipeline"):
+        robotid.ray.identify(fleet["recordings"][:1], {"ur5": fleet["pipelines"]["ur5"]})
