@@ -22,6 +22,9 @@ pub const LOCK: &str = ".robotid.lock";
 /// Prefix of a run's staging folder inside the output folder.
 pub const STAGING: &str = ".robotid-staging-";
 /// Written into the staging folder when its moves begin.
+/// The run manifest, written last into every run's output folder.
+pub const MANIFEST: &str = "run.json";
+
 const COMMIT: &str = "COMMIT";
 /// Inside the staging folder: what goes to the `--plot` folder, and that
 /// folder's path (a run finishing another's commit needs it).

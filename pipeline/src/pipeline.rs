@@ -48,6 +48,8 @@ pub struct Built {
     /// (name, stage) in order; the estimate's map step is the last.
     pub stages: Vec<(&'static str, Box<dyn Stage>)>,
     pub reducer: Option<Reducer>,
+    /// SHA-256 of the robot file's bytes, when the pipeline names one.
+    pub robot_sha256: Option<String>,
     /// Per stage: whether a later stage or sink still needs the raw samples.
     raw_needed_after: Vec<bool>,
 }
@@ -126,8 +128,19 @@ impl Pipeline {
         let raw_needed_after = (0..plan.stages.len())
             .map(|i| raw_table || plan.stages[i + 1..].iter().any(|s| s.takes().contains(&Product::Raw)))
             .collect();
+        let robot_sha256 = match &plan.robot {
+            Some(path) => {
+                let bytes = std::fs::read(path).map_err(|source| Error::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+                Some(robotid_stages::formats::sha256_hex(&bytes))
+            }
+            None => None,
+        };
         Ok(Built {
             plan,
+            robot_sha256,
             model,
             logs: resolved.logs,
             start: resolved.start,
@@ -221,6 +234,11 @@ impl Built {
             });
         }
         let estimate = self.estimate_all(&recordings, staging.staged_out())?;
+        self.write_manifest(
+            staging.staged_out(),
+            &recordings,
+            estimate.as_ref().map(|e| e.1.as_path()),
+        )?;
         let placed = |p: &Path| crate::output::placed(p, &staging, opts);
         let (estimate, parameters) = match estimate {
             Some((e, p)) => (Some(e), Some(placed(&p))),
@@ -238,6 +256,47 @@ impl Built {
             parameters,
             seconds: started.elapsed().as_secs_f64(),
         })
+    }
+
+    /// `run.json`, beside the recordings' folders: what made the run and
+    /// what it wrote, for tools that scan runs as a dataset. Nothing in it
+    /// depends on the machine, the time or the thread count.
+    pub fn write_manifest(&self, out: &Path, recordings: &[RecordingResult], parameters: Option<&Path>) -> Result<()> {
+        let relative = |p: &Path| p.strip_prefix(out).ok().map(|r| r.display().to_string());
+        let rows: Vec<serde_json::Value> = recordings
+            .iter()
+            .filter_map(|r| {
+                let o = r.outcome.as_ref().ok()?;
+                let tables: serde_json::Map<String, serde_json::Value> = o
+                    .files
+                    .iter()
+                    .filter(|f| f.extension().is_some_and(|e| e == "parquet"))
+                    .filter_map(|f| {
+                        let kind = f.file_stem()?.to_string_lossy().into_owned();
+                        Some((kind, relative(f)?.into()))
+                    })
+                    .collect();
+                Some(serde_json::json!({
+                    "name": r.name,
+                    "source": r.source.display().to_string(),
+                    "source_sha256": o.report.source_sha256,
+                    "samples": o.report.samples,
+                    "tables": tables,
+                }))
+            })
+            .collect();
+        let manifest = serde_json::json!({
+            "robotid_version": env!("CARGO_PKG_VERSION"),
+            "pipeline_file": self.plan.file.display().to_string(),
+            "config_sha256": self.plan.hash,
+            "robot_file": self.plan.robot.as_ref().map(|r| r.display().to_string()),
+            "robot_sha256": self.robot_sha256,
+            "recordings": rows,
+            "parameters": parameters.and_then(relative),
+        });
+        let path = out.join(crate::output::MANIFEST);
+        let text = serde_json::to_string_pretty(&manifest).expect("JSON of strings and numbers");
+        std::fs::write(&path, text + "\n").map_err(|source| Error::Io { path, source })
     }
 
     /// Every recording, in parallel; each writes its tables when it succeeds.

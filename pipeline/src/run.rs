@@ -112,6 +112,10 @@ pub fn run_recordings(built: &Built, opts: &RunOptions) -> Vec<RecordingResult> 
 pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Result<Chain> {
     let source = log.display().to_string();
     let mut chain = Chain::new(&source, name);
+    if built.start != Product::Raw {
+        let bytes = std::fs::read(log).map_err(|e| robotid_stages::Error::io(log, e))?;
+        chain.report.source_sha256 = Some(robotid_stages::formats::sha256_hex(&bytes));
+    }
     let placed = |e: robotid_schemas::SchemaError| robotid_stages::Error::Format {
         path: log.to_path_buf(),
         msg: e.to_string(),
@@ -123,6 +127,7 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
                 chain.report.notes.push(n);
             }
             chain.report.samples = raw.len();
+            chain.report.source_sha256 = raw.metadata.get(metadata::SOURCE_SHA256).cloned();
             chain.raw = Some(raw);
         }
         Product::PeriodMean => {

@@ -52,10 +52,11 @@ fn schema(config_sha256: &str) -> Schema {
     ]))
 }
 
-/// One row holding `part`.
-pub fn summary_batch(part: &Part, config_sha256: &str) -> Result<RecordBatch> {
+/// One row holding `part`, made by the pipeline and robot file of these
+/// hashes.
+pub fn summary_batch(part: &Part, config_sha256: &str, robot_sha256: &str) -> Result<RecordBatch> {
     let s = &part.summary;
-    let robot = s.metadata.get(metadata::ROBOT_SHA256).cloned().unwrap_or_default();
+    let robot = robot_sha256.to_string();
     let columns: Vec<ArrayRef> = vec![
         Arc::new(string_list(&s.recordings)),
         Arc::new(StringArray::from(vec![robot])),
@@ -89,7 +90,7 @@ fn refused(what: &str, msg: impl Into<String>) -> Error {
 
 /// The parts in `batches`, row by row, in order; every row must come from
 /// one pipeline and robot.
-pub fn parts(batches: &[RecordBatch]) -> Result<(Vec<Part>, String)> {
+pub fn parts(batches: &[RecordBatch]) -> Result<(Vec<Part>, String, String)> {
     let mut out = Vec::new();
     let mut seen: Option<(String, String, String)> = None;
     for (b, batch) in batches.iter().enumerate() {
@@ -138,19 +139,19 @@ pub fn parts(batches: &[RecordBatch]) -> Result<(Vec<Part>, String)> {
             out.push(part);
         }
     }
-    let config = seen.map(|s| s.1).ok_or_else(|| refused("summaries", "none given"))?;
-    Ok((out, config))
+    let (robot, config, _) = seen.ok_or_else(|| refused("summaries", "none given"))?;
+    Ok((out, config, robot))
 }
 
 /// Summaries merged, in the order given, into one row.
 pub fn merge(batches: &[RecordBatch]) -> Result<RecordBatch> {
-    let (parts, config) = parts(batches)?;
+    let (parts, config, robot) = parts(batches)?;
     let mut it = parts.into_iter();
     let mut all = it.next().expect("parts() refuses none");
     for p in it {
         all.merge(&p).map_err(Error::Stage)?;
     }
-    summary_batch(&all, &config)
+    summary_batch(&all, &config, &robot)
 }
 
 impl Built {
@@ -165,7 +166,7 @@ impl Built {
         }
         let mut chain = self.run_log(log, name, |_| {})?;
         let part = chain.estimate.take().expect("the estimate stage made its part");
-        summary_batch(&part, &self.plan.hash)
+        summary_batch(&part, &self.plan.hash, self.robot_sha256.as_deref().unwrap_or_default())
     }
 
     /// Solves merged (or unmerged: they are merged in order) summaries
@@ -177,7 +178,7 @@ impl Built {
                 "the pipeline has no `estimate` stage to solve with",
             )
         })?;
-        let (parts, config) = parts(summaries)?;
+        let (parts, config, _) = parts(summaries)?;
         if config != self.plan.hash {
             return Err(refused(
                 "summaries",

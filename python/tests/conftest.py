@@ -4,6 +4,7 @@ of simulated recordings of two robots (made once per test session)."""
 import os
 import pathlib
 import re
+import shutil
 import subprocess
 
 import pytest
@@ -50,16 +51,15 @@ def _pipeline(robot: str, fleet: pathlib.Path) -> pathlib.Path:
     return path
 
 
-@pytest.fixture(scope="session")
-def fleet(tmp_path_factory):
-    """12 arm3 and 12 UR5 recordings (own seeds), hive-style folders, and a
-    pipeline per robot: {"root", "recordings": [...], "pipelines": {robot: path}}."""
-    root = tmp_path_factory.mktemp("fleet")
+def make_fleet(root: pathlib.Path, per_robot: int) -> dict:
+    """`per_robot` arm3 and UR5 recordings (own seeds) under `root` in
+    hive-style folders, and a pipeline per robot:
+    {"root", "recordings": [...], "pipelines": {robot: path}}."""
     recordings = []
     for robot in ["arm3", "ur5"]:
         sim = (FIXTURES / "sims" / f"{robot}.toml").read_text()
         sim = re.sub(r'robot = "[^"]*"', f'robot = "{FIXTURES / "robots" / (robot + ".toml")}"', sim, count=1)
-        for i in range(PER_ROBOT):
+        for i in range(per_robot):
             name = f"{robot}_{i:02d}"
             text = re.sub(r"^seed = \d+", f"seed = {1000 + i}", sim, flags=re.M)
             text = re.sub(r'^name = "[^"]*"', f'name = "{name}"\nformats = ["parquet"]', text, flags=re.M)
@@ -70,3 +70,23 @@ def fleet(tmp_path_factory):
             recordings.append(root / f"robot={robot}" / f"{name}.parquet")
     pipelines = {r: _pipeline(r, root) for r in ["arm3", "ur5"]}
     return {"root": root, "recordings": recordings, "pipelines": pipelines}
+
+
+@pytest.fixture(scope="session")
+def fleet(tmp_path_factory):
+    """12 arm3 and 12 UR5 recordings (own seeds), hive-style folders, and a
+    pipeline per robot."""
+    return make_fleet(tmp_path_factory.mktemp("fleet"), PER_ROBOT)
+
+
+@pytest.fixture(scope="session")
+def examples(tmp_path_factory):
+    """A copy of fixtures/ (robots, pipelines, sims) with the example
+    recordings the tests use simulated into recordings/ (they are not
+    committed): the folder, whose pipelines/ run as they are."""
+    root = tmp_path_factory.mktemp("examples")
+    for sub in ["robots", "pipelines", "sims"]:
+        shutil.copytree(FIXTURES / sub, root / sub)
+    for sim in ["kuka_axis3", "kuka_axis3_validation", "arm3"]:
+        robotid("simulate", root / "sims" / f"{sim}.toml", "--out", root / "recordings" / sim)
+    return root

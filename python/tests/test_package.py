@@ -10,10 +10,8 @@ import pyarrow.parquet as pq
 import pytest
 
 import robotid
-from conftest import FIXTURES, robotid as cli
+from conftest import robotid as cli
 
-KUKA = FIXTURES / "pipelines" / "kuka_axis3.toml"
-VALIDATION = FIXTURES / "pipelines" / "validation.toml"
 CRC = b"robotid.content_crc32"
 
 
@@ -48,33 +46,39 @@ def without_crc(schema: pa.Schema) -> dict:
 
 
 @pytest.fixture(scope="module")
-def kuka_run(tmp_path_factory):
+def kuka(examples):
+    return examples / "pipelines" / "kuka_axis3.toml"
+
+
+@pytest.fixture(scope="module")
+def kuka_run(kuka, tmp_path_factory):
     out = tmp_path_factory.mktemp("kuka")
-    cli("run", KUKA, "--out", out)
+    cli("run", kuka, "--out", out)
     return out
 
 
-def every_table(kuka_run, tmp_path):
+def every_table(kuka, kuka_run, tmp_path):
     """Every table kind robotid writes, as the package gives it, with the
     file the command line wrote for it."""
-    p = robotid.Pipeline.from_path(KUKA)
+    p = robotid.Pipeline.from_path(kuka)
     (rec,) = p.recordings
     name = pathlib.Path(rec).stem
     for kind, table in p.run_recording(rec).items():
         yield kind, table, kuka_run / name / f"{kind}.parquet"
     yield "parameters", robotid.solve([p.summarize(r) for r in p.recordings], p), kuka_run / "parameters.parquet"
-    v = robotid.Pipeline.from_path(VALIDATION)
+    validation = kuka.parent / "validation.toml"
+    v = robotid.Pipeline.from_path(validation)
     vout = tmp_path / "validation"
-    cli("run", VALIDATION, "--out", vout)
+    cli("run", validation, "--out", vout)
     for rec in v.recordings:
         name = pathlib.Path(rec).stem
         for kind, table in v.run_recording(rec).items():
             yield kind, table, vout / name / f"{kind}.parquet"
 
 
-def test_every_table_kind_equals_the_command_lines_and_round_trips(kuka_run, tmp_path):
+def test_every_table_kind_equals_the_command_lines_and_round_trips(kuka, kuka_run, tmp_path):
     kinds = set()
-    for kind, table, written in every_table(kuka_run, tmp_path):
+    for kind, table, written in every_table(kuka, kuka_run, tmp_path):
         kinds.add(kind)
         cli_table = pq.read_table(written)
         # The same values, units and provenance as the file `robotid run` wrote.
@@ -100,8 +104,8 @@ def test_every_table_kind_equals_the_command_lines_and_round_trips(kuka_run, tmp
     assert kinds == {"period_mean", "noise", "kinematics", "regressor", "r_factor", "parameters", "raw_samples"}, kinds
 
 
-def test_bytes_and_paths_give_the_same_tables():
-    p = robotid.Pipeline.from_path(KUKA)
+def test_bytes_and_paths_give_the_same_tables(kuka):
+    p = robotid.Pipeline.from_path(kuka)
     (rec,) = p.recordings
     from_path = p.run_recording(rec)
     from_bytes = p.run_recording(pathlib.Path(rec).read_bytes(), name=pathlib.Path(rec).name)
@@ -112,20 +116,20 @@ def test_bytes_and_paths_give_the_same_tables():
         )
 
 
-def test_pipeline_from_toml_resolves_paths_against_base_dir():
-    p = robotid.Pipeline.from_toml(KUKA.read_text(), KUKA.parent)
-    assert p.config_sha256 == robotid.Pipeline.from_path(KUKA).config_sha256
+def test_pipeline_from_toml_resolves_paths_against_base_dir(kuka):
+    p = robotid.Pipeline.from_toml(kuka.read_text(), kuka.parent)
+    assert p.config_sha256 == robotid.Pipeline.from_path(kuka).config_sha256
     assert len(p.recordings) == 1
 
 
-def test_errors_carry_their_place(tmp_path):
-    p = robotid.Pipeline.from_path(KUKA)
+def test_errors_carry_their_place(kuka, tmp_path):
+    p = robotid.Pipeline.from_path(kuka)
     with pytest.raises(robotid.RobotidError) as e:
         p.run_recording(b"time,q\n0,1\n", name="bad.csv")
     assert e.value.file == "<bytes bad>" and e.value.channel == "q_a3", str(e.value)
     assert "missing column" in str(e.value)
     # A sample at fault is named: time stamps that go back.
-    arm3 = robotid.Pipeline.from_path(FIXTURES / "pipelines" / "arm3.toml")
+    arm3 = robotid.Pipeline.from_path(kuka.parent / "arm3.toml")
     rec = tmp_path / "back.csv"
     header = "time," + ",".join(f"q_j{j},current_j{j}" for j in (1, 2, 3)) + "\n"
     rec.write_text(header + "".join(f"{t}" + ",0.0" * 6 + "\n" for t in [0.0, 0.1, 0.05, 0.2]))

@@ -158,6 +158,8 @@ pub struct Facts {
 /// What a recording's run found and did, for the run summary.
 #[derive(Debug, Clone, Default)]
 pub struct Report {
+    /// SHA-256 of the recording's bytes (all of a bag's files together).
+    pub source_sha256: Option<String>,
     pub samples: usize,
     pub periods_kept: Option<usize>,
     pub periods_found: Option<usize>,
