@@ -6,8 +6,10 @@
 //!
 //! A row carries the estimate stage's sufficient statistics (R factor,
 //! Qᵀb, RSS, the periods' moments, per-joint moments; the rows themselves
-//! for maximum likelihood) as CBOR in its `summary` column, next to
-//! readable columns to group and check by.
+//! for maximum likelihood) with the hashes of the pipeline and robot file
+//! that made them, as CBOR in its `summary` column: that column alone
+//! merges and solves (engines may drop the others). Readable columns beside
+//! it are for grouping and checking.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -20,6 +22,27 @@ use robotid_stages::stage::estimate::{Outcome as Estimated, Part};
 
 use crate::error::{Error, Result};
 use crate::pipeline::Built;
+
+/// What the `summary` column holds: a part and what made it.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Envelope {
+    config_sha256: String,
+    robot_sha256: String,
+    part: Part,
+}
+
+impl Envelope {
+    /// CBOR: exact doubles, NaN included.
+    fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        ciborium::into_writer(self, &mut out).expect("writing to memory");
+        out
+    }
+
+    fn from_bytes(bytes: &[u8], what: &str) -> Result<Envelope> {
+        ciborium::from_reader(bytes).map_err(|e| refused(what, format!("not a robotid summary ({e})")))
+    }
+}
 
 /// The `robotid.table` value of a summary table.
 pub const TABLE_NAME: &str = "summary";
@@ -56,14 +79,19 @@ fn schema(config_sha256: &str) -> Schema {
 /// hashes.
 pub fn summary_batch(part: &Part, config_sha256: &str, robot_sha256: &str) -> Result<RecordBatch> {
     let s = &part.summary;
-    let robot = robot_sha256.to_string();
+    let blob = Envelope {
+        config_sha256: config_sha256.to_string(),
+        robot_sha256: robot_sha256.to_string(),
+        part: part.clone(),
+    }
+    .to_bytes();
     let columns: Vec<ArrayRef> = vec![
         Arc::new(string_list(&s.recordings)),
-        Arc::new(StringArray::from(vec![robot])),
+        Arc::new(StringArray::from(vec![robot_sha256.to_string()])),
         Arc::new(StringArray::from(vec![config_sha256.to_string()])),
         Arc::new(UInt64Array::from(vec![s.factor.rows as u64])),
         Arc::new(UInt64Array::from(vec![s.parameters() as u64])),
-        Arc::new(BinaryArray::from_vec(vec![&part.to_bytes()])),
+        Arc::new(BinaryArray::from_vec(vec![&blob])),
     ];
     RecordBatch::try_new(Arc::new(schema(config_sha256)), columns).map_err(|e| Error::Output {
         what: "summary table".into(),
@@ -88,58 +116,53 @@ fn refused(what: &str, msg: impl Into<String>) -> Error {
     })
 }
 
-/// The parts in `batches`, row by row, in order; every row must come from
-/// one pipeline and robot.
+/// The parts in `batches`, row by row, in order, with the pipeline and
+/// robot hashes they share (refused when they do not).
 pub fn parts(batches: &[RecordBatch]) -> Result<(Vec<Part>, String, String)> {
     let mut out = Vec::new();
-    let mut seen: Option<(String, String, String)> = None;
+    let mut first: Option<(String, String, String)> = None;
     for (b, batch) in batches.iter().enumerate() {
         let what = format!("summary table {b}");
-        let col = |name: &str| {
-            batch
-                .column_by_name(name)
-                .ok_or_else(|| refused(&what, format!("no column `{name}`: not a robotid summary table")))
-        };
-        let blobs = col("summary")?
+        let blobs = batch
+            .column_by_name("summary")
+            .ok_or_else(|| refused(&what, "no column `summary`: not a robotid summary table"))?;
+        let blobs = blobs
             .as_any()
             .downcast_ref::<BinaryArray>()
             .ok_or_else(|| refused(&what, "column `summary` is not Binary"))?;
-        let strings = |name: &str| -> Result<StringArray> {
-            col(name)?
-                .as_any()
-                .downcast_ref::<StringArray>()
-                .cloned()
-                .ok_or_else(|| refused(&what, format!("column `{name}` is not Utf8")))
-        };
-        let (robot, config) = (strings("robot_sha256")?, strings("config_sha256")?);
         for r in 0..batch.num_rows() {
             if blobs.is_null(r) {
                 return Err(refused(&what, format!("row {r} has no summary")));
             }
-            let part = Part::from_bytes(blobs.value(r), &format!("{what}, row {r}"))?;
-            let first = part.summary.recordings.first().cloned().unwrap_or_default();
-            let key = (robot.value(r).to_string(), config.value(r).to_string());
-            match &seen {
-                None => seen = Some((key.0, key.1, first)),
-                Some((robot0, config0, name0)) => {
-                    if *config0 != key.1 {
+            let e = Envelope::from_bytes(blobs.value(r), &format!("{what}, row {r}"))?;
+            let name = e.part.summary.recordings.first().cloned().unwrap_or_default();
+            match &first {
+                None => first = Some((e.config_sha256.clone(), e.robot_sha256.clone(), name)),
+                Some((config, robot, name0)) => {
+                    if *config != e.config_sha256 {
                         return Err(refused(
                             &what,
-                            format!("row {r} ({first}) was made by pipeline {} and {name0} by {config0}: summaries merge only within one pipeline", key.1),
+                            format!(
+                                "row {r} ({name}) was made by pipeline {} and {name0} by {config}: summaries merge only within one pipeline",
+                                e.config_sha256
+                            ),
                         ));
                     }
-                    if *robot0 != key.0 {
+                    if *robot != e.robot_sha256 {
                         return Err(refused(
                             &what,
-                            format!("row {r} ({first}) is of robot file {} and {name0} of {robot0}: group the summaries by robot first", key.0),
+                            format!(
+                                "row {r} ({name}) is of robot file {} and {name0} of {robot}: group the summaries by robot first",
+                                e.robot_sha256
+                            ),
                         ));
                     }
                 }
             }
-            out.push(part);
+            out.push(e.part);
         }
     }
-    let (robot, config, _) = seen.ok_or_else(|| refused("summaries", "none given"))?;
+    let (config, robot, _) = first.ok_or_else(|| refused("summaries", "none given"))?;
     Ok((out, config, robot))
 }
 

@@ -1,7 +1,10 @@
 """Identification of a fleet on a local Ray cluster against `robotid run`
 over the same recordings, on this machine, in one run.
 
-    CARGO_TARGET_DIR=... python python/benches/ray_vs_cli.py [RECORDINGS_PER_ROBOT]
+    CARGO_TARGET_DIR=... python python/benches/ray_vs_cli.py [RECORDINGS_PER_ROBOT] [PERIODS]
+
+PERIODS lengthens each recording (the examples have 4): Ray's fixed cost
+per execution weighs less on real-sized recordings.
 
 Both sides use the same build profile (the `robotid` binary of
 $CARGO_TARGET_DIR/<profile>, the installed extension); set ROBOTID_BIN to
@@ -32,9 +35,10 @@ def best_of(n, f):
 
 def main():
     per_robot = int(sys.argv[1]) if len(sys.argv) > 1 else 12
+    periods = int(sys.argv[2]) if len(sys.argv) > 2 else 0
     with tempfile.TemporaryDirectory() as tmp:
         root = pathlib.Path(tmp)
-        fleet = make_fleet(root, per_robot)
+        fleet = make_fleet(root, per_robot, periods)
         n = len(fleet["recordings"])
 
         def run_cli():
@@ -52,7 +56,7 @@ def main():
         warm_ray = best_of(3, run_ray)
         warm_cli = best_of(3, run_cli)
         ray.shutdown()
-    print(f"{n} recordings of 2 robots, 2 cores")
+    print(f"{n} recordings of 2 robots ({periods or 4} periods each), 2 cores")
     print(f"robotid run (both pipelines):   {warm_cli:.2f} s, {n / warm_cli:.1f} recordings/s")
     print(f"robotid.ray.identify, warm:     {warm_ray:.2f} s, {n / warm_ray:.1f} recordings/s")
     print(f"robotid.ray.identify, first:    {first:.2f} s (workers start); ray.init {init:.2f} s")

@@ -72,10 +72,11 @@ def _merge_summaries():
         merged one-row summary as Arrow IPC bytes (b"" before any)."""
 
         def __init__(self):
-            super().__init__("summary", zero_factory=lambda: b"", on=None, ignore_nulls=False)
+            # The `summary` column alone merges (it holds what made it).
+            super().__init__("summary", zero_factory=lambda: b"", on="summary", ignore_nulls=False)
 
         def aggregate_block(self, block) -> bytes:
-            table = BlockAccessor.for_block(block).to_arrow()
+            table = BlockAccessor.for_block(block).to_arrow().select(["summary"])
             return _ipc(merge(table.to_batches()))
 
         def combine(self, current: bytes, new: bytes) -> bytes:
@@ -104,6 +105,7 @@ def identify(
     (hive-style), else the only pipeline's. `pipelines` maps each group to
     its pipeline file, or is one pipeline file for every recording."""
     import ray.data
+    import ray.data.context
 
     if isinstance(pipelines, Mapping):
         files = {k: os.path.abspath(os.fspath(v)) for k, v in pipelines.items()}
@@ -129,14 +131,22 @@ def identify(
         items.append({group_by: key, "path": path, "pipeline": pipeline})
     if not items:
         raise RobotidError("no recordings given")
-    ds = ray.data.from_items(items)
-    summaries = ds.map_batches(
-        _summarize,
-        fn_kwargs={"group_by": group_by},
-        batch_format="pyarrow",
-        batch_size=summaries_per_task,
-    )
-    merged = summaries.groupby(group_by).aggregate(_merge_summaries()).take_all()
+    # One shuffle partition per group (a group's summaries are a few small
+    # rows), and the sort-based shuffle: the default hash shuffle starts
+    # aggregator actors, seconds on a small cluster for kilobytes of data.
+    # A dataset takes the context current when it is made.
+    groups = len({it[group_by] for it in items})
+    ctx = ray.data.DataContext.get_current()
+    strategy = ctx.shuffle_strategy
+    ctx.shuffle_strategy = ray.data.context.ShuffleStrategy.SORT_SHUFFLE_PULL_BASED
+    try:
+        ds = ray.data.from_items(items, override_num_blocks=-(-len(items) // summaries_per_task))
+        summaries = ds.map_batches(
+            _summarize, fn_kwargs={"group_by": group_by}, batch_format="pyarrow", batch_size=None
+        )
+        merged = summaries.groupby(group_by, num_partitions=groups).aggregate(_merge_summaries()).take_all()
+    finally:
+        ctx.shuffle_strategy = strategy
     pipeline_of = {it[group_by]: it["pipeline"] for it in items}
     out = {}
     for row in merged:

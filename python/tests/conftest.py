@@ -51,10 +51,11 @@ def _pipeline(robot: str, fleet: pathlib.Path) -> pathlib.Path:
     return path
 
 
-def make_fleet(root: pathlib.Path, per_robot: int) -> dict:
+def make_fleet(root: pathlib.Path, per_robot: int, periods: int = 0) -> dict:
     """`per_robot` arm3 and UR5 recordings (own seeds) under `root` in
     hive-style folders, and a pipeline per robot:
-    {"root", "recordings": [...], "pipelines": {robot: path}}."""
+    {"root", "recordings": [...], "pipelines": {robot: path}}. `periods`
+    (when given) replaces the example simulations' 4 periods."""
     recordings = []
     for robot in ["arm3", "ur5"]:
         sim = (FIXTURES / "sims" / f"{robot}.toml").read_text()
@@ -62,6 +63,8 @@ def make_fleet(root: pathlib.Path, per_robot: int) -> dict:
         for i in range(per_robot):
             name = f"{robot}_{i:02d}"
             text = re.sub(r"^seed = \d+", f"seed = {1000 + i}", sim, flags=re.M)
+            if periods:
+                text = re.sub(r"^periods = \d+", f"periods = {periods}", text, flags=re.M)
             text = re.sub(r'^name = "[^"]*"', f'name = "{name}"\nformats = ["parquet"]', text, flags=re.M)
             cfg = root / "sims" / f"{name}.toml"
             cfg.parent.mkdir(exist_ok=True)

@@ -271,22 +271,6 @@ impl Part {
         };
         self.summary.merge(&other.summary)
     }
-
-    /// The part as bytes (CBOR: exact doubles, NaN included), to travel
-    /// between processes.
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        ciborium::into_writer(self, &mut out).expect("writing to memory");
-        out
-    }
-
-    /// The part back from [`Part::to_bytes`]; `what` names the bytes' origin.
-    pub fn from_bytes(bytes: &[u8], what: &str) -> Result<Part> {
-        ciborium::from_reader(bytes).map_err(|e| Error::Format {
-            path: what.into(),
-            msg: format!("not a robotid summary ({e})"),
-        })
-    }
 }
 
 /// What the reduce gives: the estimate, its `parameters` table and what
