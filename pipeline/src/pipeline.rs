@@ -233,12 +233,7 @@ impl Built {
                 seconds: started.elapsed().as_secs_f64(),
             });
         }
-        let estimate = self.estimate_all(&recordings, staging.staged_out())?;
-        self.write_manifest(
-            staging.staged_out(),
-            &recordings,
-            estimate.as_ref().map(|e| e.1.as_path()),
-        )?;
+        let estimate = self.finish_run(&recordings, staging.staged_out())?;
         let placed = |p: &Path| crate::output::placed(p, &staging, opts);
         let (estimate, parameters) = match estimate {
             Some((e, p)) => (Some(e), Some(placed(&p))),
@@ -258,10 +253,18 @@ impl Built {
         })
     }
 
+    /// The end of a run whose recordings all succeeded: the estimate
+    /// ([`Built::estimate_all`]), then the manifest, both into `out`.
+    pub fn finish_run(&self, recordings: &[RecordingResult], out: &Path) -> Result<Option<(Estimated, PathBuf)>> {
+        let estimate = self.estimate_all(recordings, out)?;
+        self.write_manifest(out, recordings, estimate.as_ref().map(|e| e.1.as_path()))?;
+        Ok(estimate)
+    }
+
     /// `run.json`, beside the recordings' folders: what made the run and
     /// what it wrote, for tools that scan runs as a dataset. Nothing in it
     /// depends on the machine, the time or the thread count.
-    pub fn write_manifest(&self, out: &Path, recordings: &[RecordingResult], parameters: Option<&Path>) -> Result<()> {
+    fn write_manifest(&self, out: &Path, recordings: &[RecordingResult], parameters: Option<&Path>) -> Result<()> {
         let relative = |p: &Path| p.strip_prefix(out).ok().map(|r| r.display().to_string());
         let rows: Vec<serde_json::Value> = recordings
             .iter()

@@ -111,13 +111,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); nothing was written (a run's outputs appear together or not at all)");
     }
-    let estimate = built.estimate_all(&recordings, staging.staged_out())?;
-    built.write_manifest(
-        staging.staged_out(),
-        &recordings,
-        estimate.as_ref().map(|e| e.1.as_path()),
-    )?;
-    if let Some((est, path)) = estimate {
+    if let Some((est, path)) = built.finish_run(&recordings, staging.staged_out())? {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
         print!("{}", super::estimate::summary(&est.estimate, level));
         if let Some(fit) = &est.physical {

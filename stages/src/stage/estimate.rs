@@ -255,11 +255,12 @@ impl Part {
                 format!("{:?}", other.config),
             ));
         }
-        self.rows = match (self.rows.take(), &other.rows) {
+        // Nothing changes unless everything merges.
+        let rows = match (&self.rows, &other.rows) {
             (None, None) => None,
             (Some((a, na)), Some((b, nb))) => {
-                let noise = InputNoise::stack(na.into_iter().chain(nb.clone()));
-                Some((System::stack(&[&a, b])?, noise))
+                let noise = InputNoise::stack(na.iter().chain(nb).cloned());
+                Some((System::stack(&[a, b])?, noise))
             }
             _ => {
                 return Err(Error::mismatch(
@@ -269,7 +270,9 @@ impl Part {
                 ))
             }
         };
-        self.summary.merge(&other.summary)
+        self.summary.merge(&other.summary)?;
+        self.rows = rows;
+        Ok(())
     }
 }
 
