@@ -1,9 +1,9 @@
 //! The pipeline runner behind the `robotid` command: pipeline files
 //! (`plan`), the library entry point (`pipeline`: [`Pipeline`] → [`Built`]
-//! → [`RunReport`]), the execution over many recordings (`run`), and the
-//! dataset-level comparison of runs (`compare`).
+//! → [`RunReport`]), and the execution over many recordings (`run`). Runs
+//! read as a dataset (summaries, comparisons) are the `robotid-dataset`
+//! crate's.
 
-pub mod compare;
 pub mod error;
 pub mod fuzz;
 pub mod output;

@@ -48,13 +48,25 @@ enum Command {
     /// Torques of an identified model for a kinematics table (q, q̇, q̈):
     /// the feed-forward of a computed-torque controller.
     Predict(cmd::predict::Args),
-    /// Compare a run's tables with golden tables, column by column.
-    #[command(alias = "check")]
-    Compare(cmd::compare::Args),
+    /// Runs as a dataset (the robotid-dataset binary, on polars): `summary
+    /// RUN…` per recording and joint with parameter drift; `compare A B`,
+    /// a regression test of one output tree against another.
+    Dataset(cmd::dataset::Args),
+    /// Compare a run's tables with golden tables: `robotid dataset compare`.
+    #[command(alias = "compare")]
+    Check(cmd::dataset::Args),
     /// Inspect a robot model: parameters, base parameters, conditioning.
     Model(cmd::model::Args),
     /// Print the Arrow schema of a robotid table kind.
     Schema(cmd::schema::Args),
+}
+
+/// `robotid dataset`: the other binary's exit code is this one's.
+fn forward(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
+    cmd::dataset::run(args).unwrap_or_else(|e| {
+        eprintln!("error: {e:#}");
+        ExitCode::FAILURE
+    })
 }
 
 fn main() -> ExitCode {
@@ -70,7 +82,8 @@ fn main() -> ExitCode {
         Command::Export(a) => cmd::export::run(a),
         Command::Excite(a) => cmd::excite::run(a),
         Command::Report(a) => cmd::report::run(a),
-        Command::Compare(a) => cmd::compare::run(a),
+        Command::Dataset(a) => return forward(a.args),
+        Command::Check(a) => return forward(std::iter::once("compare".into()).chain(a.args)),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),
     };

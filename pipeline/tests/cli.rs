@@ -93,3 +93,36 @@ fn model_inspect_prints_the_base_set_and_conditioning() {
     let out = robotid().args(["model", "inspect", "nowhere.toml"]).output().unwrap();
     assert_eq!(out.status.code(), Some(1));
 }
+
+/// `robotid check` and `robotid dataset` run the robotid-dataset binary
+/// beside robotid (`cargo test --workspace` builds it there). Against the
+/// goldens themselves the check passes with exit 0; without the binary
+/// the command says how to get it.
+#[test]
+fn check_runs_the_dataset_comparison_beside_it() {
+    let beside = Path::new(env!("CARGO_BIN_EXE_robotid")).with_file_name("robotid-dataset");
+    let golden = root().join("fixtures/golden/kuka_axis3");
+    let out = robotid().arg("check").arg(&golden).arg(&golden).output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    if beside.is_file() {
+        assert_eq!(out.status.code(), Some(0), "{stdout}{stderr}");
+        assert!(stdout.contains("cell(s) compared: identical"), "{stdout}");
+        let out = robotid()
+            .args(["dataset", "compare", "--rtol", "-1"])
+            .arg(&golden)
+            .arg(&golden)
+            .output()
+            .unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(2),
+            "bad options: the dataset binary's exit code 2 passes through"
+        );
+    } else {
+        assert_eq!(out.status.code(), Some(1));
+        assert!(stderr.contains("cargo build -p robotid-dataset"), "{stderr}");
+    }
+}

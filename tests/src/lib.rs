@@ -28,13 +28,16 @@ pub fn realdata(name: &str) -> Option<PathBuf> {
     }
 }
 
-/// Copies the files of `from` (not sub-folders) into `to`.
+/// Copies `from` into `to`, sub-folders too.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for e in std::fs::read_dir(from).unwrap() {
         let p = e.unwrap().path();
-        if p.is_file() {
-            std::fs::copy(&p, to.join(p.file_name().unwrap())).unwrap();
+        let dest = to.join(p.file_name().unwrap());
+        if p.is_dir() {
+            copy_dir(&p, &dest);
+        } else {
+            std::fs::copy(&p, dest).unwrap();
         }
     }
 }

@@ -1,4 +1,4 @@
-pub mod compare;
+pub mod dataset;
 pub mod estimate;
 pub mod excite;
 pub mod export;
