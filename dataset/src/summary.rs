@@ -122,6 +122,14 @@ struct Columns {
     rows: usize,
 }
 
+/// Appends `v` to the column `name` of `map`, padding it with nulls to
+/// `rows` first (a run that lacked the column until now).
+fn push<T: Clone>(map: &mut BTreeMap<String, Vec<Option<T>>>, rows: usize, name: &str, v: Option<T>) {
+    let c = map.entry(name.to_string()).or_default();
+    c.resize(rows, None);
+    c.push(v);
+}
+
 impl Columns {
     fn note(&mut self, name: &str) {
         if !self.order.iter().any(|n| n == name) {
@@ -130,24 +138,15 @@ impl Columns {
     }
     fn text(&mut self, name: &str, v: Option<String>) {
         self.note(name);
-        let rows = self.rows;
-        let c = self.text.entry(name.to_string()).or_default();
-        c.resize(rows, None);
-        c.push(v);
+        push(&mut self.text, self.rows, name, v);
     }
     fn float(&mut self, name: &str, v: Option<f64>) {
         self.note(name);
-        let rows = self.rows;
-        let c = self.float.entry(name.to_string()).or_default();
-        c.resize(rows, None);
-        c.push(v);
+        push(&mut self.float, self.rows, name, v);
     }
     fn int(&mut self, name: &str, v: Option<i64>) {
         self.note(name);
-        let rows = self.rows;
-        let c = self.int.entry(name.to_string()).or_default();
-        c.resize(rows, None);
-        c.push(v);
+        push(&mut self.int, self.rows, name, v);
     }
     fn end_row(&mut self) {
         self.rows += 1;
