@@ -223,7 +223,7 @@ pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> anyhow::Result<Report> {
             Err(e) => report.problems.push(format!("{}: {e}", f.display())),
         }
     }
-    if !tol.columns.is_empty() && report.tables.iter().all(|t| t.columns.is_empty()) {
+    if !tol.columns.is_empty() && report.problems.is_empty() && report.tables.iter().all(|t| t.columns.is_empty()) {
         anyhow::bail!("no column matches --columns {}", tol.columns.join(","));
     }
     Ok(report)
