@@ -76,5 +76,111 @@ fn whole(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, whole);
+/// 130 s of a simulated UR5 excitation logged at 500 Hz to MCAP (0.1 Hz
+/// fundamental, 5 harmonics, 12 steady periods after a 10 s transient;
+/// motor currents through a Chebyshev anti-alias filter).
+const SIMULATION: &str = r#"
+robot = "ROBOT"
+seed = 7
+[trajectory]
+kind = "fourier"
+base_frequency_hz = 0.1
+q0 = [0.0, -1.2, 1.0, -1.4, -1.57, 0.0]
+a = [[0.40, -0.20, 0.10, 0.08, -0.05], [0.30, 0.20, -0.10, 0.06, 0.04], [-0.35, 0.20, 0.12, -0.08, 0.05], [0.50, -0.25, 0.15, 0.10, -0.06], [0.45, 0.20, -0.15, 0.08, 0.05], [-0.50, 0.30, 0.10, -0.10, 0.06]]
+b = [[0.20, 0.25, -0.10, 0.05, 0.04], [-0.25, 0.10, 0.10, -0.05, 0.03], [0.30, -0.10, 0.12, 0.05, -0.04], [-0.30, 0.20, 0.10, -0.08, 0.05], [0.30, -0.25, 0.10, 0.06, -0.05], [0.40, 0.20, -0.15, 0.08, 0.05]]
+[timing]
+log_rate_hz = 500.0
+steps_per_sample = 4
+transient_s = 10.0
+periods = 12
+[controller]
+kind = "pid"
+bandwidth_hz = 6.0
+[measurement]
+filter = { family = "chebyshev1", order = 6, cutoff_hz = 100.0, ripple_db = 1.0 }
+current_noise_std_a = 0.02
+position_noise_std_rad = 1.0e-5
+[output]
+name = "ur5"
+formats = ["mcap"]
+"#;
+
+/// The identification chain on that recording, to the estimate.
+const IDENTIFY: &str = r#"
+version = 1
+robot = "ROBOT"
+[source]
+path = "ur5.mcap"
+[[stage]]
+kind = "align"
+[[stage]]
+kind = "inverse_filter"
+filter = { family = "chebyshev1", order = 6, cutoff_hz = 100.0, ripple_db = 1.0 }
+bandwidth_hz = 40.0
+[[stage]]
+kind = "average"
+[[stage]]
+kind = "noise"
+[[stage]]
+kind = "differentiate"
+method = "fourier_fit"
+[[stage]]
+kind = "regressor"
+[[stage]]
+kind = "estimate"
+method = "ols"
+[output]
+tables = ["period_mean", "noise", "kinematics", "regressor"]
+"#;
+
+/// The whole identification of a 130 s, 500 Hz, 6-joint MCAP recording
+/// against reading that recording and writing the same tables.
+fn identify(c: &mut Criterion) {
+    use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
+    let dir = tempfile::tempdir().unwrap();
+    let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+    let robot = robot.canonicalize().unwrap();
+    let sim_file = dir.path().join("sim.toml");
+    let sim_text = SIMULATION.replace("ROBOT", &robot.display().to_string());
+    std::fs::write(&sim_file, &sim_text).unwrap();
+    let (cfg, text) = SimConfig::load(&sim_file).unwrap();
+    let model = robotid_stages::dynamics::load_robot(&cfg.robot).unwrap();
+    let sim = simulate(&cfg, &model, &provenance(&sim_file, &text, &cfg.robot).unwrap()).unwrap();
+    write_simulation(dir.path(), "ur5", &cfg.output.formats, &sim, &model).unwrap();
+    drop(sim);
+    let file = dir.path().join("identify.toml");
+    let pipeline = IDENTIFY.replace("ROBOT", &robot.display().to_string());
+    std::fs::write(&file, &pipeline).unwrap();
+    let built = Pipeline::from_path(&file).unwrap().build().unwrap();
+    let out = dir.path().join("out");
+    let opts = RunOptions {
+        out: out.clone(),
+        threads: None,
+        progress: false,
+        plot: None,
+    };
+    let report = built.run(&opts).unwrap();
+    let samples = report.recordings[0].outcome.as_ref().unwrap().report.samples as u64;
+    let tables: Vec<_> = ["period_mean", "noise", "kinematics", "regressor"]
+        .iter()
+        .map(|t| robotid_stages::formats::parquet::read_parquet(&out.join("ur5").join(format!("{t}.parquet"))).unwrap())
+        .collect();
+    let parameters = robotid_stages::formats::parquet::read_parquet(&out.join("parameters.parquet")).unwrap();
+    let mut g = c.benchmark_group("identify_ur5_130s_500Hz_mcap");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(samples));
+    g.bench_function("read_and_write_only", |b| {
+        b.iter(|| {
+            let raw = read(&built.logs[0], &built.plan.read, built.model.as_deref()).unwrap();
+            for (t, batch) in ["a", "b", "c", "d", "e"].iter().zip(tables.iter().chain([&parameters])) {
+                write_parquet(&dir.path().join(format!("{t}.parquet")), batch).unwrap();
+            }
+            raw.len()
+        })
+    });
+    g.bench_function("whole_identification", |b| b.iter(|| built.run(&opts).unwrap()));
+    g.finish();
+}
+
+criterion_group!(benches, whole, identify);
 criterion_main!(benches);
