@@ -84,6 +84,13 @@ pub fn content_crc32(batch: &RecordBatch) -> u32 {
     h.finalize()
 }
 
+/// Encoded bytes a row group holds before it is flushed: bounds the
+/// writer's memory on long tables (an hour's kinematics, a regressor with
+/// hundreds of period columns), where one row group cost twice the table.
+const ROW_GROUP_BYTES: usize = 32 << 20;
+/// Rows handed to the writer at a time (its own mini-batch size).
+const WRITE_ROWS: usize = 1024;
+
 /// Writes one record batch as a Parquet file (zstd), atomically. The Arrow
 /// schema, with its field and schema metadata, is stored in the file, with
 /// the content's CRC-32 ([`CONTENT_CRC32`]) that [`read_parquet`] checks.
@@ -112,6 +119,7 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     let props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
         .set_key_value_metadata(Some(keys))
+        .set_max_row_group_bytes(Some(ROW_GROUP_BYTES))
         .build();
     let fmt = |e: parquet::errors::ParquetError| Error::Format {
         path: path.to_path_buf(),
@@ -119,7 +127,13 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     };
     write_atomic(path, |w| {
         let mut writer = ArrowWriter::try_new(w, batch.schema(), Some(props)).map_err(fmt)?;
-        writer.write(batch).map_err(fmt)?;
+        // In slices, so that the writer, which holds a row group's encoded
+        // pages until it flushes them, flushes every ROW_GROUP_BYTES (one
+        // call with the whole batch would make it a single row group).
+        for start in (0..batch.num_rows()).step_by(WRITE_ROWS) {
+            let rows = WRITE_ROWS.min(batch.num_rows() - start);
+            writer.write(&batch.slice(start, rows)).map_err(fmt)?;
+        }
         writer.close().map_err(fmt)?;
         Ok(())
     })
@@ -282,5 +296,33 @@ mod tests {
         let other = Float64Array::from(vec![Some(1.0), Some(0.0), Some(3.0)]);
         let valid = RecordBatch::try_new(schema.clone(), vec![Arc::new(other)]).unwrap();
         assert_ne!(super::content_crc32(&batch(0.0)), super::content_crc32(&valid));
+    }
+
+    /// A table of 80 MB is written as row groups of about ROW_GROUP_BYTES
+    /// (the writer's memory), and reads back whole.
+    #[test]
+    fn long_tables_are_written_in_bounded_row_groups() {
+        let rows = 250_000;
+        let fields: Vec<Field> = (0..40)
+            .map(|c| Field::new(format!("c{c}"), DataType::Float64, false))
+            .collect();
+        let columns = (0..40)
+            .map(|c| {
+                Arc::new(Float64Array::from_iter_values(
+                    (0..rows).map(|i| (i * 40 + c) as f64 * 0.37),
+                )) as _
+            })
+            .collect();
+        let batch = RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("long.parquet");
+        super::write_parquet(&path, &batch).unwrap();
+        let groups = super::open(&path).unwrap().metadata().row_groups().to_vec();
+        assert!(groups.len() >= 3, "{} row group(s)", groups.len());
+        for g in &groups[..groups.len() - 1] {
+            let bytes = g.total_byte_size() as usize;
+            assert!(bytes < 2 * super::ROW_GROUP_BYTES, "row group of {bytes} bytes");
+        }
+        assert_eq!(super::read_parquet(&path).unwrap().columns(), batch.columns());
     }
 }
