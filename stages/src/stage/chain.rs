@@ -117,6 +117,16 @@ impl Periods {
     pub fn sample_rate_hz(&self) -> f64 {
         self.samples_per_period as f64 / self.period_s
     }
+
+    /// Frees the samples (every period of every joint: the largest thing a
+    /// chain holds), keeping the counts, report and metadata. For runs that
+    /// are past every stage and draw no pictures.
+    pub fn release_samples(&mut self) {
+        self.q = Vec::new();
+        self.torque = Vec::new();
+        self.reference = None;
+        self.stretch = None;
+    }
 }
 
 /// Noise statistics of one channel (positions in rad², torques in N²m²).
