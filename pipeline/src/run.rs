@@ -154,6 +154,18 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
     Ok(chain)
 }
 
+/// Hands the allocator's free pages back to the system. glibc keeps freed
+/// blocks under its dynamic mmap threshold (up to 32 MB: an hour's column
+/// vectors) in its heap; between the stages and the tables a run has freed
+/// the raw and aligned samples, and the tables need fresh memory.
+fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free memory; it is thread-safe.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &ProgressBar) -> crate::Result<Outcome> {
     let mut chain = built.run_log(log, name, |stage| {
         bar.set_message(stage);
@@ -166,6 +178,7 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
             p.release_samples();
         }
     }
+    release_free_memory();
     // Sinks: only now, with every stage done.
     let t = Instant::now();
     bar.set_message("write");
