@@ -2,8 +2,9 @@
 //! Only its Gram matrix G = AᵀA (p × p) is formed, sample by sample, so a
 //! criterion evaluation allocates nothing per sample; the column
 //! normalisation of Swevers eq. 6 is D⁻¹GD⁻¹ with D² = diag(G), and
-//! cond(A·D⁻¹) = √(λ_max/λ_min) of it. The gradient is by forward
-//! differences (the criterion is a few hundred regressor rows).
+//! cond(A·D⁻¹) = √(λ_max/λ_min) of it. The gradients are analytic in G
+//! (eigenvalue derivatives; −tr(S⁻¹dS) for the log-determinant), chained
+//! through the regressor's input Jacobians.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -122,6 +123,18 @@ impl Criterion {
         }
     }
 
+    /// What the optimiser divides the criterion by: the log-determinant
+    /// sums p log-eigenvalues, and SLSQP (its first step is the raw
+    /// gradient, its merit function weighs it against the constraints)
+    /// leaves the feasible region when it sees the sum; per parameter it
+    /// does not. The condition numbers are left as they are.
+    pub fn scale(&self) -> f64 {
+        match self.kind {
+            CriterionKind::LogDet => self.base.parameters() as f64,
+            _ => 1.0,
+        }
+    }
+
     /// The plain condition number of the column-normalised regressor.
     pub fn condition(&self, x: &[f64]) -> f64 {
         match self.eigen(x, CriterionKind::Condition) {
@@ -130,24 +143,125 @@ impl Criterion {
         }
     }
 
-    /// Value, and its gradient when asked: analytic for the condition
-    /// numbers (eigenvalue derivatives, chain rule through the regressor's
-    /// input Jacobians), forward differences for the log-determinant.
+    /// Value, and its gradient when asked (analytic for every criterion).
     pub fn value_and_gradient(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
         match grad {
             None => self.value(x),
-            Some(g) if self.kind == CriterionKind::LogDet => {
-                let f0 = self.value(x);
-                let mut xp = x.to_vec();
-                for k in 0..x.len() {
-                    let h = 1e-6 * x[k].abs().max(0.05);
-                    xp[k] = x[k] + h;
-                    g[k] = (self.value(&xp) - f0) / h;
-                    xp[k] = x[k];
-                }
-                f0
-            }
+            Some(g) if self.kind == CriterionKind::LogDet => self.log_det_gradient(x, g),
             Some(g) => self.condition_gradient(x, g),
+        }
+    }
+
+    /// f = −ln det(S/m), S = D·G·D with D the fixed a-priori scales, and
+    /// its gradient: df = −tr(S⁻¹·dS) = −tr(M·dG) with M = D·S⁻¹·D, and
+    /// dG = Σ_rows (dr·rᵀ + r·drᵀ), so df = −2·Σ_rows (M·r)·dr.
+    fn log_det_gradient(&self, x: &[f64], grad: &mut [f64]) -> f64 {
+        grad.iter_mut().for_each(|v| *v = 0.0);
+        let g = self.gram(x);
+        let p = g.nrows();
+        let d: Vec<f64> = (0..p).map(|i| self.prior_scale[i]).collect();
+        let sm = DMatrix::from_fn(p, p, |i, j| g[(i, j)] * d[i] * d[j]);
+        let eig = sm.symmetric_eigen();
+        let (lo, hi) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+        if !(lo > 1e-14 * hi) {
+            return DEGENERATE;
+        }
+        let m = (self.times.len() * self.layout.joints()) as f64;
+        let value = -eig.eigenvalues.iter().map(|v| (v / m).ln()).sum::<f64>();
+        let inverse = &eig.eigenvectors
+            * DMatrix::from_diagonal(&eig.eigenvalues.map(|v| 1.0 / v))
+            * eig.eigenvectors.transpose();
+        let weight = DMatrix::from_fn(p, p, |i, j| d[i] * inverse[(i, j)] * d[j]);
+        let n = self.layout.joints();
+        // Per sample: y_r = M·r for each of its n rows.
+        let mut y = vec![0.0; n * p];
+        self.chain_rule(
+            x,
+            &mut y,
+            |y, rows| {
+                for r in 0..n {
+                    let row = &rows[r * p..(r + 1) * p];
+                    for i in 0..p {
+                        y[r * p + i] = (0..p).map(|j| weight[(i, j)] * row[j]).sum();
+                    }
+                }
+            },
+            |y, _, drows| [-2.0 * y.iter().zip(drows).map(|(a, b)| a * b).sum::<f64>()],
+            |k, [dv]| grad[k] += dv,
+        );
+        value
+    }
+
+    /// The chain rule from the regressor rows to the trajectory's
+    /// variables, shared by the gradients. At each sample of the grid,
+    /// `prepare(state, rows)` sees the rows; then, for each of the 3n inputs
+    /// u (q, q̇, q̈ of every joint), `per_input(state, rows, ∂rows/∂u)` gives
+    /// that sample's derivative in C channels (∂r/∂u by central
+    /// differences: the scaled criteria reach condition numbers of 10⁴,
+    /// which amplify a forward difference's error). The channels go through
+    /// the Fourier basis to each variable k and are handed to `add(k, ·)`.
+    fn chain_rule<S, const C: usize>(
+        &self,
+        x: &[f64],
+        state: &mut S,
+        prepare: impl Fn(&mut S, &[f64]),
+        per_input: impl Fn(&S, &[f64], &[f64]) -> [f64; C],
+        mut add: impl FnMut(usize, [f64; C]),
+    ) {
+        let series = self.layout.series(x);
+        let n = self.layout.joints();
+        let p = self.base.parameters();
+        let mut ws = self.base.workspace();
+        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut rows = vec![0.0; n * p];
+        let mut moved = vec![0.0; n * p];
+        let mut back = vec![0.0; n * p];
+        let mut drows = vec![0.0; n * p];
+        let mut per = vec![[0.0; C]; 3 * n];
+        let w0 = 2.0 * std::f64::consts::PI * self.layout.base_frequency_hz;
+        let vars: Vec<(usize, Option<(usize, bool)>)> = (0..x.len()).map(|k| self.layout.variable(k)).collect();
+        for &t in &self.times {
+            series.eval(t, &mut q, &mut qd, &mut qdd);
+            self.base.rows(&mut ws, &q, &qd, &qdd, &mut rows);
+            prepare(state, &rows);
+            for l in 0..3 * n {
+                let (j, which) = (l % n, l / n);
+                let set = |q: &mut Vec<f64>, qd: &mut Vec<f64>, qdd: &mut Vec<f64>, v: f64| match which {
+                    0 => q[j] = v,
+                    1 => qd[j] = v,
+                    _ => qdd[j] = v,
+                };
+                let u0 = [&q, &qd, &qdd][which][j];
+                let h = 1e-5 * u0.abs().max(0.1);
+                set(&mut q, &mut qd, &mut qdd, u0 + h);
+                self.base.rows(&mut ws, &q, &qd, &qdd, &mut moved);
+                set(&mut q, &mut qd, &mut qdd, u0 - h);
+                self.base.rows(&mut ws, &q, &qd, &qdd, &mut back);
+                set(&mut q, &mut qd, &mut qdd, u0);
+                for ((d, m), b) in drows.iter_mut().zip(&moved).zip(&back) {
+                    *d = (m - b) / (2.0 * h);
+                }
+                per[l] = per_input(state, &rows, &drows);
+            }
+            for (k, &(j, what)) in vars.iter().enumerate() {
+                let (b0, b1, b2) = match what {
+                    None => (1.0, 0.0, 0.0),
+                    Some((hi, is_b)) => {
+                        let w = w0 * self.layout.harmonics[hi] as f64;
+                        let (sn, co) = (w * t).sin_cos();
+                        if is_b {
+                            (-co / w, sn, w * co)
+                        } else {
+                            (sn / w, co, -w * sn)
+                        }
+                    }
+                };
+                let mut out = [0.0; C];
+                for (c, o) in out.iter_mut().enumerate() {
+                    *o = per[j][c] * b0 + per[n + j][c] * b1 + per[2 * n + j][c] * b2;
+                }
+                add(k, out);
+            }
         }
     }
 
@@ -198,49 +312,20 @@ impl Criterion {
                 .collect()
         };
         let (wmax, wmin) = (weights(lmax, &vmax), weights(lmin, &vmin));
-        let series = self.layout.series(x);
         let n = self.layout.joints();
-        let mut ws = self.base.workspace();
-        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let mut rows = vec![0.0; n * p];
-        let mut moved = vec![0.0; n * p];
-        let mut back = vec![0.0; n * p];
-        // dλ/du_l at this sample, for λ_max and λ_min, per input l (3n).
-        let mut cmax = vec![0.0; 3 * n];
-        let mut cmin = vec![0.0; 3 * n];
-        let w0 = 2.0 * std::f64::consts::PI * self.layout.base_frequency_hz;
-        let vars: Vec<(usize, Option<(usize, bool)>)> = (0..x.len()).map(|k| self.layout.variable(k)).collect();
-        for &t in &self.times {
-            series.eval(t, &mut q, &mut qd, &mut qdd);
-            self.base.rows(&mut ws, &q, &qd, &qdd, &mut rows);
-            for l in 0..3 * n {
-                let (j, which) = (l % n, l / n);
-                let u = match which {
-                    0 => &mut q,
-                    1 => &mut qd,
-                    _ => &mut qdd,
-                };
-                let u0 = u[j];
-                let h = 1e-5 * u0.abs().max(0.1);
-                u[j] = u0 + h;
-                self.base.rows(&mut ws, &q, &qd, &qdd, &mut moved);
-                let set = |q: &mut Vec<f64>, qd: &mut Vec<f64>, qdd: &mut Vec<f64>, v: f64| match which {
-                    0 => q[j] = v,
-                    1 => qd[j] = v,
-                    _ => qdd[j] = v,
-                };
-                set(&mut q, &mut qd, &mut qdd, u0 - h);
-                self.base.rows(&mut ws, &q, &qd, &qdd, &mut back);
-                set(&mut q, &mut qd, &mut qdd, u0);
+        self.chain_rule(
+            x,
+            &mut (),
+            |_, _| {},
+            |_, rows, drows| {
                 let (mut a_max, mut a_min) = (0.0, 0.0);
                 for r in 0..n {
                     let row = &rows[r * p..(r + 1) * p];
-                    let mrow = &moved[r * p..(r + 1) * p];
-                    let brow = &back[r * p..(r + 1) * p];
+                    let drow = &drows[r * p..(r + 1) * p];
                     let (mut ry_max, mut ry_min, mut dy_max, mut dy_min, mut diag_max, mut diag_min) =
                         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
                     for i in 0..p {
-                        let dr = (mrow[i] - brow[i]) / (2.0 * h);
+                        let dr = drow[i];
                         ry_max += row[i] * ymax[i];
                         ry_min += row[i] * ymin[i];
                         dy_max += dr * ymax[i];
@@ -251,27 +336,10 @@ impl Criterion {
                     a_max += 2.0 * (dy_max * ry_max - diag_max);
                     a_min += 2.0 * (dy_min * ry_min - diag_min);
                 }
-                cmax[l] = a_max;
-                cmin[l] = a_min;
-            }
-            for (k, &(j, what)) in vars.iter().enumerate() {
-                let (b0, b1, b2) = match what {
-                    None => (1.0, 0.0, 0.0),
-                    Some((hi, is_b)) => {
-                        let w = w0 * self.layout.harmonics[hi] as f64;
-                        let (sn, co) = (w * t).sin_cos();
-                        if is_b {
-                            (-co / w, sn, w * co)
-                        } else {
-                            (sn / w, co, -w * sn)
-                        }
-                    }
-                };
-                let dmax = cmax[j] * b0 + cmax[n + j] * b1 + cmax[2 * n + j] * b2;
-                let dmin = cmin[j] * b0 + cmin[n + j] * b1 + cmin[2 * n + j] * b2;
-                grad[k] += 0.5 * cond * (dmax / lmax - dmin / lmin);
-            }
-        }
+                [a_max, a_min]
+            },
+            |k, [dmax, dmin]| grad[k] += 0.5 * cond * (dmax / lmax - dmin / lmin),
+        );
         cond
     }
 }

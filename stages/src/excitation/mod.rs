@@ -217,7 +217,15 @@ fn optimise(
         let count = std::cell::Cell::new(0usize);
         let objective = |v: &[f64], grad: Option<&mut [f64]>, _: &mut ()| -> f64 {
             count.set(count.get() + 1);
-            criterion.value_and_gradient(v, grad)
+            let scale = criterion.scale();
+            match grad {
+                Some(g) => {
+                    let f = criterion.value_and_gradient(v, Some(&mut *g));
+                    g.iter_mut().for_each(|x| *x /= scale);
+                    f / scale
+                }
+                None => criterion.value(v) / scale,
+            }
         };
         type Cons<'a> = Box<dyn Fn(&[f64], Option<&mut [f64]>, &mut ()) -> f64 + 'a>;
         let cons: Vec<Cons> = (0..constraints.count())
