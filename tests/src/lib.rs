@@ -100,6 +100,25 @@ pub fn python() -> String {
     std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
+/// The Panda of the `example-robot-data` package (installed by
+/// scripts/test.sh beside Pinocchio), or None with a message.
+pub fn panda_urdf() -> Option<PathBuf> {
+    let venv = PathBuf::from(python()).parent()?.parent()?.to_path_buf();
+    let found = std::fs::read_dir(venv.join("lib")).ok().and_then(|dirs| {
+        dirs.flatten()
+            .map(|py| {
+                py.path().join(
+                    "site-packages/cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf",
+                )
+            })
+            .find(|p| p.is_file())
+    });
+    if found.is_none() {
+        eprintln!("skipped the Panda: example-robot-data is not installed (scripts/test.sh installs it)");
+    }
+    found
+}
+
 /// One period of a 5-harmonic Fourier trajectory per joint, with exact
 /// velocities and accelerations, on `samples` samples: `coefficient(j, h)`
 /// gives joint j's (sine, cosine) velocity amplitudes of harmonic h.

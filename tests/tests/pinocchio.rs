@@ -2,7 +2,7 @@
 //! installed by scripts/test.sh): the same URDF, the same random states,
 //! torques equal to 1e-9 relative.
 
-use robotid_tests::python;
+use robotid_tests::{panda_urdf, python};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
@@ -29,29 +29,6 @@ const PRISMATIC_URDF: &str = r#"<robot name="telescope">
   <joint name="finger1" type="prismatic"><parent link="l4"/><child link="f1"/><origin xyz="0 0 0.2" rpy="0 0 0"/><axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/></joint>
   <joint name="finger2" type="prismatic"><parent link="l4"/><child link="f2"/><origin xyz="0 0 0.2" rpy="0 0 0"/><axis xyz="0 -1 0"/><limit lower="0" upper="0.04" effort="10" velocity="0.1"/><mimic joint="finger1"/></joint>
 </robot>"#;
-
-/// The Panda of the `example-robot-data` package (installed by
-/// scripts/test.sh beside Pinocchio).
-fn panda_urdf() -> Option<std::path::PathBuf> {
-    let venv = std::path::PathBuf::from(python()).parent()?.parent()?.to_path_buf();
-    let found = glob_panda(&venv.join("lib"));
-    if found.is_none() {
-        eprintln!("skipped the Panda: example-robot-data is not installed (scripts/test.sh installs it)");
-    }
-    found
-}
-
-fn glob_panda(lib: &Path) -> Option<std::path::PathBuf> {
-    for py in std::fs::read_dir(lib).ok()?.flatten() {
-        let p = py
-            .path()
-            .join("site-packages/cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf");
-        if p.is_file() {
-            return Some(p);
-        }
-    }
-    None
-}
 
 #[test]
 fn rnea_and_regressor_match_pinocchio() {
