@@ -77,6 +77,13 @@ struct CompareArgs {
 }
 
 fn main() -> ExitCode {
+    // Piped into `head`, end quietly as Unix tools do, not with a panic
+    // from a failed print (Rust ignores SIGPIPE by default).
+    #[cfg(unix)]
+    // SAFETY: restores a signal's default action before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // Printed frames: wide enough for the summary's columns, enough rows
     // for a small fleet; the user's own POLARS_* settings win.
     for (key, value) in [

@@ -70,6 +70,13 @@ fn forward(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
 }
 
 fn main() -> ExitCode {
+    // Piped into `head`, end quietly as Unix tools do, not with a panic
+    // from a failed print (Rust ignores SIGPIPE by default).
+    #[cfg(unix)]
+    // SAFETY: restores a signal's default action before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
