@@ -245,10 +245,6 @@ fn read(path: &Path) -> anyhow::Result<(DataFrame, Option<String>)> {
     Ok((df, kind))
 }
 
-fn is_numeric(dtype: &DataType) -> bool {
-    dtype.is_primitive_numeric()
-}
-
 fn unique_keys(df: &DataFrame, keys: &[String]) -> PolarsResult<bool> {
     let groups = df
         .clone()
@@ -329,7 +325,7 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> anyhow::Result<Table
                 .push(format!("column `{name}`: type {dtype_a}, reference has {dtype}"));
             continue;
         }
-        compared.push((name.to_string(), is_numeric(dtype)));
+        compared.push((name.to_string(), dtype.is_primitive_numeric()));
     }
     let side = |df: &DataFrame, s: &str| -> LazyFrame {
         let mut exprs: Vec<Expr> = keys.iter().map(|k| col(k.as_str())).collect();

@@ -13,6 +13,7 @@ use robotid_dataset::{compare, summary, Tolerances};
 #[derive(Parser)]
 #[command(
     name = "robotid dataset",
+    bin_name = "robotid dataset",
     version,
     about = "robotid runs as a dataset: summaries and regression comparisons"
 )]

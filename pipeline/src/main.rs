@@ -51,9 +51,11 @@ enum Command {
     /// Runs as a dataset (the robotid-dataset binary, on polars): `summary
     /// RUN…` per recording and joint with parameter drift; `compare A B`,
     /// a regression test of one output tree against another.
+    // `--help` too goes to the dataset binary, which knows the options.
+    #[command(disable_help_flag = true)]
     Dataset(cmd::dataset::Args),
     /// Compare a run's tables with golden tables: `robotid dataset compare`.
-    #[command(alias = "compare")]
+    #[command(alias = "compare", disable_help_flag = true)]
     Check(cmd::dataset::Args),
     /// Inspect a robot model: parameters, base parameters, conditioning.
     Model(cmd::model::Args),
