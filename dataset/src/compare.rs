@@ -187,14 +187,23 @@ impl Report {
 /// Compares every table of tree `a` with the same path in tree `b` (the
 /// reference). Either root may also be a single Parquet file.
 pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> anyhow::Result<Report> {
+    // A single table on either side: the same file name in the other
+    // side's folder, if that is one.
     let single = a.is_file() || b.is_file();
     let (files_a, files_b) = if single {
-        let name = PathBuf::from(b.file_name().unwrap_or_default());
+        let file = if b.is_file() { b } else { a };
+        let name = PathBuf::from(file.file_name().unwrap_or_default());
         (vec![name.clone()], vec![name])
     } else {
         (parquet_files(a)?, parquet_files(b)?)
     };
-    let path = |root: &Path, f: &Path| if single { root.to_path_buf() } else { root.join(f) };
+    let path = |root: &Path, f: &Path| {
+        if root.is_file() {
+            root.to_path_buf()
+        } else {
+            root.join(f)
+        }
+    };
     let mut report = Report::default();
     if files_b.is_empty() {
         report.problems.push(format!("{}: no tables", b.display()));
@@ -281,14 +290,20 @@ fn plain(v: &AnyValue) -> String {
 fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> anyhow::Result<TableDiff> {
     let (da, kind_a) = read(pa)?;
     let (db, kind_b) = read(pb)?;
+    // A table rewritten by another tool may have lost its kind: reported,
+    // and its values still compared under the kind the other side names.
+    let kind = kind_b.clone().or_else(|| kind_a.clone());
     let mut t = TableDiff {
-        kind: kind_b.clone(),
+        kind: kind.clone(),
         ..Default::default()
     };
     if kind_a != kind_b {
+        let name = |k: &Option<String>| k.clone().unwrap_or_else(|| "none (no robotid.table key)".into());
         t.problems
-            .push(format!("table kind {kind_a:?}, reference has {kind_b:?}"));
-        return Ok(t);
+            .push(format!("table kind {}, reference has {}", name(&kind_a), name(&kind_b)));
+        if kind_a.is_some() && kind_b.is_some() {
+            return Ok(t);
+        }
     }
     let (sa, sb) = (da.schema().clone(), db.schema().clone());
     for name in sa.iter_names() {
@@ -301,7 +316,7 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> anyhow::Result<Table
             t.problems.push(format!("column `{name}` only in B (the reference)"));
         }
     }
-    let mut keys: Vec<String> = keys_of(kind_b.as_deref())
+    let mut keys: Vec<String> = keys_of(kind.as_deref())
         .iter()
         .filter(|k| sa.contains(k) && sb.contains(k))
         .map(|k| k.to_string())
