@@ -11,8 +11,8 @@ use robotid_schemas::Kinematics;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    base_parameters, decoupled_names, decoupled_regressor, regressor, Data, FrictionTerms, Model, RegressorTerms,
-    Spring,
+    base_parameters, decoupled_names, decoupled_regressor, regressor, Batched, Data, FrictionTerms, Model,
+    RegressorTerms, Spring, LANES,
 };
 use crate::{Error, Result};
 
@@ -124,6 +124,8 @@ pub struct BaseRegressor {
     columns: Vec<(usize, String, String)>,
     /// θ_base = map·θ_standard (chain models).
     map: Option<DMatrix<f64>>,
+    /// The chain's kernel for whole tables, four samples per pass.
+    batched: Option<Batched>,
 }
 
 /// Preallocated buffers for [`BaseRegressor::rows`].
@@ -177,7 +179,9 @@ impl BaseRegressor {
                 )
             }
         };
+        let batched = (spec.model == ModelKind::Chain).then(|| Batched::new(&model));
         Ok(BaseRegressor {
+            batched,
             model,
             kind: spec.model,
             terms,
@@ -253,20 +257,49 @@ impl BaseRegressor {
         let nb = self.columns.len();
         let samples = kin.time.len();
         let mut buf = vec![0.0; samples * n * nb];
-        const CHUNK: usize = 256;
-        buf.par_chunks_mut(CHUNK * n * nb).enumerate().for_each(|(c, out)| {
-            let mut ws = self.workspace();
-            let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-            for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
-                let k = c * CHUNK + local;
-                for j in 0..n {
-                    q[j] = kin.q[j][k];
-                    qd[j] = kin.qd[j][k];
-                    qdd[j] = kin.qdd[j][k];
+        const CHUNK: usize = 256; // a multiple of LANES
+        buf.par_chunks_mut(CHUNK * n * nb)
+            .enumerate()
+            .for_each(|(c, out)| match &self.batched {
+                Some(batched) => {
+                    let mut ws = batched.workspace(self.terms);
+                    let (mut q, mut qd, mut qdd) =
+                        (vec![[0.0; LANES]; n], vec![[0.0; LANES]; n], vec![[0.0; LANES]; n]);
+                    for (p, rows_out) in out.chunks_mut(LANES * n * nb).enumerate() {
+                        let k0 = c * CHUNK + p * LANES;
+                        let len = rows_out.len() / (n * nb);
+                        // A short last pass repeats its last sample in the spare lanes.
+                        for l in 0..LANES {
+                            let k = k0 + l.min(len - 1);
+                            for j in 0..n {
+                                (q[j][l], qd[j][l], qdd[j][l]) = (kin.q[j][k], kin.qd[j][k], kin.qdd[j][k]);
+                            }
+                        }
+                        batched.regressor(&mut ws, &q, &qd, &qdd, self.terms);
+                        for j in 0..n {
+                            for (bi, (col, _, _)) in self.columns.iter().enumerate() {
+                                let v = ws.phi(j, *col);
+                                for (l, x) in v.iter().take(len).enumerate() {
+                                    rows_out[(l * n + j) * nb + bi] = *x;
+                                }
+                            }
+                        }
+                    }
                 }
-                self.rows(&mut ws, &q, &qd, &qdd, rows_out);
-            }
-        });
+                None => {
+                    let mut ws = self.workspace();
+                    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                    for (local, rows_out) in out.chunks_mut(n * nb).enumerate() {
+                        let k = c * CHUNK + local;
+                        for j in 0..n {
+                            q[j] = kin.q[j][k];
+                            qd[j] = kin.qd[j][k];
+                            qdd[j] = kin.qdd[j][k];
+                        }
+                        self.rows(&mut ws, &q, &qd, &qdd, rows_out);
+                    }
+                }
+            });
         DMatrix::from_row_slice(samples * n, nb, &buf)
     }
 

@@ -5,6 +5,7 @@
 
 mod base_parameters;
 mod base_regressor;
+mod batch;
 mod data;
 mod decoupled;
 mod forward_dynamics;
@@ -20,6 +21,7 @@ mod urdf_export;
 
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
 pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace};
+pub use batch::{BatchData, Batched, LANES};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};

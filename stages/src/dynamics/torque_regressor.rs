@@ -300,9 +300,29 @@ pub fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
     }
 }
 
-/// Writes one joint's friction columns into `out[(row, col..)]` for joint
-/// velocity `qd`; the Coulomb shape (sign or tanh) is the joint's. Returns
-/// the number of columns written.
+/// One joint's friction columns for joint velocity `qd`, and how many
+/// there are; the Coulomb shape (sign or tanh) is the joint's.
+pub(crate) fn friction_values(friction: FrictionTerms, model: &super::Friction, qd: f64) -> ([f64; 4], usize) {
+    let sign = if model.transition > 0.0 {
+        (qd / model.transition).tanh()
+    } else {
+        qd.signum() * (qd != 0.0) as i32 as f64
+    };
+    match friction {
+        FrictionTerms::None => ([0.0; 4], 0),
+        FrictionTerms::Symmetric => ([qd, sign, 0.0, 0.0], 2),
+        FrictionTerms::Asymmetric => {
+            let pos = qd >= 0.0;
+            match pos {
+                true => ([qd, 0.0, sign.max(0.0), 0.0], 4),
+                false => ([0.0, qd, 0.0, sign.min(0.0)], 4),
+            }
+        }
+    }
+}
+
+/// Writes one joint's friction columns into `out[(row, col..)]`; returns
+/// their number.
 pub(crate) fn friction_columns(
     friction: FrictionTerms,
     model: &super::Friction,
@@ -311,25 +331,9 @@ pub(crate) fn friction_columns(
     row: usize,
     col: usize,
 ) -> usize {
-    let sign = if model.transition > 0.0 {
-        (qd / model.transition).tanh()
-    } else {
-        qd.signum() * (qd != 0.0) as i32 as f64
-    };
-    match friction {
-        FrictionTerms::None => 0,
-        FrictionTerms::Symmetric => {
-            out[(row, col)] = qd;
-            out[(row, col + 1)] = sign;
-            2
-        }
-        FrictionTerms::Asymmetric => {
-            let pos = qd >= 0.0;
-            out[(row, col)] = if pos { qd } else { 0.0 };
-            out[(row, col + 1)] = if pos { 0.0 } else { qd };
-            out[(row, col + 2)] = if pos { sign.max(0.0) } else { 0.0 };
-            out[(row, col + 3)] = if pos { 0.0 } else { sign.min(0.0) };
-            4
-        }
+    let (values, width) = friction_values(friction, model, qd);
+    for (k, v) in values.iter().take(width).enumerate() {
+        out[(row, col + k)] = *v;
     }
+    width
 }
