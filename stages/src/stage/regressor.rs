@@ -483,7 +483,9 @@ fn normalised_condition(a: &DMatrix<f64>) -> f64 {
         .into_par_iter()
         .map(|b| {
             let rows = a.rows(b * BLOCK, BLOCK.min(m - b * BLOCK));
-            rows.tr_mul(&rows)
+            // Transposed first: `tr_mul` takes a dot product per entry,
+            // the plain product goes through matrixmultiply's packed kernels.
+            rows.transpose() * rows
         })
         .collect();
     let gram = grams.into_iter().fold(DMatrix::zeros(p, p), |acc, g| acc + g);
@@ -589,8 +591,9 @@ impl RegressorRows {
                     (metadata::EXPRESSION.to_string(), sys.expressions[i].clone()),
                 ])),
             );
-            columns.push(Arc::new(Float64Array::from_iter_values(
-                sys.a.column(i).iter().copied(),
+            // Column-major storage: each column is one contiguous copy.
+            columns.push(Arc::new(Float64Array::from(
+                sys.a.as_slice()[i * rows..(i + 1) * rows].to_vec(),
             )));
         }
         if let Some(Some(p)) = sys.periods.first() {
@@ -602,7 +605,10 @@ impl RegressorRows {
                         (metadata::PERIOD.to_string(), pi.to_string()),
                     ])),
                 );
-                columns.push(Arc::new(Float64Array::from_iter_values(p.column(pi).iter().copied())));
+                let n = p.nrows();
+                columns.push(Arc::new(Float64Array::from(
+                    p.as_slice()[pi * n..(pi + 1) * n].to_vec(),
+                )));
             }
         }
         let schema = Schema::new(fields).with_metadata(base_schema.metadata().clone());
