@@ -304,6 +304,48 @@ pub fn decode_joint_state(bytes: &[u8]) -> Result<JointState, CdrError> {
     })
 }
 
+/// A JointState's fields by position, for [`decode_joint_state_into`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointStateField {
+    Position,
+    Velocity,
+    Effort,
+}
+
+/// A JointState's names and one of its arrays, into reused buffers: names
+/// are rewritten in place (their capacity kept) and `values` refilled, so a
+/// steady stream of messages decodes without allocating.
+pub fn decode_joint_state_into(
+    bytes: &[u8],
+    field: JointStateField,
+    names: &mut Vec<String>,
+    values: &mut Vec<f64>,
+) -> Result<(), CdrError> {
+    let mut r = reader(bytes)?;
+    r.u32()?;
+    r.u32()?;
+    r.skip_string()?;
+    let n = r.u32()? as usize;
+    names.truncate(n);
+    for i in 0..n {
+        if i == names.len() {
+            names.push(String::new());
+        }
+        r.string_into(&mut names[i])?;
+    }
+    for f in [
+        JointStateField::Position,
+        JointStateField::Velocity,
+        JointStateField::Effort,
+    ] {
+        match f == field {
+            true => return r.f64_seq_into(values),
+            false => r.f64_seq_raw()?,
+        };
+    }
+    unreachable!("the field is one of the three")
+}
+
 struct Reader<'a> {
     b: &'a [u8],
     pos: usize,
@@ -333,15 +375,29 @@ impl Reader<'_> {
         self.align(4);
         Ok(u32::from_le_bytes(self.take(4)?.try_into().expect("4 bytes")))
     }
-    fn string(&mut self) -> Result<String, CdrError> {
+    fn string_raw(&mut self) -> Result<(&[u8], usize), CdrError> {
         let len = self.u32()? as usize;
         let at = self.pos;
         let raw = self.take(len)?;
-        let text = raw.strip_suffix(&[0]).unwrap_or(raw);
-        String::from_utf8(text.to_vec()).map_err(|_| CdrError {
+        Ok((raw.strip_suffix(&[0]).unwrap_or(raw), at))
+    }
+    fn string_into(&mut self, out: &mut String) -> Result<(), CdrError> {
+        let (text, at) = self.string_raw()?;
+        let text = std::str::from_utf8(text).map_err(|_| CdrError {
             what: "string is not UTF-8".into(),
             at,
-        })
+        })?;
+        out.clear();
+        out.push_str(text);
+        Ok(())
+    }
+    fn skip_string(&mut self) -> Result<(), CdrError> {
+        self.string_raw().map(|_| ())
+    }
+    fn string(&mut self) -> Result<String, CdrError> {
+        let mut s = String::new();
+        self.string_into(&mut s)?;
+        Ok(s)
     }
     fn string_seq(&mut self) -> Result<Vec<String>, CdrError> {
         let n = self.u32()? as usize;
@@ -351,20 +407,32 @@ impl Reader<'_> {
         }
         Ok(out)
     }
-    fn f64_seq(&mut self) -> Result<Vec<f64>, CdrError> {
+    /// A float64[]'s bytes (8 per value, little-endian).
+    fn f64_seq_raw(&mut self) -> Result<&[u8], CdrError> {
         let n = self.u32()? as usize;
         if n == 0 {
-            return Ok(Vec::new());
+            return Ok(&[]);
         }
         self.align(8);
-        let raw = self.take(n.checked_mul(8).ok_or(CdrError {
+        let len = n.checked_mul(8).ok_or(CdrError {
             what: "sequence length overflows".into(),
             at: self.pos,
-        })?)?;
-        Ok(raw
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-            .collect())
+        })?;
+        self.take(len)
+    }
+    fn f64_seq_into(&mut self, out: &mut Vec<f64>) -> Result<(), CdrError> {
+        let raw = self.f64_seq_raw()?;
+        out.clear();
+        out.extend(
+            raw.chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes"))),
+        );
+        Ok(())
+    }
+    fn f64_seq(&mut self) -> Result<Vec<f64>, CdrError> {
+        let mut v = Vec::new();
+        self.f64_seq_into(&mut v)?;
+        Ok(v)
     }
 }
 
@@ -386,6 +454,15 @@ mod tests {
         let mut buf = Vec::new();
         encode_joint_state(&msg, &mut buf);
         assert_eq!(decode_joint_state(&buf).unwrap(), msg);
+        // Into reused buffers: longer names and values than the message's
+        // are cut, each field is found.
+        let (mut names, mut values) = (vec!["x".repeat(9); 3], vec![7.0; 5]);
+        decode_joint_state_into(&buf, JointStateField::Effort, &mut names, &mut values).unwrap();
+        assert_eq!((names.clone(), values.clone()), (msg.name.clone(), msg.effort.clone()));
+        decode_joint_state_into(&buf, JointStateField::Velocity, &mut names, &mut values).unwrap();
+        assert_eq!(values, msg.velocity);
+        decode_joint_state_into(&buf, JointStateField::Position, &mut names, &mut values).unwrap();
+        assert_eq!(values, msg.position);
         let err = decode_joint_state(&buf[..buf.len() - 3]).unwrap_err();
         assert!(err.what.contains("truncated"), "{err}");
     }

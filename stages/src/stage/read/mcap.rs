@@ -10,8 +10,8 @@ use std::path::Path;
 
 use super::{Channel, Columns, ReadConfig};
 use crate::formats::cdr::{
-    decode_controller_state, decode_dynamic_joint_state, decode_joint_state, CONTROLLER_STATE_NAME,
-    DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
+    decode_controller_state, decode_dynamic_joint_state, decode_joint_state_into, JointStateField,
+    CONTROLLER_STATE_NAME, DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
 };
 use crate::formats::sha256_hex;
 use crate::{Error, Result};
@@ -38,6 +38,9 @@ struct Series {
     names: Vec<String>,
     /// Times the publisher changed its joint order or names.
     reorders: usize,
+    /// The message being read, in buffers reused from message to message.
+    message_names: Vec<String>,
+    message_values: Vec<f64>,
 }
 
 /// The MCAP files of a recording: the file itself, or the `.mcap` files of
@@ -68,7 +71,17 @@ pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
 /// controller's `control_msgs/msg/JointTrajectoryControllerState`
 /// (`reference`, `feedback`, `error`, `output`, `desired`, `actual`: their
 /// positions, or `output.effort`-style for another part of the point).
-fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<String>, Vec<f64>), String> {
+///
+/// The names and values go into `names` and `values`, buffers reused from
+/// message to message (a JointState stream then reads without allocating).
+/// `verified`: the JointState schemas already checked, by address.
+fn decode_cdr(
+    message: &mcap::Message<'_>,
+    field: &str,
+    verified: &mut Vec<*const ()>,
+    names: &mut Vec<String>,
+    values: &mut Vec<f64>,
+) -> std::result::Result<(), String> {
     let schema = message
         .channel
         .schema
@@ -78,27 +91,30 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
         JOINT_STATE_NAME => {
             // The schema's text, when given, must define JointState's
             // arrays: a channel named so but laid out otherwise would
-            // decode into other numbers.
-            let text = String::from_utf8_lossy(&schema.data);
-            if !schema.data.is_empty()
-                && !["string[] name", "float64[] position", "float64[] effort"].iter().all(|f| text.contains(f))
-            {
-                return Err(format!(
-                    "the channel's schema is named {JOINT_STATE_NAME} but does not define its fields (string[] name, float64[] position, velocity, effort)"
-                ));
+            // decode into other numbers. Checked once per schema.
+            let address = std::sync::Arc::as_ptr(schema) as *const ();
+            if !verified.contains(&address) {
+                let text = String::from_utf8_lossy(&schema.data);
+                if !schema.data.is_empty()
+                    && !["string[] name", "float64[] position", "float64[] effort"].iter().all(|f| text.contains(f))
+                {
+                    return Err(format!(
+                        "the channel's schema is named {JOINT_STATE_NAME} but does not define its fields (string[] name, float64[] position, velocity, effort)"
+                    ));
+                }
+                verified.push(address);
             }
-            let js = decode_joint_state(&message.data).map_err(|e| e.to_string())?;
-            let values = match field {
-                "position" => js.position,
-                "velocity" => js.velocity,
-                "effort" => js.effort,
+            let which = match field {
+                "position" => JointStateField::Position,
+                "velocity" => JointStateField::Velocity,
+                "effort" => JointStateField::Effort,
                 other => return Err(format!("JointState has no field `{other}` (position, velocity, effort)")),
             };
-            Ok((js.name, values))
+            decode_joint_state_into(&message.data, which, names, values).map_err(|e| e.to_string())
         }
         DYNAMIC_JOINT_STATE_NAME => {
             let d = decode_dynamic_joint_state(&message.data).map_err(|e| e.to_string())?;
-            let values = d
+            let dynamic = d
                 .interfaces
                 .iter()
                 .zip(&d.joint_names)
@@ -110,7 +126,8 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
                         .ok_or_else(|| format!("joint `{joint}` has no interface `{field}` (it has {names:?})"))
                 })
                 .collect::<std::result::Result<Vec<f64>, String>>()?;
-            Ok((d.joint_names, values))
+            (*names, *values) = (d.joint_names, dynamic);
+            Ok(())
         }
         CONTROLLER_STATE_NAME => {
             let text = String::from_utf8_lossy(&schema.data);
@@ -125,14 +142,15 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
                     let have: Vec<&str> = c.points.iter().map(|(n, _)| n.as_str()).collect();
                     format!("the controller state has no point `{point}` ({have:?})")
                 })?;
-            let values = match part {
+            *values = match part {
                 "positions" => p.positions.clone(),
                 "velocities" => p.velocities.clone(),
                 "accelerations" => p.accelerations.clone(),
                 "effort" => p.effort.clone(),
                 other => return Err(format!("a trajectory point has no `{other}` (positions, velocities, accelerations, effort)")),
             };
-            Ok((c.joint_names, values))
+            *names = c.joint_names;
+            Ok(())
         }
         other => Err(format!(
             "message type `{other}` is not read ({JOINT_STATE_NAME}, {DYNAMIC_JOINT_STATE_NAME}, {CONTROLLER_STATE_NAME})"
@@ -140,85 +158,64 @@ fn decode_cdr(message: &mcap::Message, field: &str) -> std::result::Result<(Vec<
     }
 }
 
-/// The messages of a mapped MCAP file up to its data-end record, chunks
-/// decompressed with their CRCs checked. Like `mcap::MessageStream`, but
-/// every record, inside a chunk too, is bounded by the file's length: that
-/// reader takes a corrupt record length inside a chunk at its word and
-/// allocates it (a fuzzed file asked for 352 GB, and the process aborted).
-struct BoundedMessages<'a> {
-    buf: &'a [u8],
-    reader: mcap::sans_io::LinearReader,
-    channels: mcap::read::ChannelAccumulator<'static>,
-    done: bool,
-}
-
-impl<'a> BoundedMessages<'a> {
-    fn new(buf: &'a [u8]) -> Self {
-        let options = mcap::sans_io::LinearReaderOptions::default()
-            .with_skip_end_magic(true)
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(buf.len());
-        BoundedMessages {
-            buf,
-            reader: mcap::sans_io::LinearReader::new_with_options(options),
-            channels: Default::default(),
-            done: false,
-        }
-    }
-}
-
-impl Iterator for BoundedMessages<'_> {
-    type Item = std::result::Result<mcap::Message<'static>, mcap::McapError>;
-
-    fn next(&mut self) -> Option<Self::Item> {
-        use mcap::records::Record;
-        use mcap::sans_io::LinearReadEvent;
-        while !self.done {
-            let event = self.reader.next_event()?;
-            let record = match event {
-                Ok(LinearReadEvent::ReadRequest(need)) => {
-                    let len = need.min(self.buf.len());
-                    self.reader.insert(len).copy_from_slice(&self.buf[..len]);
-                    self.reader.notify_read(len);
-                    self.buf = &self.buf[len..];
-                    continue;
-                }
-                Ok(LinearReadEvent::Record { data, opcode }) => {
-                    mcap::parse_record(opcode, data).map(|r| r.into_owned())
-                }
-                Err(e) => Err(e),
-            };
-            let step = match record {
-                Ok(Record::Schema { header, data }) => self.channels.add_schema(header, data).map(|_| None),
-                Ok(Record::Channel(c)) => self.channels.add_channel(c).map(|_| None),
-                Ok(Record::Message { header, data }) => match self.channels.get(header.channel_id) {
-                    Some(channel) => Ok(Some(mcap::Message {
+/// Calls `f` with every message of a mapped MCAP file up to its data-end
+/// record, chunks decompressed with their CRCs checked, each message's
+/// bytes borrowed from its chunk (no copy per message). Like
+/// `mcap::MessageStream`, but every record, inside a chunk too, is bounded
+/// by the file's length: that reader takes a corrupt record length inside a
+/// chunk at its word and allocates it (a fuzzed file asked for 352 GB, and
+/// the process aborted). `Err(count)`: the MCAP error after `count` messages.
+fn for_each_message(
+    mut buf: &[u8],
+    mut f: impl FnMut(&mcap::Message<'_>) -> Result<()>,
+) -> Result<std::result::Result<(), (usize, mcap::McapError)>> {
+    use mcap::records::Record;
+    use mcap::sans_io::LinearReadEvent;
+    let options = mcap::sans_io::LinearReaderOptions::default()
+        .with_skip_end_magic(true)
+        .with_validate_chunk_crcs(true)
+        .with_record_length_limit(buf.len());
+    let mut reader = mcap::sans_io::LinearReader::new_with_options(options);
+    let mut channels = mcap::read::ChannelAccumulator::<'static>::default();
+    let mut count = 0;
+    while let Some(event) = reader.next_event() {
+        let (opcode, data) = match event {
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let len = need.min(buf.len());
+                reader.insert(len).copy_from_slice(&buf[..len]);
+                reader.notify_read(len);
+                buf = &buf[len..];
+                continue;
+            }
+            Ok(LinearReadEvent::Record { data, opcode }) => (opcode, data),
+            Err(e) => return Ok(Err((count, e))),
+        };
+        let step = match mcap::parse_record(opcode, data) {
+            Ok(Record::Schema { header, data }) => channels.add_schema(header, data.into_owned().into()),
+            Ok(Record::Channel(c)) => channels.add_channel(c),
+            Ok(Record::Message { header, data }) => match channels.get(header.channel_id) {
+                Some(channel) => {
+                    f(&mcap::Message {
                         channel,
                         sequence: header.sequence,
                         log_time: header.log_time,
                         publish_time: header.publish_time,
                         data,
-                    })),
-                    None => Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id)),
-                },
-                Ok(Record::DataEnd(_)) => {
-                    self.done = true;
-                    Ok(None)
+                    })?;
+                    count += 1;
+                    Ok(())
                 }
-                Ok(_) => Ok(None),
-                Err(e) => Err(e),
-            };
-            match step {
-                Ok(Some(m)) => return Some(Ok(m)),
-                Ok(None) => {}
-                Err(e) => {
-                    self.done = true;
-                    return Some(Err(e));
-                }
-            }
+                None => Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id)),
+            },
+            Ok(Record::DataEnd(_)) => break,
+            Ok(_) => Ok(()),
+            Err(e) => Err(e),
+        };
+        if let Err(e) = step {
+            return Ok(Err((count, e)));
         }
-        None
     }
+    Ok(Ok(()))
 }
 
 /// A chunk may declare at most this many times its stored size, and at
@@ -311,97 +308,109 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             order: None,
             names: Vec::new(),
             reorders: 0,
+            message_names: Vec::new(),
+            message_values: Vec::new(),
         })
         .collect();
-    let mut seen_topics = BTreeMap::new();
-    let messages = maps.iter().flat_map(|(f, map)| {
+    let mut seen_topics: BTreeMap<String, usize> = BTreeMap::new();
+    // JointState schemas already checked, by address: the file's channel
+    // accumulator keeps them alive, so an address is not reused within it.
+    let mut verified: Vec<*const ()> = Vec::new();
+    for (f, map) in &maps {
         // The messages end at the data-end record: the summary after it
         // is checked on its own (a warning), the end magic here (a file
         // cut short is refused).
         if !map.ends_with(mcap::MAGIC) {
-            return Box::new(std::iter::once(Err(fmt_at(
+            return Err(fmt_at(
                 f,
                 "truncated: it does not end with the MCAP magic (a copy or a recording cut short)".into(),
-            )))) as Box<dyn Iterator<Item = Result<mcap::Message>>>;
+            ));
         }
-        Box::new(BoundedMessages::new(map).enumerate().map(move |(count, m)| {
-            m.map_err(|e| fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")))
-        })) as Box<dyn Iterator<Item = Result<mcap::Message>>>
-    });
-    for message in messages {
-        let message = message?;
-        let topic = &message.channel.topic;
-        *seen_topics.entry(topic.clone()).or_insert(0usize) += 1;
-        for (w, s) in specs.iter().zip(series.iter_mut()) {
-            if &w.topic != topic {
-                continue;
+        verified.clear();
+        let outcome = for_each_message(map, |message| {
+            let topic = &message.channel.topic;
+            match seen_topics.get_mut(topic) {
+                Some(count) => *count += 1,
+                None => {
+                    seen_topics.insert(topic.clone(), 1);
+                }
             }
-            let sample = s.stamps.len();
-            let err = |msg: String| Error::Data {
-                source_name: source.clone(),
-                channel: format!("{}:{}", w.topic, w.field),
-                sample: Some(sample),
-                msg,
-            };
-            match message.channel.message_encoding.as_str() {
-                "cdr" => {
-                    let (names, values) = decode_cdr(&message, &w.field).map_err(err)?;
-                    // Names are matched on every message whose names differ
-                    // from the last: a publisher that reorders its joints
-                    // is followed, one that drops or repeats a name refused.
-                    if s.names != names {
-                        if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
-                            return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
+            for (w, s) in specs.iter().zip(series.iter_mut()) {
+                if &w.topic != topic {
+                    continue;
+                }
+                let sample = s.stamps.len();
+                let err = |msg: String| Error::Data {
+                    source_name: source.clone(),
+                    channel: format!("{}:{}", w.topic, w.field),
+                    sample: Some(sample),
+                    msg,
+                };
+                match message.channel.message_encoding.as_str() {
+                    "cdr" => {
+                        let (names, values) = (&mut s.message_names, &mut s.message_values);
+                        decode_cdr(message, &w.field, &mut verified, names, values).map_err(err)?;
+                        // Names are matched on every message whose names differ
+                        // from the last: a publisher that reorders its joints
+                        // is followed, one that drops or repeats a name refused.
+                        if s.names != *names {
+                            if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
+                                return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
+                            }
+                            let order = joints
+                                .iter()
+                                .map(|j| names.iter().position(|n| n == j))
+                                .collect::<Option<Vec<usize>>>()
+                                .ok_or_else(|| {
+                                    err(format!("joints {joints:?} not all in the message's names {:?}", names))
+                                })?;
+                            if s.order.is_some() {
+                                s.reorders += 1;
+                            }
+                            s.order = Some(order);
+                            s.names.clone_from(names);
                         }
-                        let order = joints
-                            .iter()
-                            .map(|j| names.iter().position(|n| n == j))
-                            .collect::<Option<Vec<usize>>>()
-                            .ok_or_else(|| {
-                                err(format!("joints {joints:?} not all in the message's names {:?}", names))
+                        let order = s.order.as_ref().expect("set");
+                        for (j, &i) in order.iter().enumerate() {
+                            let v = *values.get(i).ok_or_else(|| {
+                                err(format!(
+                                    "`{}` has {} values, joint `{}` is number {}",
+                                    w.field,
+                                    values.len(),
+                                    joints[j],
+                                    i + 1
+                                ))
                             })?;
-                        if s.order.is_some() {
-                            s.reorders += 1;
+                            s.values[j].push(v);
                         }
-                        s.order = Some(order);
-                        s.names = names;
                     }
-                    let order = s.order.as_ref().expect("set");
-                    for (j, &i) in order.iter().enumerate() {
-                        let v = *values.get(i).ok_or_else(|| {
-                            err(format!(
-                                "`{}` has {} values, joint `{}` is number {}",
+                    "json" => {
+                        let v: serde_json::Value =
+                            serde_json::from_slice(&message.data).map_err(|e| err(format!("invalid JSON: {e}")))?;
+                        let arr = v
+                            .get(&w.field)
+                            .and_then(|a| a.as_array())
+                            .ok_or_else(|| err(format!("no array `{}` in the message", w.field)))?;
+                        if arr.len() != joints.len() {
+                            return Err(err(format!(
+                                "`{}` has {} values for {} joints",
                                 w.field,
-                                values.len(),
-                                joints[j],
-                                i + 1
-                            ))
-                        })?;
-                        s.values[j].push(v);
+                                arr.len(),
+                                joints.len()
+                            )));
+                        }
+                        for (j, x) in arr.iter().enumerate() {
+                            s.values[j].push(x.as_f64().ok_or_else(|| err(format!("`{x}` is not a number")))?);
+                        }
                     }
+                    other => return Err(err(format!("message encoding `{other}` is not supported (cdr, json)"))),
                 }
-                "json" => {
-                    let v: serde_json::Value =
-                        serde_json::from_slice(&message.data).map_err(|e| err(format!("invalid JSON: {e}")))?;
-                    let arr = v
-                        .get(&w.field)
-                        .and_then(|a| a.as_array())
-                        .ok_or_else(|| err(format!("no array `{}` in the message", w.field)))?;
-                    if arr.len() != joints.len() {
-                        return Err(err(format!(
-                            "`{}` has {} values for {} joints",
-                            w.field,
-                            arr.len(),
-                            joints.len()
-                        )));
-                    }
-                    for (j, x) in arr.iter().enumerate() {
-                        s.values[j].push(x.as_f64().ok_or_else(|| err(format!("`{x}` is not a number")))?);
-                    }
-                }
-                other => return Err(err(format!("message encoding `{other}` is not supported (cdr, json)"))),
+                s.stamps.push(message.log_time);
             }
-            s.stamps.push(message.log_time);
+            Ok(())
+        })?;
+        if let Err((count, e)) = outcome {
+            return Err(fmt_at(f, format!("corrupt or truncated after {count} messages: {e}")));
         }
     }
     for (w, s) in specs.iter().zip(&series) {
