@@ -435,19 +435,39 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     assert!(page.find("Verdicts").unwrap() < page.find("Parameters").unwrap());
     assert!(!page.contains("{\""), "raw JSON in the report");
     rendered_in_a_browser(&html);
-    // `robotid export`: a URDF whose model reproduces the estimate's base
-    // parameters (the KUKA has no rotor inertia to lose in URDF).
-    let urdf = out.join("identified.urdf");
+    // `robotid export`: the least-squares estimate is refused; the
+    // physically consistent one (`robotid estimate --physical`) goes to
+    // URDF, MJCF and sidecar, and MuJoCo and Pinocchio give robotid's
+    // torques for it (a 1-dof axis whose gravity is −x).
+    let refused = Command::new(env!("CARGO_BIN_EXE_robotid"))
+        .args(["export", "--robot", &p("robots/kuka_axis3.toml"), "-p"])
+        .arg(&params_path)
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+    let physical = out.join("physical.parquet");
     run_cli(&[
-        "export",
+        "estimate",
+        &out.join("ex/kuka_axis3/regressor.parquet").display().to_string(),
         "--robot",
         &p("robots/kuka_axis3.toml"),
-        "-p",
-        &params_path.display().to_string(),
+        "--physical",
         "-o",
-        &urdf.display().to_string(),
+        &physical.display().to_string(),
     ]);
-    let exported = load_robot(&urdf).unwrap();
+    let (mujoco, pinocchio) = robotid_tests::export_checked_in_simulators(
+        Path::new(env!("CARGO_BIN_EXE_robotid")),
+        &ws.path().join("robots/kuka_axis3.toml"),
+        &physical,
+        &out,
+    );
+    assert!(
+        mujoco < 1e-9 && pinocchio < 1e-9,
+        "MuJoCo {mujoco:e}, Pinocchio {pinocchio:e}"
+    );
+    // The robot file's URDF-less terms: the exported URDF, read back, has
+    // the same inertials, and its base parameters are the estimate's.
+    let exported = load_robot(&out.join("identified.urdf")).unwrap();
     let mut rc_sym = rc.clone();
     rc_sym.coulomb_transition_rad_s = Some(0.01);
     let back = rc_sym
@@ -455,13 +475,14 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
         .unwrap()
         .base_values(&exported)
         .unwrap();
+    let phys = robotid_stages::estimation::parameters_from_table(&read_parquet(&physical).unwrap()).unwrap();
     for i in 0..5 {
         assert!(
-            (back[i] - params.values[i]).abs() < 1e-3 * params.std[i].max(1e-9) + 1e-9 * params.values[i].abs(),
+            (back[i] - phys.values[i]).abs() < 1e-3 * phys.std[i].max(1e-9) + 1e-9 * phys.values[i].abs(),
             "{}: exported {} vs estimate {}",
-            params.names[i],
+            phys.names[i],
             back[i],
-            params.values[i]
+            phys.values[i]
         );
     }
 }

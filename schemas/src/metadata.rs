@@ -110,6 +110,11 @@ pub const CONTENT_CRC32: &str = "robotid.content_crc32";
 pub const KNOWN: &str = "robotid.known";
 /// What the physically consistent estimate cost.
 pub const PHYSICAL: &str = "robotid.physical";
+/// The physical fit's prior weight λ (what `robotid export` fits with again).
+pub const PHYSICAL_PRIOR_WEIGHT: &str = "robotid.physical.prior_weight";
+/// The physical fit's standard parameters (a JSON array, in the regressor's
+/// standard order): the consistent model `robotid export` writes.
+pub const PHYSICAL_STANDARD: &str = "robotid.physical.standard";
 /// The estimator, its confidence level and the intervals' degrees of freedom.
 pub const ESTIMATE_METHOD: &str = "robotid.estimate.method";
 pub const ESTIMATE_CONFIDENCE: &str = "robotid.estimate.confidence";

@@ -153,3 +153,149 @@ pub fn fourier_kinematics(
     }
     k
 }
+
+/// Runs one of `tests/python/` (`script`, with `args`) in the test venv and
+/// parses what it prints (JSON).
+pub fn python_json(script: &str, args: &[&Path]) -> serde_json::Value {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("python").join(script);
+    let out = std::process::Command::new(python())
+        .arg(&path)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!(
+                "cannot run {}: {e}; run scripts/test.sh, which installs the venv",
+                python()
+            )
+        });
+    assert!(
+        out.status.success(),
+        "{script} failed (scripts/test.sh installs its packages):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `robotid export` of `params` (a physically consistent estimate for
+/// `robot`) in every format into `dir`, then checked where it is used:
+/// - the MJCF loaded in MuJoCo: `mj_inverse` (constraints off) against
+///   robotid's RNEA of the exported standard parameters with gravity,
+///   rotor inertia (MuJoCo's armature) and viscous friction (damping);
+/// - the URDF loaded in Pinocchio: `rnea` against robotid's rigid-body RNEA;
+/// - those standard parameters' base values against the estimate's.
+///
+/// At 40 random states within the joint limits. Returns the largest
+/// differences relative to the largest torque: (MuJoCo, Pinocchio).
+pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path, dir: &Path) -> (f64, f64) {
+    use robotid_stages::dynamics::{parameter_names, rnea_terms, with_standard_parameters, Data, Terms};
+    use robotid_stages::estimation::parameters_from_table;
+    use robotid_stages::formats::parquet::read_parquet;
+    use robotid_stages::stage::regressor::RegressorConfig;
+    let stem = dir.join("identified");
+    let out = std::process::Command::new(robotid)
+        .args(["export", "--format", "urdf,mjcf,sidecar", "--robot"])
+        .arg(robot)
+        .arg("-p")
+        .arg(params)
+        .arg("-o")
+        .arg(&stem)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "export: {}", String::from_utf8_lossy(&out.stderr));
+    let estimate = parameters_from_table(&read_parquet(params).unwrap()).unwrap();
+    let base = RegressorConfig::of_metadata(&estimate.metadata)
+        .unwrap()
+        .base_regressor(&load_robot(robot).unwrap())
+        .unwrap();
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("identified.sidecar.json")).unwrap()).unwrap();
+    let standard: Vec<f64> = sidecar["standard_parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["value"].as_f64().unwrap())
+        .collect();
+    let names: Vec<String> = sidecar["standard_parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(names, parameter_names(&base.model, base.terms));
+    let model = with_standard_parameters(&base.model, base.terms, &standard);
+    // The exported model is the estimate: its base values are the table's.
+    let back = base.base_values(&model).unwrap();
+    let scale = estimate.values.amax();
+    for (i, name) in estimate.names.iter().enumerate() {
+        let d = (back[i] - estimate.values[i]).abs();
+        assert!(
+            d <= 1e-9 * scale + 1e-6 * estimate.std[i],
+            "{name}: the exported model gives {} against the estimate's {} ± {}",
+            back[i],
+            estimate.values[i],
+            estimate.std[i]
+        );
+    }
+    assert!(
+        (model.gravity.norm() - 9.81).abs() < 1e-12,
+        "the scripts assume |g| = 9.81"
+    );
+    let n = model.dof();
+    let mut x = 11u64;
+    let mut u = || {
+        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut states: [Vec<Vec<f64>>; 3] = Default::default();
+    for _ in 0..40 {
+        let q: Vec<f64> = (0..n)
+            .map(|j| match model.limits[j].position {
+                Some((lo, hi)) => 0.5 * (lo + hi) + 0.45 * (hi - lo) * u(),
+                None => 3.0 * u(),
+            })
+            .collect();
+        states[0].push(q);
+        states[1].push((0..n).map(|_| 1.5 * u()).collect());
+        states[2].push((0..n).map(|_| 4.0 * u()).collect());
+    }
+    let file = dir.join("states.json");
+    std::fs::write(
+        &file,
+        serde_json::json!({"q": states[0], "v": states[1], "a": states[2]}).to_string(),
+    )
+    .unwrap();
+    let mujoco = python_json("mujoco_inverse.py", &[&dir.join("identified.xml"), &file]);
+    let pin = python_json("pin_rnea.py", &[&dir.join("identified.urdf"), &file]);
+    for v in [&mujoco, &pin] {
+        let names: Vec<&str> = v["names"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s.as_str().unwrap())
+            .collect();
+        assert_eq!(names, model.joint_names());
+    }
+    let mut data = Data::new(&model);
+    let (mut worst_mj, mut worst_pin, mut top_mj, mut top_pin) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for k in 0..states[0].len() {
+        let (q, v, a) = (&states[0][k], &states[1][k], &states[2][k]);
+        let rigid = Terms {
+            gravity: true,
+            friction: false,
+            rotor: false,
+        };
+        let t_rigid = rnea_terms(&model, &mut data, q, v, a, rigid).clone();
+        let t_mj = rnea_terms(&model, &mut data, q, v, a, Terms { rotor: true, ..rigid }).clone();
+        for j in 0..n {
+            let f = &model.friction[j];
+            let want_mj = t_mj[j] + 0.5 * (f.viscous_pos + f.viscous_neg) * v[j];
+            let got_mj = mujoco["tau"][k][j].as_f64().unwrap();
+            let got_pin = pin["tau"][k][j].as_f64().unwrap();
+            worst_mj = worst_mj.max((got_mj - want_mj).abs());
+            worst_pin = worst_pin.max((got_pin - t_rigid[j]).abs());
+            top_mj = top_mj.max(want_mj.abs());
+            top_pin = top_pin.max(t_rigid[j].abs());
+        }
+    }
+    (worst_mj / top_mj, worst_pin / top_pin)
+}

@@ -26,6 +26,19 @@ pub struct Args {
     /// from `robotid sweeps`): compensated before estimating the rest.
     #[arg(long)]
     pub known: Option<PathBuf>,
+    /// The nearest physically consistent estimate (every link a real body,
+    /// friction ≥ 0), as the `estimate` stage's `physical = true`: what
+    /// `robotid export` needs. Needs `--robot`.
+    #[arg(long, requires = "robot")]
+    pub physical: bool,
+    /// The robot file the tables were made for (the physical fit's
+    /// a-priori model).
+    #[arg(long)]
+    pub robot: Option<PathBuf>,
+    /// With `--physical`: the weight of the pull towards the robot file's
+    /// inertials (chosen by Mallows' C_p when not given).
+    #[arg(long, requires = "physical")]
+    pub prior_weight: Option<f64>,
     /// Output parameters table.
     #[arg(long, short, default_value = "parameters.parquet")]
     pub out: PathBuf,
@@ -51,13 +64,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         confidence: args.confidence,
         covariance,
         known: args.known.clone(),
+        physical: args.physical,
+        prior_weight: args.prior_weight,
         ..Default::default()
     };
     if let Some(p) = cfg.settings_problems().first() {
         bail!("--{}: {}", p.key, p.message);
     }
+    let model = match &args.robot {
+        Some(r) => Some(std::sync::Arc::new(robotid_stages::dynamics::load_robot(r)?)),
+        None => None,
+    };
     let reducer = cfg.reducer(&Context {
         base_dir: PathBuf::from("."),
+        model,
         ..Default::default()
     })?;
     // The same map and reduce as a pipeline's `estimate` stage: each table

@@ -1,9 +1,29 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use anyhow::bail;
-use robotid_stages::dynamics::{parameter_names, standard_parameters, to_urdf, with_standard_parameters};
+use anyhow::{bail, Context as _};
+use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use robotid_schemas::metadata;
+use robotid_stages::dynamics::{
+    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
+};
 use robotid_stages::estimation::physically_consistent;
-use robotid_stages::formats::write_atomic;
+use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::formats::{sha256_hex, write_atomic};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// `<stem>.urdf`: inertials and `<dynamics damping friction>`.
+    Urdf,
+    /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
+    /// damping, frictionloss.
+    Mjcf,
+    /// `<stem>.sidecar.json` and `<stem>.sidecar.parquet`: every value with
+    /// unit, standard deviation and interval, the covariance, what the
+    /// formats cannot hold, the provenance.
+    Sidecar,
+}
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -11,73 +31,449 @@ pub struct Args {
     /// are the a-priori model the exported standard parameters stay close to.
     #[arg(long)]
     pub robot: PathBuf,
-    /// Identified parameters (`parameters.parquet`, chain model).
+    /// Identified parameters (`parameters.parquet`, chain model, from an
+    /// estimate with `physical = true`).
     #[arg(long, short)]
     pub parameters: PathBuf,
-    /// Output URDF.
-    #[arg(long, short, default_value = "identified.urdf")]
+    /// What to write (comma-separated or repeated).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "urdf")]
+    pub format: Vec<Format>,
+    /// Output path without extension: `identified` gives identified.urdf,
+    /// identified.xml, identified.sidecar.json and identified.sidecar.parquet.
+    /// The extension of the one format written is accepted (`-o model.urdf`).
+    #[arg(long, short, default_value = "identified")]
     pub out: PathBuf,
     /// Weight of the pull of the inertial parameters towards the a-priori
     /// model, relative to the data (χ² units per squared deviation of one
-    /// a-priori scale); chosen by Mallows' C_p when not given.
+    /// a-priori scale); by default the estimate's own.
     #[arg(long)]
     pub prior_weight: Option<f64>,
 }
 
 /// Physically consistent standard parameters closest to the a-priori model
-/// that reproduce the identified base parameters, written as a URDF.
+/// that reproduce the identified base parameters, written as URDF, MJCF
+/// and a sidecar with everything neither can hold.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(w) = args.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
+        bail!("--prior-weight: the prior weight must be a positive number, not {w}");
+    }
     let (params, _, base) = super::identified(&args.robot, &args.parameters)?;
     let Some(map) = base.map() else {
         bail!("export needs the chain model's base parameters (the decoupled model has no standard parameters)");
     };
-    let names = parameter_names(&base.model, base.terms);
-    let prior = standard_parameters(&base.model, base.terms);
-    let fit = physically_consistent(
-        &names,
-        &prior,
-        map,
-        &params.values,
-        &params.covariance,
-        args.prior_weight,
-    )
-    .map_err(anyhow::Error::msg)?;
-    println!(
-        "physically consistent fit: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, {} interior-point iterations",
-        fit.chi2,
-        params.names.len(),
-        fit.prior_weight,
-        if fit.chosen { " (chosen by C_p)" } else { "" },
-        fit.iterations
-    );
-    for (l, j) in base.model.joints.iter().enumerate() {
-        println!(
-            "  link of `{}`: smallest pseudo-inertia eigenvalue {:.3e} (a-priori {:.3e})",
-            j.name, fit.min_eigen[l], fit.min_eigen_prior[l]
+    if !params.metadata.contains_key(metadata::PHYSICAL) {
+        bail!(
+            "{} is not a physically consistent estimate: a least-squares estimate can hold links with negative mass or inertia, which no simulator accepts. \
+             Estimate with `physical = true` in the pipeline's `estimate` stage, or `robotid estimate REGRESSOR… --robot {} --physical`, and export that",
+            args.parameters.display(),
+            args.robot.display()
         );
     }
-    let mut moved: Vec<(f64, usize)> = (0..names.len())
-        .map(|i| ((fit.standard[i] - prior[i]).abs(), i))
-        .collect();
-    moved.sort_by(|a, b| b.0.total_cmp(&a.0));
-    println!("largest changes from the a-priori model:");
-    for (_, i) in moved.iter().take(6) {
-        println!("  {:<10} {:>14.6} → {:>14.6}", names[*i], prior[*i], fit.standard[*i]);
-    }
+    let names = parameter_names(&base.model, base.terms);
+    let stored: Option<Vec<f64>> = params
+        .metadata
+        .get(metadata::PHYSICAL_STANDARD)
+        .and_then(|s| serde_json::from_str(s).ok())
+        .filter(|v: &Vec<f64>| v.len() == names.len());
+    // The estimate's own consistent model, unless another prior weight is
+    // asked for (or the table predates it being stored): then fitted again.
+    let fit = match (stored, args.prior_weight) {
+        (Some(standard), None) => {
+            println!(
+                "the estimate's physically consistent standard parameters ({})",
+                metadata::PHYSICAL_STANDARD
+            );
+            Consistent {
+                standard,
+                how: params.metadata[metadata::PHYSICAL].clone(),
+            }
+        }
+        (_, weight) => {
+            let prior = standard_parameters(&base.model, base.terms);
+            let weight = weight.or_else(|| {
+                params
+                    .metadata
+                    .get(metadata::PHYSICAL_PRIOR_WEIGHT)
+                    .and_then(|w| w.parse::<f64>().ok())
+            });
+            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, weight)
+                .map_err(anyhow::Error::msg)?;
+            let how = format!(
+                "fitted again: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, smallest pseudo-inertia eigenvalues {:?}",
+                fit.chi2,
+                params.names.len(),
+                fit.prior_weight,
+                if fit.chosen { " (chosen by C_p)" } else { "" },
+                fit.min_eigen
+            );
+            println!("physically consistent standard parameters {how}");
+            Consistent {
+                standard: fit.standard,
+                how,
+            }
+        }
+    };
     let identified = with_standard_parameters(&base.model, base.terms, &fit.standard);
+    if let Some((l, j)) = identified
+        .links
+        .iter()
+        .zip(&identified.joints)
+        .find(|(l, _)| !(l.mass > 0.0))
+    {
+        bail!(
+            "the link of `{}` has mass {} in the consistent fit: no simulator moves a massless body; give the robot file a mass for it",
+            j.name,
+            l.mass
+        );
+    }
     let note = format!(
-        "identified by robotid from {} (a-priori model {}); physically consistent, χ² = {:.3}",
+        "identified by robotid {} from {} (a-priori model {}); physically consistent",
+        env!("CARGO_PKG_VERSION"),
         args.parameters.display(),
         args.robot.display(),
-        fit.chi2
     );
-    let text = to_urdf(&identified, &note);
-    write_atomic(&args.out, |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes())
-            .map_err(|e| robotid_stages::Error::io(&args.out, e))
-    })
-    .map_err(anyhow::Error::msg)?;
-    println!("URDF in {}", args.out.display());
+    let stem = stem(&args.out, &args.format);
+    // Everything is made before anything is written.
+    let mut files: Vec<(PathBuf, Output)> = Vec::new();
+    for f in dedup(&args.format) {
+        match f {
+            Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(to_urdf(&identified, &note)))),
+            Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
+            Format::Sidecar => {
+                let batch = read_parquet(&args.parameters)?;
+                let table = Table::of(&batch, &params.names)?;
+                let side = Sidecar {
+                    args: &args,
+                    params: &params,
+                    table: &table,
+                    fit: &fit,
+                    names: &names,
+                    model: &identified,
+                    terms: base.terms,
+                    map,
+                };
+                files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
+                files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
+            }
+        }
+    }
+    for (path, out) in &files {
+        match out {
+            Output::Text(text) => write_atomic(path, |w| {
+                use std::io::Write;
+                w.write_all(text.as_bytes())
+                    .map_err(|e| robotid_stages::Error::io(path, e))
+            })?,
+            Output::Table(batch) => write_parquet(path, batch)?,
+        }
+        println!("{}", path.display());
+    }
     Ok(())
+}
+
+/// Physically consistent standard parameters and how they were obtained.
+struct Consistent {
+    standard: Vec<f64>,
+    how: String,
+}
+
+enum Output {
+    Text(String),
+    Table(RecordBatch),
+}
+
+fn dedup(formats: &[Format]) -> Vec<Format> {
+    let mut out = Vec::new();
+    for f in formats {
+        if !out.contains(f) {
+            out.push(*f);
+        }
+    }
+    out
+}
+
+/// `-o` without the extension its one format would add.
+fn stem(out: &Path, formats: &[Format]) -> PathBuf {
+    let one = dedup(formats);
+    let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("");
+    let strip = matches!(
+        (one.as_slice(), ext),
+        ([Format::Urdf], "urdf") | ([Format::Mjcf], "xml") | ([Format::Sidecar], "json" | "parquet")
+    );
+    if !strip {
+        return out.to_path_buf();
+    }
+    let s = out.with_extension("");
+    match s.extension().and_then(|e| e.to_str()) {
+        Some("sidecar") => s.with_extension(""),
+        _ => s,
+    }
+}
+
+fn with_ext(stem: &Path, ext: &str) -> PathBuf {
+    let mut s = stem.as_os_str().to_owned();
+    s.push(".");
+    s.push(ext);
+    PathBuf::from(s)
+}
+
+/// The parameters table's intervals and expressions, by base parameter.
+struct Table {
+    ci_low: Vec<f64>,
+    ci_high: Vec<f64>,
+    expressions: Vec<String>,
+}
+
+impl Table {
+    fn of(batch: &RecordBatch, names: &[String]) -> anyhow::Result<Table> {
+        let f = |c: &str| -> anyhow::Result<Vec<f64>> {
+            let a = batch
+                .column_by_name(c)
+                .and_then(|a| a.as_any().downcast_ref::<Float64Array>())
+                .with_context(|| format!("the parameters table has no column `{c}`"))?;
+            Ok(a.values().to_vec())
+        };
+        let expressions = match batch
+            .column_by_name("expression")
+            .and_then(|a| a.as_any().downcast_ref::<StringArray>())
+        {
+            Some(e) => (0..e.len()).map(|i| e.value(i).to_string()).collect(),
+            None => names.to_vec(),
+        };
+        Ok(Table {
+            ci_low: f("ci_low")?,
+            ci_high: f("ci_high")?,
+            expressions,
+        })
+    }
+}
+
+struct Sidecar<'a> {
+    args: &'a Args,
+    params: &'a robotid_stages::estimation::Parameters,
+    table: &'a Table,
+    fit: &'a Consistent,
+    /// Standard parameter names, in the fit's order.
+    names: &'a [String],
+    model: &'a Model,
+    terms: robotid_stages::dynamics::RegressorTerms,
+    /// θ_base = map·θ_standard.
+    map: &'a nalgebra::DMatrix<f64>,
+}
+
+/// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
+/// symmetric friction pair goes into both (`friction`/`frictionloss`,
+/// `damping`); asymmetric coefficients only as their means; offsets,
+/// springs and the URDF's rotor inertia nowhere.
+fn representable(name: &str) -> (bool, bool) {
+    match name.split('_').next().unwrap_or("") {
+        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "MX" | "MY" | "MZ" | "M" | "Fv" | "Fc" => (true, true),
+        "Ia" => (false, true),
+        _ => (false, false),
+    }
+}
+
+impl Sidecar<'_> {
+    /// Whether URDF and MJCF hold base parameter `i`: every standard
+    /// parameter it combines is held.
+    fn base_representable(&self, i: usize) -> (bool, bool) {
+        // The regrouping's round-off aside (|K_ij| ~ 1e-17 of the row).
+        let row = self.map.row(i).amax();
+        (0..self.names.len())
+            .filter(|&j| self.map[(i, j)].abs() > 1e-9 * row)
+            .map(|j| representable(&self.names[j]))
+            .fold((true, true), |(u, m), (a, b)| (u && a, m && b))
+    }
+
+    fn provenance(&self) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
+        let bytes = |p: &Path| std::fs::read(p).with_context(|| p.display().to_string());
+        let mut m = serde_json::Map::new();
+        m.insert("robotid_version".into(), env!("CARGO_PKG_VERSION").into());
+        m.insert(
+            "parameters_file".into(),
+            self.args.parameters.display().to_string().into(),
+        );
+        m.insert(
+            "parameters_sha256".into(),
+            sha256_hex(&bytes(&self.args.parameters)?).into(),
+        );
+        m.insert("robot_file".into(), self.args.robot.display().to_string().into());
+        m.insert("robot_sha256".into(), sha256_hex(&bytes(&self.args.robot)?).into());
+        // The estimate's own provenance: recordings, pipeline and config
+        // hashes, method, adequacy, what the physical fit cost.
+        for (k, v) in &self.params.metadata {
+            if k.starts_with("robotid.") && k.as_str() != metadata::CONTENT_CRC32 {
+                m.insert(k.clone(), v.clone().into());
+            }
+        }
+        Ok(m)
+    }
+
+    fn json(&self) -> anyhow::Result<String> {
+        use serde_json::json;
+        let p = self.params;
+        let base: Vec<_> = (0..p.names.len())
+            .map(|i| {
+                let (urdf, mjcf) = self.base_representable(i);
+                json!({
+                    "name": p.names[i], "unit": p.units[i], "value": p.values[i], "std": p.std[i],
+                    "ci_low": self.table.ci_low[i], "ci_high": self.table.ci_high[i],
+                    "expression": self.table.expressions[i], "in_urdf": urdf, "in_mjcf": mjcf,
+                })
+            })
+            .collect();
+        let standard: Vec<_> = self
+            .names
+            .iter()
+            .zip(&self.fit.standard)
+            .map(|(n, v)| {
+                let (urdf, mjcf) = representable(n);
+                json!({"name": n, "unit": parameter_unit(n), "value": v, "in_urdf": urdf, "in_mjcf": mjcf})
+            })
+            .collect();
+        let joints: Vec<_> = self
+            .model
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| {
+                let f = &self.model.friction[i];
+                let ia = self.model.drives[i].reflected_inertia();
+                let mut lost_both = Vec::new();
+                if f.viscous_pos != f.viscous_neg || f.coulomb_pos != f.coulomb_neg {
+                    lost_both.push("asymmetric friction (the formats take the means of the two signs)");
+                }
+                if f.transition > 0.0 {
+                    lost_both.push("the Coulomb transition tanh(q̇/v): URDF and MuJoCo switch at q̇ = 0");
+                }
+                if self.terms.offset {
+                    lost_both.push("the torque offset");
+                }
+                let mut not_in_urdf = lost_both.clone();
+                if self.terms.rotor {
+                    not_in_urdf.push("the rotor inertia (MJCF: armature)");
+                }
+                json!({
+                    "name": j.name,
+                    "viscous_pos": f.viscous_pos, "viscous_neg": f.viscous_neg,
+                    "coulomb_pos": f.coulomb_pos, "coulomb_neg": f.coulomb_neg,
+                    "coulomb_transition_rad_s": f.transition, "offset": f.offset,
+                    "reflected_rotor_inertia": ia,
+                    "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+                    "mjcf": {"armature": ia, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+                    "not_in_urdf": not_in_urdf,
+                    "not_in_mjcf": lost_both,
+                })
+            })
+            .collect();
+        let cov: Vec<Vec<f64>> = (0..p.names.len())
+            .map(|r| (0..p.names.len()).map(|c| p.covariance[(r, c)]).collect())
+            .collect();
+        let confidence = p.metadata.get(metadata::ESTIMATE_CONFIDENCE).cloned();
+        let doc = json!({
+            "robot": self.model.name,
+            "provenance": self.provenance()?,
+            "confidence": confidence,
+            "physical_fit": self.fit.how,
+            "base_parameters": base,
+            "base_covariance": {"names": p.names, "unit": "the product of the two parameters' units", "matrix": cov},
+            "standard_parameters": standard,
+            "joints": joints,
+        });
+        Ok(serde_json::to_string_pretty(&doc)? + "\n")
+    }
+
+    /// One row per value: the base parameters (with standard deviation,
+    /// interval and covariance columns), then the standard ones (the
+    /// deviation and interval where a standard parameter is a base one).
+    fn parquet(&self) -> anyhow::Result<RecordBatch> {
+        let p = self.params;
+        let nb = p.names.len();
+        let rows = nb + self.names.len();
+        let base_of = |n: &str| p.names.iter().position(|b| b == n);
+        let mut name = Vec::with_capacity(rows);
+        let mut kind = Vec::with_capacity(rows);
+        let mut unit = Vec::with_capacity(rows);
+        let mut value = Vec::with_capacity(rows);
+        let (mut std, mut lo, mut hi) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut urdf, mut mjcf, mut base_row) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..nb {
+            name.push(p.names[i].clone());
+            kind.push("base");
+            unit.push(p.units[i].clone());
+            value.push(p.values[i]);
+            std.push(Some(p.std[i]));
+            lo.push(Some(self.table.ci_low[i]));
+            hi.push(Some(self.table.ci_high[i]));
+            let (u, m) = self.base_representable(i);
+            urdf.push(u);
+            mjcf.push(m);
+            base_row.push(Some(i));
+        }
+        for (n, v) in self.names.iter().zip(&self.fit.standard) {
+            let b = base_of(n);
+            name.push(n.clone());
+            kind.push("standard");
+            unit.push(parameter_unit(n).to_string());
+            value.push(*v);
+            std.push(b.map(|i| p.std[i]));
+            lo.push(b.map(|i| self.table.ci_low[i]));
+            hi.push(b.map(|i| self.table.ci_high[i]));
+            let (u, m) = representable(n);
+            urdf.push(u);
+            mjcf.push(m);
+            base_row.push(None);
+        }
+        let unit_field = |n: &str, u: &str| {
+            Field::new(n, DataType::Float64, true).with_metadata(std::collections::HashMap::from([(
+                metadata::UNIT.to_string(),
+                u.to_string(),
+            )]))
+        };
+        let mut fields = vec![
+            Field::new("name", DataType::Utf8, false),
+            Field::new("kind", DataType::Utf8, false),
+            Field::new("unit", DataType::Utf8, false),
+            Field::new("value", DataType::Float64, false).with_metadata(std::collections::HashMap::from([(
+                metadata::UNIT.to_string(),
+                "see `unit`".to_string(),
+            )])),
+            unit_field("std", "see `unit`"),
+            unit_field("ci_low", "see `unit`"),
+            unit_field("ci_high", "see `unit`"),
+            Field::new("in_urdf", DataType::Boolean, false),
+            Field::new("in_mjcf", DataType::Boolean, false),
+        ];
+        let mut columns: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(name)),
+            Arc::new(StringArray::from(kind)),
+            Arc::new(StringArray::from(unit)),
+            Arc::new(Float64Array::from(value)),
+            Arc::new(Float64Array::from(std)),
+            Arc::new(Float64Array::from(lo)),
+            Arc::new(Float64Array::from(hi)),
+            Arc::new(BooleanArray::from(urdf)),
+            Arc::new(BooleanArray::from(mjcf)),
+        ];
+        for (c, cn) in p.names.iter().enumerate() {
+            fields.push(unit_field(
+                &format!("cov_{cn}"),
+                &format!("units of `unit` × {}", p.units[c]),
+            ));
+            columns.push(Arc::new(Float64Array::from(
+                base_row
+                    .iter()
+                    .map(|r| r.map(|r| p.covariance[(r, c)]))
+                    .collect::<Vec<_>>(),
+            )));
+        }
+        let mut md: std::collections::HashMap<String, String> = self
+            .provenance()?
+            .into_iter()
+            .map(|(k, v)| (k, v.as_str().map(str::to_string).unwrap_or_else(|| v.to_string())))
+            .collect();
+        md.insert(metadata::TABLE.into(), "export_sidecar".into());
+        let schema = Schema::new(fields).with_metadata(md);
+        Ok(RecordBatch::try_new(Arc::new(schema), columns)?)
+    }
 }

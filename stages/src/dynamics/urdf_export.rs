@@ -49,7 +49,7 @@ pub fn to_urdf(model: &Model, note: &str) -> String {
         let d = &model.drives[i];
         let _ = writeln!(
             s,
-            "  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {}, offset = {}, coulomb_transition = {}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} -->",
+            "  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (<dynamics> carries the means of the two signs), offset = {}, coulomb_transition = {}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} (URDF has no place for it) -->",
             f.viscous_pos,
             f.viscous_neg,
             f.coulomb_pos,

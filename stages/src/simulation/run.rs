@@ -232,6 +232,22 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             }
             plant.step(step as f64 * h, h, &mut x);
             step += 1;
+            // RK4 beyond its stability limit (a light link under stiff
+            // gains) blows up within steps: stop while the numbers are
+            // still numbers, with the way out.
+            if let Some(j) = (0..2 * n).find(|&j| !(x[j].abs() < 1e4)) {
+                return Err(Error::setting(
+                    "timing.steps_per_sample",
+                    format!(
+                        "large enough for the controller's gains: the integration diverged at t = {:.4} s ({} of joint `{}` = {:e}); raise it or lower the controller bandwidth",
+                        step as f64 * h,
+                        if j < n { "position" } else { "velocity" },
+                        model.joints[j % n].name,
+                        x[j]
+                    ),
+                    steps,
+                ));
+            }
         }
         let t = idx as f64 * h;
         plant.derivative(t, &x, &mut dx);

@@ -485,6 +485,14 @@ impl Reducer {
             est.widened = false;
             est.adequacy = summary.adequacy_at(&est.values)?;
             md.insert(metadata::PHYSICAL.into(), note);
+            md.insert(
+                metadata::PHYSICAL_PRIOR_WEIGHT.into(),
+                format!("{:?}", fit.prior_weight),
+            );
+            md.insert(
+                metadata::PHYSICAL_STANDARD.into(),
+                serde_json::to_string(&fit.standard).expect("numbers serialise"),
+            );
             physical = Some(fit);
         }
         for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {

@@ -1,0 +1,216 @@
+//! `robotid export` checked where its files are used: a 6-dof arm (the UR5
+//! fixture, with drives: armature) and a 7-dof arm whose gripper's
+//! prismatic fingers are locked (example-robot-data's Panda URDF), each
+//! simulated, identified with `physical = true`, exported as URDF, MJCF and
+//! sidecar, and loaded in MuJoCo and Pinocchio. The 1-dof KUKA axis is
+//! exported in `pipeline.rs`, after its estimate is checked.
+
+use std::path::Path;
+use std::process::Command;
+
+use robotid_tests::{export_checked_in_simulators, panda_urdf, workspace};
+
+fn robotid(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap()
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = robotid(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The stages that end a pipeline with a physically consistent estimate.
+const IDENTIFY: &str = r#"
+[[stage]]
+kind = "regressor"
+
+[[stage]]
+kind = "estimate"
+method = "ols"
+physical = true
+"#;
+
+/// Both simulators agree with robotid to 1e-9 of the largest torque: the
+/// exports carry the numbers at full precision (shortest round-trip
+/// decimal), and what remains is round-off in three RNEA implementations.
+fn assert_agree(what: &str, (mujoco, pinocchio): (f64, f64)) {
+    println!("{what}: MuJoCo {mujoco:.2e}, Pinocchio {pinocchio:.2e} of the largest torque");
+    assert!(mujoco < 1e-9, "{what}: MuJoCo's mj_inverse differs by {mujoco:e}");
+    assert!(pinocchio < 1e-9, "{what}: Pinocchio's rnea differs by {pinocchio:e}");
+}
+
+#[test]
+fn ur5_identified_model_in_mujoco_and_pinocchio() {
+    let ws = workspace(&["ur5"]);
+    let pipeline = std::fs::read_to_string(ws.path().join("pipelines/ur5.toml")).unwrap();
+    let (stages, _) = pipeline.split_once("[output]").unwrap();
+    let file = ws.path().join("pipelines/ur5_physical.toml");
+    std::fs::write(&file, format!("{stages}{IDENTIFY}")).unwrap();
+    let out = ws.path().join("out");
+    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    let params = out.join("parameters.parquet");
+    let robot = ws.path().join("robots/ur5.toml");
+    let agree = export_checked_in_simulators(Path::new(env!("CARGO_BIN_EXE_robotid")), &robot, &params, &out);
+    assert_agree("UR5", agree);
+    // The sidecar says what the formats cannot hold: URDF has no rotor
+    // inertia, and the Coulomb transition of the robot file is in neither.
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("identified.sidecar.json")).unwrap()).unwrap();
+    let joint = &sidecar["joints"][0];
+    assert!(joint["not_in_urdf"].to_string().contains("rotor inertia"), "{joint}");
+    assert!(joint["mjcf"]["armature"].as_f64().unwrap() > 0.0);
+    let base = sidecar["base_parameters"].as_array().unwrap();
+    assert_eq!(base.len(), 52);
+    // A base parameter holding a rotor inertia (Ia grouped with a ZZ) is in
+    // the MJCF (armature) but not in the URDF.
+    let rotor = base
+        .iter()
+        .find(|b| b["expression"].as_str().unwrap().contains("Ia_"))
+        .unwrap();
+    assert_eq!(
+        (rotor["in_urdf"].as_bool(), rotor["in_mjcf"].as_bool()),
+        (Some(false), Some(true)),
+        "{rotor}"
+    );
+    assert!(
+        sidecar["provenance"]["robotid.recordings"].is_string(),
+        "{}",
+        sidecar["provenance"]
+    );
+}
+
+#[test]
+fn panda_with_its_gripper_locked_in_mujoco_and_pinocchio() {
+    let Some(urdf) = panda_urdf() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let sim = |steps: u32| {
+        format!(
+            r#"robot = "{}"
+seed = 5
+
+[trajectory]
+kind = "fourier"
+base_frequency_hz = 0.2
+q0 = [0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8]
+a = [[0.30, -0.15, 0.08], [0.25, 0.15, -0.08], [-0.30, 0.15, 0.10], [0.30, -0.15, 0.10], [0.35, 0.15, -0.10], [-0.30, 0.20, 0.08], [0.40, -0.20, 0.10]]
+b = [[0.15, 0.20, -0.08], [-0.20, 0.08, 0.08], [0.25, -0.08, 0.10], [-0.20, 0.15, 0.08], [0.25, -0.20, 0.08], [0.30, 0.15, -0.10], [0.30, 0.15, -0.10]]
+
+[timing]
+log_rate_hz = 200.0
+steps_per_sample = {steps}
+transient_s = 1.0
+periods = 3
+
+[controller]
+kind = "pid"
+bandwidth_hz = 6.0
+
+[measurement]
+current_noise_std_a = 0.01
+position_noise_std_rad = 1.0e-6
+
+[output]
+name = "panda"
+"#,
+            urdf.display()
+        )
+    };
+    let sim_file = dir.path().join("sim.toml");
+    let rec = dir.path().join("rec").display().to_string();
+    // Four RK4 steps per 5 ms sample are too few for the light wrist under
+    // a 6 Hz controller: an error that says so, not a panic.
+    std::fs::write(&sim_file, sim(4)).unwrap();
+    let o = robotid(&["simulate", &sim_file.display().to_string(), "-o", &rec]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("steps_per_sample") && err.contains("diverged"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    std::fs::write(&sim_file, sim(32)).unwrap();
+    ok(&["simulate", &sim_file.display().to_string(), "-o", &rec]);
+    let file = dir.path().join("panda.toml");
+    std::fs::write(
+        &file,
+        format!(
+            r#"version = 1
+robot = "{}"
+
+[source]
+path = "rec/panda.parquet"
+
+[read]
+position = {{ column = "counts_{{joint}}", unit = "count" }}
+
+[[stage]]
+kind = "align"
+
+[[stage]]
+kind = "average"
+
+[[stage]]
+kind = "noise"
+
+[[stage]]
+kind = "differentiate"
+method = "dft"
+bandwidth_hz = 1.0
+{IDENTIFY}covariance = "residual"
+"#,
+            urdf.display()
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    let agree = export_checked_in_simulators(
+        Path::new(env!("CARGO_BIN_EXE_robotid")),
+        &urdf,
+        &out.join("parameters.parquet"),
+        &out,
+    );
+    assert_agree("Panda, fingers locked", agree);
+    // The fingers are welded: seven hinges, no slide.
+    let mjcf = std::fs::read_to_string(out.join("identified.xml")).unwrap();
+    assert_eq!(mjcf.matches("type=\"hinge\"").count(), 7);
+    assert!(!mjcf.contains("slide"));
+}
+
+/// An estimate that is not physically consistent is refused, with the way
+/// to a consistent one; nothing is written.
+#[test]
+fn a_least_squares_estimate_is_not_exported() {
+    let ws = workspace(&["ur5"]);
+    let pipeline = std::fs::read_to_string(ws.path().join("pipelines/ur5.toml")).unwrap();
+    let (stages, _) = pipeline.split_once("[output]").unwrap();
+    let file = ws.path().join("pipelines/ur5_ols.toml");
+    std::fs::write(&file, format!("{stages}{}", IDENTIFY.replace("physical = true", ""))).unwrap();
+    let out = ws.path().join("out");
+    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    let stem = out.join("identified").display().to_string();
+    let o = robotid(&[
+        "export",
+        "--robot",
+        &ws.path().join("robots/ur5.toml").display().to_string(),
+        "-p",
+        &out.join("parameters.parquet").display().to_string(),
+        "--format",
+        "urdf,mjcf",
+        "-o",
+        &stem,
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("not a physically consistent estimate") && err.contains("physical = true"),
+        "{err}"
+    );
+    assert!(err.contains("--physical"), "{err}");
+    assert!(!out.join("identified.urdf").exists() && !out.join("identified.xml").exists());
+}
