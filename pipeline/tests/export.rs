@@ -45,15 +45,27 @@ fn assert_agree(what: &str, (mujoco, pinocchio): (f64, f64)) {
     assert!(pinocchio < 1e-9, "{what}: Pinocchio's rnea differs by {pinocchio:e}");
 }
 
+/// The UR5 example's pipeline with the regressor and an estimate
+/// (physically consistent or not) added, run; its output folder.
+fn ur5_identified(ws: &Path, physical: bool) -> std::path::PathBuf {
+    let pipeline = std::fs::read_to_string(ws.join("pipelines/ur5.toml")).unwrap();
+    let (stages, _) = pipeline.split_once("[output]").unwrap();
+    let file = ws.join("pipelines/ur5_identify.toml");
+    let identify = if physical {
+        IDENTIFY.to_string()
+    } else {
+        IDENTIFY.replace("physical = true", "")
+    };
+    std::fs::write(&file, format!("{stages}{identify}")).unwrap();
+    let out = ws.join("out");
+    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    out
+}
+
 #[test]
 fn ur5_identified_model_in_mujoco_and_pinocchio() {
     let ws = workspace(&["ur5"]);
-    let pipeline = std::fs::read_to_string(ws.path().join("pipelines/ur5.toml")).unwrap();
-    let (stages, _) = pipeline.split_once("[output]").unwrap();
-    let file = ws.path().join("pipelines/ur5_physical.toml");
-    std::fs::write(&file, format!("{stages}{IDENTIFY}")).unwrap();
-    let out = ws.path().join("out");
-    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    let out = ur5_identified(ws.path(), true);
     let params = out.join("parameters.parquet");
     let robot = ws.path().join("robots/ur5.toml");
     let agree = export_checked_in_simulators(Path::new(env!("CARGO_BIN_EXE_robotid")), &robot, &params, &out);
@@ -187,12 +199,7 @@ bandwidth_hz = 1.0
 #[test]
 fn a_least_squares_estimate_is_not_exported() {
     let ws = workspace(&["ur5"]);
-    let pipeline = std::fs::read_to_string(ws.path().join("pipelines/ur5.toml")).unwrap();
-    let (stages, _) = pipeline.split_once("[output]").unwrap();
-    let file = ws.path().join("pipelines/ur5_ols.toml");
-    std::fs::write(&file, format!("{stages}{}", IDENTIFY.replace("physical = true", ""))).unwrap();
-    let out = ws.path().join("out");
-    ok(&["run", &file.display().to_string(), "-o", &out.display().to_string()]);
+    let out = ur5_identified(ws.path(), false);
     let stem = out.join("identified").display().to_string();
     let o = robotid(&[
         "export",
