@@ -126,6 +126,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             l.mass
         );
     }
+    let warnings = far_from_the_robot_file(&base.model, &identified, &params.metadata);
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
     let note = format!(
         "identified by robotid {} from {} (a-priori model {}); physically consistent",
         env!("CARGO_PKG_VERSION"),
@@ -151,6 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     model: &identified,
                     terms: base.terms,
                     map,
+                    warnings: &warnings,
                 };
                 files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
                 files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
@@ -175,6 +180,32 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 struct Consistent {
     standard: Vec<f64>,
     how: String,
+}
+
+/// Links whose exported mass is over 3× from the robot file's (either
+/// way): a base parameter groups it with others, the data cannot tell them
+/// apart, and the fit's prior weight left it free. The joint torques along
+/// motions like the recorded ones stay right; a simulation's masses, and so
+/// its contacts and Cartesian forces, do not.
+fn far_from_the_robot_file(
+    prior: &Model,
+    exported: &Model,
+    md: &std::collections::BTreeMap<String, String>,
+) -> Vec<String> {
+    let weight = md.get(metadata::PHYSICAL_PRIOR_WEIGHT).map_or("?", String::as_str);
+    prior
+        .links
+        .iter()
+        .zip(&exported.links)
+        .zip(&prior.joints)
+        .filter(|((a, b), _)| a.mass > 0.0 && !(b.mass / a.mass <= 3.0 && b.mass / a.mass >= 1.0 / 3.0))
+        .map(|((a, b), j)| {
+            format!(
+                "the link of `{}` weighs {:.4} kg in the export against {:.4} kg in the robot file: the data do not tell its mass from the parameters it is grouped with, and the fit's prior weight ({weight}) left it free. Torques along motions like the recorded ones are right; the body is not. Estimate with a larger `prior_weight` (or `robotid export --prior-weight`) to keep it near the robot file",
+                j.name, b.mass, a.mass
+            )
+        })
+        .collect()
 }
 
 enum Output {
@@ -259,6 +290,7 @@ struct Sidecar<'a> {
     terms: robotid_stages::dynamics::RegressorTerms,
     /// θ_base = map·θ_standard.
     map: &'a nalgebra::DMatrix<f64>,
+    warnings: &'a [String],
 }
 
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
@@ -379,6 +411,7 @@ impl Sidecar<'_> {
             "base_covariance": {"names": p.names, "unit": "the product of the two parameters' units", "matrix": cov},
             "standard_parameters": standard,
             "joints": joints,
+            "warnings": self.warnings,
         });
         Ok(serde_json::to_string_pretty(&doc)? + "\n")
     }
