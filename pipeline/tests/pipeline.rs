@@ -803,3 +803,43 @@ fn wrong_declarations_are_named_with_their_numbers() {
         "{notes}"
     );
 }
+
+/// The real KUKA LWR4+ files, with no period given: align finds it in the
+/// positions. Files 1 and 2 repeat with 4π s (found to 1e-4, with jittered
+/// stamps and a start-up transient in the first period); file 3, another
+/// trajectory, already repeats after 2π s, and that is what is found (its
+/// three steady 2π s periods average with a time-domain torque noise equal
+/// to the spectrum's, 5.2e-3 both: they are periods).
+#[test]
+fn real_kuka_lwr4_period_found_in_the_record() {
+    let Some(data) = robotid_tests::realdata("kuka_lwr4") else {
+        return;
+    };
+    let text = std::fs::read_to_string(fixture("pipelines/kuka_lwr4.toml"))
+        .unwrap()
+        .replace("../../../shared/realdata/kuka_lwr4/", &format!("{}/", data.display()))
+        .replace("period_s = 12.566370614359172\n", "");
+    assert!(!text.contains("period_s"));
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("no_period.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = dir.path().join("out");
+    for r in run_pipeline(&file, &out, None) {
+        r.outcome.unwrap();
+    }
+    let four_pi = 4.0 * std::f64::consts::PI;
+    for (name, want) in [
+        ("measurements_1", four_pi),
+        ("measurements_2", four_pi),
+        ("measurements_3", four_pi / 2.0),
+    ] {
+        let md = read_parquet(&out.join(name).join("kinematics.parquet"))
+            .unwrap()
+            .schema()
+            .metadata()
+            .clone();
+        let period: f64 = md[metadata::PERIOD_S].parse().unwrap();
+        println!("{name}: {period} s against {want}");
+        assert!((period - want).abs() < 1e-4 * want, "{name}: {period} against {want}");
+    }
+}

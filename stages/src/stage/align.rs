@@ -28,7 +28,8 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AlignConfig {
-    /// Excitation period, s (default: the recording's `robotid.period_s`).
+    /// Excitation period, s (default: the recording's `robotid.period_s`,
+    /// else inferred from the positions' self-similarity, `stage/period.rs`).
     pub period_s: Option<f64>,
     /// Nominal sample rate, Hz (default: the recording's
     /// `robotid.sample_rate_hz`, else 1 / median step).
@@ -151,12 +152,6 @@ impl Component for AlignConfig {
         let mut out = Vec::new();
         if ctx.before.contains(&Product::Periods) {
             out.push(Problem::new("", "the data is already aligned"));
-        }
-        if self.period_s.is_none() && ctx.provenance == Some(false) {
-            out.push(Problem::new(
-                "period_s",
-                "the source does not say its excitation period (no robotid provenance): give period_s",
-            ));
         }
         if let Some(rel) = &self.reference_trajectory {
             if let Err(e) = reference_trajectory(&ctx.base_dir.join(rel)) {
@@ -342,13 +337,20 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             ));
         }
     }
-    let period = cfg.period_s.or_else(|| md_f64(metadata::PERIOD_S)).ok_or_else(|| {
-        data_err(
-            "time",
-            None,
-            "no excitation period: set `period_s` in the align stage (the recording does not say)".into(),
-        )
-    })?;
+    // Given, else the recording's, else found in the record itself.
+    let (period, inferred) = match cfg.period_s.or_else(|| md_f64(metadata::PERIOD_S)) {
+        Some(p) => (p, None),
+        None => {
+            let e = super::period::infer_period(t, &raw.q).map_err(|e| {
+                data_err(
+                    "position",
+                    None,
+                    format!("no excitation period: the recording does not say, and none was found in it ({e}); set `period_s` in the align stage"),
+                )
+            })?;
+            (e.period_s, Some(e))
+        }
+    };
     // What the pipeline file left to the recording, said.
     let mut defaults = Vec::new();
     if cfg.sample_rate_hz.is_none() {
@@ -357,8 +359,13 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             None => format!("sample_rate_hz = {fs} (1 / the median step)"),
         });
     }
-    if cfg.period_s.is_none() {
-        defaults.push(format!("period_s = {period} (the recording's {})", metadata::PERIOD_S));
+    match (cfg.period_s, inferred) {
+        (Some(_), _) => {}
+        (None, None) => defaults.push(format!("period_s = {period} (the recording's {})", metadata::PERIOD_S)),
+        (None, Some(e)) => defaults.push(format!(
+            "period_s = {period} ± {:.1e} s (inferred: the positions repeat with it, {:.1} periods in the record)",
+            e.std_s, e.cycles
+        )),
     }
     let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
     if n < 4 {
