@@ -34,11 +34,11 @@ fn place_of_stage_error(e: &robotid_stages::Error, place: &mut Place) {
         E::Stage {
             stage,
             source_name,
-            source,
+            cause,
         } => {
             place.stage = Some(stage.to_string());
             place.file.get_or_insert_with(|| source_name.clone());
-            place_of_stage_error(source, place);
+            place_of_stage_error(cause, place);
         }
         E::Data {
             source_name,

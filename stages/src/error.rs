@@ -62,13 +62,13 @@ pub enum Error {
         parameters: Vec<String>,
         combination: String,
     },
-    /// A failure inside one stage of one recording.
-    #[error("{source_name}: stage `{stage}`: {source}")]
+    /// A failure inside one stage of one recording. Its message holds the
+    /// cause's (not an error `source`: a printed chain would say it twice).
+    #[error("{source_name}: stage `{stage}`: {cause}")]
     Stage {
         stage: &'static str,
         source_name: String,
-        #[source]
-        source: Box<Error>,
+        cause: Box<Error>,
     },
     /// Every problem of a settings file or table, each with its key.
     #[error("{what}: {}", problems.iter().map(|p| if p.key.is_empty() { p.message.clone() } else { format!("`{}`: {}", p.key, p.message) }).collect::<Vec<_>>().join("; "))]
@@ -133,7 +133,7 @@ impl Error {
             e => Error::Stage {
                 stage,
                 source_name: source_name.to_string(),
-                source: Box::new(e),
+                cause: Box::new(e),
             },
         }
     }
