@@ -6,6 +6,7 @@
 
 pub mod error;
 pub mod fuzz;
+pub mod identify;
 pub mod output;
 pub mod pipeline;
 pub mod plan;

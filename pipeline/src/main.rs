@@ -23,6 +23,11 @@ enum Command {
     /// Simulate a robot under closed-loop control and write a raw recording
     /// (MCAP, CSV, Parquet) with its ground truth.
     Simulate(cmd::simulate::Args),
+    /// From recordings and a robot to a validated model in one command: the
+    /// excitation (period, harmonics, steady periods, sample rate) found in
+    /// the data, a pipeline chosen and written out, the estimate, its
+    /// validation on held-out recordings, the report and the exports.
+    Identify(cmd::identify::Args),
     /// Run a preprocessing pipeline on its recordings and write its tables.
     Run(cmd::run::Args),
     /// Check a pipeline file without running it; report every problem.
@@ -82,6 +87,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
+        Command::Identify(a) => cmd::identify::run(a),
         Command::Run(a) => cmd::run::run(a),
         Command::Lint(a) => cmd::lint::run(a),
         Command::Estimate(a) => cmd::estimate::run(a),

@@ -155,7 +155,12 @@ impl Pipeline {
 impl Built {
     /// The run's provenance written into every table.
     pub fn provenance(&self) -> BTreeMap<String, String> {
-        BTreeMap::from([
+        let inferred = self
+            .plan
+            .inferred
+            .iter()
+            .map(|(k, v)| (format!("{}.{k}", metadata::INFERRED_PREFIX), v.clone()));
+        let mut md = BTreeMap::from([
             (metadata::CONFIG_SHA256.to_string(), self.plan.hash.clone()),
             (
                 metadata::PIPELINE_FILE.to_string(),
@@ -165,7 +170,9 @@ impl Built {
                     .map(|s| s.to_string_lossy().into_owned())
                     .unwrap_or_default(),
             ),
-        ])
+        ]);
+        md.extend(inferred);
+        md
     }
 
     /// Runs every stage on one chain; `progress` is told each stage's name.

@@ -43,6 +43,11 @@ struct PipelineFile {
     /// position (rad or m). Joints not in `[read] joints` are locked too.
     #[serde(default)]
     lock: std::collections::BTreeMap<String, f64>,
+    /// What `robotid identify` found in the data and wrote into this file
+    /// as settings: key → value with its uncertainty and how it was found.
+    /// Copied into every table's metadata as `robotid.inferred.<key>`.
+    #[serde(default)]
+    inferred: std::collections::BTreeMap<String, String>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -138,6 +143,8 @@ pub struct Plan {
     pub tables: Vec<TableKind>,
     /// Locked joints and their positions (`[lock]`).
     pub lock: std::collections::BTreeMap<String, f64>,
+    /// `[inferred]`: what `robotid identify` found in the data.
+    pub inferred: std::collections::BTreeMap<String, String>,
 }
 
 impl Plan {
@@ -253,6 +260,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
         lines,
         tables,
         lock: raw.lock,
+        inferred: raw.inferred,
     };
     if problems.is_empty() {
         return Ok(plan);

@@ -61,6 +61,9 @@ pub const NOISE_PER_SAMPLE: &str = "robotid.noise.per_sample";
 pub const DIFFERENTIATION: &str = "robotid.differentiation";
 /// Defaults a stage chose where the pipeline file is silent, with why.
 pub const DEFAULTS: &str = "robotid.defaults";
+/// Prefix of what `robotid identify` inferred from the data (`[inferred]`
+/// of the pipeline file): `robotid.inferred.period_s`, ….
+pub const INFERRED_PREFIX: &str = "robotid.inferred";
 /// The regressor configuration (JSON) a table was made with.
 pub const REGRESSOR_CONFIG: &str = "robotid.regressor_config";
 /// `chain` or `decoupled`.

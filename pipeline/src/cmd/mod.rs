@@ -2,6 +2,7 @@ pub mod dataset;
 pub mod estimate;
 pub mod excite;
 pub mod export;
+pub mod identify;
 pub mod lint;
 pub mod model;
 pub mod predict;

@@ -6,9 +6,12 @@
 //! converted with the robot's drives (or the constants given here). Every
 //! value is checked: a NaN or infinity names the file, channel and sample.
 
+mod guess;
 mod mcap;
 mod parquet;
 mod text;
+
+pub use guess::guess_read;
 
 use std::path::Path;
 
@@ -291,6 +294,25 @@ pub(crate) struct Columns {
 
 /// Reads `path` into `raw_samples`. `model` supplies joint names and drive
 /// constants when given.
+/// The column names of a text or Parquet log; None for a text log without
+/// a header line and for MCAP (topics, not columns).
+pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        e if TEXT_EXTENSIONS.contains(&e) => text::header_of(path),
+        "parquet" => {
+            let builder = crate::formats::parquet::open(path)?;
+            Ok(Some(
+                builder.schema().fields().iter().map(|f| f.name().clone()).collect(),
+            ))
+        }
+        _ => Ok(None),
+    }
+}
+
 pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
     let source = path.display().to_string();
     let joints: Vec<String> = cfg

@@ -236,6 +236,32 @@ fn number(text: &str, decimal: Decimal) -> Option<f64> {
     std::str::from_utf8(&buf[..bytes.len()]).ok()?.parse().ok()
 }
 
+/// The names on a text log's first line, or None when it holds numbers
+/// (no header).
+pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut reader = std::io::BufReader::new(file);
+    let mut line = String::new();
+    loop {
+        line.clear();
+        if reader.read_line(&mut line).map_err(|e| Error::io(path, e))? == 0 {
+            return Ok(None);
+        }
+        let t = line.trim_start_matches('\u{feff}').trim();
+        if t.is_empty() || comment(t) {
+            continue;
+        }
+        let sep = separator_of(t);
+        let names: Vec<String> = fields(t, sep).map(|f| f.trim().trim_matches('"').to_string()).collect();
+        let numeric = names.iter().all(|f| {
+            number(f, Decimal::Point)
+                .or_else(|| number(f, Decimal::Comma))
+                .is_some()
+        });
+        return Ok((!numeric).then_some(names));
+    }
+}
+
 /// Delimited text: CSV, semicolon, tab or whitespace separated, with or
 /// without a header line, comment lines and a UTF-8 byte-order mark
 /// skipped, either decimal mark. Streamed line by line; only the mapped

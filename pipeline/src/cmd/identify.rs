@@ -1,0 +1,189 @@
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context as _};
+use robotid::identify::{absolute, design, Design};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Recordings of the excitation (text, Parquet or MCAP logs), periodic
+    /// or not; the parameters are estimated from all of them.
+    #[arg(required = true)]
+    pub recordings: Vec<PathBuf>,
+    /// The robot file (TOML or URDF).
+    #[arg(long)]
+    pub robot: PathBuf,
+    /// Held-out recordings to validate the identified model on.
+    #[arg(long, num_args = 1..)]
+    pub validate: Vec<PathBuf>,
+    /// Output folder (default: out/identify/<first recording's name>); must
+    /// not exist or be empty.
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
+    /// Print the pipeline file of the first recording (also written into
+    /// the output folder, with every other one).
+    #[arg(long)]
+    pub print_pipeline: bool,
+}
+
+/// Removes the output folder unless told the work is done: a failed
+/// identify leaves nothing behind.
+struct Cleanup<'a>(&'a Path, bool);
+
+impl Drop for Cleanup<'_> {
+    fn drop(&mut self) {
+        if !self.1 {
+            let _ = std::fs::remove_dir_all(self.0);
+        }
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let robot = absolute(&args.robot)?;
+    let ident: Vec<PathBuf> = args.recordings.iter().map(|p| absolute(p)).collect::<Result<_, _>>()?;
+    let held: Vec<PathBuf> = args.validate.iter().map(|p| absolute(p)).collect::<Result<_, _>>()?;
+    let all: Vec<PathBuf> = ident.iter().chain(&held).cloned().collect();
+    let names = robotid::run::recording_names(&all);
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out/identify").join(&names[0]));
+    if out.exists() && std::fs::read_dir(&out).map(|mut d| d.next().is_some()).unwrap_or(true) {
+        bail!(
+            "{}: the output folder is not empty; give another with --out, or remove it",
+            out.display()
+        );
+    }
+    for p in &all {
+        if absolute(&out).is_ok_and(|o| p.starts_with(o)) {
+            bail!("{}: the output folder holds the recordings", out.display());
+        }
+    }
+
+    // Design every recording's pipeline; all take the first one's regressor
+    // stage, so that their tables share one parameter set.
+    let mut designs: Vec<Design> = Vec::new();
+    for (i, log) in all.iter().enumerate() {
+        let regressor = designs.first().map(|d| d.regressor.clone());
+        let d = design(log, &robot, regressor.as_deref()).with_context(|| format!("identify {}", log.display()))?;
+        let role = if i < ident.len() { "excitation" } else { "validation" };
+        println!(
+            "{role} {} ({}):",
+            names[i],
+            if d.periodic { "periodic" } else { "not periodic" }
+        );
+        for (k, v) in &d.findings {
+            println!("  {k}: {v}");
+        }
+        designs.push(d);
+    }
+    if args.print_pipeline {
+        println!("\n# {}/pipelines/{}.toml\n{}", out.display(), names[0], designs[0].text);
+    }
+
+    std::fs::create_dir_all(out.join("pipelines")).with_context(|| out.display().to_string())?;
+    let mut cleanup = Cleanup(&out, false);
+    let mut script = String::from(
+        "#!/usr/bin/env bash\n# What `robotid identify` ran, as commands to pin and edit (from this folder).\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\n",
+    );
+    let mut tables = Vec::new();
+    for (i, d) in designs.iter().enumerate() {
+        let file = out.join("pipelines").join(format!("{}.toml", names[i]));
+        std::fs::write(&file, &d.text).with_context(|| file.display().to_string())?;
+        super::run::run(super::run::Args {
+            pipeline: file,
+            out: Some(out.join(&names[i])),
+            threads: None,
+            timings: false,
+            plot: None,
+        })?;
+        writeln!(script, "robotid run pipelines/{0}.toml --out {0}", names[i])?;
+        tables.push(out.join(&names[i]).join(&names[i]).join("regressor.parquet"));
+    }
+    let (id_tables, val_tables) = tables.split_at(ident.len());
+    let rel = |p: &Path| p.strip_prefix(&out).unwrap_or(p).display().to_string();
+    let joined = |ts: &[PathBuf]| ts.iter().map(|t| rel(t)).collect::<Vec<_>>().join(" ");
+
+    let parameters = out.join("parameters.parquet");
+    super::estimate::run(estimate_args(id_tables, None, &parameters))?;
+    writeln!(script, "robotid estimate {} -o parameters.parquet", joined(id_tables))?;
+    if !val_tables.is_empty() {
+        println!();
+        super::validate::run(super::validate::Args {
+            parameters: parameters.clone(),
+            regressors: val_tables.to_vec(),
+            plot: None,
+            fail_on_inadequate: false,
+        })?;
+        writeln!(script, "robotid validate -p parameters.parquet {}", joined(val_tables))?;
+    }
+    super::report::run(super::report::Args {
+        parameters: parameters.clone(),
+        excitation: id_tables.to_vec(),
+        validation: val_tables.to_vec(),
+        out: out.join("report.html"),
+    })?;
+    writeln!(
+        script,
+        "robotid report -p parameters.parquet --excitation {}{} -o report.html",
+        joined(id_tables),
+        if val_tables.is_empty() {
+            String::new()
+        } else {
+            format!(" --validation {}", joined(val_tables))
+        }
+    )?;
+    // The model for simulators needs every link a real body.
+    let physical = out.join("parameters_physical.parquet");
+    match super::estimate::run(estimate_args(id_tables, Some(&robot), &physical)) {
+        Ok(()) => {
+            super::export::run(super::export::Args {
+                robot: robot.clone(),
+                parameters: physical,
+                format: vec![
+                    super::export::Format::Urdf,
+                    super::export::Format::Mjcf,
+                    super::export::Format::Sidecar,
+                ],
+                out: out.join("identified"),
+                prior_weight: None,
+            })?;
+            writeln!(
+                script,
+                "robotid estimate {} --robot {} --physical -o parameters_physical.parquet",
+                joined(id_tables),
+                robot.display()
+            )?;
+            writeln!(
+                script,
+                "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar -o identified",
+                robot.display()
+            )?;
+        }
+        Err(e) => eprintln!("warning: no export for simulators: the physically consistent estimate failed: {e:#}"),
+    }
+    let sh = out.join("identify.sh");
+    std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
+    cleanup.1 = true;
+    println!(
+        "\nidentified: {} (pipelines in {}, commands in {})",
+        out.display(),
+        out.join("pipelines").display(),
+        sh.display()
+    );
+    Ok(())
+}
+
+fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, out: &Path) -> super::estimate::Args {
+    super::estimate::Args {
+        regressors: tables.to_vec(),
+        method: "ols".into(),
+        confidence: 0.95,
+        covariance: "auto".into(),
+        known: None,
+        physical: robot.is_some(),
+        robot: robot.map(Path::to_path_buf),
+        prior_weight: None,
+        out: out.to_path_buf(),
+    }
+}
