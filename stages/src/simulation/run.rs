@@ -282,6 +282,12 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
     if let Some(p) = period {
         md.insert(metadata::PERIOD_S.into(), p.to_string());
     }
+    if let Some(f) = &cfg.measurement.filter {
+        md.insert(
+            metadata::ANALOG_FILTER.into(),
+            serde_json::to_string(f).expect("a filter spec serialises"),
+        );
+    }
     let harmonics = match &cfg.trajectory {
         Trajectory::Fourier(f) => Some(f.harmonic_numbers()),
         Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
