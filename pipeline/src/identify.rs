@@ -105,13 +105,6 @@ fn read_settings(
 /// The sample rate from the stamps: the mean step over the record, a whole
 /// number of hertz when it is one within 0.1 %; and its uncertainty.
 fn sample_rate(raw: &RawSamples) -> (f64, String) {
-    if let Some(r) = raw
-        .metadata
-        .get(metadata::SAMPLE_RATE_HZ)
-        .and_then(|v| v.parse::<f64>().ok())
-    {
-        return (r, format!("{r} Hz (the recording's {})", metadata::SAMPLE_RATE_HZ));
-    }
     let t = &raw.time;
     let n = t.len();
     let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
@@ -119,6 +112,26 @@ fn sample_rate(raw: &RawSamples) -> (f64, String) {
     let rate = 1.0 / mean;
     // The mean step of n − 1 jittered steps: its spread over √n, relative.
     let std = rate * var.sqrt() / mean / (n as f64).sqrt();
+    if let Some(r) = raw
+        .metadata
+        .get(metadata::SAMPLE_RATE_HZ)
+        .and_then(|v| v.parse::<f64>().ok())
+    {
+        // Dropped samples lower the stamps' rate: only a faster one conflicts.
+        let said = if rate > r * (1.0 + 1e-3) + 4.0 * std {
+            eprintln!(
+                "warning: the recording declares {} = {r} Hz, but its stamps' mean step gives {rate:.4} ± {std:.1e} Hz",
+                metadata::SAMPLE_RATE_HZ
+            );
+            format!(
+                "{r} Hz (the recording's {}; its stamps say {rate:.4} ± {std:.1e} Hz)",
+                metadata::SAMPLE_RATE_HZ
+            )
+        } else {
+            format!("{r} Hz (the recording's {})", metadata::SAMPLE_RATE_HZ)
+        };
+        return (r, said);
+    }
     let whole = rate.round();
     if (whole - rate).abs() < 1e-3 * rate && whole > 0.0 {
         (
@@ -170,15 +183,16 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     }
     let (fs, fs_said) = sample_rate(&raw);
     // The anti-alias filter the effort went through, when the recording
-    // declares it: undone up to its cutoff (below Nyquist), where its gain
-    // is still above −3 dB, and the regressor columns band-limited alike.
+    // declares it: undone, and the regressor columns band-limited alike.
     let filter: Option<FilterSpec> = raw
         .metadata
         .get(metadata::ANALOG_FILTER)
         .map(|j| serde_json::from_str(j))
         .transpose()
         .with_context(|| format!("{}: its `{}`", log.display(), metadata::ANALOG_FILTER))?;
-    let inverse = filter.map(|f| (f, f.cutoff_hz.min(0.4 * fs)));
+    // Undone up to 0.8 of the cutoff (a 4th-order Butterworth is still
+    // within 0.7 dB there), below Nyquist.
+    let inverse = filter.map(|f| (f, (0.8 * f.cutoff_hz).min(0.4 * fs)));
     match &inverse {
         Some((f, band)) => findings.push((
             "inverse_filter".into(),
@@ -201,7 +215,23 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     findings.push(("sample_rate_hz".into(), fs_said));
 
     let period = match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
-        Some(p) => Ok((p, format!("{p} s (the recording's {})", metadata::PERIOD_S))),
+        Some(p) => {
+            // Declared values win; one the data contradicts is said.
+            if let Ok(e) = infer_period(&raw.time, &raw.q) {
+                let k = (p / e.period_s).round().max(1.0);
+                if (p - k * e.period_s).abs() > 4.0 * k * e.std_s + 1e-9 * p {
+                    let w = format!(
+                        "the recording declares {} = {p} s, but its positions repeat with {} ± {:.1e} s",
+                        metadata::PERIOD_S,
+                        e.period_s,
+                        e.std_s
+                    );
+                    eprintln!("warning: {}: {w}", log.display());
+                    findings.push(("conflict".into(), w));
+                }
+            }
+            Ok((p, format!("{p} s (the recording's {})", metadata::PERIOD_S)))
+        }
         None => infer_period(&raw.time, &raw.q).map(|e| {
             (
                 e.period_s,
@@ -239,8 +269,13 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         }
     }
     let Some((tol, chain)) = found else {
+        let conflict = findings
+            .iter()
+            .find(|(k, _)| k == "conflict")
+            .map(|(_, w)| format!(" ({w})"))
+            .unwrap_or_default();
         bail!(
-            "{}: periodic with {period} s, but no stretch of steady periods within {} % of each other: {}",
+            "{}: periodic with {period} s{conflict}, but no stretch of steady periods within {} % of each other: {}",
             log.display(),
             100.0 * STEADY_LADDER[STEADY_LADDER.len() - 1],
             last_err.map(|e| e.to_string()).unwrap_or_default()
@@ -283,10 +318,17 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     }
     union.sort_unstable();
     union.dedup();
-    if union.is_empty() {
+    let still: Vec<&str> = sets
+        .iter()
+        .zip(&joints)
+        .filter(|(h, _)| h.is_empty())
+        .map(|(_, j)| j.as_str())
+        .collect();
+    if !still.is_empty() {
         bail!(
-            "{}: no joint moves at any harmonic of the {period} s period",
-            log.display()
+            "{}: joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
+            log.display(),
+            still.join(", ")
         );
     }
     findings.push((

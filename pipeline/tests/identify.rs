@@ -315,3 +315,38 @@ fn a_non_periodic_record_gets_the_filtered_chain() {
     assert!(d.text.contains("method = \"filtered\""), "{}", d.text);
     assert!(!d.text.contains("kind = \"align\""), "{}", d.text);
 }
+
+/// A declared period the positions contradict is used (declared values
+/// win) and said with both numbers.
+#[test]
+fn a_declared_period_the_data_contradict_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let batch = read_parquet(&robotid_tests::simulated("arm3").join("arm3.parquet")).unwrap();
+    let mut md = batch.schema().metadata().clone();
+    md.insert("robotid.period_s".to_string(), "10.5".to_string());
+    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
+    let wrong = arrow::array::RecordBatch::try_new(schema, batch.columns().to_vec()).unwrap();
+    let path = dir.path().join("arm3.parquet");
+    robotid_stages::formats::parquet::write_parquet(&path, &wrong).unwrap();
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let e = design(&path, &robot, None);
+    let findings = match &e {
+        Ok(d) => format!("{:?}", d.findings),
+        Err(e) => format!("{e:#}"),
+    };
+    assert!(
+        findings.contains("declares robotid.period_s = 10.5 s, but its positions repeat with 10.0000"),
+        "{findings}"
+    );
+}
+
+/// A joint held still in the record is refused, with what to do.
+#[test]
+fn a_joint_that_does_not_move_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = simulate_arm3(dir.path(), 5, 10.0, &[vec![1, 2], vec![], vec![3]]);
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let e = design(&csv, &robot, None).unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(msg.contains("joint(s) j2 do not move"), "{msg}");
+}

@@ -135,7 +135,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     // The model for simulators needs every link a real body.
     let physical = out.join("parameters_physical.parquet");
-    match super::estimate::run(estimate_args(id_tables, Some(&robot), &physical)) {
+    // The spread across few periods can leave the covariance singular
+    // (arm3, 4 periods, 25 parameters): then the residual's is used.
+    let mut residual_cov = false;
+    let fitted = super::estimate::run(estimate_args(id_tables, Some(&robot), &physical)).or_else(|e| {
+        residual_cov = true;
+        eprintln!("note: the physical fit with the periods' covariance failed ({e:#}); again with the residual's");
+        super::estimate::run(super::estimate::Args {
+            covariance: "residual".into(),
+            ..estimate_args(id_tables, Some(&robot), &physical)
+        })
+    });
+    match fitted {
         Ok(()) => {
             super::export::run(super::export::Args {
                 robot: robot.clone(),
@@ -150,9 +161,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })?;
             writeln!(
                 script,
-                "robotid estimate {} --robot {} --physical -o parameters_physical.parquet",
+                "robotid estimate {} --robot {} --physical{} -o parameters_physical.parquet",
                 joined(id_tables),
-                robot.display()
+                robot.display(),
+                if residual_cov { " --covariance residual" } else { "" }
             )?;
             writeln!(
                 script,

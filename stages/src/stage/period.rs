@@ -42,14 +42,22 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
     // nothing about the period).
     let m = (span / dt).floor() as usize + 1;
     let grid: Vec<f64> = (0..m).map(|k| t[0] + k as f64 * dt).collect();
-    let x: Vec<Vec<f64>> = q
+    let centred: Vec<(Vec<f64>, f64, f64)> = q
         .iter()
-        .filter_map(|c| {
+        .map(|c| {
             let v = resample(t, c, &grid);
             let mean = v.iter().sum::<f64>() / m as f64;
             let sd = (v.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / m as f64).sqrt();
-            (sd > 1e-9 * mean.abs().max(1.0)).then(|| v.iter().map(|y| (y - mean) / sd).collect())
+            (v, mean, sd)
         })
+        .collect();
+    // A joint moving less than 1 % of the most moving one is mostly noise
+    // once normalised: it would blur the others' period.
+    let widest = centred.iter().map(|c| c.2).fold(0.0, f64::max);
+    let x: Vec<Vec<f64>> = centred
+        .into_iter()
+        .filter(|(_, mean, sd)| *sd > 1e-9 * mean.abs().max(1.0) && *sd > 1e-2 * widest)
+        .map(|(v, mean, sd)| v.iter().map(|y| (y - mean) / sd).collect())
         .collect();
     if x.is_empty() {
         return Err("no joint moves".into());
@@ -141,6 +149,9 @@ pub const LINE_MARGIN: f64 = 10.0;
 /// errors and the plant's nonlinearity put weak lines at the excited
 /// ones' sums and differences.
 pub const LINE_RELATIVE: f64 = 3e-3;
+/// Lines below this (rad, N·m) are numerical zeros: a joint held still
+/// by a noise-free reference has no excited line.
+pub const LINE_ABSOLUTE: f64 = 1e-9;
 
 /// The excited harmonics of one period `x` (N samples of one period).
 pub fn excited_lines(x: &[f64]) -> Lines {
@@ -159,7 +170,7 @@ pub fn excited_lines(x: &[f64]) -> Lines {
     sorted.sort_by(f64::total_cmp);
     let floor = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let strongest = sorted.last().copied().unwrap_or(0.0);
-    let threshold = (LINE_MARGIN * floor).max(LINE_RELATIVE * strongest);
+    let threshold = (LINE_MARGIN * floor).max(LINE_RELATIVE * strongest).max(LINE_ABSOLUTE);
     let harmonics = amplitude
         .iter()
         .enumerate()
