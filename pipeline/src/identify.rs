@@ -11,7 +11,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context as _};
-use robotid_schemas::{metadata, RawSamples, TorqueChannel};
+use robotid_schemas::{metadata, RawSamples};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::signal::FilterSpec;
 use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
@@ -42,13 +42,13 @@ pub struct Design {
 }
 
 /// The regressor stage identify uses: symmetric friction, rotor inertia
-/// where the robot file declares drives, and a torque offset per joint when
-/// the effort comes from torque sensors (they carry offsets).
+/// where the robot file declares drives, and a torque offset per joint:
+/// torque sensors and current amplifiers carry offsets, and a Coulomb
+/// pair that differs by direction is a symmetric one plus an offset.
 /// With an inverse-filtered torque, the columns are band-limited to the
 /// same band (periodic records only: the stage drops it on others).
-pub fn regressor_stage(raw: &RawSamples, band_limit_hz: Option<f64>) -> String {
-    let offset = raw.effort_kind == TorqueChannel::Torque;
-    let mut s = format!("[[stage]]\nkind = \"regressor\"\nfriction = \"symmetric\"\noffset = {offset}\n");
+pub fn regressor_stage(band_limit_hz: Option<f64>) -> String {
+    let mut s = "[[stage]]\nkind = \"regressor\"\nfriction = \"symmetric\"\noffset = true\n".to_string();
     if let Some(b) = band_limit_hz {
         s.push_str(&format!("band_limit_hz = {b:?}\n"));
     }
@@ -211,7 +211,7 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     }
     let regressor = regressor
         .map(str::to_string)
-        .unwrap_or_else(|| regressor_stage(&raw, inverse.map(|(_, b)| b)));
+        .unwrap_or_else(|| regressor_stage(inverse.map(|(_, b)| b)));
     findings.push(("sample_rate_hz".into(), fs_said));
 
     let period = match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
@@ -324,11 +324,36 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         .filter(|(h, _)| h.is_empty())
         .map(|(_, j)| j.as_str())
         .collect();
-    if !still.is_empty() {
+    // One joint moving, the others held: a joint-wise experiment (Bona
+    // §3), identified with the decoupled model from that joint's rows.
+    let joint_wise = joints.len() > 1 && still.len() == joints.len() - 1;
+    let mut regressor = regressor;
+    if joint_wise {
+        let moving = &joints[sets.iter().position(|h| !h.is_empty()).expect("one moves")];
+        findings.push((
+            "joint_wise".into(),
+            format!("only {moving} moves: a joint-wise experiment (Bona §3), the decoupled model from its rows only"),
+        ));
+        if own_regressor {
+            regressor = regressor.replacen(
+                "kind = \"regressor\"\n",
+                "kind = \"regressor\"\nmodel = \"decoupled\"\nrotor = false\njoint_wise = true\n",
+                1,
+            );
+        }
+    } else if !still.is_empty() {
         bail!(
             "{}: joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
             log.display(),
             still.join(", ")
+        );
+    }
+    if !own_regressor && joint_wise != regressor.contains("joint_wise = true") {
+        bail!(
+            "{}: {} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
+            log.display(),
+            if joint_wise { "one joint moves" } else { "every joint moves" },
+            if joint_wise { "moved every joint" } else { "moved one joint" }
         );
     }
     findings.push((
@@ -398,7 +423,6 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     writeln!(text, "[[stage]]\nkind = \"average\"\n")?;
     writeln!(text, "[[stage]]\nkind = \"noise\"\nharmonics = {}\n", list(&union))?;
     writeln!(text, "{differentiate}")?;
-    let mut regressor = regressor;
     if own_regressor {
         let (chosen, said) = coulomb_transition(&text, &regressor, log)?;
         regressor = chosen;
