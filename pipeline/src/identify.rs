@@ -450,8 +450,9 @@ const TRANSITIONS: [f64; 6] = [0.0, 0.001, 0.003, 0.01, 0.03, 0.1];
 /// The Coulomb transition velocity whose least-squares fit leaves the
 /// smallest residual (a profile over the one nonlinear friction
 /// parameter), kept at sign(q̇) unless another lowers the residual sum of
-/// squares by more than 1 %: a plant whose friction turns over smoothly
-/// biases Fv and Fc fitted with a sign (+32 % and −6 % on the KUKA axis).
+/// squares by more than 1 % with every friction value ≥ 0: a plant whose
+/// friction turns over smoothly biases Fv and Fc fitted with a sign
+/// (+32 % and −6 % on the KUKA axis).
 fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Result<(String, String)> {
     let with = |v: f64| {
         if v == 0.0 {
@@ -471,6 +472,17 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
             .svd(true, true)
             .solve(&sys.b, 1e-12)
             .map_err(|e| anyhow!("least squares: {e}"))?;
+        // A smooth turn-over trades against viscous friction (tanh is
+        // linear near 0): one that makes friction negative is no candidate.
+        let impossible = v > 0.0
+            && sys
+                .names
+                .iter()
+                .zip(theta.iter())
+                .any(|(n, x)| (n.starts_with("Fv") || n.starts_with("Fc")) && *x < 0.0);
+        if impossible {
+            return Ok(f64::INFINITY);
+        }
         Ok((&sys.a * theta - &sys.b).norm_squared())
     };
     let rss = TRANSITIONS
@@ -481,7 +493,13 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
         TRANSITIONS
             .iter()
             .zip(rss)
-            .map(|(v, r)| format!("{v}: {:.4}", r / rss[0]))
+            .map(|(v, r)| {
+                if r.is_finite() {
+                    format!("{v}: {:.4}", r / rss[0])
+                } else {
+                    format!("{v}: friction < 0")
+                }
+            })
             .collect::<Vec<_>>()
             .join(", ")
     };
@@ -493,7 +511,7 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
         return Ok((
             with(0.0),
             format!(
-                "0, sign(q̇): no transition velocity lowers the residual by 1 % ({})",
+                "0, sign(q̇): no transition velocity with friction ≥ 0 lowers the residual by 1 % ({})",
                 table(&rss)
             ),
         ));
@@ -517,7 +535,10 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
     let v = format!("{:.2e}", (0.5 * (a + b)).exp())
         .parse::<f64>()
         .expect("a number");
-    let r = residual(v)?;
+    let (v, r) = match residual(v)? {
+        r if r <= rss[pick] => (v, r),
+        _ => (TRANSITIONS[pick], rss[pick]),
+    };
     let said = format!(
         "{v} (residual sum of squares {:.4} of sign(q̇)'s; on the grid: {})",
         r / rss[0],

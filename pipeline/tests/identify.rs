@@ -204,7 +204,8 @@ fn held_out(params: &Path, tables: &[PathBuf]) -> Vec<(String, f64)> {
 /// The real KUKA LWR4+ files with nothing but the robot: 4π s found, and
 /// held-out residues on files 2 and 3 no worse than the hand-written
 /// pipelines' (fixtures/pipelines/kuka_lwr4_identify.toml, _heldout.toml)
-/// by more than 10 % on any joint.
+/// by more than 5 % on any joint (equal on lwr_4_joint, lower on the
+/// others), and lower in sum.
 #[test]
 fn real_kuka_lwr4_identified_with_only_the_robot() {
     let Some(dir) = realdata("kuka_lwr4") else { return };
@@ -246,7 +247,7 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let theirs = held_out(&id.join("parameters.parquet"), &held(&ho, "measurements_{n}"));
     for ((joint, a), (_, b)) in ours.iter().zip(&theirs) {
         println!("{joint}: held-out MSR {a:.4} (identify) against {b:.4} (hand-written)");
-        assert!(*a < 1.6 * b, "{joint}: {a} against {b}\n{text}");
+        assert!(*a < 1.05 * b, "{joint}: {a} against {b}\n{text}");
     }
     let total = |v: &[(String, f64)]| v.iter().map(|(_, m)| m).sum::<f64>();
     assert!(total(&ours) < total(&theirs), "{ours:?} against {theirs:?}");
