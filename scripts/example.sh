@@ -49,6 +49,16 @@ fi
 # One page with everything: parameters, intervals, torques, residues, noise.
 "$bin" report -p out/kuka_axis3/parameters.parquet --excitation out/kuka_axis3/kuka_axis3/regressor.parquet \
   --validation out/validation/kuka_axis3_validation/regressor.parquet -o out/kuka_axis3/report.html
+# The same in one command, everything inferred from the recordings
+# (docs/your-recordings.md): the KUKA axis, and the real LWR4+ arm.
+rm -rf out/identify
+"$bin" identify fixtures/recordings/kuka_axis3/kuka_axis3.mcap --robot fixtures/robots/kuka_axis3.toml \
+  --validate fixtures/recordings/kuka_axis3_validation/kuka_axis3_validation.mcap --out out/identify/kuka_axis3
+if [ -d ../shared/realdata/kuka_lwr4 ]; then
+  r=../shared/realdata/kuka_lwr4
+  "$bin" identify $r/measurements_1.csv --robot $r/kuka_lwr4.urdf \
+    --validate $r/measurements_2.csv $r/measurements_3.csv --out out/identify/kuka_lwr4
+fi
 # Optimal excitation for the KUKA axis and the 3-dof arm (Swevers §4).
 "$bin" excite fixtures/excite/kuka_axis3.toml -o out/excite/kuka_axis3
 "$bin" excite fixtures/excite/arm3.toml -o out/excite/arm3
