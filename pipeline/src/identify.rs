@@ -14,7 +14,7 @@ use anyhow::{anyhow, bail, Context as _};
 use robotid_schemas::{metadata, RawSamples};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::signal::FilterSpec;
-use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
+use robotid_stages::stage::period::{excited_lines, golden, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::stage::read::{guess_read, log_columns, read, Channel, ReadConfig};
 
 use crate::Pipeline;
@@ -461,10 +461,17 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
             format!("{regressor}coulomb_transition_rad_s = {v}\n")
         }
     };
+    // Everything before the regressor does not depend on the transition:
+    // run once; each candidate runs the regressor stage on a copy.
+    let probe = log.with_extension("probe.toml");
+    let kinematics = Pipeline::from_toml(stages, &probe)?
+        .build()?
+        .run_log(log, "probe", |_| {})?;
     let residual = |v: f64| -> anyhow::Result<f64> {
-        let text = format!("{stages}{}", with(v));
-        let built = Pipeline::from_toml(&text, log.with_extension("probe.toml"))?.build()?;
-        let chain = built.run_log(log, "probe", |_| {})?;
+        let built = Pipeline::from_toml(&format!("{stages}{}", with(v)), &probe)?.build()?;
+        let (name, stage) = built.stages.last().expect("a regressor stage");
+        let mut chain = kinematics.clone();
+        stage.run(&mut chain).map_err(|e| e.in_stage(name, &chain.source))?;
         let sys = &chain.regressor.as_ref().expect("a regressor stage").system;
         let theta = sys
             .a
@@ -523,18 +530,22 @@ fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Resu
         .copied()
         .unwrap_or(TRANSITIONS[pick] * 3.0)
         .ln();
-    let (g, mut a, mut b) = (0.5 * (5f64.sqrt() - 1.0), lo, hi);
-    for _ in 0..10 {
-        let (c, d) = (b - g * (b - a), a + g * (b - a));
-        if residual(c.exp())? < residual(d.exp())? {
-            b = d;
-        } else {
-            a = c;
-        }
+    let mut failed = None;
+    let best_ln = golden(
+        |l| {
+            residual(l.exp()).unwrap_or_else(|e| {
+                failed.get_or_insert(e);
+                f64::INFINITY
+            })
+        },
+        lo,
+        hi,
+        2e-3,
+    );
+    if let Some(e) = failed {
+        return Err(e);
     }
-    let v = format!("{:.2e}", (0.5 * (a + b)).exp())
-        .parse::<f64>()
-        .expect("a number");
+    let v = format!("{:.2e}", best_ln.exp()).parse::<f64>().expect("a number");
     let (v, r) = match residual(v)? {
         r if r <= rss[pick] => (v, r),
         _ => (TRANSITIONS[pick], rss[pick]),

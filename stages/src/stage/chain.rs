@@ -182,7 +182,7 @@ pub struct Report {
 }
 
 /// One recording's state as it goes through the stages.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct Chain {
     /// The log's path as shown in messages.
     pub source: String,

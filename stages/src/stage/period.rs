@@ -83,11 +83,21 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
     let mut k = 1usize;
     for _ in 0..2 {
         let w = 2.0 * dt / k as f64;
-        period = golden(|p| mismatch(&x, &grid, dt, all, k as f64 * p), period - w, period + w);
+        period = golden(
+            |p| mismatch(&x, &grid, dt, all, k as f64 * p),
+            period - w,
+            period + w,
+            1e-12,
+        );
         k = ((((m - start) as f64 * dt / period) as usize).saturating_sub(1) / 2).max(1);
     }
     let w = dt / k as f64;
-    period = golden(|p| mismatch(&x, &grid, dt, all, k as f64 * p), period - w, period + w);
+    period = golden(
+        |p| mismatch(&x, &grid, dt, all, k as f64 * p),
+        period - w,
+        period + w,
+        1e-12,
+    );
     // D(T) ≈ D₀ + ½ D''·(T − T̂)²; as least squares in T over M samples
     // of noise with D₀ = 2σ²: var T̂ ≈ D₀ / (M · D'').
     let h = 0.5 * dt / k as f64;
@@ -105,7 +115,14 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
     // every period (a start-up transient, drift) moves the estimate with
     // the stretch compared: half the difference between its two halves.
     let mid = start + (overlap as usize) / 2;
-    let half_of = |range| golden(|p| mismatch(&x, &grid, dt, range, k as f64 * p), period - w, period + w);
+    let half_of = |range| {
+        golden(
+            |p| mismatch(&x, &grid, dt, range, k as f64 * p),
+            period - w,
+            period + w,
+            1e-12,
+        )
+    };
     let spread = 0.5 * (half_of((start, mid)) - half_of((mid, m))).abs();
     let std_s = noise_std.max(spread);
     if !(std_s < 1e-3 * period) {
@@ -295,13 +312,13 @@ fn mismatch(x: &[Vec<f64>], grid: &[f64], dt: f64, (start, end): (usize, usize),
     sum / (count * x.len()) as f64
 }
 
-/// The minimum of a unimodal `f` on [a, b], by golden section to 1e-12 of
-/// the interval's midpoint.
-fn golden(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+/// The minimum of a unimodal `f` on [a, b], by golden section until the
+/// interval is `rel` of its midpoint; one evaluation per step.
+pub fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, rel: f64) -> f64 {
     let g = 0.5 * (5f64.sqrt() - 1.0);
     let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
     let (mut fc, mut fd) = (f(c), f(d));
-    while (b - a).abs() > 1e-12 * (0.5 * (a + b)).abs() {
+    while (b - a).abs() > rel * (0.5 * (a + b)).abs() {
         if fc < fd {
             (b, d, fd) = (d, c, fc);
             c = b - g * (b - a);
