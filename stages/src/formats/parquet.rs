@@ -2,6 +2,7 @@ use std::path::Path;
 
 use arrow::array::RecordBatch;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::arrow_writer::compute_leaves;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::properties::WriterProperties;
@@ -84,12 +85,11 @@ pub fn content_crc32(batch: &RecordBatch) -> u32 {
     h.finalize()
 }
 
-/// Encoded bytes a row group holds before it is flushed: bounds the
-/// writer's memory on long tables (an hour's kinematics, a regressor with
-/// hundreds of period columns), where one row group cost twice the table.
-const ROW_GROUP_BYTES: usize = 8 << 20;
-/// Rows handed to the writer at a time (its own mini-batch size).
-const WRITE_ROWS: usize = 1024;
+/// Rows per row group (arrow-rs's default). The writer encodes one column
+/// chunk at a time and hands it to the file before the next, so its memory
+/// is one column chunk (at most 8 MB of f64), whatever the table's width:
+/// an hour's regressor table has hundreds of period columns.
+const ROW_GROUP_ROWS: usize = 1 << 20;
 
 /// Writes one record batch as a Parquet file (zstd), atomically. The Arrow
 /// schema, with its field and schema metadata, is stored in the file, with
@@ -123,7 +123,6 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
         .set_key_value_metadata(Some(keys))
-        .set_max_row_group_bytes(Some(ROW_GROUP_BYTES))
         .set_dictionary_enabled(false);
     for f in batch.schema().fields() {
         if f.data_type() == &arrow::datatypes::DataType::Utf8 {
@@ -137,15 +136,32 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
         msg: e.to_string(),
     };
     write_atomic(path, |w| {
-        let mut writer = ArrowWriter::try_new(w, batch.schema(), Some(props)).map_err(fmt)?;
-        // In slices, so that the writer, which holds a row group's encoded
-        // pages until it flushes them, flushes every ROW_GROUP_BYTES (one
-        // call with the whole batch would make it a single row group).
-        for start in (0..batch.num_rows()).step_by(WRITE_ROWS) {
-            let rows = WRITE_ROWS.min(batch.num_rows() - start);
-            writer.write(&batch.slice(start, rows)).map_err(fmt)?;
+        // The ArrowWriter only sets up the file (schema, the Arrow schema in
+        // its metadata); the rows go through its column writers one column
+        // at a time, where the ArrowWriter would hold a whole row group's
+        // encoded pages (a 12 MB regressor table cost 16 MB of buffers).
+        let (mut file, columns) = ArrowWriter::try_new(w, batch.schema(), Some(props))
+            .and_then(|writer| writer.into_serialized_writer())
+            .map_err(fmt)?;
+        let rows = batch.num_rows();
+        for (group, start) in (0..rows).step_by(ROW_GROUP_ROWS).enumerate() {
+            let slice = batch.slice(start, ROW_GROUP_ROWS.min(rows - start));
+            let mut row_group = file.next_row_group().map_err(fmt)?;
+            let mut writers = columns.create_column_writers(group).map_err(fmt)?.into_iter();
+            for (field, column) in batch.schema().fields().iter().zip(slice.columns()) {
+                for leaf in compute_leaves(field, column).map_err(fmt)? {
+                    let mut writer = writers.next().expect("a writer per leaf column");
+                    writer.write(&leaf).map_err(fmt)?;
+                    writer
+                        .close()
+                        .map_err(fmt)?
+                        .append_to_row_group(&mut row_group)
+                        .map_err(fmt)?;
+                }
+            }
+            row_group.close().map_err(fmt)?;
         }
-        writer.close().map_err(fmt)?;
+        file.close().map_err(fmt)?;
         Ok(())
     })
 }
@@ -309,38 +325,32 @@ mod tests {
         assert_ne!(super::content_crc32(&batch(0.0)), super::content_crc32(&valid));
     }
 
-    /// A table of 80 MB is written as row groups of about ROW_GROUP_BYTES
-    /// (the writer's memory), and reads back whole.
+    /// A long table is cut into row groups of ROW_GROUP_ROWS, and reads back
+    /// whole; an empty one has none. (What the writer holds meanwhile:
+    /// tests/write_memory.rs.)
     #[test]
-    fn long_tables_are_written_in_bounded_row_groups() {
-        let rows = 250_000;
-        let fields: Vec<Field> = (0..40)
-            .map(|c| Field::new(format!("c{c}"), DataType::Float64, false))
-            .collect();
-        let columns = (0..40)
-            .map(|c| {
-                Arc::new(Float64Array::from_iter_values(
-                    (0..rows).map(|i| (i * 40 + c) as f64 * 0.37),
-                )) as _
-            })
-            .collect();
+    fn long_tables_are_written_in_row_groups() {
+        let rows = super::ROW_GROUP_ROWS * 2 + 7;
+        let fields = vec![
+            Field::new("x", DataType::Float64, false),
+            Field::new("k", DataType::Int64, false),
+        ];
+        let columns: Vec<arrow::array::ArrayRef> = vec![
+            Arc::new(Float64Array::from_iter_values((0..rows).map(|i| i as f64 * 0.37))),
+            Arc::new(arrow::array::Int64Array::from_iter_values(0..rows as i64)),
+        ];
         let batch = RecordBatch::try_new(Arc::new(Schema::new(fields)), columns).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("long.parquet");
         super::write_parquet(&path, &batch).unwrap();
         let groups = super::open(&path).unwrap().metadata().row_groups().to_vec();
-        assert!(groups.len() >= 3, "{} row group(s)", groups.len());
-        // The writer counts the pages it holds (compressed) and the open
-        // pages' values: between a group's compressed size (3.9 MB here)
-        // and its values (18 MB, as these values compress 4.7×).
-        for g in &groups[..groups.len() - 1] {
-            let (held, values) = (g.compressed_size() as usize, g.total_byte_size() as usize);
-            assert!(held <= super::ROW_GROUP_BYTES, "row group of {held} compressed bytes");
-            assert!(
-                values < 3 * super::ROW_GROUP_BYTES,
-                "row group of {values} bytes of values"
-            );
-        }
+        let sizes: Vec<i64> = groups.iter().map(|g| g.num_rows()).collect();
+        let full = super::ROW_GROUP_ROWS as i64;
+        assert_eq!(sizes, [full, full, 7]);
         assert_eq!(super::read_parquet(&path).unwrap().columns(), batch.columns());
+        let empty = batch.slice(0, 0);
+        super::write_parquet(&path, &empty).unwrap();
+        assert_eq!(super::open(&path).unwrap().metadata().row_groups().len(), 0);
+        assert_eq!(super::read_parquet(&path).unwrap().num_rows(), 0);
     }
 }
