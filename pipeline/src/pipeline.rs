@@ -25,7 +25,7 @@ use robotid_stages::dynamics::Model;
 use robotid_stages::formats::parquet::write_parquet;
 use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::{Outcome as Estimated, Part, Reducer};
-use robotid_stages::stage::{Chain, Context, Product, Stage};
+use robotid_stages::stage::{Chain, Context, PeriodsUse, Product, Stage};
 
 use crate::error::{Error, Result};
 use crate::plan::{lint, parse, Plan, Resolved, StageConfig};
@@ -52,6 +52,8 @@ pub struct Built {
     pub robot_sha256: Option<String>,
     /// Per stage: whether a later stage or sink still needs the raw samples.
     raw_needed_after: Vec<bool>,
+    /// Per stage: what later stages read of the aligned periods.
+    periods_needed_after: Vec<PeriodsUse>,
 }
 
 /// What a run gave: each recording's result and, when the pipeline
@@ -128,6 +130,15 @@ impl Pipeline {
         let raw_needed_after = (0..plan.stages.len())
             .map(|i| raw_table || plan.stages[i + 1..].iter().any(|s| s.takes().contains(&Product::Raw)))
             .collect();
+        let periods_needed_after = (0..plan.stages.len())
+            .map(|i| {
+                plan.stages[i + 1..]
+                    .iter()
+                    .map(StageConfig::reads_periods)
+                    .max()
+                    .unwrap_or(PeriodsUse::None)
+            })
+            .collect();
         let robot_sha256 = match &plan.robot {
             Some(path) => {
                 let bytes = std::fs::read(path).map_err(|source| Error::Io {
@@ -148,6 +159,7 @@ impl Pipeline {
             stages,
             reducer,
             raw_needed_after,
+            periods_needed_after,
         })
     }
 }
@@ -176,13 +188,27 @@ impl Built {
     }
 
     /// Runs every stage on one chain; `progress` is told each stage's name.
-    pub fn run_stages(&self, chain: &mut Chain, mut progress: impl FnMut(&'static str)) -> robotid_stages::Result<()> {
+    pub fn run_stages(&self, chain: &mut Chain, progress: impl FnMut(&'static str)) -> robotid_stages::Result<()> {
+        self.stages_on(chain, false, progress)
+    }
+
+    /// `lean`: the aligned periods' samples are freed once no later stage
+    /// reads them (pictures do, and callers that look at them).
+    fn stages_on(
+        &self,
+        chain: &mut Chain,
+        lean: bool,
+        mut progress: impl FnMut(&'static str),
+    ) -> robotid_stages::Result<()> {
         for (i, (name, stage)) in self.stages.iter().enumerate() {
             let t = Instant::now();
             progress(name);
             stage.run(chain).map_err(|e| e.in_stage(name, &chain.source))?;
             if chain.periods.is_some() && !self.raw_needed_after[i] {
                 chain.raw = None;
+            }
+            if let Some(p) = chain.periods.as_mut().filter(|_| lean) {
+                p.release_samples(self.periods_needed_after[i]);
             }
             chain.report.timings.push((name.to_string(), t.elapsed().as_secs_f64()));
         }
@@ -191,23 +217,47 @@ impl Built {
 
     /// One recording read and run through every stage, nothing written;
     /// `progress` is told "read", then each stage's name.
-    pub fn run_log(
+    pub fn run_log(&self, log: &Path, name: &str, progress: impl FnMut(&'static str)) -> robotid_stages::Result<Chain> {
+        self.log_on(log, name, false, progress)
+    }
+
+    /// The same, holding only what the tables and the estimate need: the
+    /// aligned periods' samples are freed after the last stage that reads
+    /// them (they are as large as the recording, and the regressor too).
+    pub fn run_log_for_tables(
         &self,
         log: &Path,
         name: &str,
+        progress: impl FnMut(&'static str),
+    ) -> robotid_stages::Result<Chain> {
+        self.log_on(log, name, true, progress)
+    }
+
+    fn log_on(
+        &self,
+        log: &Path,
+        name: &str,
+        lean: bool,
         mut progress: impl FnMut(&'static str),
     ) -> robotid_stages::Result<Chain> {
         let t = Instant::now();
         progress("read");
         let mut chain = crate::run::start_chain(self, log, name)?;
         chain.report.timings.push(("read".into(), t.elapsed().as_secs_f64()));
-        self.run_stages(&mut chain, progress)?;
+        self.stages_on(&mut chain, lean, progress)?;
         Ok(chain)
     }
 
     /// The tables the pipeline writes for a finished chain.
     pub fn tables(&self, chain: &Chain) -> robotid_stages::Result<Vec<(TableKind, RecordBatch)>> {
-        tables_of(chain, &self.plan.tables, &self.provenance())
+        tables_of(chain, None, &self.plan.tables, &self.provenance())
+    }
+
+    /// The same, the chain's regressor rows moved into the regressor table
+    /// rather than copied (the chain has none after).
+    pub fn take_tables(&self, chain: &mut Chain) -> robotid_stages::Result<Vec<(TableKind, RecordBatch)>> {
+        let rows = chain.regressor.take();
+        tables_of(chain, rows, &self.plan.tables, &self.provenance())
     }
 
     /// Runs the stages on samples in memory and returns the chain, nothing

@@ -115,6 +115,10 @@ impl StageConfig {
         each_stage!(self, c => c.makes())
     }
 
+    pub fn reads_periods(&self) -> robotid_stages::stage::PeriodsUse {
+        each_stage!(self, c => c.reads_periods())
+    }
+
     pub fn problems(&self) -> Vec<Problem> {
         each_stage!(self, c => c.problems())
     }

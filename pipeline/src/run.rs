@@ -167,24 +167,28 @@ fn release_free_memory() {
 }
 
 fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &ProgressBar) -> crate::Result<Outcome> {
-    let mut chain = built.run_log(log, name, |stage| {
+    let progress = |stage| {
         bar.set_message(stage);
         bar.inc(1);
-    })?;
-    // Past the stages only the pictures read the aligned periods: without
-    // them, freed before the tables are made (an hour at 1 kHz: 350 MB).
-    if opts.plot.is_none() {
-        if let Some(p) = chain.periods.as_mut() {
-            p.release_samples();
-        }
-    }
+    };
+    // Only the pictures read the aligned periods past their stages: without
+    // them, they are freed as soon as no stage reads them (an hour at 1 kHz:
+    // 350 MB).
+    let mut chain = match opts.plot {
+        Some(_) => built.run_log(log, name, progress)?,
+        None => built.run_log_for_tables(log, name, progress)?,
+    };
     release_free_memory();
     // Sinks: only now, with every stage done.
     let t = Instant::now();
     bar.set_message("write");
     let dir = opts.out.join(name);
     let mut outcome = Outcome::default();
-    let tables = built.tables(&chain)?;
+    // The regressor rows move into their table unless the report keeps them.
+    let tables = match opts.plot {
+        Some(_) => built.tables(&chain)?,
+        None => built.take_tables(&mut chain)?,
+    };
     if !tables.is_empty() {
         std::fs::create_dir_all(&dir).map_err(|e| robotid_stages::Error::io(&dir, e))?;
     }
@@ -226,8 +230,11 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
 }
 
 /// The requested tables of a finished chain, with the run's provenance.
+/// The regressor table is made from `regressor` when given (moved into the
+/// table), else from a copy of the chain's.
 pub fn tables_of(
     chain: &Chain,
+    regressor: Option<RegressorRows>,
     kinds: &[TableKind],
     provenance: &BTreeMap<String, String>,
 ) -> robotid_stages::Result<Vec<(TableKind, RecordBatch)>> {
@@ -238,6 +245,7 @@ pub fn tables_of(
     };
     let mut out = Vec::new();
     // The regressor table is made once, for itself and its R factor.
+    let mut rows = regressor;
     let mut regressor: Option<RecordBatch> = None;
     for &kind in kinds {
         let batch = match kind {
@@ -267,7 +275,13 @@ pub fn tables_of(
             TableKind::Regressor | TableKind::RFactor => {
                 let full = match &regressor {
                     Some(t) => t.clone(),
-                    None => regressor.insert(chain.regressor()?.to_record_batch()?).clone(),
+                    None => {
+                        let made = match rows.take() {
+                            Some(r) => r.into_record_batch()?,
+                            None => chain.regressor()?.to_record_batch()?,
+                        };
+                        regressor.insert(made).clone()
+                    }
                 };
                 let b = if kind == TableKind::RFactor {
                     r_factor_table(&full)?

@@ -187,7 +187,7 @@ impl Built {
                 "the pipeline has no `estimate` stage: there is nothing to summarize",
             ));
         }
-        let mut chain = self.run_log(log, name, |_| {})?;
+        let mut chain = self.run_log_for_tables(log, name, |_| {})?;
         let part = chain.estimate.take().expect("the estimate stage made its part");
         summary_batch(&part, &self.plan.hash, self.robot_sha256.as_deref().unwrap_or_default())
     }

@@ -238,6 +238,42 @@ fn plots_and_report_are_written() {
 /// averaged torque's noise (σ ≈ 0.78 N·m per row, 1500 rows, condition
 /// number ≈ 3) puts the parameter errors at the 1e-3 relative level; what
 /// is left (ZZ −0.7 %, Fv −0.4 %) is the derivatives' 8 Hz band limit.
+/// A run for tables frees the aligned periods' samples as soon as no later
+/// stage reads them (the regressor reads only the torques), and moves the
+/// regressor rows into their table: the same tables as a run that keeps
+/// everything, column for column.
+#[test]
+fn a_run_for_tables_frees_the_periods_and_makes_the_same_tables() {
+    let ws = workspace(&["kuka_axis3"]);
+    let built = Pipeline::from_path(&ws.path().join("pipelines/kuka_axis3.toml"))
+        .unwrap()
+        .build()
+        .unwrap();
+    let log = &built.logs[0];
+    let whole = built.run_log(log, "axis", |_| {}).unwrap();
+    let mut lean = built.run_log_for_tables(log, "axis", |_| {}).unwrap();
+    let (kept, freed) = (whole.periods.as_ref().unwrap(), lean.periods.as_ref().unwrap());
+    assert!(kept.q[0].len() > 1000 && kept.torque[0].len() == kept.q[0].len());
+    assert!(freed.q.is_empty() && freed.torque.is_empty() && freed.reference.is_none());
+    assert_eq!(
+        (freed.periods, freed.samples_per_period),
+        (kept.periods, kept.samples_per_period)
+    );
+    let copied = built.tables(&whole).unwrap();
+    let moved = built.take_tables(&mut lean).unwrap();
+    assert!(lean.regressor.is_none(), "the rows moved into the table");
+    assert_eq!(copied.len(), 5);
+    for ((k1, a), (k2, b)) in copied.iter().zip(&moved) {
+        assert_eq!(k1, k2);
+        assert_eq!(a, b, "the {k1} table");
+    }
+    let regressor = &moved.iter().find(|(k, _)| k.name() == "regressor").unwrap().1;
+    assert!(
+        regressor.schema().field_with_name("torque_p1").is_ok(),
+        "period torques kept"
+    );
+}
+
 #[test]
 fn least_squares_on_the_regressor_table_recovers_the_axis() {
     use robotid_stages::formats::parquet::read_parquet;

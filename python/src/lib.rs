@@ -235,8 +235,8 @@ impl Pipeline {
         let name = rec.name(name);
         let tables = py
             .detach(|| {
-                let chain = self.built.run_log(rec.path(), &name, |_| {})?;
-                self.built.tables(&chain)
+                let mut chain = self.built.run_log_for_tables(rec.path(), &name, |_| {})?;
+                self.built.take_tables(&mut chain)
             })
             .map_err(|e| py_error_in(robotid::Error::Stage(e), Some((&rec, &name))))?;
         let out = PyDict::new(py);

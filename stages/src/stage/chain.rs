@@ -119,14 +119,29 @@ impl Periods {
     }
 
     /// Frees the samples (every period of every joint: the largest thing a
-    /// chain holds), keeping the counts, report and metadata. For runs that
-    /// are past every stage and draw no pictures.
-    pub fn release_samples(&mut self) {
+    /// chain holds) but those `keep` names, keeping the counts, report and
+    /// metadata. For runs past the stages that read them, drawing no
+    /// pictures.
+    pub fn release_samples(&mut self, keep: PeriodsUse) {
+        if keep == PeriodsUse::All {
+            return;
+        }
         self.q = Vec::new();
-        self.torque = Vec::new();
         self.reference = None;
         self.stretch = None;
+        if keep == PeriodsUse::None {
+            self.torque = Vec::new();
+        }
     }
+}
+
+/// What a stage reads of the aligned periods' samples, least first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum PeriodsUse {
+    None,
+    /// Each period's torque (the regressor's covariance from their spread).
+    Torque,
+    All,
 }
 
 /// Noise statistics of one channel (positions in rad², torques in N²m²).

@@ -14,7 +14,7 @@ use robotid_schemas::metadata;
 use serde::{Deserialize, Serialize};
 
 use super::differentiate::Differentiation;
-use super::{Chain, Component, Context, LintContext, Problem, Product, Stage};
+use super::{Chain, Component, Context, LintContext, PeriodsUse, Problem, Product, Stage};
 use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
 use crate::estimation::{
     bootstrap_covariance, essential_parameters, input_noise, maximum_likelihood, parameters_from_table,
@@ -163,6 +163,10 @@ impl Component for EstimateConfig {
 
     fn makes(&self) -> Option<Product> {
         None
+    }
+
+    fn reads_periods(&self) -> PeriodsUse {
+        PeriodsUse::None
     }
 
     fn problems(&self) -> Vec<Problem> {

@@ -27,7 +27,7 @@ pub mod regressor;
 
 use std::path::Path;
 
-pub use chain::{AlignReport, Chain, ChannelNoise, Context, Facts, Periods, Product, Report, Stretch};
+pub use chain::{AlignReport, Chain, ChannelNoise, Context, Facts, Periods, PeriodsUse, Product, Report, Stretch};
 
 use crate::dynamics::Model;
 pub use crate::Problem;
@@ -68,6 +68,11 @@ pub trait Component {
     /// Problems against the rest of the pipeline, the robot and the
     /// sources: everything else that can be known without reading samples.
     fn lint(&self, ctx: &LintContext) -> Vec<Problem>;
+    /// What it reads of the aligned periods' samples, which are freed once
+    /// no later stage reads them (they are as large as the recording).
+    fn reads_periods(&self) -> PeriodsUse {
+        PeriodsUse::All
+    }
     /// Precomputes what does not depend on the recording.
     fn build(&self, ctx: &Context) -> Result<Box<dyn Stage>>;
 }
