@@ -9,7 +9,7 @@ target="${CARGO_TARGET_DIR:-$PWD/target}"
 venv="$target/pyenv"
 stamp=$(sha256sum tests/python/requirements.txt | cut -d' ' -f1)
 if [ "$(cat "$venv/requirements.sha256" 2>/dev/null)" != "$stamp" ] \
-  || ! "$venv/bin/python" -c "import mcap, mcap_ros2, pinocchio, mujoco, ray, polars" 2>/dev/null; then
+  || ! "$venv/bin/python" -c "import mcap, mcap_ros2, pinocchio, mujoco, ray, polars, scipy" 2>/dev/null; then
   echo "setting up $venv (tests/python/requirements.txt)" >&2
   rm -rf "$venv"
   python3 -m venv "$venv"

@@ -76,62 +76,10 @@ fn whole(c: &mut Criterion) {
     g.finish();
 }
 
-/// 130 s of a simulated UR5 excitation logged at 500 Hz to MCAP (0.1 Hz
-/// fundamental, 5 harmonics, 12 steady periods after a 10 s transient;
-/// motor currents through a Chebyshev anti-alias filter).
-const SIMULATION: &str = r#"
-robot = "ROBOT"
-seed = 7
-[trajectory]
-kind = "fourier"
-base_frequency_hz = 0.1
-q0 = [0.0, -1.2, 1.0, -1.4, -1.57, 0.0]
-a = [[0.40, -0.20, 0.10, 0.08, -0.05], [0.30, 0.20, -0.10, 0.06, 0.04], [-0.35, 0.20, 0.12, -0.08, 0.05], [0.50, -0.25, 0.15, 0.10, -0.06], [0.45, 0.20, -0.15, 0.08, 0.05], [-0.50, 0.30, 0.10, -0.10, 0.06]]
-b = [[0.20, 0.25, -0.10, 0.05, 0.04], [-0.25, 0.10, 0.10, -0.05, 0.03], [0.30, -0.10, 0.12, 0.05, -0.04], [-0.30, 0.20, 0.10, -0.08, 0.05], [0.30, -0.25, 0.10, 0.06, -0.05], [0.40, 0.20, -0.15, 0.08, 0.05]]
-[timing]
-log_rate_hz = 500.0
-steps_per_sample = 4
-transient_s = 10.0
-periods = 12
-[controller]
-kind = "pid"
-bandwidth_hz = 6.0
-[measurement]
-filter = { family = "chebyshev1", order = 6, cutoff_hz = 100.0, ripple_db = 1.0 }
-current_noise_std_a = 0.02
-position_noise_std_rad = 1.0e-5
-[output]
-name = "ur5"
-formats = ["mcap"]
-"#;
-
-/// The identification chain on that recording, to the estimate.
-const IDENTIFY: &str = r#"
-version = 1
-robot = "ROBOT"
-[source]
-path = "ur5.mcap"
-[[stage]]
-kind = "align"
-[[stage]]
-kind = "inverse_filter"
-filter = { family = "chebyshev1", order = 6, cutoff_hz = 100.0, ripple_db = 1.0 }
-bandwidth_hz = 40.0
-[[stage]]
-kind = "average"
-[[stage]]
-kind = "noise"
-[[stage]]
-kind = "differentiate"
-method = "fourier_fit"
-[[stage]]
-kind = "regressor"
-[[stage]]
-kind = "estimate"
-method = "ols"
-[output]
-tables = ["period_mean", "noise", "kinematics", "regressor"]
-"#;
+/// 130 s of a simulated UR5 excitation logged at 500 Hz to MCAP, and the
+/// identification chain on it (templates shared with scripts/bench-numpy.sh).
+const SIMULATION: &str = include_str!("../../fixtures/bench/ur5_130s_sim.toml");
+const IDENTIFY: &str = include_str!("../../fixtures/bench/ur5_130s_identify.toml");
 
 /// The whole identification of a 130 s, 500 Hz, 6-joint MCAP recording
 /// against reading that recording and writing the same tables.
