@@ -245,7 +245,7 @@ fn plots_and_report_are_written() {
 #[test]
 fn a_run_for_tables_frees_the_periods_and_makes_the_same_tables() {
     let ws = workspace(&["kuka_axis3"]);
-    let built = Pipeline::from_path(&ws.path().join("pipelines/kuka_axis3.toml"))
+    let built = Pipeline::from_path(ws.path().join("pipelines/kuka_axis3.toml"))
         .unwrap()
         .build()
         .unwrap();

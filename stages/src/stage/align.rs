@@ -356,7 +356,11 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     if cfg.sample_rate_hz.is_none() {
         defaults.push(match md_f64(metadata::SAMPLE_RATE_HZ) {
             Some(r) => format!("sample_rate_hz = {r} (the recording's {})", metadata::SAMPLE_RATE_HZ),
-            None => format!("sample_rate_hz = {fs} (1 / the median step)"),
+            // To nine decimals: 1 / 0.004 s is 249.99999999999997 in floats.
+            None => format!(
+                "sample_rate_hz = {} (1 / the median step)",
+                format!("{fs:.9}").trim_end_matches('0').trim_end_matches('.')
+            ),
         });
     }
     match (cfg.period_s, inferred) {
