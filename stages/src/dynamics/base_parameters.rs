@@ -163,10 +163,12 @@ pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, see
     for (b, &c) in base.iter().enumerate() {
         map[(b, c)] = 1.0;
     }
+    // Q and R formed once, not per dependent column (Q from its
+    // reflections was most of building a 6-dof model's regressor).
+    let (q_t, r_factor) = (qr.q().transpose(), qr.r());
     for &d in &dependent {
-        let k = qr
-            .r()
-            .solve_upper_triangular(&(qr.q().transpose() * w.column(d)))
+        let k = r_factor
+            .solve_upper_triangular(&(&q_t * w.column(d)))
             .expect("full column rank");
         for b in 0..base.len() {
             map[(b, d)] = k[b];
