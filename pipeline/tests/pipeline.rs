@@ -620,6 +620,76 @@ fn estimate_stage_ml_and_physical_options() {
     }
 }
 
+/// The spread of 4 periods gives the estimate a covariance of rank 3: the
+/// physical fit, which needs it whole, refuses it and says why and what to
+/// do, rather than "not positive definite".
+#[test]
+fn physical_fit_refuses_a_covariance_from_too_few_periods() {
+    let ws = workspace(&["arm3"]);
+    // What `robotid identify` writes for this recording: the fit is at the
+    // noise floor, so the covariance is the periods' alone.
+    let text = r#"
+version = 1
+robot = "../robots/arm3.toml"
+[source]
+path = "../recordings/arm3/arm3.mcap"
+[[stage]]
+kind = "align"
+[[stage]]
+kind = "inverse_filter"
+filter = { cutoff_hz = 40.0, family = "butterworth", order = 4 }
+bandwidth_hz = 32.0
+[[stage]]
+kind = "average"
+[[stage]]
+kind = "noise"
+[[stage]]
+kind = "differentiate"
+method = "dft"
+bandwidth_hz = 8.55
+[[stage]]
+kind = "regressor"
+offset = true
+band_limit_hz = 32.0
+coulomb_transition_rad_s = 0.0106
+[[stage]]
+kind = "estimate"
+method = "ols"
+physical = true
+[output]
+tables = ["kinematics"]
+"#;
+    let f = ws.path().join("pipelines/arm3_physical.toml");
+    std::fs::write(&f, text).unwrap();
+    let built = Pipeline::from_path(&f).unwrap().build().unwrap();
+    let out = ws.path().join("out");
+    let results = built.run_recordings(&RunOptions {
+        out: out.clone(),
+        ..Default::default()
+    });
+    assert!(results[0].outcome.is_ok(), "{:?}", results[0].outcome);
+    let err = built.estimate_all(&results, &out).unwrap_err().to_string();
+    assert!(
+        err.contains("covariance is singular: it comes from the spread of the periods")
+            && err.contains("below the 25 parameters"),
+        "{err}"
+    );
+    assert!(err.contains("covariance = \"residual\""), "{err}");
+    // Said so, the residual's covariance does it.
+    std::fs::write(
+        &f,
+        text.replace("physical = true", "physical = true\ncovariance = \"residual\""),
+    )
+    .unwrap();
+    let built = Pipeline::from_path(&f).unwrap().build().unwrap();
+    let out = ws.path().join("out2");
+    let results = built.run_recordings(&RunOptions {
+        out: out.clone(),
+        ..Default::default()
+    });
+    built.estimate_all(&results, &out).unwrap();
+}
+
 /// `robotid excite` writes a trajectory the simulator takes as is
 /// (`trajectory_file`), with its coefficients, samples and pictures.
 #[test]

@@ -633,6 +633,24 @@ fn physical_fit(
             "true",
         ));
     }
+    // The spread of P periods gives a covariance of rank at most P − 1: with
+    // fewer periods than parameters it is singular (widening it by the model
+    // error of some joints need not fill it), and the fit (a Mahalanobis
+    // distance, a bootstrap) cannot use it.
+    let p = est.values.len();
+    if est.covariance_from == Covariance::Periods && est.covariance.clone().cholesky().is_none() {
+        return Err(Error::numerical(
+            "physical fit",
+            format!(
+                "the estimate's covariance is singular: it comes from the spread of the periods, and P periods give it a rank of at most P − 1, here below the {p} parameters{}: record more than {p} periods, or set covariance = \"residual\"",
+                if est.widened {
+                    " (widened only by the model error of the joints where it dominates)"
+                } else {
+                    ""
+                }
+            ),
+        ));
+    }
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
     let fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, prior_weight)?;
