@@ -18,10 +18,7 @@ cargo build --release --locked -q -p robotid
 robotid="$target/release/robotid"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-robot=$(realpath fixtures/robots/ur5.toml)
-sed "s|ROBOT|$robot|" fixtures/bench/ur5_130s_sim.toml > "$work/sim.toml"
-"$robotid" simulate "$work/sim.toml" --out "$work/rec" > /dev/null
-sed "s|ROBOT|$robot|" fixtures/bench/ur5_130s_identify.toml > "$work/rec/identify.toml"
+bash scripts/bench-recording.sh "$robotid" "$work"
 ls -l "$work/rec/ur5.mcap" | awk '{printf "recording: %s, %.1f MB\n", $NF, $5 / 1e6}'
 
 # best wall time and its peak RSS over $runs runs of "$@"

@@ -13,10 +13,7 @@ CARGO_PROFILE_RELEASE_DEBUG=line-tables-only CARGO_TARGET_DIR="$target" cargo bu
 robotid="$target/release/robotid"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-robot=$(realpath fixtures/robots/ur5.toml)
-sed "s|ROBOT|$robot|" fixtures/bench/ur5_130s_sim.toml > "$work/sim.toml"
-"$robotid" simulate "$work/sim.toml" --out "$work/rec" > /dev/null
-sed "s|ROBOT|$robot|" fixtures/bench/ur5_130s_identify.toml > "$work/rec/identify.toml"
+bash scripts/bench-recording.sh "$robotid" "$work"
 perf record -q -F 4000 --call-graph dwarf,16384 -o "$work/perf.data" -- bash -c \
   "for i in 1 2 3 4 5; do rm -rf '$work/out'; '$robotid' run '$work/rec/identify.toml' --out '$work/out' > /dev/null; done"
 perf script -i "$work/perf.data" --comm robotid -F comm,tid,ip,sym 2> /dev/null > "$work/perf.txt"
