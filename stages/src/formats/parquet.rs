@@ -2,9 +2,10 @@ use std::path::Path;
 
 use arrow::array::RecordBatch;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
-use parquet::arrow::arrow_writer::compute_leaves;
+use parquet::arrow::arrow_writer::{compute_leaves, ArrowWriterOptions};
 use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
 
 use robotid_schemas::metadata::CONTENT_CRC32;
@@ -17,72 +18,123 @@ use crate::{Error, Result};
 /// itself. Computed from the values, so it does not depend on how a writer
 /// laid them out.
 pub fn content_crc32(batch: &RecordBatch) -> u32 {
-    use arrow::array::{Array, AsArray};
-    use arrow::datatypes::ToByteSlice;
-    use arrow::datatypes::{DataType, Float64Type, Int64Type};
-    let mut h = crc32fast::Hasher::new();
-    let schema = batch.schema();
-    let mut md: Vec<(&String, &String)> = schema
-        .metadata()
-        .iter()
-        .filter(|(k, _)| k.as_str() != CONTENT_CRC32)
-        .collect();
-    md.sort();
-    for (k, v) in md {
-        h.update(k.as_bytes());
-        h.update(&[0]);
-        h.update(v.as_bytes());
-        h.update(&[0]);
+    let mut crc = ContentCrc::new(batch.schema_ref());
+    crc.update(batch);
+    crc.finish()
+}
+
+/// [`content_crc32`] of a table fed a batch of rows at a time: each
+/// column's validity and values are hashed apart and joined at the end
+/// (CRC-32 combines), so the table need not be whole.
+pub struct ContentCrc {
+    schema: arrow::datatypes::SchemaRef,
+    columns: Vec<ColumnCrc>,
+}
+
+#[derive(Default)]
+struct ColumnCrc {
+    /// Validity bytes, from the first null on (`rows` valid ones before it).
+    validity: Option<crc32fast::Hasher>,
+    values: crc32fast::Hasher,
+    rows: usize,
+}
+
+impl ContentCrc {
+    pub fn new(schema: &arrow::datatypes::SchemaRef) -> ContentCrc {
+        ContentCrc {
+            schema: schema.clone(),
+            columns: schema.fields().iter().map(|_| ColumnCrc::default()).collect(),
+        }
     }
-    for (field, column) in schema.fields().iter().zip(batch.columns()) {
-        h.update(field.name().as_bytes());
-        let mut fmd: Vec<_> = field.metadata().iter().collect();
-        fmd.sort();
-        for (k, v) in fmd {
+
+    /// Adds the next rows (a batch of the same schema).
+    pub fn update(&mut self, batch: &RecordBatch) {
+        use arrow::array::{Array, AsArray};
+        use arrow::datatypes::ToByteSlice;
+        use arrow::datatypes::{DataType, Float64Type, Int64Type};
+        for (c, column) in self.columns.iter_mut().zip(batch.columns()) {
+            if column.null_count() > 0 && c.validity.is_none() {
+                let mut v = crc32fast::Hasher::new();
+                v.update(&vec![0u8; c.rows]);
+                c.validity = Some(v);
+            }
+            if let Some(v) = &mut c.validity {
+                let bytes: Vec<u8> = (0..column.len()).map(|i| column.is_null(i) as u8).collect();
+                v.update(&bytes);
+            }
+            let h = &mut c.values;
+            match column.data_type() {
+                // A null slot's value is whatever a writer left there: hashed as 0.
+                DataType::Float64 if column.null_count() > 0 => {
+                    for v in column.as_primitive::<Float64Type>().iter() {
+                        h.update(&v.unwrap_or(0.0).to_le_bytes());
+                    }
+                }
+                DataType::Int64 if column.null_count() > 0 => {
+                    for v in column.as_primitive::<Int64Type>().iter() {
+                        h.update(&v.unwrap_or(0).to_le_bytes());
+                    }
+                }
+                DataType::Float64 => h.update(column.as_primitive::<Float64Type>().values().as_ref().to_byte_slice()),
+                DataType::Int64 => h.update(column.as_primitive::<Int64Type>().values().as_ref().to_byte_slice()),
+                DataType::Utf8 => {
+                    for v in column.as_string::<i32>().iter() {
+                        let v = v.unwrap_or("");
+                        h.update(&(v.len() as u64).to_le_bytes());
+                        h.update(v.as_bytes());
+                    }
+                }
+                // Other types (none in robotid's tables): their display form,
+                // values apart by U+0001.
+                _ => {
+                    let text = arrow::util::display::ArrayFormatter::try_new(column.as_ref(), &Default::default())
+                        .map(|f| {
+                            (0..column.len())
+                                .map(|i| f.value(i).to_string())
+                                .collect::<Vec<_>>()
+                                .join("\u{1}")
+                        })
+                        .unwrap_or_default();
+                    if c.rows > 0 && !column.is_empty() {
+                        h.update("\u{1}".as_bytes());
+                    }
+                    h.update(text.as_bytes());
+                }
+            }
+            c.rows += column.len();
+        }
+    }
+
+    pub fn finish(self) -> u32 {
+        let mut h = crc32fast::Hasher::new();
+        let mut md: Vec<(&String, &String)> = self
+            .schema
+            .metadata()
+            .iter()
+            .filter(|(k, _)| k.as_str() != CONTENT_CRC32)
+            .collect();
+        md.sort();
+        for (k, v) in md {
             h.update(k.as_bytes());
+            h.update(&[0]);
             h.update(v.as_bytes());
+            h.update(&[0]);
         }
-        if column.null_count() > 0 {
-            for i in 0..column.len() {
-                h.update(&[column.is_null(i) as u8]);
+        for (field, c) in self.schema.fields().iter().zip(&self.columns) {
+            h.update(field.name().as_bytes());
+            let mut fmd: Vec<_> = field.metadata().iter().collect();
+            fmd.sort();
+            for (k, v) in fmd {
+                h.update(k.as_bytes());
+                h.update(v.as_bytes());
             }
+            if let Some(v) = &c.validity {
+                h.combine(v);
+            }
+            h.combine(&c.values);
         }
-        match column.data_type() {
-            // A null slot's value is whatever a writer left there: hashed as 0.
-            DataType::Float64 if column.null_count() > 0 => {
-                for v in column.as_primitive::<Float64Type>().iter() {
-                    h.update(&v.unwrap_or(0.0).to_le_bytes());
-                }
-            }
-            DataType::Int64 if column.null_count() > 0 => {
-                for v in column.as_primitive::<Int64Type>().iter() {
-                    h.update(&v.unwrap_or(0).to_le_bytes());
-                }
-            }
-            DataType::Float64 => h.update(column.as_primitive::<Float64Type>().values().as_ref().to_byte_slice()),
-            DataType::Int64 => h.update(column.as_primitive::<Int64Type>().values().as_ref().to_byte_slice()),
-            DataType::Utf8 => {
-                for v in column.as_string::<i32>().iter() {
-                    let v = v.unwrap_or("");
-                    h.update(&(v.len() as u64).to_le_bytes());
-                    h.update(v.as_bytes());
-                }
-            }
-            // Other types (none in robotid's tables): their display form.
-            _ => {
-                let text = arrow::util::display::ArrayFormatter::try_new(column.as_ref(), &Default::default())
-                    .map(|f| {
-                        (0..column.len())
-                            .map(|i| f.value(i).to_string())
-                            .collect::<Vec<_>>()
-                            .join("\u{1}")
-                    })
-                    .unwrap_or_default();
-                h.update(text.as_bytes());
-            }
-        }
+        h.finalize()
     }
-    h.finalize()
 }
 
 /// Rows per row group (arrow-rs's default). The writer encodes one column
@@ -95,36 +147,29 @@ const ROW_GROUP_ROWS: usize = 1 << 20;
 /// schema, with its field and schema metadata, is stored in the file, with
 /// the content's CRC-32 ([`CONTENT_CRC32`]) that [`read_parquet`] checks.
 pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
-    let mut md = batch.schema().metadata().clone();
-    md.insert(CONTENT_CRC32.to_string(), format!("{:08x}", content_crc32(batch)));
-    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
-    let batch = &RecordBatch::try_new(schema, batch.columns().to_vec()).map_err(|e| Error::Format {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
-    })?;
-    // The table's keys also as the file's own key-value metadata, where
-    // readers that do not decode the Arrow schema (DuckDB's
-    // parquet_kv_metadata, polars' read_parquet_metadata) find them.
-    let mut keys: Vec<_> = batch
-        .schema()
-        .metadata()
-        .iter()
-        .map(|(k, v)| (k.clone(), v.clone()))
-        .collect();
-    keys.sort();
-    let keys = keys
-        .into_iter()
-        .map(|(k, v)| parquet::file::metadata::KeyValue::new(k, v))
-        .collect();
+    let rows = batch.num_rows();
+    let groups = (0..rows)
+        .step_by(ROW_GROUP_ROWS)
+        .map(|start| Ok(batch.slice(start, ROW_GROUP_ROWS.min(rows - start))));
+    write_parquet_groups(path, batch.schema(), groups)
+}
+
+/// The same for a table given a row group at a time, each batch made when
+/// the writer asks for it (a table never whole in memory). The metadata
+/// goes in at the end, with the content's CRC-32 then known.
+pub fn write_parquet_groups(
+    path: &Path,
+    schema: arrow::datatypes::SchemaRef,
+    groups: impl IntoIterator<Item = Result<RecordBatch>>,
+) -> Result<()> {
     // Dictionaries only for text (recording and joint names): measured
     // numbers are nearly all distinct, and the writer's dictionary hash
     // tables for them took more memory than the table (53 MB for a 130 s,
     // 6-joint identification) before falling back to plain pages anyway.
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("valid level")))
-        .set_key_value_metadata(Some(keys))
         .set_dictionary_enabled(false);
-    for f in batch.schema().fields() {
+    for f in schema.fields() {
         if f.data_type() == &arrow::datatypes::DataType::Utf8 {
             props =
                 props.set_column_dictionary_enabled(parquet::schema::types::ColumnPath::from(f.name().as_str()), true);
@@ -135,20 +180,38 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
         path: path.to_path_buf(),
         msg: e.to_string(),
     };
+    // A CRC left from the table this one was read from is not this one's.
+    let mut md = schema.metadata().clone();
+    md.remove(CONTENT_CRC32);
+    let schema = std::sync::Arc::new(schema.as_ref().clone().with_metadata(md));
     write_atomic(path, |w| {
         // The ArrowWriter only sets up the file (schema, the Arrow schema in
         // its metadata); the rows go through its column writers one column
         // at a time, where the ArrowWriter would hold a whole row group's
         // encoded pages (a 12 MB regressor table cost 16 MB of buffers).
-        let (mut file, columns) = ArrowWriter::try_new(w, batch.schema(), Some(props))
+        let options = ArrowWriterOptions::new()
+            .with_properties(props)
+            .with_skip_arrow_metadata(true);
+        let (mut file, columns) = ArrowWriter::try_new_with_options(w, schema.clone(), options)
             .and_then(|writer| writer.into_serialized_writer())
             .map_err(fmt)?;
-        let rows = batch.num_rows();
-        for (group, start) in (0..rows).step_by(ROW_GROUP_ROWS).enumerate() {
-            let slice = batch.slice(start, ROW_GROUP_ROWS.min(rows - start));
+        let mut crc = ContentCrc::new(&schema);
+        let mut group = 0;
+        for batch in groups {
+            let batch = batch?;
+            if batch.schema().fields() != schema.fields() {
+                return Err(Error::Format {
+                    path: path.to_path_buf(),
+                    msg: format!("row group {group}: its columns are not the table's"),
+                });
+            }
+            if batch.num_rows() == 0 {
+                continue;
+            }
+            crc.update(&batch);
             let mut row_group = file.next_row_group().map_err(fmt)?;
             let mut writers = columns.create_column_writers(group).map_err(fmt)?.into_iter();
-            for (field, column) in batch.schema().fields().iter().zip(slice.columns()) {
+            for (field, column) in schema.fields().iter().zip(batch.columns()) {
                 for leaf in compute_leaves(field, column).map_err(fmt)? {
                     let mut writer = writers.next().expect("a writer per leaf column");
                     writer.write(&leaf).map_err(fmt)?;
@@ -160,7 +223,24 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
                 }
             }
             row_group.close().map_err(fmt)?;
+            group += 1;
         }
+        // The metadata last, with the CRC now known: the table's keys as
+        // the file's own key-value metadata, where readers that do not
+        // decode the Arrow schema find them (DuckDB's parquet_kv_metadata,
+        // polars' read_parquet_metadata), then the Arrow schema.
+        let mut md = schema.metadata().clone();
+        md.insert(CONTENT_CRC32.to_string(), format!("{:08x}", crc.finish()));
+        let mut keys: Vec<_> = md.iter().collect();
+        keys.sort();
+        for (k, v) in keys {
+            file.append_key_value_metadata(KeyValue::new(k.clone(), v.clone()));
+        }
+        let schema = schema.as_ref().clone().with_metadata(md);
+        file.append_key_value_metadata(KeyValue::new(
+            parquet::arrow::ARROW_SCHEMA_META_KEY.to_string(),
+            parquet::arrow::encode_arrow_schema(&schema),
+        ));
         file.close().map_err(fmt)?;
         Ok(())
     })
@@ -323,6 +403,57 @@ mod tests {
         let other = Float64Array::from(vec![Some(1.0), Some(0.0), Some(3.0)]);
         let valid = RecordBatch::try_new(schema.clone(), vec![Arc::new(other)]).unwrap();
         assert_ne!(super::content_crc32(&batch(0.0)), super::content_crc32(&valid));
+    }
+
+    /// The checksum fed a batch at a time is that of the whole table, for
+    /// every column type, with the first null only in a later batch and
+    /// empty batches between; the groups writer stores it, and the file
+    /// reads back checked and whole.
+    #[test]
+    fn the_checksum_of_a_table_fed_in_parts_is_that_of_the_whole() {
+        use arrow::array::{ArrayRef, Int64Array, StringArray};
+        let rows = 1000;
+        let schema = Arc::new(
+            Schema::new(vec![
+                Field::new("x", DataType::Float64, true),
+                Field::new("k", DataType::Int64, false),
+                Field::new("s", DataType::Utf8, true),
+                Field::new("b", DataType::Boolean, false),
+            ])
+            .with_metadata(std::collections::HashMap::from([(
+                "robotid.table".to_string(),
+                "test".to_string(),
+            )])),
+        );
+        let columns: Vec<ArrayRef> = vec![
+            Arc::new(Float64Array::from_iter(
+                (0..rows).map(|i| (i != 700).then_some(i as f64 * 0.5)),
+            )),
+            Arc::new(Int64Array::from_iter_values(0..rows as i64)),
+            Arc::new(StringArray::from_iter(
+                (0..rows).map(|i| (i % 97 != 5).then(|| format!("j{}", i % 6))),
+            )),
+            Arc::new(arrow::array::BooleanArray::from_iter(
+                (0..rows).map(|i| Some(i % 3 == 0)),
+            )),
+        ];
+        let whole = RecordBatch::try_new(schema.clone(), columns).unwrap();
+        let cuts = [0, 0, 300, 300, 650, 999, 1000];
+        let parts: Vec<RecordBatch> = cuts.windows(2).map(|w| whole.slice(w[0], w[1] - w[0])).collect();
+        let mut crc = super::ContentCrc::new(&schema);
+        parts.iter().for_each(|p| crc.update(p));
+        assert_eq!(crc.finish(), super::content_crc32(&whole));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("groups.parquet");
+        super::write_parquet_groups(&path, schema.clone(), parts.into_iter().map(Ok)).unwrap();
+        let back = super::read_parquet(&path).unwrap();
+        assert_eq!(back.columns(), whole.columns());
+        assert_eq!(
+            back.schema().metadata().get(super::CONTENT_CRC32),
+            Some(&format!("{:08x}", super::content_crc32(&whole)))
+        );
+        // Empty parts make no row group.
+        assert_eq!(super::open(&path).unwrap().metadata().row_groups().len(), 4);
     }
 
     /// A long table is cut into row groups of ROW_GROUP_ROWS, and reads back
