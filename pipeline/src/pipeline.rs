@@ -200,6 +200,7 @@ impl Built {
         lean: bool,
         mut progress: impl FnMut(&'static str),
     ) -> robotid_stages::Result<()> {
+        chain.lean = lean;
         for (i, (name, stage)) in self.stages.iter().enumerate() {
             let t = Instant::now();
             progress(name);

@@ -185,18 +185,11 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
     let dir = opts.out.join(name);
     let mut outcome = Outcome::default();
     // The regressor rows move into their table unless the report keeps them.
-    let tables = match opts.plot {
-        Some(_) => built.tables(&chain)?,
-        None => built.take_tables(&mut chain)?,
+    let regressor = match opts.plot {
+        Some(_) => chain.regressor.clone(),
+        None => chain.regressor.take(),
     };
-    if !tables.is_empty() {
-        std::fs::create_dir_all(&dir).map_err(|e| robotid_stages::Error::io(&dir, e))?;
-    }
-    for (kind, batch) in tables {
-        let path = dir.join(format!("{}.parquet", kind.name()));
-        write_parquet(&path, &batch)?;
-        outcome.files.push(path);
-    }
+    outcome.files = write_tables(&chain, regressor, &built.plan.tables, &built.provenance(), &dir)?;
     chain.report.timings.push(("write".into(), t.elapsed().as_secs_f64()));
     bar.inc(1);
     if let Some(plot_dir) = &opts.plot {
@@ -295,17 +288,73 @@ pub fn tables_of(
                     .map_err(robotid_schemas::SchemaError::from)?
             }
         };
-        refuse_infinities(&batch, kind, &chain.source)?;
+        refuse_infinities(&batch, 0, kind, &chain.source)?;
         out.push((kind, batch));
     }
     Ok(out)
+}
+
+/// Writes the requested tables of a finished chain into `dir` (made when
+/// there is one), and returns their paths. The regressor table is written
+/// from `regressor` (else a copy of the chain's rows) a row group at a
+/// time, each group's rows of A made when written where the rows are made
+/// on demand: A is never whole. With an `r_factor` table, which is made
+/// from the whole regressor table, it is made whole.
+pub fn write_tables(
+    chain: &Chain,
+    regressor: Option<RegressorRows>,
+    kinds: &[TableKind],
+    provenance: &BTreeMap<String, String>,
+    dir: &Path,
+) -> robotid_stages::Result<Vec<PathBuf>> {
+    if !kinds.is_empty() {
+        std::fs::create_dir_all(dir).map_err(|e| robotid_stages::Error::io(dir, e))?;
+    }
+    let path = |kind: TableKind| dir.join(format!("{}.parquet", kind.name()));
+    let mut files = Vec::new();
+    if kinds.contains(&TableKind::RFactor) {
+        for (kind, batch) in tables_of(chain, regressor, kinds, provenance)? {
+            write_parquet(&path(kind), &batch)?;
+            files.push(path(kind));
+        }
+        return Ok(files);
+    }
+    let mut regressor = regressor;
+    for &kind in kinds {
+        if kind != TableKind::Regressor {
+            for (kind, batch) in tables_of(chain, None, &[kind], provenance)? {
+                write_parquet(&path(kind), &batch)?;
+            }
+            files.push(path(kind));
+            continue;
+        }
+        let rows = match regressor.take() {
+            Some(r) => r,
+            None => chain.regressor()?.clone(),
+        };
+        let (schema, groups) = rows.into_groups()?;
+        let mut md = schema.metadata().clone();
+        md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
+        let schema = std::sync::Arc::new(schema.as_ref().clone().with_metadata(md));
+        let mut first = 0;
+        let groups = groups.map(|batch| {
+            let batch = RecordBatch::try_new(schema.clone(), batch?.columns().to_vec())
+                .map_err(robotid_schemas::SchemaError::from)?;
+            refuse_infinities(&batch, first, kind, &chain.source)?;
+            first += batch.num_rows();
+            Ok(batch)
+        });
+        robotid_stages::formats::parquet::write_parquet_groups(&path(kind), schema.clone(), groups)?;
+        files.push(path(kind));
+    }
+    Ok(files)
 }
 
 /// No infinity is written to a table (a sample of 1e200 A gives every
 /// variance = inf): refused with the table, column and row. NaN stays the
 /// schemas' "not known" (a spread with one period, a variance without a
 /// noise stage).
-fn refuse_infinities(batch: &RecordBatch, kind: TableKind, source: &str) -> robotid_stages::Result<()> {
+fn refuse_infinities(batch: &RecordBatch, first: usize, kind: TableKind, source: &str) -> robotid_stages::Result<()> {
     use arrow::array::{Array, Float64Array};
     for (i, field) in batch.schema().fields().iter().enumerate() {
         let Some(col) = batch.column(i).as_any().downcast_ref::<Float64Array>() else {
@@ -315,7 +364,7 @@ fn refuse_infinities(batch: &RecordBatch, kind: TableKind, source: &str) -> robo
             return Err(robotid_stages::Error::NotFinite {
                 what: format!("{source}: the `{kind}` table's column `{}`", field.name()),
                 value: col.value(row),
-                at: format!("row {row} (a sample far out of range upstream?)"),
+                at: format!("row {} (a sample far out of range upstream?)", first + row),
             });
         }
     }

@@ -239,16 +239,20 @@ fn plots_and_report_are_written() {
 /// number ≈ 3) puts the parameter errors at the 1e-3 relative level; what
 /// is left (ZZ −0.7 %, Fv −0.4 %) is the derivatives' 8 Hz band limit.
 /// A run for tables frees the aligned periods' samples as soon as no later
-/// stage reads them (the regressor reads only the torques), and moves the
-/// regressor rows into their table: the same tables as a run that keeps
-/// everything, column for column.
+/// stage reads them (the regressor reads only the torques), never holds A
+/// whole (its rows are made per block when read), and moves the regressor
+/// rows into their table: the same estimate, bit for bit, and the same
+/// tables as a run that keeps everything, column for column; written, the
+/// same files, byte for byte.
 #[test]
 fn a_run_for_tables_frees_the_periods_and_makes_the_same_tables() {
     let ws = workspace(&["kuka_axis3"]);
-    let built = Pipeline::from_path(ws.path().join("pipelines/kuka_axis3.toml"))
-        .unwrap()
-        .build()
-        .unwrap();
+    // Without the band limit, which reworks A whole.
+    let text = std::fs::read_to_string(ws.path().join("pipelines/kuka_axis3.toml")).unwrap();
+    assert!(text.contains("band_limit_hz = 20.0\n"));
+    let file = ws.path().join("pipelines/kuka_axis3_plain.toml");
+    std::fs::write(&file, text.replace("band_limit_hz = 20.0\n", "")).unwrap();
+    let built = Pipeline::from_path(file).unwrap().build().unwrap();
     let log = &built.logs[0];
     let whole = built.run_log(log, "axis", |_| {}).unwrap();
     let mut lean = built.run_log_for_tables(log, "axis", |_| {}).unwrap();
@@ -259,6 +263,25 @@ fn a_run_for_tables_frees_the_periods_and_makes_the_same_tables() {
         (freed.periods, freed.samples_per_period),
         (kept.periods, kept.samples_per_period)
     );
+    let made = lean.regressor.as_ref().unwrap();
+    assert!(made.maker.is_some() && made.system.a.is_empty(), "A not kept");
+    assert!(whole.regressor.as_ref().unwrap().maker.is_none());
+    assert_eq!(made.condition, whole.regressor.as_ref().unwrap().condition);
+    assert_eq!(
+        lean.estimate.as_ref().unwrap().summary,
+        whole.estimate.as_ref().unwrap().summary
+    );
+    let written = |chain: &robotid_stages::stage::Chain, dir: &str| {
+        let dir = ws.path().join(dir);
+        let rows = chain.regressor.clone();
+        robotid::run::write_tables(chain, rows, &built.plan.tables, &built.provenance(), &dir).unwrap();
+        let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+        files.sort();
+        files.iter().map(|f| std::fs::read(f).unwrap()).collect::<Vec<_>>()
+    };
+    let (from_whole, from_made) = (written(&whole, "whole"), written(&lean, "made"));
+    assert_eq!(from_whole.len(), 5);
+    assert!(from_whole == from_made, "the same bytes");
     let copied = built.tables(&whole).unwrap();
     let moved = built.take_tables(&mut lean).unwrap();
     assert!(lean.regressor.is_none(), "the rows moved into the table");

@@ -63,13 +63,26 @@ fn stage(c: &mut Criterion) {
     });
     // Band-limited to 20 Hz: the columns on a 16× finer grid first (no
     // aliasing of sign(q̇)); the price of that, against the plain rows.
-    let base = cfg.base_regressor(&model).unwrap();
+    let base = std::sync::Arc::new(cfg.base_regressor(&model).unwrap());
     let spectra = robotid_stages::signal::Spectra::new();
     g.bench_function("rows", |b| {
-        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench").unwrap())
+        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench", false).unwrap())
     });
     g.bench_function("rows_band_limited_16x", |b| {
-        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, Some((20.0, period)), &spectra, "bench").unwrap())
+        b.iter(|| {
+            regressor_rows(
+                &kin,
+                None,
+                None,
+                &base,
+                &cfg,
+                Some((20.0, period)),
+                &spectra,
+                "bench",
+                false,
+            )
+            .unwrap()
+        })
     });
     g.finish();
 
@@ -88,13 +101,13 @@ fn stage(c: &mut Criterion) {
         ..Default::default()
     };
     let built = cfg.build(&ctx).unwrap();
-    let base = cfg.base_regressor(&model).unwrap();
+    let base = std::sync::Arc::new(cfg.base_regressor(&model).unwrap());
     let mut g = c.benchmark_group("regressor_stage_lwr4_21k");
     g.sample_size(10);
     g.throughput(Throughput::Elements(n as u64));
     g.bench_function("kernel", |b| b.iter(|| base.matrix(&kin)));
     g.bench_function("rows", |b| {
-        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench").unwrap())
+        b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench", false).unwrap())
     });
     g.bench_function("stage", |b| {
         b.iter_batched(

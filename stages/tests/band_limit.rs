@@ -75,7 +75,7 @@ fn at_samples_band_limited(base: &BaseRegressor, kin: &Kinematics, spectra: &Spe
     a
 }
 
-fn model() -> (Model, BaseRegressor, RegressorConfig, DVector<f64>) {
+fn model() -> (Model, std::sync::Arc<BaseRegressor>, RegressorConfig, DVector<f64>) {
     let model = load_robot(&fixture("robots/arm3.toml")).unwrap();
     let cfg = RegressorConfig {
         friction: FrictionTerms::Asymmetric,
@@ -83,7 +83,7 @@ fn model() -> (Model, BaseRegressor, RegressorConfig, DVector<f64>) {
         band_limit_hz: Some(BAND),
         ..Default::default()
     };
-    let base = cfg.base_regressor(&model).unwrap();
+    let base = std::sync::Arc::new(cfg.base_regressor(&model).unwrap());
     let theta = base.base_values(&model).unwrap();
     (model, base, cfg, theta)
 }
@@ -105,6 +105,7 @@ fn exact_coulomb_friction_is_band_limited_without_aliasing() {
         Some((BAND, PERIOD)),
         &spectra,
         "exact sign",
+        false,
     )
     .unwrap();
     let stage = per_joint(&rows.system.a, &theta, n);
@@ -190,6 +191,7 @@ fn exact_coulomb_friction_leaves_the_residual_at_the_noise_floor() {
         Some((BAND, PERIOD)),
         &spectra,
         "exact sign",
+        false,
     )
     .unwrap();
     let mut naive = rows.system.clone();

@@ -254,9 +254,24 @@ impl BaseRegressor {
     /// thread count. Written straight into the column-major matrix: each
     /// chunk owns its rows' piece of every column.
     pub fn matrix(&self, kin: &Kinematics) -> DMatrix<f64> {
+        self.matrix_of(&kin.q, &kin.qd, &kin.qdd, 0..kin.time.len())
+    }
+
+    /// The stacked rows of the samples `range` of the motion (q, q̇, q̈ per
+    /// joint): rows `range.start·n ..` of [`BaseRegressor::matrix`], equal
+    /// to them bit for bit (each sample is computed alone), for callers
+    /// that take the matrix in blocks rather than whole.
+    pub fn matrix_of(
+        &self,
+        q: &[Vec<f64>],
+        qd: &[Vec<f64>],
+        qdd: &[Vec<f64>],
+        range: std::ops::Range<usize>,
+    ) -> DMatrix<f64> {
         let n = self.model.dof();
         let nb = self.columns.len();
-        let samples = kin.time.len();
+        let first = range.start;
+        let samples = range.len();
         let rows = samples * n;
         const CHUNK: usize = 256; // samples, a multiple of LANES
         let mut a = DMatrix::zeros(rows, nb);
@@ -274,19 +289,19 @@ impl BaseRegressor {
             .for_each(|(c, mut out)| match &self.batched {
                 Some(batched) => {
                     let mut ws = batched.workspace(self.terms);
-                    let (mut q, mut qd, mut qdd) =
+                    let (mut lq, mut lqd, mut lqdd) =
                         (vec![[0.0; LANES]; n], vec![[0.0; LANES]; n], vec![[0.0; LANES]; n]);
                     let len = out.first().map_or(0, |p| p.len() / n);
                     for k0 in (0..len).step_by(LANES) {
                         let lanes = LANES.min(len - k0);
                         // A short last pass repeats its last sample in the spare lanes.
                         for l in 0..LANES {
-                            let k = c * CHUNK + k0 + l.min(lanes - 1);
+                            let k = first + c * CHUNK + k0 + l.min(lanes - 1);
                             for j in 0..n {
-                                (q[j][l], qd[j][l], qdd[j][l]) = (kin.q[j][k], kin.qd[j][k], kin.qdd[j][k]);
+                                (lq[j][l], lqd[j][l], lqdd[j][l]) = (q[j][k], qd[j][k], qdd[j][k]);
                             }
                         }
-                        batched.regressor(&mut ws, &q, &qd, &qdd, self.terms);
+                        batched.regressor(&mut ws, &lq, &lqd, &lqdd, self.terms);
                         for (bi, (col, _, _)) in self.columns.iter().enumerate() {
                             for j in 0..n {
                                 let v = ws.phi(j, *col);
@@ -299,17 +314,17 @@ impl BaseRegressor {
                 }
                 None => {
                     let mut ws = self.workspace();
-                    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                    let (mut sq, mut sqd, mut sqdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
                     let mut row = vec![0.0; n * nb];
                     let len = out.first().map_or(0, |p| p.len() / n);
                     for local in 0..len {
-                        let k = c * CHUNK + local;
+                        let k = first + c * CHUNK + local;
                         for j in 0..n {
-                            q[j] = kin.q[j][k];
-                            qd[j] = kin.qd[j][k];
-                            qdd[j] = kin.qdd[j][k];
+                            sq[j] = q[j][k];
+                            sqd[j] = qd[j][k];
+                            sqdd[j] = qdd[j][k];
                         }
-                        self.rows(&mut ws, &q, &qd, &qdd, &mut row);
+                        self.rows(&mut ws, &sq, &sqd, &sqdd, &mut row);
                         for j in 0..n {
                             for (bi, piece) in out.iter_mut().enumerate() {
                                 piece[local * n + j] = row[j * nb + bi];

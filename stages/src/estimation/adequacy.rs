@@ -12,6 +12,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::RowBlocks;
 use super::System;
 use crate::{Error, Result};
 
@@ -112,6 +113,38 @@ impl JointMoments {
 /// variance of a row is that of its periods' mean when the table carries
 /// the periods, else the noise stage's, else unknown.
 pub fn joint_moments(sys: &System, weights: Option<&DVector<f64>>) -> Vec<JointMoments> {
+    let mut out = empty_moments(sys, weights);
+    let m = sys.rows();
+    let block = super::block_rows(sys.joints.len());
+    for start in (0..m).step_by(block) {
+        let (a, b) = weighted_rows(sys, sys.a.block(start, block.min(m - start)), start, weights);
+        fold_moments(&mut out, sys, start, &a, &b);
+    }
+    out
+}
+
+/// Rows `start ..` of A (given) and of b, each times √w.
+pub(super) fn weighted_rows(
+    sys: &System,
+    mut a: DMatrix<f64>,
+    start: usize,
+    weights: Option<&DVector<f64>>,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let k = a.nrows();
+    let mut b = sys.b.rows(start, k).into_owned();
+    if let Some(w) = weights {
+        for i in 0..k {
+            let sw = w[start + i].sqrt();
+            a.row_mut(i).scale_mut(sw);
+            b[i] *= sw;
+        }
+    }
+    (a, b)
+}
+
+/// Per-joint moments before any row: the rows and the noise floor, which
+/// do not need A.
+pub(super) fn empty_moments(sys: &System, weights: Option<&DVector<f64>>) -> Vec<JointMoments> {
     let p = sys.parameters();
     let mut out: Vec<JointMoments> = sys
         .joints
@@ -136,27 +169,31 @@ pub fn joint_moments(sys: &System, weights: Option<&DVector<f64>>) -> Vec<JointM
             var[sys.offsets[r] + i] = spread / (np * (np - 1.0));
         }
     }
-    // The Gram matrices by blocks of rows: one syrk-like product per block.
-    const BLOCK: usize = 1024;
-    for (j, m) in out.iter_mut().enumerate() {
-        let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == j).collect();
-        m.rows = rows.len();
-        for chunk in rows.chunks(BLOCK) {
-            let sw = |i: usize| weights.map_or(1.0, |w| w[i].sqrt());
-            let a = DMatrix::from_fn(chunk.len(), p, |k, c| sw(chunk[k]) * sys.a[(chunk[k], c)]);
-            let b = DVector::from_fn(chunk.len(), |k, _| sw(chunk[k]) * sys.b[chunk[k]]);
-            m.gram += a.transpose() * &a;
-            m.atb += a.transpose() * &b;
-            m.btb += b.norm_squared();
-        }
-        for &i in &rows {
-            if var[i].is_finite() && var[i] >= 0.0 {
-                m.floor += weights.map_or(1.0, |w| w[i]) * var[i];
-                m.floor_rows += 1;
-            }
+    for (i, &j) in sys.joint.iter().enumerate() {
+        let m = &mut out[j];
+        m.rows += 1;
+        if var[i].is_finite() && var[i] >= 0.0 {
+            m.floor += weights.map_or(1.0, |w| w[i]) * var[i];
+            m.floor_rows += 1;
         }
     }
     out
+}
+
+/// Adds the weighted rows `start ..` (`a`, `b`) to their joints' moments:
+/// one Gram product per joint and block.
+pub(super) fn fold_moments(out: &mut [JointMoments], sys: &System, start: usize, a: &DMatrix<f64>, b: &DVector<f64>) {
+    for (j, m) in out.iter_mut().enumerate() {
+        let rows: Vec<usize> = (0..a.nrows()).filter(|&i| sys.joint[start + i] == j).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let aj = a.select_rows(rows.iter());
+        let bj = b.select_rows(rows.iter());
+        m.gram += aj.transpose() * &aj;
+        m.atb += aj.transpose() * &bj;
+        m.btb += bj.norm_squared();
+    }
 }
 
 /// Adds another recording's moments, joint by joint (joints matched by name;

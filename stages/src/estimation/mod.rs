@@ -35,7 +35,9 @@ pub use physical::{
     BOOTSTRAP_DRAWS,
 };
 pub use summary::{KnownPart, Summary, MAX_CONDITION};
-pub use system::{columns_of, row_weights, Known, System, PARAMETER_COLUMN, PERIOD_TORQUE};
+pub use system::{
+    block_rows, columns_of, row_weights, Known, RowBlocks, System, BLOCK_SAMPLES, PARAMETER_COLUMN, PERIOD_TORQUE,
+};
 pub use table::{parameters_from_table, parameters_table, Parameters};
 
 /// Which estimator, chosen in the pipeline's `estimate` stage or on the

@@ -15,8 +15,10 @@ use std::collections::BTreeMap;
 
 use nalgebra::{DMatrix, DVector};
 
-use super::adequacy::{adequacy, combined_dof, joint_moments, merge_moments, widen, JointMoments};
-use super::{Covariance, Estimate, Estimator, System};
+use super::adequacy::{
+    adequacy, combined_dof, empty_moments, fold_moments, merge_moments, weighted_rows, widen, JointMoments,
+};
+use super::{block_rows, Covariance, Estimate, Estimator, RowBlocks, System};
 use crate::dynamics::RFactor;
 use crate::{Error, Result};
 
@@ -89,51 +91,69 @@ impl Summary {
     /// Folds one system (usually one recording) with optional row weights.
     /// Non-finite values are refused here, with the row named.
     pub fn of(sys: &System, weights: Option<&DVector<f64>>) -> Result<Summary> {
-        sys.validate_values()?;
+        Summary::of_rows(sys, &sys.a, weights)
+    }
+
+    /// The same with A's rows from `rows`, a block at a time (`sys.a` is
+    /// not read): every statistic is a sum over rows, folded in one pass.
+    pub fn of_rows(sys: &System, rows: &dyn RowBlocks, weights: Option<&DVector<f64>>) -> Result<Summary> {
+        sys.validate_torque()?;
         let (m, p) = (sys.rows(), sys.parameters());
-        let sw = |i: usize| weights.map_or(1.0, |w| w[i].sqrt());
         let mut factor = RFactor::new(p);
-        const BLOCK: usize = 4096;
-        for start in (0..m).step_by(BLOCK) {
-            let k = BLOCK.min(m - start);
-            let a = DMatrix::from_fn(k, p, |i, j| sw(start + i) * sys.a[(start + i, j)]);
-            let b = DVector::from_fn(k, |i, _| sw(start + i) * sys.b[start + i]);
-            factor.add_rows(&a, &b);
-        }
-        let column_max = DVector::from_fn(p, |j, _| sys.a.column(j).amax());
-        let mut period_moments = Vec::with_capacity(sys.recordings.len());
-        for (r, periods) in sys.periods.iter().enumerate() {
-            period_moments.push(periods.as_ref().map(|tp| {
-                let start = sys.offsets[r];
+        let mut column_max = DVector::zeros(p);
+        let mut period_moments: Vec<Option<DMatrix<f64>>> = sys
+            .periods
+            .iter()
+            .map(|tp| tp.as_ref().map(|tp| DMatrix::zeros(p, tp.ncols())))
+            .collect();
+        let mut joints = empty_moments(sys, weights);
+        let mut cross = sys.known.as_ref().map(|(ak, _)| DMatrix::zeros(p, ak.ncols()));
+        let block = block_rows(sys.joints.len());
+        for start in (0..m).step_by(block) {
+            let a = rows.block(start, block.min(m - start));
+            sys.validate_block(start, &a)?;
+            for (j, c) in a.column_iter().enumerate() {
+                column_max[j] = c.amax().max(column_max[j]);
+            }
+            // Aᵀ·W·D of the periods' deviations from their mean, row by row.
+            for i in 0..a.nrows() {
+                let row = start + i;
+                let r = sys.recording[row];
+                let (Some(tp), Some(out)) = (&sys.periods[r], &mut period_moments[r]) else {
+                    continue;
+                };
+                let local = row - sys.offsets[r];
                 let np = tp.ncols();
-                let mut out = DMatrix::zeros(p, np);
-                for i in 0..tp.nrows() {
-                    let mean = tp.row(i).sum() / np as f64;
-                    let w = weights.map_or(1.0, |w| w[start + i]);
-                    for k in 0..np {
-                        let d = w * (tp[(i, k)] - mean);
-                        for j in 0..p {
-                            out[(j, k)] += sys.a[(start + i, j)] * d;
-                        }
+                let mean = tp.row(local).sum() / np as f64;
+                let w = weights.map_or(1.0, |w| w[row]);
+                for k in 0..np {
+                    let d = w * (tp[(local, k)] - mean);
+                    for j in 0..p {
+                        out[(j, k)] += a[(i, j)] * d;
                     }
                 }
-                out
-            }));
-        }
-        let known = sys.known.as_ref().map(|(ak, ck)| {
-            let wak = match weights {
-                Some(w) => DMatrix::from_fn(ak.nrows(), ak.ncols(), |i, j| w[i] * ak[(i, j)]),
-                None => ak.clone(),
-            };
-            KnownPart {
-                names: sys
-                    .metadata
-                    .get(robotid_schemas::metadata::KNOWN)
-                    .map(|k| k.split(',').map(str::to_string).collect())
-                    .unwrap_or_default(),
-                cross: sys.a.transpose() * wak,
-                covariance: ck.clone(),
             }
+            if let (Some(cross), Some((ak, _))) = (&mut cross, &sys.known) {
+                let mut wak = ak.rows(start, a.nrows()).into_owned();
+                if let Some(w) = weights {
+                    for i in 0..a.nrows() {
+                        wak.row_mut(i).scale_mut(w[start + i]);
+                    }
+                }
+                *cross += a.transpose() * wak;
+            }
+            let (a, b) = weighted_rows(sys, a, start, weights);
+            fold_moments(&mut joints, sys, start, &a, &b);
+            factor.add_rows(&a, &b);
+        }
+        let known = sys.known.as_ref().zip(cross).map(|((_, ck), cross)| KnownPart {
+            names: sys
+                .metadata
+                .get(robotid_schemas::metadata::KNOWN)
+                .map(|k| k.split(',').map(str::to_string).collect())
+                .unwrap_or_default(),
+            cross,
+            covariance: ck.clone(),
         });
         Ok(Summary {
             names: sys.names.clone(),
@@ -145,7 +165,7 @@ impl Summary {
             equations: sys.equations(),
             period_moments,
             known,
-            joints: joint_moments(sys, weights),
+            joints,
             weighted: weights.is_some(),
             metadata: sys.metadata.clone(),
         })

@@ -28,6 +28,32 @@ pub fn columns_of(schema: &Schema, quantity: &str) -> Vec<usize> {
         .collect()
 }
 
+/// Where the rows of A come from: a system's own matrix, or a maker that
+/// computes them block by block, so that A is never whole (it is the
+/// largest thing a run holds: a 130 s recording's A is larger than the
+/// recording). Readers take [`block_rows`] rows at a time, so that sums
+/// over the rows do not depend on where A came from.
+pub trait RowBlocks: Sync {
+    /// Rows `start .. start + k` of A (k × parameters), a fresh matrix;
+    /// `start` and `k` are whole samples of every joint, but at the end.
+    fn block(&self, start: usize, k: usize) -> DMatrix<f64>;
+}
+
+impl RowBlocks for DMatrix<f64> {
+    fn block(&self, start: usize, k: usize) -> DMatrix<f64> {
+        self.rows(start, k).into_owned()
+    }
+}
+
+/// Samples per block of rows (times the joints: rows). A 6-joint,
+/// 52-parameter block is 1.3 MB.
+pub const BLOCK_SAMPLES: usize = 512;
+
+/// Rows per block for a system of `joints` joints: whole samples.
+pub fn block_rows(joints: usize) -> usize {
+    BLOCK_SAMPLES * joints.max(1)
+}
+
 /// A·θ = b with the bookkeeping to name rows.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct System {
@@ -409,16 +435,27 @@ impl System {
 
     /// Every value finite; an error names the parameter, recording, sample and joint.
     pub fn validate_values(&self) -> Result<()> {
-        let (m, p) = (self.rows(), self.parameters());
-        for j in 0..p {
-            if let Some(i) = (0..m).find(|&i| !self.a[(i, j)].is_finite()) {
+        self.validate_block(0, &self.a)?;
+        self.validate_torque()
+    }
+
+    /// Every value of the rows `start ..` of A in `a` finite.
+    pub fn validate_block(&self, start: usize, a: &DMatrix<f64>) -> Result<()> {
+        for j in 0..a.ncols() {
+            if let Some(i) = (0..a.nrows()).find(|&i| !a[(i, j)].is_finite()) {
                 return Err(Error::NotFinite {
                     what: format!("the regressor column of parameter `{}`", self.names[j]),
-                    value: self.a[(i, j)],
-                    at: format!("row {i} ({})", self.row_label(i)),
+                    value: a[(i, j)],
+                    at: format!("row {} ({})", start + i, self.row_label(start + i)),
                 });
             }
         }
+        Ok(())
+    }
+
+    /// Every torque finite.
+    pub fn validate_torque(&self) -> Result<()> {
+        let m = self.rows();
         if let Some(i) = (0..m).find(|&i| !self.b[i].is_finite()) {
             return Err(Error::NotFinite {
                 what: "the torque".into(),

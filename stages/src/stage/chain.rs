@@ -214,6 +214,9 @@ pub struct Chain {
     pub estimate: Option<crate::stage::estimate::Part>,
     pub facts: Facts,
     pub report: Report,
+    /// A run for tables: stages keep only what the tables and the estimate
+    /// read (the regressor makes A's rows when read, not kept whole).
+    pub lean: bool,
 }
 
 fn absent(what: Product, hint: &str) -> Error {

@@ -322,7 +322,7 @@ impl Stage for Reducer {
         };
         let config = Some(rows.config.clone());
         let part = if self.cfg.method == Estimator::Ml {
-            let sys = fix(rows.system.clone())?;
+            let sys = fix(rows.whole())?;
             let noise = self.ml_input_noise(chain, &rows.config)?;
             Part {
                 summary: Summary::of(&sys, weights(&sys)?.as_ref())?,
@@ -330,7 +330,7 @@ impl Stage for Reducer {
                 config,
             }
         } else if self.known.is_some() {
-            let sys = fix(rows.system.clone())?;
+            let sys = fix(rows.whole())?;
             Part {
                 summary: Summary::of(&sys, weights(&sys)?.as_ref())?,
                 rows: None,
@@ -338,7 +338,7 @@ impl Stage for Reducer {
             }
         } else {
             let w = weights(&rows.system)?;
-            let mut summary = Summary::of(&rows.system, w.as_ref())?;
+            let mut summary = Summary::of_rows(&rows.system, rows.source(), w.as_ref())?;
             summary.metadata = md;
             Part {
                 summary,

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
-use arrow::datatypes::{DataType, Field, Schema};
+use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use nalgebra::{DMatrix, DVector};
 use robotid_schemas::{metadata, Kinematics, NoiseTable, TableKind};
 use serde::{Deserialize, Serialize};
@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::{Chain, Component, Context, LintContext, Periods, PeriodsUse, Problem, Product, Stage};
 use crate::dynamics::{parameter_unit, BaseRegressor, FrictionTerms, Model, ModelKind, RegressorModel, SpringConfig};
 use crate::estimation::projection::ProjectionConfig;
-use crate::estimation::System;
+use crate::estimation::{block_rows, RowBlocks, System, BLOCK_SAMPLES};
 use crate::signal::Spectra;
 use crate::{Error, Result};
 
@@ -189,7 +189,7 @@ impl Component for RegressorConfig {
             ));
         }
         Ok(Box::new(Regressor {
-            base,
+            base: Arc::new(base),
             cfg,
             defaults,
             spectra: ctx.spectra.clone(),
@@ -200,7 +200,7 @@ impl Component for RegressorConfig {
 /// The built `regressor` stage: the base regressor (base-parameter QR and
 /// SVD) made once per run.
 pub struct Regressor {
-    base: BaseRegressor,
+    base: Arc<BaseRegressor>,
     cfg: RegressorConfig,
     /// Defaults the build chose, for the run summary and the metadata.
     defaults: Vec<String>,
@@ -237,7 +237,11 @@ impl Stage for Regressor {
             )),
             None => None,
         };
-        let rows = regressor_rows(
+        // A is made in blocks when asked, never whole, where only sums over
+        // its rows and the table need it: a run for tables, without the
+        // band limit, projection or joint selection, which rework A whole.
+        let on_demand = chain.lean && band.is_none() && self.cfg.projection.is_none() && !self.cfg.joint_wise;
+        let mut rows = regressor_rows(
             kin,
             chain.noise.as_ref(),
             chain.periods.as_ref(),
@@ -246,6 +250,7 @@ impl Stage for Regressor {
             band,
             &self.spectra,
             &chain.name,
+            on_demand,
         )?;
         chain.report.notes.push(format!(
             "regressor: {} rows, {} base parameters, condition number {} (column-normalised)",
@@ -256,10 +261,9 @@ impl Stage for Regressor {
         for d in &self.defaults {
             chain.report.notes.push(format!("regressor: default {d}"));
         }
-        if let Some(note) = torque_against_robot_file(&self.base, &rows.system) {
+        if let Some(note) = rows.torque_note.take() {
             chain.report.notes.push(note);
         }
-        let mut rows = rows;
         if !self.defaults.is_empty() {
             rows.metadata
                 .insert(metadata::DEFAULTS.into(), self.defaults.join("; "));
@@ -271,19 +275,14 @@ impl Stage for Regressor {
 
 /// The measured torques against those the robot file predicts for the same
 /// motion (its own parameters through the same regressor): b ≈ k·τ_file
-/// with k = bᵀτ/τᵀτ and their correlation. A robot file is rarely exact,
-/// but it is not off by a factor of 3: a k far from 1 where the two
-/// correlate says the torque is not in N·m at the joint (current read as
-/// torque, a missing gear ratio or torque constant); a strong negative
-/// correlation says a joint or channel is reversed. None when nothing is
-/// wrong or the file cannot tell (no inertias, no correlation).
-pub fn torque_against_robot_file(base: &BaseRegressor, sys: &System) -> Option<String> {
-    let theta = base.base_values(&base.model)?;
-    if theta.len() != sys.parameters() || theta.iter().all(|v| *v == 0.0) {
-        return None;
-    }
-    let predicted = &sys.a * theta;
-    let (bb, pp, bp) = (sys.b.norm_squared(), predicted.norm_squared(), sys.b.dot(&predicted));
+/// with k = bᵀτ/τᵀτ and their correlation, from bᵀb, τᵀτ and bᵀτ. A robot
+/// file is rarely exact, but it is not off by a factor of 3: a k far from
+/// 1 where the two correlate says the torque is not in N·m at the joint
+/// (current read as torque, a missing gear ratio or torque constant); a
+/// strong negative correlation says a joint or channel is reversed. None
+/// when nothing is wrong or the file cannot tell (no inertias, no
+/// correlation).
+fn torque_against_robot_file(bb: f64, pp: f64, bp: f64) -> Option<String> {
     if !(bb > 0.0 && pp > 0.0) {
         return None;
     }
@@ -301,15 +300,52 @@ pub fn torque_against_robot_file(base: &BaseRegressor, sys: &System) -> Option<S
     }
 }
 
+/// A's rows made from the motion when asked, a block of samples at a time
+/// ([`RowBlocks`]): a run that only sums over A's rows and writes its
+/// table never holds it whole.
+#[derive(Clone)]
+pub struct RowMaker {
+    base: Arc<BaseRegressor>,
+    q: Vec<Vec<f64>>,
+    qd: Vec<Vec<f64>>,
+    qdd: Vec<Vec<f64>>,
+}
+
+impl std::fmt::Debug for RowMaker {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "RowMaker {{ samples: {}, parameters: {} }}",
+            self.q.first().map_or(0, Vec::len),
+            self.base.parameters()
+        )
+    }
+}
+
+impl RowBlocks for RowMaker {
+    fn block(&self, start: usize, k: usize) -> DMatrix<f64> {
+        let n = self.base.model.dof();
+        assert!(start.is_multiple_of(n) && k.is_multiple_of(n), "blocks of whole samples");
+        self.base
+            .matrix_of(&self.q, &self.qd, &self.qdd, start / n..(start + k) / n)
+    }
+}
+
 /// One recording's regressor system, with what its table shows.
 #[derive(Debug, Clone)]
 pub struct RegressorRows {
-    /// A·θ = b, one recording; its per-period torques when aligned.
+    /// A·θ = b, one recording; its per-period torques when aligned. Its A
+    /// is empty (0 × parameters) when `maker` makes the rows: read them
+    /// through [`RegressorRows::source`], or [`RegressorRows::whole`].
     pub system: System,
+    /// Makes A's rows on demand, where A is not kept.
+    pub maker: Option<RowMaker>,
     /// Time of each sample, s.
     pub time: Vec<f64>,
     /// Condition number of the column-normalised A (Swevers' criterion).
     pub condition: f64,
+    /// The measured torques against the robot file's, when they disagree.
+    pub torque_note: Option<String>,
     /// What the Projection Method found, for the metadata.
     pub projection: Option<String>,
     pub config: RegressorConfig,
@@ -321,17 +357,20 @@ pub struct RegressorRows {
 /// The base regressor of `kin` and, with the aligned `periods`, the torque
 /// of every period (the estimator's covariance then comes from the spread
 /// across periods, which holds whatever the noise's colour, Swevers
-/// §4.1.2). `band`: (band limit Hz, period s).
+/// §4.1.2). `band`: (band limit Hz, period s). `on_demand`: A is not
+/// kept but made when read ([`RowMaker`]); not with `band`, projection or
+/// joint_wise.
 #[allow(clippy::too_many_arguments)]
 pub fn regressor_rows(
     kin: &Kinematics,
     noise: Option<&NoiseTable>,
     periods: Option<&Periods>,
-    base: &BaseRegressor,
+    base: &Arc<BaseRegressor>,
     cfg: &RegressorConfig,
     band: Option<(f64, f64)>,
     spectra: &Spectra,
     recording: &str,
+    on_demand: bool,
 ) -> Result<RegressorRows> {
     let model = &base.model;
     let names = model.joint_names();
@@ -349,8 +388,16 @@ pub fn regressor_rows(
     let n = model.dof();
     let samples = kin.time.len();
     let rows = samples * n;
+    let on_demand = on_demand && band.is_none() && cfg.projection.is_none() && !cfg.joint_wise;
+    let maker = on_demand.then(|| RowMaker {
+        base: base.clone(),
+        q: kin.q.clone(),
+        qd: kin.qd.clone(),
+        qdd: kin.qdd.clone(),
+    });
     let mut a = match band {
         Some((b, period)) => band_limited_matrix(base, kin, period, b, spectra),
+        None if on_demand => DMatrix::zeros(0, base.parameters()),
         None => base.matrix(kin),
     };
     let mut b_torque: Vec<Vec<f64>> = torque.clone();
@@ -455,15 +502,26 @@ pub fn regressor_rows(
         let keep = system.keep_joint(j);
         period_torques = period_torques.map(|p| p.select_rows(keep.iter()));
     }
-    let condition = normalised_condition(&system.a);
+    let source: &dyn RowBlocks = match &maker {
+        Some(m) => m,
+        None => &system.a,
+    };
+    let theta = base
+        .base_values(&base.model)
+        .filter(|t| t.len() == system.parameters() && t.iter().any(|v| *v != 0.0));
+    let pass = row_pass(source, &system, theta.as_ref());
+    let condition = normalised_condition(source, &system, &pass.gram);
+    let torque_note = torque_against_robot_file(system.b.norm_squared(), pass.pp, pass.bp);
     system.expressions = base.expressions();
     system.recordings = vec![recording.to_string()];
     system.periods = vec![period_torques];
     system.equations = equations;
     Ok(RegressorRows {
         system,
+        maker,
         time: kin.time.clone(),
         condition,
+        torque_note,
         projection,
         config: cfg.clone(),
         robot: model.name.clone(),
@@ -471,34 +529,34 @@ pub fn regressor_rows(
     })
 }
 
-/// Condition number of the column-normalised A (Swevers' criterion), over
-/// the columns the rows excite: a joint-wise recording excites only its
-/// joint's parameters, which the other recordings complete.
-///
-/// From the Gram matrix AᵀA: a matrix product, in fixed blocks of rows
-/// across threads and summed in block order (the result does not depend
-/// on the thread count), where the SVD of the tall A itself took six times
-/// the regressor kernel. Its eigenvalues are the squared singular values,
-/// each to about p·ε·λ_max, so the condition number is good to p·ε·κ²
-/// (below 1e-6 relative up to κ = 10⁴); above that, A's own singular
-/// values are taken.
-fn normalised_condition(a: &DMatrix<f64>) -> f64 {
+/// What one pass over A's rows gives: AᵀA, and for the torque check
+/// (A·θ)ᵀ(A·θ) and bᵀ(A·θ) at the robot file's θ.
+struct RowPass {
+    gram: DMatrix<f64>,
+    pp: f64,
+    bp: f64,
+}
+
+/// The pass in fixed blocks of rows ([`block_rows`]) across threads,
+/// summed in block order: the result does not depend on the thread count,
+/// nor on whether A is whole or made.
+fn row_pass(rows: &dyn RowBlocks, sys: &System, theta: Option<&DVector<f64>>) -> RowPass {
     use rayon::prelude::*;
-    const BLOCK: usize = 8192;
-    let (m, p) = a.shape();
-    let grams: Vec<DMatrix<f64>> = (0..m.div_ceil(BLOCK))
+    let (m, p) = (sys.rows(), sys.parameters());
+    let block = block_rows(sys.joints.len());
+    let parts: Vec<RowPass> = (0..m.div_ceil(block))
         .into_par_iter()
-        .map(|b| {
-            let (start, k) = (b * BLOCK, BLOCK.min(m - b * BLOCK));
+        .map(|bi| {
+            let (start, k) = (bi * block, block.min(m - bi * block));
+            let a = rows.block(start, k);
             // Through matrixmultiply's packed kernels with the block's
             // transpose given by strides: `tr_mul` takes a dot product per
-            // entry, and `rows.transpose() * rows` copied every block (3.4
-            // MB each, a third of a 130 s run's peak memory).
+            // entry, and `a.transpose() * a` copies the block.
             let mut g = DMatrix::zeros(p, p);
-            let first = a.as_slice()[start..].as_ptr();
-            // SAFETY: A is column-major m × p, so the block's (i, j) entry,
-            // i < k, j < p, lies at first + i + j·m, inside A; g is p × p,
-            // column-major, and nothing else borrows it.
+            let first = a.as_slice().as_ptr();
+            // SAFETY: a is column-major k × p, so its (i, j) entry lies at
+            // first + i + j·k: Aᵀ's (j, i) entry has row stride k, column
+            // stride 1; g is p × p, column-major, and nothing else borrows it.
             unsafe {
                 matrixmultiply::dgemm(
                     p,
@@ -506,21 +564,52 @@ fn normalised_condition(a: &DMatrix<f64>) -> f64 {
                     p,
                     1.0,
                     first,
-                    m as isize,
+                    k as isize,
                     1,
                     first,
                     1,
-                    m as isize,
+                    k as isize,
                     0.0,
                     g.as_mut_slice().as_mut_ptr(),
                     1,
                     p as isize,
                 );
             }
-            g
+            let (pp, bp) = match theta {
+                Some(t) => {
+                    let predicted = &a * t;
+                    (predicted.norm_squared(), predicted.dot(&sys.b.rows(start, k)))
+                }
+                None => (0.0, 0.0),
+            };
+            RowPass { gram: g, pp, bp }
         })
         .collect();
-    let gram = grams.into_iter().fold(DMatrix::zeros(p, p), |acc, g| acc + g);
+    parts.into_iter().fold(
+        RowPass {
+            gram: DMatrix::zeros(p, p),
+            pp: 0.0,
+            bp: 0.0,
+        },
+        |acc, x| RowPass {
+            gram: acc.gram + x.gram,
+            pp: acc.pp + x.pp,
+            bp: acc.bp + x.bp,
+        },
+    )
+}
+
+/// Condition number of the column-normalised A (Swevers' criterion), over
+/// the columns the rows excite: a joint-wise recording excites only its
+/// joint's parameters, which the other recordings complete.
+///
+/// From the Gram matrix AᵀA ([`row_pass`]), where the SVD of the tall A
+/// itself took six times the regressor kernel. Its eigenvalues are the
+/// squared singular values, each to about p·ε·λ_max, so the condition
+/// number is good to p·ε·κ² (below 1e-6 relative up to κ = 10⁴); above
+/// that, A's own singular values are taken (A made whole for it).
+fn normalised_condition(rows: &dyn RowBlocks, sys: &System, gram: &DMatrix<f64>) -> f64 {
+    let (m, p) = (sys.rows(), sys.parameters());
     let norms: Vec<f64> = (0..p).map(|c| gram[(c, c)].sqrt()).collect();
     let excited: Vec<usize> = (0..p).filter(|&c| norms[c] > 0.0).collect();
     if excited.is_empty() {
@@ -535,6 +624,7 @@ fn normalised_condition(a: &DMatrix<f64>) -> f64 {
     if lo > 0.0 && hi < 1e8 * lo {
         return (hi / lo).sqrt();
     }
+    let a = rows.block(0, m);
     let scaled = DMatrix::from_fn(m, excited.len(), |i, k| a[(i, excited[k])] / norms[excited[k]]);
     let sv = scaled.singular_values();
     if !sv.is_empty() && sv.min() > 0.0 {
@@ -554,7 +644,7 @@ pub fn regressor_table(
     cfg: &RegressorConfig,
     recording: &str,
 ) -> Result<RecordBatch> {
-    let base = cfg.base_regressor(model)?;
+    let base = Arc::new(cfg.base_regressor(model)?);
     let spectra = Spectra::new();
     let band = match cfg.band_limit_hz {
         Some(b) => Some((
@@ -567,7 +657,7 @@ pub fn regressor_table(
         )),
         None => None,
     };
-    regressor_rows(kin, noise, periods, &base, cfg, band, &spectra, recording)?.to_record_batch()
+    regressor_rows(kin, noise, periods, &base, cfg, band, &spectra, recording, false)?.into_record_batch()
 }
 
 impl RegressorRows {
@@ -593,6 +683,30 @@ impl RegressorRows {
         Ok(TableKind::Regressor.metadata(&sys.joints, &md))
     }
 
+    /// A's rows: the system's matrix, or the maker's.
+    pub fn source(&self) -> &dyn RowBlocks {
+        match &self.maker {
+            Some(m) => m,
+            None => &self.system.a,
+        }
+    }
+
+    /// The system with A whole (made, when its rows are made on demand).
+    pub fn whole(&self) -> System {
+        let mut sys = self.system.clone();
+        if let Some(m) = &self.maker {
+            sys.a = m.block(0, sys.rows());
+        }
+        sys
+    }
+
+    /// Makes A whole in the system, when its rows are made on demand.
+    pub fn make_whole(&mut self) {
+        if let Some(m) = self.maker.take() {
+            self.system.a = m.block(0, self.system.rows());
+        }
+    }
+
     /// The `regressor` table: recording, sample, joint, time, torque,
     /// torque_var, one column per base parameter, then `torque_p0`, … for
     /// each period when there are at least two. A copy; see
@@ -605,26 +719,51 @@ impl RegressorRows {
     /// the system's own column-major storage, moved, not copied (they are
     /// most of the table, which is as large as the recording).
     pub fn into_record_batch(mut self) -> Result<RecordBatch> {
-        let md = self.table_metadata()?;
+        self.make_whole();
+        let schema = Arc::new(self.table_schema()?);
         let periods = self.system.periods.first_mut().and_then(Option::take);
         let a = std::mem::replace(&mut self.system.a, DMatrix::zeros(0, 0));
+        let rows = self.system.rows();
+        self.batch(&schema, 0, rows, a, periods)
+    }
+
+    /// Rows per row group of the table written in groups: whole samples,
+    /// [`BLOCK_SAMPLES`] of them, more when that would make over 64 groups
+    /// (each group's metadata is a few kB).
+    pub fn group_rows(&self) -> usize {
+        let n = self.system.joints.len().max(1);
+        let samples = self.system.rows().div_ceil(n);
+        BLOCK_SAMPLES.max(samples.div_ceil(64)) * n
+    }
+
+    /// The `regressor` table a row group at a time ([`RegressorRows::group_rows`]):
+    /// its schema, and the groups, each made when asked, A's rows for it
+    /// from [`RegressorRows::source`], so that A is never whole.
+    pub fn into_groups(self) -> Result<(SchemaRef, impl Iterator<Item = Result<RecordBatch>>)> {
+        let schema = Arc::new(self.table_schema()?);
+        let (m, group) = (self.system.rows(), self.group_rows());
+        let out = schema.clone();
+        let groups = (0..m).step_by(group).map(move |start| {
+            let k = group.min(m - start);
+            let a = self.source().block(start, k);
+            let periods = self
+                .system
+                .periods
+                .first()
+                .and_then(Option::as_ref)
+                .map(|p| p.rows(start, k).into_owned());
+            self.batch(&schema, start, k, a, periods)
+        });
+        Ok((out, groups))
+    }
+
+    /// The table's schema: the kinds' columns, then one per base parameter
+    /// (unit, expression) and one per period.
+    fn table_schema(&self) -> Result<Schema> {
+        let md = self.table_metadata()?;
         let sys = &self.system;
-        let rows = sys.rows();
         let base_schema = TableKind::Regressor.schema(&sys.joints, &[], &md);
         let mut fields: Vec<Field> = base_schema.fields().iter().map(|f| f.as_ref().clone()).collect();
-        let recording = sys.recordings.first().map(String::as_str).unwrap_or("");
-        let mut columns: Vec<ArrayRef> = vec![
-            Arc::new(StringArray::from(vec![recording; rows])),
-            Arc::new(Int64Array::from(sys.sample.clone())),
-            Arc::new(StringArray::from_iter_values(
-                sys.joint.iter().map(|&j| sys.joints[j].as_str()),
-            )),
-            Arc::new(Float64Array::from_iter_values(
-                sys.sample.iter().map(|&k| self.time[k as usize]),
-            )),
-            Arc::new(Float64Array::from_iter_values(sys.b.iter().copied())),
-            Arc::new(Float64Array::from_iter_values(sys.var.iter().copied())),
-        ];
         for (i, name) in sys.names.iter().enumerate() {
             fields.push(
                 Field::new(name, DataType::Float64, false).with_metadata(BTreeMap::from([
@@ -634,24 +773,52 @@ impl RegressorRows {
                 ])),
             );
         }
-        columns.extend(column_arrays(a));
-        if let Some(p) = periods {
-            for pi in 0..p.ncols() {
-                fields.push(
-                    Field::new(format!("torque_p{pi}"), DataType::Float64, false).with_metadata(BTreeMap::from([
-                        (metadata::UNIT.to_string(), "N*m".to_string()),
-                        (metadata::QUANTITY.to_string(), PERIOD_TORQUE.to_string()),
-                        (metadata::PERIOD.to_string(), pi.to_string()),
-                    ])),
-                );
-            }
-            columns.extend(column_arrays(p));
+        let periods = sys.periods.first().and_then(Option::as_ref).map_or(0, |p| p.ncols());
+        for pi in 0..periods {
+            fields.push(
+                Field::new(format!("torque_p{pi}"), DataType::Float64, false).with_metadata(BTreeMap::from([
+                    (metadata::UNIT.to_string(), "N*m".to_string()),
+                    (metadata::QUANTITY.to_string(), PERIOD_TORQUE.to_string()),
+                    (metadata::PERIOD.to_string(), pi.to_string()),
+                ])),
+            );
         }
         let schema = Schema::new(fields).with_metadata(base_schema.metadata().clone());
-        let batch = RecordBatch::try_new(Arc::new(schema), columns)
-            .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
-        TableKind::Regressor.validate(&batch.schema())?;
-        Ok(batch)
+        TableKind::Regressor.validate(&schema)?;
+        Ok(schema)
+    }
+
+    /// The table's rows `start .. start + k`, with A's and the periods'
+    /// rows for them (moved into the table).
+    fn batch(
+        &self,
+        schema: &SchemaRef,
+        start: usize,
+        k: usize,
+        a: DMatrix<f64>,
+        periods: Option<DMatrix<f64>>,
+    ) -> Result<RecordBatch> {
+        let sys = &self.system;
+        let range = start..start + k;
+        let recording = sys.recordings.first().map(String::as_str).unwrap_or("");
+        let mut columns: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(vec![recording; k])),
+            Arc::new(Int64Array::from(sys.sample[range.clone()].to_vec())),
+            Arc::new(StringArray::from_iter_values(
+                sys.joint[range.clone()].iter().map(|&j| sys.joints[j].as_str()),
+            )),
+            Arc::new(Float64Array::from_iter_values(
+                sys.sample[range.clone()].iter().map(|&s| self.time[s as usize]),
+            )),
+            Arc::new(Float64Array::from_iter_values(sys.b.rows(start, k).iter().copied())),
+            Arc::new(Float64Array::from_iter_values(sys.var.rows(start, k).iter().copied())),
+        ];
+        columns.extend(column_arrays(a));
+        if let Some(p) = periods {
+            columns.extend(column_arrays(p));
+        }
+        Ok(RecordBatch::try_new(schema.clone(), columns)
+            .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?)
     }
 }
 
@@ -857,7 +1024,16 @@ mod tests {
                 // Column 7 nearly a copy of column 2 (scaled to its size).
                 a[(i, 7)] = a[(i, 2)] * 1e5 + coupling * a[(i, 7)];
             }
-            let (fast, exact) = (super::normalised_condition(&a), by_svd(&a));
+            let sys = crate::estimation::System::from_matrices(
+                (0..p).map(|c| format!("p{c}")).collect(),
+                vec![String::new(); p],
+                vec!["j".into()],
+                a.clone(),
+                nalgebra::DVector::zeros(m),
+                nalgebra::DVector::zeros(m),
+            );
+            let gram = super::row_pass(&a, &sys, None).gram;
+            let (fast, exact) = (super::normalised_condition(&a, &sys, &gram), by_svd(&a));
             assert!(
                 (fast / exact - 1.0).abs() < tol,
                 "coupling {coupling}: {fast} vs {exact}"
