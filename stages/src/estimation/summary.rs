@@ -115,23 +115,23 @@ impl Summary {
             for (j, c) in a.column_iter().enumerate() {
                 column_max[j] = c.amax().max(column_max[j]);
             }
-            // Aᵀ·W·D of the periods' deviations from their mean, row by row.
-            for i in 0..a.nrows() {
-                let row = start + i;
-                let r = sys.recording[row];
-                let (Some(tp), Some(out)) = (&sys.periods[r], &mut period_moments[r]) else {
+            // Aᵀ·W·D of the periods' deviations from their mean, over the
+            // rows of each recording in this block.
+            for (r, (tp, out)) in sys.periods.iter().zip(&mut period_moments).enumerate() {
+                let (Some(tp), Some(out)) = (tp, out) else { continue };
+                let (lo, hi) = (
+                    start.max(sys.offsets[r]),
+                    (start + a.nrows()).min(sys.offsets[r] + tp.nrows()),
+                );
+                if lo >= hi {
                     continue;
-                };
-                let local = row - sys.offsets[r];
-                let np = tp.ncols();
-                let mean = tp.row(local).sum() / np as f64;
-                let w = weights.map_or(1.0, |w| w[row]);
-                for k in 0..np {
-                    let d = w * (tp[(local, k)] - mean);
-                    for j in 0..p {
-                        out[(j, k)] += a[(i, j)] * d;
-                    }
                 }
+                let (np, first) = (tp.ncols(), lo - sys.offsets[r]);
+                let means: Vec<f64> = (first..first + hi - lo).map(|l| tp.row(l).sum() / np as f64).collect();
+                let wd = DMatrix::from_fn(hi - lo, np, |i, k| {
+                    weights.map_or(1.0, |w| w[lo + i]) * (tp[(first + i, k)] - means[i])
+                });
+                out.gemm_tr(1.0, &a.rows(lo - start, hi - lo), &wd, 1.0);
             }
             if let (Some(cross), Some((ak, _))) = (&mut cross, &sys.known) {
                 let mut wak = ak.rows(start, a.nrows()).into_owned();

@@ -325,7 +325,10 @@ impl std::fmt::Debug for RowMaker {
 impl RowBlocks for RowMaker {
     fn block(&self, start: usize, k: usize) -> DMatrix<f64> {
         let n = self.base.model.dof();
-        assert!(start.is_multiple_of(n) && k.is_multiple_of(n), "blocks of whole samples");
+        assert!(
+            start.is_multiple_of(n) && k.is_multiple_of(n),
+            "blocks of whole samples"
+        );
         self.base
             .matrix_of(&self.q, &self.qd, &self.qdd, start / n..(start + k) / n)
     }
