@@ -6,7 +6,7 @@
 
 use robotid_schemas::metadata;
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::{Channel, Columns, ReadConfig};
 use crate::formats::cdr::{
@@ -225,7 +225,6 @@ const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
 pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
-    let source = path.display().to_string();
     let mut maps = Vec::new();
     for f in bag_files(path)? {
         let file = std::fs::File::open(&f).map_err(|e| Error::io(&f, e))?;
@@ -234,12 +233,25 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(&f, e))?;
         maps.push((f, map));
     }
-    let hash = if maps.len() == 1 {
-        sha256_hex(&maps[0].1)
-    } else {
-        let parts: String = maps.iter().map(|(_, m)| sha256_hex(m)).collect();
-        sha256_hex(parts.as_bytes())
-    };
+    // The files' hash on a thread of its own while the messages are read
+    // (it is a tenth of the read).
+    std::thread::scope(|scope| {
+        let hash = scope.spawn(|| {
+            if maps.len() == 1 {
+                sha256_hex(&maps[0].1)
+            } else {
+                let parts: String = maps.iter().map(|(_, m)| sha256_hex(m)).collect();
+                sha256_hex(parts.as_bytes())
+            }
+        });
+        let columns = columns_of(path, &maps, cfg, joints)?;
+        Ok((columns, hash.join().expect("hashing does not panic")))
+    })
+}
+
+/// The channels of the mapped MCAP files `maps` (the parts of `path`).
+fn columns_of(path: &Path, maps: &[(PathBuf, memmap2::Mmap)], cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let source = path.display().to_string();
     let fmt_at = |f: &Path, msg: String| Error::Format {
         path: f.to_path_buf(),
         msg,
@@ -253,7 +265,7 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         ));
     }
     let mut metadata = BTreeMap::new();
-    for (f, map) in &maps {
+    for (f, map) in maps {
         for record in
             mcap::read::LinearReader::new(map).map_err(|e| fmt_at(f, format!("not a readable MCAP file: {e}")))?
         {
@@ -316,7 +328,7 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
     // JointState schemas already checked, by address: the file's channel
     // accumulator keeps them alive, so an address is not reused within it.
     let mut verified: Vec<*const ()> = Vec::new();
-    for (f, map) in &maps {
+    for (f, map) in maps {
         // The messages end at the data-end record: the summary after it
         // is checked on its own (a warning), the end magic here (a file
         // cut short is refused).
@@ -456,7 +468,7 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
     // The summary (index and statistics at the end) is not needed to read
     // the messages, but a damaged or inconsistent one says the file was
     // changed or cut: said, not ignored.
-    for (f, map) in &maps {
+    for (f, map) in maps {
         let name = f
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
@@ -499,15 +511,12 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
     if cfg.effort.is_none() {
         metadata.insert(metadata::READ_EFFORT_UNIT.into(), "N*m".into());
     }
-    Ok((
-        Columns {
-            time,
-            position,
-            effort,
-            reference,
-            names: [names(&pos), names(&eff), refw.as_ref().map(names).unwrap_or_default()],
-            metadata,
-        },
-        hash,
-    ))
+    Ok(Columns {
+        time,
+        position,
+        effort,
+        reference,
+        names: [names(&pos), names(&eff), refw.as_ref().map(names).unwrap_or_default()],
+        metadata,
+    })
 }
