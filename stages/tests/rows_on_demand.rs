@@ -6,50 +6,16 @@
 use std::sync::Arc;
 
 use nalgebra::DVector;
-use robotid_stages::dynamics::{load_robot, FrictionTerms};
 use robotid_stages::estimation::Summary;
 use robotid_stages::formats::parquet::content_crc32;
 use robotid_stages::signal::Spectra;
-use robotid_stages::stage::regressor::{regressor_rows, RegressorConfig};
-use robotid_tests::fixture;
-
-/// `samples` of one 10 s period of a 5-harmonic motion per joint, and a
-/// torque that is the robot file's model times 1.1 plus a deterministic
-/// ripple (so that nothing fits exactly).
-fn case(robot: &str, samples: usize) -> (robotid_stages::dynamics::BaseRegressor, robotid_schemas::Kinematics) {
-    let model = load_robot(&fixture(robot)).unwrap();
-    let cfg = RegressorConfig {
-        friction: FrictionTerms::Symmetric,
-        offset: true,
-        ..Default::default()
-    };
-    let base = cfg.base_regressor(&model).unwrap();
-    let names = model.joint_names();
-    let n = names.len();
-    let mut kin = robotid_tests::fourier_kinematics(names, samples, 10.0, |j, h| {
-        (
-            0.3 / h as f64 * (1.0 + 0.2 * j as f64),
-            0.1 * ((j + h) % 3) as f64 - 0.1,
-        )
-    });
-    let theta = base.base_values(&model).unwrap();
-    let tau = base.matrix(&kin) * theta * 1.1;
-    kin.torque = Some(
-        (0..n)
-            .map(|j| {
-                (0..samples)
-                    .map(|k| tau[k * n + j] + 0.05 * ((7 * k + 3 * j) as f64).sin())
-                    .collect()
-            })
-            .collect(),
-    );
-    (base, kin)
-}
+use robotid_stages::stage::regressor::regressor_rows;
+use robotid_tests::regressor_case;
 
 #[test]
 fn rows_made_in_blocks_are_the_rows_of_the_whole_matrix() {
     for robot in ["robots/ur5.urdf", "robots/arm3.toml"] {
-        let (base, kin) = case(robot, 1337);
+        let (base, _, kin) = regressor_case(robot, 1337);
         let n = base.model.dof();
         let whole = base.matrix(&kin);
         // Ranges that start and end off the kernel's lanes and chunks.
@@ -69,13 +35,8 @@ fn rows_made_in_blocks_are_the_rows_of_the_whole_matrix() {
 fn an_estimate_and_table_from_rows_made_on_demand_equal_those_from_a_whole() {
     for robot in ["robots/ur5.urdf", "robots/arm3.toml"] {
         // Over four blocks of rows, the last one short.
-        let (base, kin) = case(robot, 1700);
+        let (base, cfg, kin) = regressor_case(robot, 1700);
         let base = Arc::new(base);
-        let cfg = RegressorConfig {
-            friction: FrictionTerms::Symmetric,
-            offset: true,
-            ..Default::default()
-        };
         let spectra = Spectra::new();
         let rows = |on_demand| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "r", on_demand).unwrap();
         let (whole, made) = (rows(false), rows(true));
@@ -110,16 +71,11 @@ fn an_estimate_and_table_from_rows_made_on_demand_equal_those_from_a_whole() {
 /// from the whole matrix (the check is the same sums in the same order).
 #[test]
 fn the_torque_check_sees_the_same_from_blocks() {
-    let (base, mut kin) = case("robots/ur5.urdf", 1100);
+    let (base, cfg, mut kin) = regressor_case("robots/ur5.urdf", 1100);
     for series in kin.torque.as_mut().unwrap() {
         series.iter_mut().for_each(|t| *t *= 4.0);
     }
     let base = Arc::new(base);
-    let cfg = RegressorConfig {
-        friction: FrictionTerms::Symmetric,
-        offset: true,
-        ..Default::default()
-    };
     let spectra = Spectra::new();
     let rows = |on_demand| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "r", on_demand).unwrap();
     let (whole, made) = (rows(false), rows(true));

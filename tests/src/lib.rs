@@ -119,6 +119,47 @@ pub fn panda_urdf() -> Option<PathBuf> {
     found
 }
 
+/// A robot file's base regressor (symmetric friction, an offset) and one
+/// 10 s period of a 5-harmonic motion per joint on `samples` samples, with
+/// a torque that is the file's model times 1.1 plus a deterministic ripple
+/// (so that nothing fits exactly): a regressor system of known shape.
+pub fn regressor_case(
+    robot: &str,
+    samples: usize,
+) -> (
+    robotid_stages::dynamics::BaseRegressor,
+    robotid_stages::stage::regressor::RegressorConfig,
+    robotid_schemas::Kinematics,
+) {
+    let model = robotid_stages::dynamics::load_robot(&fixture(robot)).unwrap();
+    let cfg = robotid_stages::stage::regressor::RegressorConfig {
+        friction: robotid_stages::dynamics::FrictionTerms::Symmetric,
+        offset: true,
+        ..Default::default()
+    };
+    let base = cfg.base_regressor(&model).unwrap();
+    let names = model.joint_names();
+    let n = names.len();
+    let mut kin = fourier_kinematics(names, samples, 10.0, |j, h| {
+        (
+            0.3 / h as f64 * (1.0 + 0.2 * j as f64),
+            0.1 * ((j + h) % 3) as f64 - 0.1,
+        )
+    });
+    let theta = base.base_values(&model).unwrap();
+    let tau = base.matrix(&kin) * theta * 1.1;
+    kin.torque = Some(
+        (0..n)
+            .map(|j| {
+                (0..samples)
+                    .map(|k| tau[k * n + j] + 0.05 * ((7 * k + 3 * j) as f64).sin())
+                    .collect()
+            })
+            .collect(),
+    );
+    (base, cfg, kin)
+}
+
 /// One period of a 5-harmonic Fourier trajectory per joint, with exact
 /// velocities and accelerations, on `samples` samples: `coefficient(j, h)`
 /// gives joint j's (sine, cosine) velocity amplitudes of harmonic h.
