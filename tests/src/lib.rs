@@ -340,3 +340,46 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
     }
     (worst_mj / top_mj, worst_pin / top_pin)
 }
+
+/// A global allocator that counts the bytes live and their peak, for tests
+/// of what an operation holds: a test binary declares it
+/// `#[global_allocator]` and holds that one test, since every thread's
+/// allocations count.
+pub struct Counting;
+
+static LIVE: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+static PEAK: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator; only counts.
+unsafe impl std::alloc::GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        use std::sync::atomic::Ordering::SeqCst;
+        let live = LIVE.fetch_add(layout.size(), SeqCst) + layout.size();
+        PEAK.fetch_max(live, SeqCst);
+        std::alloc::System.alloc(layout)
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        LIVE.fetch_sub(layout.size(), std::sync::atomic::Ordering::SeqCst);
+        std::alloc::System.dealloc(ptr, layout)
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: std::alloc::Layout, new_size: usize) -> *mut u8 {
+        use std::sync::atomic::Ordering::SeqCst;
+        if new_size > layout.size() {
+            let live = LIVE.fetch_add(new_size - layout.size(), SeqCst) + new_size - layout.size();
+            PEAK.fetch_max(live, SeqCst);
+        } else {
+            LIVE.fetch_sub(layout.size() - new_size, SeqCst);
+        }
+        std::alloc::System.realloc(ptr, layout, new_size)
+    }
+}
+
+/// What `f` allocates at its peak beyond what was live before it (with
+/// [`Counting`] as the global allocator).
+pub fn extra_memory<T>(f: impl FnOnce() -> T) -> (T, usize) {
+    use std::sync::atomic::Ordering::SeqCst;
+    let before = LIVE.load(SeqCst);
+    PEAK.store(before, SeqCst);
+    let out = f();
+    (out, PEAK.load(SeqCst) - before)
+}
