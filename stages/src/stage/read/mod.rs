@@ -20,7 +20,6 @@ use serde::{Deserialize, Serialize};
 
 use super::Problem;
 use crate::dynamics::Model;
-use crate::formats::sha256_hex;
 use crate::{Error, Result};
 
 /// Where one channel is in the log and its unit. `column` (CSV, Parquet)
@@ -331,22 +330,19 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
             .unwrap_or_default()
     };
-    let bytes_hash;
     let text = TEXT_EXTENSIONS.contains(&ext.as_str());
-    let cols = match ext.as_str() {
-        e if TEXT_EXTENSIONS.contains(&e) => {
-            bytes_hash = hash_file(path)?;
-            text::read_text(path, cfg, &joints)?
-        }
-        "parquet" => {
-            bytes_hash = hash_file(path)?;
-            parquet::read_parquet_log(path, cfg, &joints)?
-        }
-        "mcap" => {
-            let (c, h) = mcap::read_mcap(path, cfg, &joints)?;
-            bytes_hash = h;
-            c
-        }
+    // The file's hash on a thread of its own while the channels are read.
+    let beside = |read: &dyn Fn() -> Result<Columns>| {
+        std::thread::scope(|scope| {
+            let hash = scope.spawn(|| hash_file(path));
+            let cols = read()?;
+            Ok::<_, Error>((cols, hash.join().expect("hashing does not panic")?))
+        })
+    };
+    let (cols, bytes_hash) = match ext.as_str() {
+        e if TEXT_EXTENSIONS.contains(&e) => beside(&|| text::read_text(path, cfg, &joints))?,
+        "parquet" => beside(&|| parquet::read_parquet_log(path, cfg, &joints))?,
+        "mcap" => mcap::read_mcap(path, cfg, &joints)?,
         other => {
             return Err(Error::Format {
                 path: path.to_path_buf(),
@@ -571,9 +567,14 @@ fn effort_unit_of(c: &Channel, columns: &[String]) -> Option<String> {
     }
 }
 
+/// SHA-256 of a file, streamed (not read whole: an hour's recording is
+/// hundreds of MB).
 fn hash_file(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    Ok(sha256_hex(&bytes))
+    use sha2::Digest;
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut hasher = sha2::Sha256::new();
+    std::io::copy(&mut file, &mut hasher).map_err(|e| Error::io(path, e))?;
+    Ok(hex::encode(hasher.finalize()))
 }
 
 /// Positions outside the robot's joint limits by more than a tenth of the
