@@ -237,10 +237,6 @@ impl Stage for Regressor {
             )),
             None => None,
         };
-        // A is made in blocks when asked, never whole, where only sums over
-        // its rows and the table need it: a run for tables, without the
-        // band limit, projection or joint selection, which rework A whole.
-        let on_demand = chain.lean && band.is_none() && self.cfg.projection.is_none() && !self.cfg.joint_wise;
         let mut rows = regressor_rows(
             kin,
             chain.noise.as_ref(),
@@ -250,7 +246,7 @@ impl Stage for Regressor {
             band,
             &self.spectra,
             &chain.name,
-            on_demand,
+            chain.lean,
         )?;
         chain.report.notes.push(format!(
             "regressor: {} rows, {} base parameters, condition number {} (column-normalised)",
@@ -360,9 +356,9 @@ pub struct RegressorRows {
 /// The base regressor of `kin` and, with the aligned `periods`, the torque
 /// of every period (the estimator's covariance then comes from the spread
 /// across periods, which holds whatever the noise's colour, Swevers
-/// §4.1.2). `band`: (band limit Hz, period s). `on_demand`: A is not
-/// kept but made when read ([`RowMaker`]); not with `band`, projection or
-/// joint_wise.
+/// §4.1.2). `band`: (band limit Hz, period s). `on_demand` (a run for
+/// tables): A is not kept but made when read ([`RowMaker`]), unless
+/// `band`, projection or joint_wise rework it whole.
 #[allow(clippy::too_many_arguments)]
 pub fn regressor_rows(
     kin: &Kinematics,
@@ -391,6 +387,9 @@ pub fn regressor_rows(
     let n = model.dof();
     let samples = kin.time.len();
     let rows = samples * n;
+    // A is made in blocks when read, never whole, where only sums over its
+    // rows and the table read it; the band limit, projection and joint
+    // selection rework it whole.
     let on_demand = on_demand && band.is_none() && cfg.projection.is_none() && !cfg.joint_wise;
     let maker = on_demand.then(|| RowMaker {
         base: base.clone(),

@@ -6,14 +6,13 @@
 
 use robotid_schemas::metadata;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::{Channel, Columns, ReadConfig};
 use crate::formats::cdr::{
     decode_controller_state, decode_dynamic_joint_state, decode_joint_state_into, JointStateField,
     CONTROLLER_STATE_NAME, DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
 };
-use crate::formats::sha256_hex;
 use crate::{Error, Result};
 
 struct Wanted {
@@ -224,7 +223,8 @@ fn for_each_message(
 const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
-pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
+pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let source = path.display().to_string();
     let mut maps = Vec::new();
     for f in bag_files(path)? {
         let file = std::fs::File::open(&f).map_err(|e| Error::io(&f, e))?;
@@ -233,25 +233,6 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(&f, e))?;
         maps.push((f, map));
     }
-    // The files' hash on a thread of its own while the messages are read
-    // (it is a tenth of the read).
-    std::thread::scope(|scope| {
-        let hash = scope.spawn(|| {
-            if maps.len() == 1 {
-                sha256_hex(&maps[0].1)
-            } else {
-                let parts: String = maps.iter().map(|(_, m)| sha256_hex(m)).collect();
-                sha256_hex(parts.as_bytes())
-            }
-        });
-        let columns = columns_of(path, &maps, cfg, joints)?;
-        Ok((columns, hash.join().expect("hashing does not panic")))
-    })
-}
-
-/// The channels of the mapped MCAP files `maps` (the parts of `path`).
-fn columns_of(path: &Path, maps: &[(PathBuf, memmap2::Mmap)], cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
-    let source = path.display().to_string();
     let fmt_at = |f: &Path, msg: String| Error::Format {
         path: f.to_path_buf(),
         msg,
@@ -265,7 +246,7 @@ fn columns_of(path: &Path, maps: &[(PathBuf, memmap2::Mmap)], cfg: &ReadConfig, 
         ));
     }
     let mut metadata = BTreeMap::new();
-    for (f, map) in maps {
+    for (f, map) in &maps {
         for record in
             mcap::read::LinearReader::new(map).map_err(|e| fmt_at(f, format!("not a readable MCAP file: {e}")))?
         {
@@ -328,7 +309,7 @@ fn columns_of(path: &Path, maps: &[(PathBuf, memmap2::Mmap)], cfg: &ReadConfig, 
     // JointState schemas already checked, by address: the file's channel
     // accumulator keeps them alive, so an address is not reused within it.
     let mut verified: Vec<*const ()> = Vec::new();
-    for (f, map) in maps {
+    for (f, map) in &maps {
         // The messages end at the data-end record: the summary after it
         // is checked on its own (a warning), the end magic here (a file
         // cut short is refused).
@@ -468,7 +449,7 @@ fn columns_of(path: &Path, maps: &[(PathBuf, memmap2::Mmap)], cfg: &ReadConfig, 
     // The summary (index and statistics at the end) is not needed to read
     // the messages, but a damaged or inconsistent one says the file was
     // changed or cut: said, not ignored.
-    for (f, map) in maps {
+    for (f, map) in &maps {
         let name = f
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
