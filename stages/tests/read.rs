@@ -892,3 +892,128 @@ fn mcap_summary_damage_is_reported_and_foreign_schemas_refused() {
         .unwrap_err();
     assert!(e.to_string().contains("does not define its fields"), "{e}");
 }
+
+/// `rec.mcap` written again with `options`: the same schemas, channels,
+/// messages and metadata.
+fn rewrite_mcap(from: &Path, to: &Path, options: mcap::WriteOptions) {
+    let bytes = std::fs::read(from).unwrap();
+    let mut w = options
+        .create(std::io::BufWriter::new(std::fs::File::create(to).unwrap()))
+        .unwrap();
+    let mut ids = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let id = *ids.entry(m.channel.id).or_insert_with(|| {
+            let s = m.channel.schema.as_ref().unwrap();
+            let schema = w.add_schema(&s.name, &s.encoding, &s.data).unwrap();
+            w.add_channel(
+                schema,
+                &m.channel.topic,
+                &m.channel.message_encoding,
+                &m.channel.metadata,
+            )
+            .unwrap()
+        });
+        let header = mcap::records::MessageHeader {
+            channel_id: id,
+            sequence: m.sequence,
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+        };
+        w.write_to_known_channel(&header, &m.data).unwrap();
+    }
+    for r in mcap::read::LinearReader::new(&bytes).unwrap() {
+        if let mcap::records::Record::Metadata(m) = r.unwrap() {
+            w.write_metadata(&m).unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+/// Chunks compressed with zstd or lz4, or not at all, small or large, or
+/// no chunks: the same samples and metadata. Small chunks make many
+/// windows of the parallel decompression.
+#[test]
+fn mcap_chunks_of_any_compression_read_the_same() {
+    use mcap::{Compression, WriteOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    let original = read(&dir.path().join("rec.mcap"), &cfg, Some(&model)).unwrap();
+    let ways = [
+        (
+            "zstd_small",
+            WriteOptions::new()
+                .compression(Some(Compression::Zstd))
+                .chunk_size(Some(4096)),
+        ),
+        (
+            "lz4",
+            WriteOptions::new()
+                .compression(Some(Compression::Lz4))
+                .chunk_size(Some(50_000)),
+        ),
+        ("none", WriteOptions::new().compression(None).chunk_size(Some(20_000))),
+        ("unchunked", WriteOptions::new().use_chunks(false)),
+    ];
+    for (name, options) in ways {
+        let path = dir.path().join(format!("{name}.mcap"));
+        rewrite_mcap(&dir.path().join("rec.mcap"), &path, options);
+        let r = read(&path, &cfg, Some(&model)).unwrap();
+        assert_eq!(r.q, original.q, "{name}");
+        assert_eq!(r.effort, original.effort, "{name}");
+        assert_eq!(r.reference, original.reference, "{name}");
+        assert_eq!(r.time, original.time, "{name}");
+        for key in ["robotid.period_s", "robotid.harmonics", "robotid.sample_rate_hz"] {
+            assert_eq!(r.metadata.get(key), original.metadata.get(key), "{name}: {key}");
+        }
+        assert!(
+            !r.metadata
+                .get("robotid.read.notes")
+                .is_some_and(|n| n.contains("warning")),
+            "{name}"
+        );
+    }
+}
+
+/// One bit flipped at 200 places of an MCAP recording: each read either
+/// fails naming the file or gives the very same samples (a flip in bytes
+/// the read does not use: indexes, the summary, padding); never other
+/// numbers. Chunk CRCs catch flips inside compressed records.
+#[test]
+fn mcap_flipped_bit_is_refused_or_harmless() {
+    use rand::{Rng, SeedableRng};
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    // Small zstd chunks: flips land in chunk headers, records and CRCs.
+    let path = dir.path().join("small.mcap");
+    let options = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .chunk_size(Some(8192));
+    rewrite_mcap(&dir.path().join("rec.mcap"), &path, options);
+    let original = read(&path, &cfg, Some(&model)).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let flipped = dir.path().join("flipped.mcap");
+    let (mut refused, mut harmless) = (0, 0);
+    for _ in 0..200 {
+        let at = rng.random_range(8..bytes.len() - 8);
+        let mut b = bytes.clone();
+        b[at] ^= 1 << rng.random_range(0..8);
+        std::fs::write(&flipped, &b).unwrap();
+        match read(&flipped, &cfg, Some(&model)) {
+            Err(e) => {
+                assert!(e.to_string().contains("flipped.mcap"), "{e}");
+                refused += 1;
+            }
+            Ok(r) => {
+                let same = r.q == original.q && r.effort == original.effort && r.time == original.time;
+                assert!(same, "byte {at}: read as valid with other values");
+                harmless += 1;
+            }
+        }
+    }
+    println!("200 single-bit flips: {refused} refused, {harmless} in bytes the read does not use");
+    assert!(refused > 100, "{refused} refused");
+}
