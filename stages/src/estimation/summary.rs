@@ -112,39 +112,50 @@ impl Summary {
         for start in (0..m).step_by(block) {
             let a = rows.block(start, block.min(m - start));
             sys.validate_block(start, &a)?;
-            for (j, c) in a.column_iter().enumerate() {
-                column_max[j] = c.amax().max(column_max[j]);
-            }
-            // Aᵀ·W·D of the periods' deviations from their mean, over the
-            // rows of each recording in this block.
-            for (r, (tp, out)) in sys.periods.iter().zip(&mut period_moments).enumerate() {
-                let (Some(tp), Some(out)) = (tp, out) else { continue };
-                let (lo, hi) = (
-                    start.max(sys.offsets[r]),
-                    (start + a.nrows()).min(sys.offsets[r] + tp.nrows()),
-                );
-                if lo >= hi {
-                    continue;
-                }
-                let (np, first) = (tp.ncols(), lo - sys.offsets[r]);
-                let means: Vec<f64> = (first..first + hi - lo).map(|l| tp.row(l).sum() / np as f64).collect();
-                let wd = DMatrix::from_fn(hi - lo, np, |i, k| {
-                    weights.map_or(1.0, |w| w[lo + i]) * (tp[(first + i, k)] - means[i])
-                });
-                out.gemm_tr(1.0, &a.rows(lo - start, hi - lo), &wd, 1.0);
-            }
-            if let (Some(cross), Some((ak, _))) = (&mut cross, &sys.known) {
-                let mut wak = ak.rows(start, a.nrows()).into_owned();
-                if let Some(w) = weights {
-                    for i in 0..a.nrows() {
-                        wak.row_mut(i).scale_mut(w[start + i]);
+            // The R factor's fold (Householder, a sequence of its own) on
+            // one core, the sums on the other: the same numbers as one
+            // after the other.
+            let (aw, bw) = match weights {
+                Some(_) => weighted_rows(sys, a.clone(), start, weights),
+                None => (DMatrix::zeros(0, 0), sys.b.rows(start, a.nrows()).into_owned()),
+            };
+            let aw = if weights.is_some() { &aw } else { &a };
+            rayon::join(
+                || factor.add_rows(aw, &bw),
+                || {
+                    for (j, c) in a.column_iter().enumerate() {
+                        column_max[j] = c.amax().max(column_max[j]);
                     }
-                }
-                *cross += a.transpose() * wak;
-            }
-            let (a, b) = weighted_rows(sys, a, start, weights);
-            fold_moments(&mut joints, sys, start, &a, &b);
-            factor.add_rows(&a, &b);
+                    // Aᵀ·W·D of the periods' deviations from their mean,
+                    // over the rows of each recording in this block.
+                    for (r, (tp, out)) in sys.periods.iter().zip(&mut period_moments).enumerate() {
+                        let (Some(tp), Some(out)) = (tp, out) else { continue };
+                        let (lo, hi) = (
+                            start.max(sys.offsets[r]),
+                            (start + a.nrows()).min(sys.offsets[r] + tp.nrows()),
+                        );
+                        if lo >= hi {
+                            continue;
+                        }
+                        let (np, first) = (tp.ncols(), lo - sys.offsets[r]);
+                        let means: Vec<f64> = (first..first + hi - lo).map(|l| tp.row(l).sum() / np as f64).collect();
+                        let wd = DMatrix::from_fn(hi - lo, np, |i, k| {
+                            weights.map_or(1.0, |w| w[lo + i]) * (tp[(first + i, k)] - means[i])
+                        });
+                        out.gemm_tr(1.0, &a.rows(lo - start, hi - lo), &wd, 1.0);
+                    }
+                    if let (Some(cross), Some((ak, _))) = (&mut cross, &sys.known) {
+                        let mut wak = ak.rows(start, a.nrows()).into_owned();
+                        if let Some(w) = weights {
+                            for i in 0..a.nrows() {
+                                wak.row_mut(i).scale_mut(w[start + i]);
+                            }
+                        }
+                        *cross += a.transpose() * wak;
+                    }
+                    fold_moments(&mut joints, sys, start, aw, &bw);
+                },
+            );
         }
         let known = sys.known.as_ref().zip(cross).map(|((_, ck), cross)| KnownPart {
             names: sys
