@@ -320,9 +320,16 @@ fn normality(col: &[f64], mean: &[f64], np: usize) -> (f64, f64, f64, f64) {
     // Sorted as integers in `f64::total_cmp`'s order (its own bit
     // transform, which is its own inverse): the same order, in half the time.
     let total_order = |x: i64| x ^ (((x >> 63) as u64) >> 1) as i64;
-    let mut keys: Vec<i64> = all.iter().step_by(stride).map(|v| total_order(v.to_bits() as i64)).collect();
+    let mut keys: Vec<i64> = all
+        .iter()
+        .step_by(stride)
+        .map(|v| total_order(v.to_bits() as i64))
+        .collect();
     keys.sort_unstable();
-    let r: Vec<f64> = keys.into_iter().map(|k| f64::from_bits(total_order(k) as u64)).collect();
+    let r: Vec<f64> = keys
+        .into_iter()
+        .map(|k| f64::from_bits(total_order(k) as u64))
+        .collect();
     let len = r.len() as f64;
     let mut d = 0.0f64;
     for (i, v) in r.iter().enumerate() {
