@@ -315,23 +315,42 @@ pub enum JointStateField {
 /// A JointState's names and one of its arrays, into reused buffers: names
 /// are rewritten in place (their capacity kept) and `values` refilled, so a
 /// steady stream of messages decodes without allocating.
+///
+/// `raw_names` holds the encoded names `names` were decoded from: a message
+/// whose names are the same bytes (a publisher's every message) skips their
+/// decoding, and the result says whether the names changed. The sequence
+/// starts 4-aligned, so equal bytes are equal names wherever they lie.
 pub fn decode_joint_state_into(
     bytes: &[u8],
     field: JointStateField,
     names: &mut Vec<String>,
+    raw_names: &mut Vec<u8>,
     values: &mut Vec<f64>,
-) -> Result<(), CdrError> {
+) -> Result<bool, CdrError> {
     let mut r = reader(bytes)?;
     r.u32()?;
     r.u32()?;
     r.skip_string()?;
     let n = r.u32()? as usize;
-    names.truncate(n);
-    for i in 0..n {
-        if i == names.len() {
-            names.push(String::new());
+    let start = r.pos - 4;
+    for _ in 0..n {
+        r.string_raw()?;
+    }
+    let changed = bytes[start..r.pos] != raw_names[..];
+    if changed {
+        let mut names_reader = Reader {
+            b: bytes,
+            pos: start + 4,
+        };
+        names.truncate(n);
+        for i in 0..n {
+            if i == names.len() {
+                names.push(String::new());
+            }
+            names_reader.string_into(&mut names[i])?;
         }
-        r.string_into(&mut names[i])?;
+        raw_names.clear();
+        raw_names.extend_from_slice(&bytes[start..r.pos]);
     }
     for f in [
         JointStateField::Position,
@@ -339,7 +358,7 @@ pub fn decode_joint_state_into(
         JointStateField::Effort,
     ] {
         match f == field {
-            true => return r.f64_seq_into(values),
+            true => return r.f64_seq_into(values).map(|()| changed),
             false => r.f64_seq_raw()?,
         };
     }
@@ -456,13 +475,55 @@ mod tests {
         assert_eq!(decode_joint_state(&buf).unwrap(), msg);
         // Into reused buffers: longer names and values than the message's
         // are cut, each field is found.
-        let (mut names, mut values) = (vec!["x".repeat(9); 3], vec![7.0; 5]);
-        decode_joint_state_into(&buf, JointStateField::Effort, &mut names, &mut values).unwrap();
+        let (mut names, mut raw, mut values) = (vec!["x".repeat(9); 3], Vec::new(), vec![7.0; 5]);
+        let into = |buf: &[u8], f, names: &mut Vec<String>, raw: &mut Vec<u8>, values: &mut Vec<f64>| {
+            decode_joint_state_into(buf, f, names, raw, values).unwrap()
+        };
+        assert!(into(&buf, JointStateField::Effort, &mut names, &mut raw, &mut values));
         assert_eq!((names.clone(), values.clone()), (msg.name.clone(), msg.effort.clone()));
-        decode_joint_state_into(&buf, JointStateField::Velocity, &mut names, &mut values).unwrap();
+        // The same names again: not decoded, said unchanged.
+        assert!(!into(
+            &buf,
+            JointStateField::Velocity,
+            &mut names,
+            &mut raw,
+            &mut values
+        ));
         assert_eq!(values, msg.velocity);
-        decode_joint_state_into(&buf, JointStateField::Position, &mut names, &mut values).unwrap();
-        assert_eq!(values, msg.position);
+        assert!(!into(
+            &buf,
+            JointStateField::Position,
+            &mut names,
+            &mut raw,
+            &mut values
+        ));
+        assert_eq!(
+            (names.clone(), values.clone()),
+            (msg.name.clone(), msg.position.clone())
+        );
+        // Other names, and a longer frame id that moves them (the same
+        // names at another offset are the same bytes): decoded when they
+        // differ, and only then.
+        let renamed = JointState {
+            name: vec!["bc".into(), "a".into()],
+            ..msg.clone()
+        };
+        let moved = JointState {
+            frame_id: "base_link_x".into(),
+            ..renamed.clone()
+        };
+        let (mut b2, mut b3) = (Vec::new(), Vec::new());
+        encode_joint_state(&renamed, &mut b2);
+        encode_joint_state(&moved, &mut b3);
+        assert!(into(&b2, JointStateField::Position, &mut names, &mut raw, &mut values));
+        assert_eq!(names, renamed.name);
+        assert!(!into(&b3, JointStateField::Effort, &mut names, &mut raw, &mut values));
+        assert_eq!(
+            (names.clone(), values.clone()),
+            (moved.name.clone(), moved.effort.clone())
+        );
+        assert!(into(&buf, JointStateField::Position, &mut names, &mut raw, &mut values));
+        assert_eq!(names, msg.name);
         let err = decode_joint_state(&buf[..buf.len() - 3]).unwrap_err();
         assert!(err.what.contains("truncated"), "{err}");
     }

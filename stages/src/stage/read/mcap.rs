@@ -40,6 +40,8 @@ struct Series {
     reorders: usize,
     /// The message being read, in buffers reused from message to message.
     message_names: Vec<String>,
+    /// The encoded names `message_names` were decoded from (JointState).
+    message_names_raw: Vec<u8>,
     message_values: Vec<f64>,
 }
 
@@ -74,14 +76,17 @@ pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
 ///
 /// The names and values go into `names` and `values`, buffers reused from
 /// message to message (a JointState stream then reads without allocating).
-/// `verified`: the JointState schemas already checked, by address.
+/// `verified`: the JointState schemas already checked, by address. The
+/// result says whether the names may differ from the last message's (a
+/// JointState's whose encoded names are the same bytes do not).
 fn decode_cdr(
     message: &mcap::Message<'_>,
     field: &str,
     verified: &mut Vec<*const ()>,
     names: &mut Vec<String>,
+    raw_names: &mut Vec<u8>,
     values: &mut Vec<f64>,
-) -> std::result::Result<(), String> {
+) -> std::result::Result<bool, String> {
     let schema = message
         .channel
         .schema
@@ -110,7 +115,7 @@ fn decode_cdr(
                 "effort" => JointStateField::Effort,
                 other => return Err(format!("JointState has no field `{other}` (position, velocity, effort)")),
             };
-            decode_joint_state_into(&message.data, which, names, values).map_err(|e| e.to_string())
+            decode_joint_state_into(&message.data, which, names, raw_names, values).map_err(|e| e.to_string())
         }
         DYNAMIC_JOINT_STATE_NAME => {
             let d = decode_dynamic_joint_state(&message.data).map_err(|e| e.to_string())?;
@@ -127,7 +132,8 @@ fn decode_cdr(
                 })
                 .collect::<std::result::Result<Vec<f64>, String>>()?;
             (*names, *values) = (d.joint_names, dynamic);
-            Ok(())
+            raw_names.clear();
+            Ok(true)
         }
         CONTROLLER_STATE_NAME => {
             let text = String::from_utf8_lossy(&schema.data);
@@ -150,7 +156,8 @@ fn decode_cdr(
                 other => return Err(format!("a trajectory point has no `{other}` (positions, velocities, accelerations, effort)")),
             };
             *names = c.joint_names;
-            Ok(())
+            raw_names.clear();
+            Ok(true)
         }
         other => Err(format!(
             "message type `{other}` is not read ({JOINT_STATE_NAME}, {DYNAMIC_JOINT_STATE_NAME}, {CONTROLLER_STATE_NAME})"
@@ -495,6 +502,7 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
             names: Vec::new(),
             reorders: 0,
             message_names: Vec::new(),
+            message_names_raw: Vec::new(),
             message_values: Vec::new(),
         })
         .collect();
@@ -530,11 +538,12 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                 match message.channel.message_encoding.as_str() {
                     "cdr" => {
                         let (names, values) = (&mut s.message_names, &mut s.message_values);
-                        decode_cdr(message, &w.field, &mut verified, names, values).map_err(err)?;
+                        let raw = &mut s.message_names_raw;
+                        let changed = decode_cdr(message, &w.field, &mut verified, names, raw, values).map_err(err)?;
                         // Names are matched on every message whose names differ
                         // from the last: a publisher that reorders its joints
                         // is followed, one that drops or repeats a name refused.
-                        if s.names != *names {
+                        if (changed || s.order.is_none()) && s.names != *names {
                             if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
                                 return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
                             }
