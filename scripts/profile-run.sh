@@ -14,7 +14,7 @@ robotid="$target/release/robotid"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 bash scripts/bench-recording.sh "$robotid" "$work"
-perf record -q -F 4000 --call-graph dwarf,16384 -o "$work/perf.data" -- bash -c \
+perf record -q -F 4000 --call-graph dwarf,32768 -o "$work/perf.data" -- bash -c \
   "for i in 1 2 3 4 5; do rm -rf '$work/out'; '$robotid' run '$work/rec/identify.toml' --out '$work/out' > /dev/null; done"
 perf script -i "$work/perf.data" --comm robotid -F comm,tid,ip,sym 2> /dev/null > "$work/perf.txt"
 python3 scripts/perf_breakdown.py "$work/perf.txt"
