@@ -116,12 +116,17 @@ impl Summary {
             // one core, the sums on the other: the same numbers as one
             // after the other.
             let (aw, bw) = match weights {
-                Some(_) => weighted_rows(sys, a.clone(), start, weights),
-                None => (DMatrix::zeros(0, 0), sys.b.rows(start, a.nrows()).into_owned()),
+                Some(_) => {
+                    let (aw, bw) = weighted_rows(sys, a.clone(), start, weights);
+                    (std::borrow::Cow::Owned(aw), bw)
+                }
+                None => (
+                    std::borrow::Cow::Borrowed(&a),
+                    sys.b.rows(start, a.nrows()).into_owned(),
+                ),
             };
-            let aw = if weights.is_some() { &aw } else { &a };
             rayon::join(
-                || factor.add_rows(aw, &bw),
+                || factor.add_rows(&aw, &bw),
                 || {
                     for (j, c) in a.column_iter().enumerate() {
                         column_max[j] = c.amax().max(column_max[j]);
@@ -153,7 +158,7 @@ impl Summary {
                         }
                         *cross += a.transpose() * wak;
                     }
-                    fold_moments(&mut joints, sys, start, aw, &bw);
+                    fold_moments(&mut joints, sys, start, &aw, &bw);
                 },
             );
         }

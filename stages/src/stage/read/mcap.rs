@@ -279,8 +279,9 @@ enum Holder<'a> {
 /// Chunks are decompressed on the rayon pool a window ahead while this
 /// thread decodes the window before: zstd was most of a serial read (on
 /// two cores, the 130 s bench recording's read went from a median of 145
-/// to 66 ms with this and the skipped topics and names below). Every record, inside a chunk too, is bounded by the
-/// bytes that hold it; chunk CRCs are checked.
+/// to 66 ms with this, the skipped topics and the names kept). Every
+/// record, inside a chunk too, is bounded by the bytes that hold it; chunk
+/// CRCs are checked.
 fn for_each_message<'m>(
     path: &Path,
     map: &'m [u8],
@@ -316,51 +317,58 @@ fn for_each_message<'m>(
     // One record of the data section or of a chunk: schemas and channels
     // recorded, messages passed to `f`.
     let mut take = |opcode: u8, body: &[u8], count: &mut usize| -> Result<()> {
-        if opcode == op::MESSAGE {
-            // The channel id leads a message record.
-            let id = body.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]]));
-            let known = by_id.iter().position(|c| Some(c.id) == id).or_else(|| {
-                let channel = channels.get(id?)?;
-                let wanted = topics.contains(&channel.topic.as_str());
-                by_id.push(Seen {
-                    id: id?,
-                    channel,
-                    wanted,
-                    messages: 0,
+        let step = match opcode {
+            op::SCHEMA | op::CHANNEL => match mcap::parse_record(opcode, body) {
+                Ok(Record::Schema { header, data }) => channels.add_schema(header, data.into_owned().into()),
+                Ok(Record::Channel(c)) => channels.add_channel(c),
+                Ok(_) => Ok(()),
+                Err(e) => Err(e),
+            },
+            op::MESSAGE => {
+                // The channel id leads a message record: one on a topic
+                // not read is counted, not parsed.
+                let id = body.get(..2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+                let k = id.and_then(|id| {
+                    by_id.iter().position(|c| c.id == id).or_else(|| {
+                        let channel = channels.get(id)?;
+                        let wanted = topics.contains(&channel.topic.as_str());
+                        by_id.push(Seen {
+                            id,
+                            channel,
+                            wanted,
+                            messages: 0,
+                        });
+                        Some(by_id.len() - 1)
+                    })
                 });
-                Some(by_id.len() - 1)
-            });
-            if let Some(k) = known {
-                by_id[k].messages += 1;
-                if !by_id[k].wanted {
-                    *count += 1;
-                    return Ok(());
+                match k.map(|k| &mut by_id[k]) {
+                    Some(seen) if !seen.wanted => {
+                        seen.messages += 1;
+                        *count += 1;
+                        Ok(())
+                    }
+                    seen => match (seen, mcap::parse_record(opcode, body)) {
+                        (Some(seen), Ok(Record::Message { header, data })) => {
+                            seen.messages += 1;
+                            f(&mcap::Message {
+                                channel: seen.channel.clone(),
+                                sequence: header.sequence,
+                                log_time: header.log_time,
+                                publish_time: header.publish_time,
+                                data,
+                            })?;
+                            *count += 1;
+                            Ok(())
+                        }
+                        (None, Ok(Record::Message { header, .. })) => {
+                            Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id))
+                        }
+                        (_, Ok(_)) => Ok(()),
+                        (_, Err(e)) => Err(e),
+                    },
                 }
             }
-        }
-        let record = match opcode {
-            op::SCHEMA | op::CHANNEL | op::MESSAGE => mcap::parse_record(opcode, body),
-            _ => return Ok(()),
-        };
-        let step = match record {
-            Ok(Record::Schema { header, data }) => channels.add_schema(header, data.into_owned().into()),
-            Ok(Record::Channel(c)) => channels.add_channel(c),
-            Ok(Record::Message { header, data }) => match by_id.iter().find(|c| c.id == header.channel_id) {
-                Some(seen) => {
-                    f(&mcap::Message {
-                        channel: seen.channel.clone(),
-                        sequence: header.sequence,
-                        log_time: header.log_time,
-                        publish_time: header.publish_time,
-                        data,
-                    })?;
-                    *count += 1;
-                    Ok(())
-                }
-                None => Err(mcap::McapError::UnknownChannel(header.sequence, header.channel_id)),
-            },
-            Ok(_) => Ok(()),
-            Err(e) => Err(e),
+            _ => Ok(()),
         };
         step.map_err(|e| corrupt(*count, e.to_string()))
     };
