@@ -14,7 +14,7 @@ use anyhow::{anyhow, bail, Context as _};
 use robotid_schemas::{metadata, RawSamples};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::signal::FilterSpec;
-use robotid_stages::stage::period::{excited_lines, golden, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
+use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::stage::read::{guess_read, log_columns, read, Channel, ReadConfig};
 
 use crate::Pipeline;
@@ -33,6 +33,15 @@ pub struct Design {
     pub periodic: bool,
     /// Its regressor stage (the tables of one identification share one).
     pub regressor: String,
+    /// The anti-alias filter undone (declared, found in the spectrum, or
+    /// the identification recording's) and the band it is undone in, Hz.
+    pub inverse: Option<(FilterSpec, f64)>,
+    /// The kinematics keep the torques' lines beyond the excited ones (the
+    /// identification's choice, which validation recordings follow).
+    pub wide_band: bool,
+    /// Whole steady periods averaged (0: not periodic). With fewer than
+    /// two, the noise floor comes from the non-excited lines of one period.
+    pub periods: usize,
     /// The excitation period, s (periodic records).
     pub period_s: Option<f64>,
     /// The excited harmonics of each joint (periodic records), and their
@@ -148,9 +157,11 @@ fn list(h: &[u32]) -> String {
 }
 
 /// Designs the pipeline for `log` and the robot file `robot` (absolute
-/// paths are written into it). `regressor`: the regressor stage to use
-/// (validation recordings take the identification's), else identify's own.
-pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Result<Design> {
+/// paths are written into it). `first`: the first recording's design,
+/// whose regressor stage (and anti-alias filter, where this one declares
+/// none) the others take, so that their tables share one parameter set.
+pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Result<Design> {
+    let regressor = first.map(|d| d.regressor.as_str());
     let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
@@ -193,7 +204,16 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     // Undone up to 0.8 of the cutoff (a 4th-order Butterworth is still
     // within 0.7 dB there), below Nyquist.
     let inverse = filter.map(|f| (f, (0.8 * f.cutoff_hz).min(0.4 * fs)));
+    let inherited = inverse.is_none() && first.is_some_and(|d| d.inverse.is_some());
+    let inverse = inverse.or_else(|| first.and_then(|d| d.inverse));
     match &inverse {
+        Some((f, band)) if inherited => findings.push((
+            "inverse_filter".into(),
+            format!(
+                "{}, the identification recording's (this one declares none), undone up to {band} Hz",
+                describe(f)
+            ),
+        )),
         Some((f, band)) => findings.push((
             "inverse_filter".into(),
             format!(
@@ -283,6 +303,7 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     };
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
+    let steady_periods = p.periods;
     findings.push((
         "steady".into(),
         format!(
@@ -327,6 +348,7 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
     // One joint moving, the others held: a joint-wise experiment (Bona
     // §3), identified with the decoupled model from that joint's rows.
     let joint_wise = joints.len() > 1 && still.len() == joints.len() - 1;
+    let moving = joint_wise.then(|| sets.iter().position(|h| !h.is_empty()).expect("one moves"));
     let mut regressor = regressor;
     if joint_wise {
         let moving = &joints[sets.iter().position(|h| !h.is_empty()).expect("one moves")];
@@ -365,69 +387,163 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
             per_joint.join(", ")
         ),
     ));
-    // Tracking and nonlinearity: lines of the positions (the robot does
-    // not follow its excitation exactly) and of the torques (gravity and
-    // friction answer a sinusoid with its harmonics) beyond the excited
-    // ones. Both sides of A·θ = b must keep them: the DFT up to the
-    // highest. Without any, the Fourier fit at the excited lines rejects
-    // the noise between them.
+    // Lines beyond the excited ones. In the positions they belong to the
+    // motion (the robot does not follow its excitation exactly): the
+    // kinematics keep them, the DFT up to the highest. In the torques they
+    // are either motion too small for the encoder (a closed loop's
+    // tracking, amplified by ω² in the inertial torque) or the dynamics'
+    // own nonlinearity (a sign(q̇) friction answers a sinusoid with every
+    // odd harmonic), which the regressor's columns make themselves: both
+    // bands are tried, and the held-out periods decide. Without any, the
+    // Fourier fit at the excited lines rejects the noise between them.
     let f0 = 1.0 / period;
-    let mut beyond: Option<(u32, String)> = None;
-    for (what, channels) in [("positions", &mean.q), ("torques", &mean.torque)] {
-        for (j, c) in channels.iter().enumerate() {
-            // Above the noise floor, however weak against the strongest.
-            let l = excited_lines(c);
-            let above = l
-                .amplitude
-                .iter()
-                .enumerate()
-                .filter(|(_, &a)| a > LINE_MARGIN * l.floor)
-                .map(|(i, _)| i as u32 + 1);
-            if let Some(h) = above.filter(|h| !union.contains(h)).max() {
-                if beyond.as_ref().is_none_or(|b| h > b.0) {
-                    beyond = Some((h, format!("the {what} of {}", joints[j])));
-                }
-            }
+    let by_positions = highest_beyond(&mean.q, &union, &joints);
+    let by_torques =
+        highest_beyond(&mean.torque, &union, &joints).filter(|(h, _)| by_positions.as_ref().is_none_or(|(p, _)| h > p));
+    let dft = |h: u32| {
+        let band = (h as f64 + 0.5) * f0;
+        (
+            band,
+            format!("[[stage]]\nkind = \"differentiate\"\nmethod = \"dft\"\nbandwidth_hz = {band:?}\n"),
+        )
+    };
+    let positions_stage = match &by_positions {
+        Some((h, whose)) => {
+            let (band, text) = dft(*h);
+            (
+                text,
+                format!("dft up to {band:.4} Hz: the positions of {whose} hold lines besides the excited ones up to harmonic {h} (tracking errors)"),
+                band,
+            )
         }
-    }
-    let differentiate = match beyond {
-        Some((highest, whose)) => {
-            let band = (highest as f64 + 0.5) * f0;
-            findings.push((
-                "differentiate".into(),
-                format!(
-                    "dft up to {band:.4} Hz: {whose} hold lines besides the excited ones up to harmonic {highest} (tracking errors, the dynamics' nonlinearity)"
-                ),
-            ));
-            format!("[[stage]]\nkind = \"differentiate\"\nmethod = \"dft\"\nbandwidth_hz = {band:?}\n")
-        }
-        None => {
-            findings.push((
-                "differentiate".into(),
-                "fourier_fit at the excited lines: neither positions nor torques hold others".into(),
-            ));
+        None => (
             format!(
                 "[[stage]]\nkind = \"differentiate\"\nmethod = \"fourier_fit\"\nharmonics = {}\n",
                 list(&union)
-            )
-        }
+            ),
+            "fourier_fit at the excited lines: the positions hold no others".to_string(),
+            f0 * union.iter().max().copied().unwrap_or(1) as f64,
+        ),
     };
-    let mut text = head;
-    writeln!(
-        text,
-        "[[stage]]\nkind = \"align\"\nperiod_s = {period:?}\nsample_rate_hz = {fs:?}\nsteady_tolerance = {tol}\n"
-    )?;
-    if let Some(inv) = &inverse {
-        writeln!(text, "{}", inverse_filter_stage(inv)?)?;
-    }
-    writeln!(text, "[[stage]]\nkind = \"average\"\n")?;
-    writeln!(text, "[[stage]]\nkind = \"noise\"\nharmonics = {}\n", list(&union))?;
-    writeln!(text, "{differentiate}")?;
+    let torques_stage = by_torques.as_ref().map(|(h, whose)| {
+        let (band, text) = dft(*h);
+        (
+            text,
+            format!("dft up to {band:.4} Hz: the torques of {whose} hold lines besides the excited ones up to harmonic {h} (tracking too small for the encoder, or the dynamics' nonlinearity)"),
+            band,
+        )
+    });
+    let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &str| -> anyhow::Result<String> {
+        let mut text = String::new();
+        writeln!(
+            text,
+            "[[stage]]\nkind = \"align\"\nperiod_s = {period:?}\nsample_rate_hz = {fs:?}\nsteady_tolerance = {tol}\n"
+        )?;
+        if let Some(inv) = inverse {
+            writeln!(text, "{}", inverse_filter_stage(inv)?)?;
+        }
+        writeln!(text, "[[stage]]\nkind = \"average\"\n")?;
+        writeln!(text, "[[stage]]\nkind = \"noise\"\nharmonics = {}\n", list(&union))?;
+        writeln!(text, "{differentiate}")?;
+        Ok(text)
+    };
+    let mut inverse = inverse;
+    let mut wide_band = first.map(|d| d.wide_band);
+    let mut differentiate = None;
     if own_regressor {
-        let (chosen, said) = coulomb_transition(&text, &regressor, log)?;
-        regressor = chosen;
-        findings.push(("coulomb_transition_rad_s".into(), said));
+        // The kinematics of each band and the periods' torques as
+        // measured; the band, the filter and the Coulomb model are chosen
+        // on them by held-out periods.
+        let mut tried = Vec::new();
+        for (wide, (stage, said, band)) in [(false, &positions_stage)]
+            .into_iter()
+            .chain(torques_stage.as_ref().map(|t| (true, t)))
+        {
+            let probe = format!("{head}{}", stages_after(None, stage)?);
+            let chain = Pipeline::from_toml(&probe, log.with_extension("probe.toml"))?
+                .build()?
+                .run_log(log, "probe", |_| {})?;
+            let lowest = (4.0 * band).max(fs / 50.0);
+            let choice = choose_model(
+                &chain,
+                &model,
+                &regressor_config(&regressor)?,
+                moving,
+                inverse.as_ref().map(|(f, _)| *f),
+                fs,
+                lowest,
+            )?;
+            tried.push((wide, said.clone(), choice));
+        }
+        // The Fourier fit or the positions' band unless the torques' band
+        // predicts held-out periods better by the score's spread; with
+        // fewer than two periods nothing can be scored, and the wider band
+        // keeps whatever motion the torques show.
+        let pick = match tried.iter().map(|t| t.2.score).collect::<Option<Vec<f64>>>() {
+            Some(scores) if scores.len() == 2 => usize::from(scores[1] < scores[0] * (1.0 - tried[1].2.margin)),
+            _ => tried.len() - 1,
+        };
+        let scores: String = tried
+            .iter()
+            .map(|t| match t.2.score {
+                Some(r) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
+                None => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let (wide, said, choice) = tried.swap_remove(pick);
+        wide_band = Some(wide);
+        findings.push((
+            "differentiate".into(),
+            if scores.contains(',') {
+                format!("{said} (held-out residue over the noise floor, each with its best filter and Coulomb model: {scores})")
+            } else {
+                said
+            },
+        ));
+        if inverse.is_none() {
+            if let Some(spec) = choice.filter {
+                let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
+                inverse = Some((spec, band));
+                regressor = regressor_stage(Some(band));
+                if joint_wise {
+                    regressor = regressor.replacen(
+                        "kind = \"regressor\"\n",
+                        "kind = \"regressor\"\nmodel = \"decoupled\"\nrotor = false\njoint_wise = true\n",
+                        1,
+                    );
+                }
+            }
+            findings.retain(|(k, _)| k != "inverse_filter");
+            findings.push(("inverse_filter".into(), choice.filter_said.clone()));
+        }
+        if let Some(v) = choice.transition.filter(|v| *v > 0.0) {
+            regressor.push_str(&format!("coulomb_transition_rad_s = {v:?}\n"));
+        }
+        findings.push(("coulomb_transition_rad_s".into(), choice.transition_said));
+        findings.push(("held_out".into(), choice.held_out_said));
+        differentiate = Some(
+            if wide {
+                torques_stage.as_ref()
+            } else {
+                Some(&positions_stage)
+            }
+            .expect("tried")
+            .0
+            .clone(),
+        );
     }
+    let differentiate = differentiate.unwrap_or_else(|| {
+        // Validation recordings take the identification's rule.
+        let (stage, said, _) = match (&torques_stage, wide_band) {
+            (Some(t), Some(true)) => t,
+            _ => &positions_stage,
+        };
+        findings.push(("differentiate".into(), said.clone()));
+        stage.clone()
+    });
+    let mut text = head;
+    text.push_str(&stages_after(inverse.as_ref(), &differentiate)?);
     writeln!(text, "{regressor}")?;
     writeln!(
         text,
@@ -438,124 +554,260 @@ pub fn design(log: &Path, robot: &Path, regressor: Option<&str>) -> anyhow::Resu
         findings,
         periodic: true,
         regressor,
+        inverse,
+        wide_band: wide_band.unwrap_or(false),
+        periods: steady_periods,
         period_s: Some(period),
         harmonics: sets,
         union,
     })
 }
 
-/// Transition velocities of the Coulomb term tried: 0 is sign(q̇).
+/// The highest harmonic of the period holding a line above the noise floor
+/// in any of `channels` besides the excited `union`, and whose channel.
+fn highest_beyond(channels: &[Vec<f64>], union: &[u32], joints: &[String]) -> Option<(u32, String)> {
+    let mut beyond: Option<(u32, String)> = None;
+    for (j, c) in channels.iter().enumerate() {
+        // Above the noise floor, however weak against the strongest.
+        let l = excited_lines(c);
+        let above = l
+            .amplitude
+            .iter()
+            .enumerate()
+            .filter(|(_, &a)| a > LINE_MARGIN * l.floor)
+            .map(|(i, _)| i as u32 + 1);
+        if let Some(h) = above.filter(|h| !union.contains(h)).max() {
+            if beyond.as_ref().is_none_or(|b| h > b.0) {
+                beyond = Some((h, joints[j].clone()));
+            }
+        }
+    }
+    beyond
+}
+
+/// Transition velocities of the Coulomb term tried, rad/s: 0 is sign(q̇).
 const TRANSITIONS: [f64; 6] = [0.0, 0.001, 0.003, 0.01, 0.03, 0.1];
 
-/// The Coulomb transition velocity whose least-squares fit leaves the
-/// smallest residual (a profile over the one nonlinear friction
-/// parameter), kept at sign(q̇) unless another lowers the residual sum of
-/// squares by more than 1 % with every friction value ≥ 0: a plant whose
-/// friction turns over smoothly biases Fv and Fc fitted with a sign
-/// (+32 % and −6 % on the KUKA axis).
-fn coulomb_transition(stages: &str, regressor: &str, log: &Path) -> anyhow::Result<(String, String)> {
-    let with = |v: f64| {
-        if v == 0.0 {
-            regressor.to_string()
-        } else {
-            format!("{regressor}coulomb_transition_rad_s = {v}\n")
-        }
+/// What [`choose_model`] chose, with the numbers that decided.
+struct ModelChoice {
+    /// An anti-alias filter found in the spectrum (when none was declared).
+    filter: Option<FilterSpec>,
+    filter_said: String,
+    /// The Coulomb transition velocity (None: the regression could not be
+    /// scored, and sign(q̇) is kept).
+    transition: Option<f64>,
+    transition_said: String,
+    held_out_said: String,
+    /// The held-out score of the choice (None: fewer than two periods).
+    score: Option<f64>,
+    /// The relative improvement one choice needs over a simpler one.
+    margin: f64,
+}
+
+/// The anti-alias filter (when `declared` is None) and the Coulomb model,
+/// jointly: each (transition, filter) pair scored by how well its fit on
+/// half of the periods predicts the other half (`estimation::spectral`).
+/// The filter's shape is searched with sign(q̇) and its best shapes refitted
+/// for each smooth turn-over. A filter must beat none, and a smooth
+/// turn-over sign(q̇), by the score's sampling spread, and friction must
+/// stay ≥ 0 (tanh is linear near 0 and trades against viscous friction).
+#[allow(clippy::too_many_arguments)]
+fn choose_model(
+    chain: &robotid_stages::stage::Chain,
+    model: &robotid_stages::dynamics::Model,
+    template: &robotid_stages::stage::regressor::RegressorConfig,
+    moving: Option<usize>,
+    declared: Option<FilterSpec>,
+    fs: f64,
+    lowest_hz: f64,
+) -> anyhow::Result<ModelChoice> {
+    use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem, Score};
+    use robotid_stages::signal::Spectra;
+    use robotid_stages::stage::regressor::{column_spectra, RegressorConfig};
+    let kin = chain.kinematics()?;
+    let p = chain.periods.as_ref().ok_or_else(|| anyhow!("no aligned periods"))?;
+    let samples = p.samples_per_period;
+    let lines = samples.saturating_sub(1) / 2 + 1;
+    let spectra = Spectra::new();
+    let margin = 3.0 * (2.0 / (chain_samples(kin) as f64)).sqrt();
+    // A joint-wise record: the moving joint's rows only, as the regressor
+    // stage takes them.
+    let used: Vec<bool> = match moving {
+        Some(m) => (0..kin.joints.len()).map(|j| j == m).collect(),
+        None => Vec::new(),
     };
-    // Everything before the regressor does not depend on the transition:
-    // run once; each candidate runs the regressor stage on a copy.
-    let probe = log.with_extension("probe.toml");
-    let kinematics = Pipeline::from_toml(stages, &probe)?
-        .build()?
-        .run_log(log, "probe", |_| {})?;
-    let residual = |v: f64| -> anyhow::Result<f64> {
-        let built = Pipeline::from_toml(&format!("{stages}{}", with(v)), &probe)?.build()?;
-        let (name, stage) = built.stages.last().expect("a regressor stage");
-        let mut chain = kinematics.clone();
-        stage.run(&mut chain).map_err(|e| e.in_stage(name, &chain.source))?;
-        let sys = &chain.regressor.as_ref().expect("a regressor stage").system;
-        let theta = sys
-            .a
-            .clone()
-            .svd(true, true)
-            .solve(&sys.b, 1e-12)
-            .map_err(|e| anyhow!("least squares: {e}"))?;
-        // A smooth turn-over trades against viscous friction (tanh is
-        // linear near 0): one that makes friction negative is no candidate.
-        let impossible = v > 0.0
-            && sys
-                .names
-                .iter()
-                .zip(theta.iter())
-                .any(|(n, x)| (n.starts_with("Fv") || n.starts_with("Fc")) && *x < 0.0);
-        if impossible {
-            return Ok(f64::INFINITY);
-        }
-        Ok((&sys.a * theta - &sys.b).norm_squared())
+    let system = |v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
+        let cfg = RegressorConfig {
+            coulomb_transition_rad_s: Some(v),
+            band_limit_hz: None,
+            joint_wise: false,
+            ..template.clone()
+        };
+        let base = cfg.base_regressor(model)?;
+        let cols = base.parameters();
+        let spec = column_spectra(&base, kin, lines - 1, &spectra);
+        Ok((
+            LineSystem::new(spec, lines, cols, &p.torque, samples, p.period_s, &used, &spectra),
+            base.names(),
+        ))
     };
-    let rss = TRANSITIONS
-        .map(residual)
-        .into_iter()
-        .collect::<anyhow::Result<Vec<f64>>>()?;
-    let table = |rss: &[f64]| {
-        TRANSITIONS
-            .iter()
-            .zip(rss)
-            .map(|(v, r)| {
-                if r.is_finite() {
-                    format!("{v}: {:.4}", r / rss[0])
-                } else {
-                    format!("{v}: friction < 0")
+    let (Some(sign), names) = system(0.0)? else {
+        return Ok(ModelChoice {
+            filter: None,
+            filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
+            transition: None,
+            transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
+            held_out_said: "not scored: fewer than two steady periods".into(),
+            score: None,
+            margin,
+        });
+    };
+    // With sign(q̇): the declared filter, or the search over all shapes.
+    let search = match declared {
+        Some(_) => None,
+        None => Some(
+            choose_filter(&sign, lowest_hz, 0.5 * fs)
+                .ok_or_else(|| anyhow!("the held-out scores of the filters: the regression is singular"))?,
+        ),
+    };
+    let score_with = |sys: &LineSystem| -> Option<(Option<FilterSpec>, Score)> {
+        match (declared, &search) {
+            (Some(f), _) => Some((None, sys.score(&sys.response(Some(&f))?)?)),
+            (None, Some(c)) => {
+                let none = sys.score(&sys.response(None)?)?;
+                match refit_filter(sys, &c.top) {
+                    Some((f, s)) if s.ratio < none.ratio * (1.0 - c.margin) => Some((Some(f), s)),
+                    _ => Some((None, none)),
                 }
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
+            }
+            (None, None) => unreachable!("a search without a declared filter"),
+        }
     };
-    let best = (0..rss.len())
-        .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
-        .expect("candidates");
-    let pick = if rss[best] < 0.99 * rss[0] { best } else { 0 };
-    if pick == 0 {
-        return Ok((
-            with(0.0),
-            format!(
-                "0, sign(q̇): no transition velocity with friction ≥ 0 lowers the residual by 1 % ({})",
-                table(&rss)
-            ),
-        ));
-    }
-    // Refined between the grid neighbours, in log space, by golden section.
-    let lo = TRANSITIONS[pick.saturating_sub(1)].max(TRANSITIONS[pick] / 3.0).ln();
-    let hi = TRANSITIONS
-        .get(pick + 1)
-        .copied()
-        .unwrap_or(TRANSITIONS[pick] * 3.0)
-        .ln();
-    let mut failed = None;
-    let best_ln = golden(
-        |l| {
-            residual(l.exp()).unwrap_or_else(|e| {
-                failed.get_or_insert(e);
-                f64::INFINITY
-            })
-        },
-        lo,
-        hi,
-        2e-3,
-    );
-    if let Some(e) = failed {
-        return Err(e);
-    }
-    let v = format!("{:.2e}", best_ln.exp()).parse::<f64>().expect("a number");
-    let (v, r) = match residual(v)? {
-        r if r <= rss[pick] => (v, r),
-        _ => (TRANSITIONS[pick], rss[pick]),
+    let sign_fit = match &search {
+        Some(c) => (c.spec, c.score.clone()),
+        None => score_with(&sign).ok_or_else(|| anyhow!("the regression is singular"))?,
     };
-    let said = format!(
-        "{v} (residual sum of squares {:.4} of sign(q̇)'s; on the grid: {})",
-        r / rss[0],
-        table(&rss)
-    );
-    Ok((with(v), said))
+    let moving_name = moving.map(|m| kin.joints[m].as_str());
+    let friction_ok = |names: &[String], s: &Score| {
+        names.iter().zip(s.theta.iter()).all(|(n, x)| {
+            let friction = n.starts_with("Fv") || n.starts_with("Fc");
+            let scored = moving_name.is_none_or(|m| n.ends_with(m));
+            !(friction && scored) || *x >= 0.0
+        })
+    };
+    let mut scored = vec![(0.0, Some(sign_fit.clone()), true)];
+    for &v in &TRANSITIONS[1..] {
+        let (Some(sys), names) = system(v)? else { continue };
+        let fit = score_with(&sys);
+        let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
+        scored.push((v, fit, ok));
+    }
+    let ratio = |f: &Option<(Option<FilterSpec>, Score)>| f.as_ref().map_or(f64::INFINITY, |x| x.1.ratio);
+    let best = scored
+        .iter()
+        .filter(|s| s.2)
+        .min_by(|a, b| ratio(&a.1).total_cmp(&ratio(&b.1)))
+        .expect("sign(q̇) is always possible");
+    let pick = if ratio(&best.1) < sign_fit.1.ratio * (1.0 - margin) {
+        best
+    } else {
+        &scored[0]
+    };
+    let (filter, score) = pick.1.clone().expect("scored");
+    let describe_fit = |f: &Option<(Option<FilterSpec>, Score)>| match f {
+        Some((Some(s), x)) if declared.is_none() => format!("{:.3} ({})", x.ratio, describe(s)),
+        Some((_, x)) => format!("{:.3}", x.ratio),
+        None => "singular".into(),
+    };
+    let table = scored
+        .iter()
+        .map(|(v, f, ok)| {
+            if *ok {
+                format!("{v}: {}", describe_fit(f))
+            } else {
+                format!("{v}: friction < 0")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    let transition_said = if pick.0 == 0.0 {
+        format!("0, sign(q̇): no smooth turn-over with friction ≥ 0 predicts held-out periods better by {:.2} % (held-out residue over the noise floor: {table})", 100.0 * margin)
+    } else {
+        format!("{} (held-out residue over the noise floor: {table})", pick.0)
+    };
+    let filter_said = match &search {
+        None => String::new(),
+        Some(c) => {
+            let runner = c
+                .runner_up
+                .as_ref()
+                .map(|(s, r)| format!("; next best shape {} at {r:.3}", describe(s)))
+                .unwrap_or_default();
+            match &filter {
+                Some(s) => format!(
+                    "{}, found in the spectrum (not declared): the fit on half of the periods predicts the other half {:.3}× the noise floor with it, {:.3}× without{runner}; {} candidates",
+                    describe(s),
+                    score.ratio,
+                    c.none.ratio,
+                    c.candidates
+                ),
+                None => format!(
+                    "none: no analog filter predicts held-out periods better than none by {:.2} % ({:.3}× the noise floor without one{runner})",
+                    100.0 * c.margin,
+                    score.ratio
+                ),
+            }
+        }
+    };
+    let per_joint = score
+        .per_joint
+        .iter()
+        .zip(&kin.joints)
+        .filter(|(r, _)| !r.is_nan())
+        .map(|(r, j)| format!("{j} {r:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let _ = names;
+    Ok(ModelChoice {
+        filter,
+        filter_said,
+        transition: Some(pick.0),
+        transition_said,
+        held_out_said: format!(
+            "{:.3}× the noise floor: fitted on the even periods and scored on the odd ones, and the reverse (per joint: {per_joint})",
+            score.ratio
+        ),
+        score: Some(score.ratio),
+        margin,
+    })
+}
+
+/// The typed settings of a regressor stage written as text.
+fn regressor_config(stage: &str) -> anyhow::Result<robotid_stages::stage::regressor::RegressorConfig> {
+    let mut t: toml::Table = stage.parse()?;
+    let mut s = t
+        .remove("stage")
+        .and_then(|s| s.as_array().and_then(|a| a.first().cloned()))
+        .and_then(|s| s.as_table().cloned())
+        .ok_or_else(|| anyhow!("a regressor stage"))?;
+    s.remove("kind");
+    Ok(toml::Value::Table(s).try_into()?)
+}
+
+/// Joints × samples of one period: the count behind a held-out score.
+fn chain_samples(kin: &robotid_schemas::Kinematics) -> usize {
+    kin.joints.len() * kin.time.len()
+}
+
+/// A filter as a person writes it.
+fn describe(s: &FilterSpec) -> String {
+    let family = toml::Value::try_from(s.family)
+        .map(|v| v.to_string())
+        .unwrap_or_default();
+    match s.ripple_db {
+        Some(r) => format!("{family} order {} ({r} dB ripple) at {:.2} Hz", s.order, s.cutoff_hz),
+        None => format!("{family} order {} at {:.2} Hz", s.order, s.cutoff_hz),
+    }
 }
 
 /// A record that does not repeat: derivatives by a zero-phase 2nd-order
@@ -598,6 +850,9 @@ fn non_periodic(
         findings,
         periodic: false,
         regressor,
+        inverse: inverse.copied(),
+        wide_band: false,
+        periods: 0,
         period_s: None,
         harmonics: Vec::new(),
         union: Vec::new(),

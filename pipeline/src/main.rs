@@ -104,6 +104,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<cmd::identify::Inadequate>().is_some() => {
+            eprintln!("error: {e}");
+            ExitCode::from(cmd::identify::INADEQUATE_EXIT)
+        }
         Err(e) => {
             // A pipeline file's problems: one line each. Anything else: one
             // line, the whole cause chain, outermost first.

@@ -101,6 +101,10 @@ pub const IMPOSSIBLE: &str = "robotid.estimate.impossible";
 pub const ADEQUACY: &str = "robotid.estimate.adequacy";
 /// Present when the covariance was widened by the excess residual variance
 /// of the joints where model error dominates: which joints, and why.
+/// Set by `robotid identify --accept-inadequate` on a fit whose residue
+/// is over 3× the noise floor: the joints, their ratios and the causes it
+/// measured. Intervals of such a table are not at their nominal level.
+pub const INADEQUATE: &str = "robotid.identify.inadequate";
 pub const WIDENED: &str = "robotid.estimate.covariance_widened";
 /// Base parameters whose standard deviation exceeds their a-priori size
 /// (robot file), with both.

@@ -100,23 +100,57 @@ pub fn python() -> String {
     std::env::var("ROBOTID_PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
-/// The Panda of the `example-robot-data` package (installed by
-/// scripts/test.sh beside Pinocchio), or None with a message.
-pub fn panda_urdf() -> Option<PathBuf> {
+/// A URDF of the `example-robot-data` package (installed by
+/// scripts/test.sh beside Pinocchio) by its path under `robots/`, or None
+/// with a message; under CI (`CI` set) its absence fails instead.
+pub fn example_urdf(rel: &str) -> Option<PathBuf> {
     let venv = PathBuf::from(python()).parent()?.parent()?.to_path_buf();
     let found = std::fs::read_dir(venv.join("lib")).ok().and_then(|dirs| {
         dirs.flatten()
             .map(|py| {
-                py.path().join(
-                    "site-packages/cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf",
-                )
+                py.path()
+                    .join("site-packages/cmeel.prefix/share/example-robot-data/robots")
+                    .join(rel)
             })
             .find(|p| p.is_file())
     });
     if found.is_none() {
-        eprintln!("skipped the Panda: example-robot-data is not installed (scripts/test.sh installs it)");
+        absent(&format!(
+            "{rel}: example-robot-data is not installed (scripts/test.sh installs it)"
+        ));
     }
     found
+}
+
+/// The Panda of the `example-robot-data` package, or None with a message.
+pub fn panda_urdf() -> Option<PathBuf> {
+    example_urdf("panda_description/urdf/panda.urdf")
+}
+
+/// The foreign recordings beside the repository
+/// (`../shared/foreign/NAME`: made by an independent simulator, with the
+/// truth beside them), or None with a message; under CI their absence
+/// fails instead.
+pub fn foreign(name: &str) -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/foreign")
+        .join(name);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        absent(&format!("{} is absent", dir.display()));
+        None
+    }
+}
+
+/// Says a test's input is absent: skipped with a message, or under CI
+/// (where everything is installed and `../shared` lies beside the clone)
+/// a failure, so that no test passes vacuously there.
+fn absent(what: &str) {
+    if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
+        panic!("{what}, under CI");
+    }
+    eprintln!("skipped: {what}");
 }
 
 /// A robot file's base regressor (symmetric friction, an offset) and one

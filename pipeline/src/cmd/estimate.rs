@@ -45,6 +45,23 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let level = args.confidence;
+    let out = estimate(&args, None)?;
+    if let Some(k) = &args.known {
+        println!("known ({}): {}", k.display(), out.known.join(", "));
+    }
+    print!("{}", summary(&out.estimate, level));
+    print!("{}", findings(&out));
+    println!("parameters in {}", args.out.display());
+    Ok(())
+}
+
+/// The estimate of `args`, its table written to `args.out` with
+/// `marks` added to the table's metadata.
+pub fn estimate(
+    args: &Args,
+    marks: Option<&dyn Fn(&robotid_stages::stage::estimate::Outcome) -> Vec<(String, String)>>,
+) -> anyhow::Result<robotid_stages::stage::estimate::Outcome> {
     let method = match args.method.as_str() {
         "ols" => Estimator::Ols,
         "wls" => Estimator::Wls,
@@ -99,14 +116,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         parts.push(reducer.part_of(sys)?);
     }
     let out = reducer.reduce(&parts, &Default::default())?;
-    if let Some(k) = &args.known {
-        println!("known ({}): {}", k.display(), out.known.join(", "));
-    }
-    write_parquet(&args.out, &out.table)?;
-    print!("{}", summary(&out.estimate, cfg.confidence));
-    print!("{}", findings(&out));
-    println!("parameters in {}", args.out.display());
-    Ok(())
+    let table = match marks.map(|m| m(&out)).filter(|m| !m.is_empty()) {
+        None => out.table.clone(),
+        Some(m) => {
+            let mut md = out.table.schema().metadata().clone();
+            md.extend(m);
+            let schema = std::sync::Arc::new(out.table.schema().as_ref().clone().with_metadata(md));
+            out.table.clone().with_schema(schema)?
+        }
+    };
+    write_parquet(&args.out, &table)?;
+    Ok(out)
 }
 
 /// Stacks regressor tables named on the command line.
@@ -188,6 +208,12 @@ pub fn adequacy(est: &Estimate) -> String {
 
 /// The parameter table as text: value, std, relative std and interval.
 pub fn summary(est: &Estimate, level: f64) -> String {
+    summary_at(est, level, Some(level))
+}
+
+/// The same, with the intervals' label: `None` where the fit is
+/// inadequate and the intervals are at no known level.
+pub fn summary_at(est: &Estimate, level: f64, label: Option<f64>) -> String {
     let std = est.std();
     let half = est.half_width(level);
     let mut s = format!(
@@ -211,7 +237,10 @@ pub fn summary(est: &Estimate, level: f64) -> String {
         "value",
         "std",
         "std %",
-        format!("{:.1} % interval", 100.0 * level)
+        label.map_or("interval (level unknown)".to_string(), |l| format!(
+            "{:.1} % interval",
+            100.0 * l
+        ))
     ));
     for i in 0..est.values.len() {
         s.push_str(&format!(

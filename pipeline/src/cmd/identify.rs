@@ -24,6 +24,43 @@ pub struct Args {
     /// the output folder, with every other one).
     #[arg(long)]
     pub print_pipeline: bool,
+    /// Write the estimate, its physical fit and the exports even when the
+    /// fit's residue is over 3× the noise floor on some joint (the tables
+    /// are marked `robotid.identify.inadequate`); without it identify
+    /// writes the estimate and the report marked so, no export, and exits
+    /// with code 3.
+    #[arg(long)]
+    pub accept_inadequate: bool,
+}
+
+/// A fit whose residue is over this many times the noise floor on some
+/// joint is not identified: the model, the declarations or the channels
+/// disagree with the data.
+pub const REFUSE_RATIO: f64 = 3.0;
+
+/// The exit code of an identification refused as inadequate.
+pub const INADEQUATE_EXIT: u8 = 3;
+
+/// identify's refusal of an inadequate fit (exit code [`INADEQUATE_EXIT`]).
+#[derive(Debug)]
+pub struct Inadequate(pub String);
+
+impl std::fmt::Display for Inadequate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Inadequate {}
+
+/// The joints whose fit residue is over [`REFUSE_RATIO`]× the noise floor,
+/// with their ratios.
+fn over_floor(est: &robotid_stages::estimation::Estimate) -> Vec<(String, f64)> {
+    est.adequacy
+        .iter()
+        .filter_map(|a| Some((a.joint.clone(), a.ratio()?)))
+        .filter(|(_, r)| !(*r <= REFUSE_RATIO))
+        .collect()
 }
 
 /// Removes the output folder unless told the work is done: a failed
@@ -59,13 +96,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("{}: the output folder holds the recordings", out.display());
         }
     }
+    // The same data under two names would count twice: the intervals
+    // shrink by √2, and a validation on its own excitation proves nothing.
+    let mut seen: Vec<(String, &PathBuf)> = Vec::new();
+    for p in &all {
+        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
+        let hash = robotid_stages::formats::sha256_hex(&bytes);
+        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
+            bail!(
+                "{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2, or it would validate itself)",
+                first.display(),
+                p.display()
+            );
+        }
+        seen.push((hash, p));
+    }
 
     // Design every recording's pipeline; all take the first one's regressor
     // stage, so that their tables share one parameter set.
     let mut designs: Vec<Design> = Vec::new();
     for (i, log) in all.iter().enumerate() {
-        let regressor = designs.first().map(|d| d.regressor.clone());
-        let d = design(log, &robot, regressor.as_deref()).with_context(|| format!("identify {}", log.display()))?;
+        let d = design(log, &robot, designs.first()).with_context(|| format!("identify {}", log.display()))?;
         let role = if i < ident.len() { "excitation" } else { "validation" };
         println!(
             "{role} {} ({}):",
@@ -105,8 +156,57 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let joined = |ts: &[PathBuf]| ts.iter().map(|t| rel(t)).collect::<Vec<_>>().join(" ");
 
     let parameters = out.join("parameters.parquet");
-    super::estimate::run(estimate_args(id_tables, None, &parameters))?;
-    writeln!(script, "robotid estimate {} -o parameters.parquet", joined(id_tables))?;
+    // Over 3× the noise floor on a joint: the joints, their ratios and what
+    // identify measured on the way, for the table and the message.
+    let causes: String = designs[0]
+        .findings
+        .iter()
+        .filter(|(k, _)| {
+            [
+                "inverse_filter",
+                "differentiate",
+                "coulomb_transition_rad_s",
+                "held_out",
+            ]
+            .contains(&k.as_str())
+        })
+        .map(|(k, v)| format!("\n  {k}: {v}"))
+        .collect();
+    let verdict = |est: &robotid_stages::estimation::Estimate| -> Option<String> {
+        let bad = over_floor(est);
+        (!bad.is_empty()).then(|| {
+            format!(
+                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {}: the model, a declaration or a channel disagrees with the data. Most likely causes, as measured: an anti-alias filter other than the one undone, a channel scaled, reversed or in other units, friction other than viscous + Coulomb, or joints held by brakes or a gripper the robot file does not have. What identify found:{causes}",
+                bad.iter().map(|(j, r)| format!("{j} ({r:.1}×)")).collect::<Vec<_>>().join(", ")
+            )
+        })
+    };
+    let mark = |o: &robotid_stages::stage::estimate::Outcome| {
+        verdict(&o.estimate)
+            .map(|v| vec![(robotid_schemas::metadata::INADEQUATE.to_string(), v)])
+            .unwrap_or_default()
+    };
+    // A floor from one period's non-excited lines (no spread to take it
+    // from) may hold real content or miss noise: said, not refused on.
+    let reliable = designs[..ident.len()].iter().all(|d| d.periods >= 2);
+    let ols = super::estimate::estimate(&estimate_args(id_tables, Some(&robot), false, &parameters), Some(&mark))?;
+    let inadequate = verdict(&ols.estimate);
+    if let Some(v) = inadequate.as_ref().filter(|_| !reliable) {
+        eprintln!(
+            "warning: {v}\n(not refused: the noise floor comes from the non-excited lines of a single steady period, not from the spread of several; the table is marked)"
+        );
+    }
+    let inadequate = inadequate.filter(|_| reliable);
+    let level = if inadequate.is_some() { None } else { Some(0.95) };
+    print!("{}", super::estimate::summary_at(&ols.estimate, 0.95, level));
+    print!("{}", super::estimate::findings(&ols));
+    println!("parameters in {}", parameters.display());
+    writeln!(
+        script,
+        "robotid estimate {} --robot {} -o parameters.parquet",
+        joined(id_tables),
+        robot.display()
+    )?;
     if !val_tables.is_empty() {
         println!();
         super::validate::run(super::validate::Args {
@@ -133,17 +233,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             format!(" --validation {}", joined(val_tables))
         }
     )?;
+    if let Some(why) = inadequate.filter(|_| !args.accept_inadequate) {
+        let sh = out.join("identify.sh");
+        std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
+        std::fs::write(out.join("INADEQUATE.txt"), format!("{why}\n")).with_context(|| out.display().to_string())?;
+        cleanup.1 = true;
+        return Err(Inadequate(format!(
+            "{}: not identified: {why}\nThe estimate and the report are in {} marked inadequate (INADEQUATE.txt), with no physical fit and no export; its intervals are not 95 % intervals. To write everything anyway: --accept-inadequate",
+            ident[0].display(),
+            out.display()
+        ))
+        .into());
+    }
     // The model for simulators needs every link a real body.
     let physical = out.join("parameters_physical.parquet");
     // The spread across few periods can leave the covariance singular
     // (arm3, 4 periods, 25 parameters): then the residual's is used.
     let mut residual_cov = false;
-    let fitted = super::estimate::run(estimate_args(id_tables, Some(&robot), &physical)).or_else(|e| {
+    let fitted = super::estimate::run(estimate_args(id_tables, Some(&robot), true, &physical)).or_else(|e| {
         residual_cov = true;
         eprintln!("note: the physical fit with the periods' covariance failed ({e:#}); again with the residual's");
         super::estimate::run(super::estimate::Args {
             covariance: "residual".into(),
-            ..estimate_args(id_tables, Some(&robot), &physical)
+            ..estimate_args(id_tables, Some(&robot), true, &physical)
         })
     });
     match fitted {
@@ -186,14 +298,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, out: &Path) -> super::estimate::Args {
+/// The estimate's arguments; the robot file always (its a-priori sizes
+/// flag the parameters the data cannot tell), the physical fit on demand.
+fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, physical: bool, out: &Path) -> super::estimate::Args {
     super::estimate::Args {
         regressors: tables.to_vec(),
         method: "ols".into(),
         confidence: 0.95,
         covariance: "auto".into(),
         known: None,
-        physical: robot.is_some(),
+        physical,
         robot: robot.map(Path::to_path_buf),
         prior_weight: None,
         out: out.to_path_buf(),

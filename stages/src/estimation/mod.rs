@@ -16,6 +16,7 @@ mod least_squares;
 mod ml;
 mod physical;
 pub mod projection;
+pub mod spectral;
 mod summary;
 mod system;
 mod table;

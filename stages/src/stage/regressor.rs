@@ -865,14 +865,48 @@ fn band_limited_matrix(
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
-    let fine_len = (samples * OVERSAMPLING) as f64;
     // Lines kept: at most `band`, below the samples' Nyquist line (which a
     // real series cannot shift).
     let keep = ((band * period).floor() as usize).min(samples.saturating_sub(1) / 2);
+    let lines = column_spectra(base, kin, keep, spectra);
+    let mut a = DMatrix::zeros(samples * n, cols);
+    let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
+    for j in 0..n {
+        for c in 0..cols {
+            spec[..=keep].copy_from_slice(&lines[(j * cols + c) * (keep + 1)..][..keep + 1]);
+            let back = spectra.inverse(&spec, samples);
+            for k in 0..samples {
+                a[(k * n + j, c)] = back[k];
+            }
+        }
+    }
+    a
+}
+
+/// The lines 0..=`keep` of every regressor column over one period of
+/// `kin`, as the sample grid's DFT (unnormalised) of the columns computed
+/// on a grid [`OVERSAMPLING`] times finer, laid out
+/// `[(joint · parameters + column) · (keep + 1) + line]`. The fine grid is
+/// that many shifted copies of the sample grid (the kinematics, periodic
+/// and band-limited, shifted exactly in the frequency domain): each copy
+/// is an ordinary regressor of `samples` rows, so memory stays that of
+/// the result.
+pub fn column_spectra(
+    base: &BaseRegressor,
+    kin: &Kinematics,
+    keep: usize,
+    spectra: &Spectra,
+) -> Vec<rustfft::num_complex::Complex64> {
+    use rustfft::num_complex::Complex64;
+    let samples = kin.time.len();
+    let n = base.model.dof();
+    let cols = base.parameters();
+    let fine_len = (samples * OVERSAMPLING) as f64;
+    let keep = keep.min(samples.saturating_sub(1) / 2);
     let spectrum = |x: &Vec<f64>| {
         let mut s = spectra.forward(x);
         s.iter_mut()
-            .skip(keep.max(samples.saturating_sub(1) / 2) + 1)
+            .skip(samples.saturating_sub(1) / 2 + 1)
             .for_each(|v| *v = Complex64::new(0.0, 0.0));
         s
     };
@@ -914,21 +948,8 @@ fn band_limited_matrix(
             }
         }
     }
-    let mut a = DMatrix::zeros(samples * n, cols);
-    let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
-    for j in 0..n {
-        for c in 0..cols {
-            let lines = &acc[(j * cols + c) * (keep + 1)..][..keep + 1];
-            for (l, v) in lines.iter().enumerate() {
-                spec[l] = v / OVERSAMPLING as f64;
-            }
-            let back = spectra.inverse(&spec, samples);
-            for k in 0..samples {
-                a[(k * n + j, c)] = back[k];
-            }
-        }
-    }
-    a
+    acc.iter_mut().for_each(|v| *v /= OVERSAMPLING as f64);
+    acc
 }
 
 pub use crate::estimation::{columns_of, PARAMETER_COLUMN, PERIOD_TORQUE};

@@ -3,7 +3,8 @@
 //! for positions (or encoder counts), effort (torque or current) and,
 //! when there is one, the reference. Each set is a prefix and a joint
 //! (name, 1-based or 0-based number), optionally a unit suffix:
-//! `q1_rad`, `q_shoulder`, `tau_3`, `current_{joint}`, `pos0`. Matching
+//! `q1_rad`, `q_shoulder`, `tau_3`, `current_{joint}`, `pos0`, or the
+//! joint first: `shoulder_pos_rad`, `{joint}_effort_Nm`. Matching
 //! ignores case; the unit comes from the suffix, else from the prefix.
 
 use super::{Channel, Column, OneColumn, ReadConfig};
@@ -82,9 +83,15 @@ fn channel(header: &[String], joints: &[String], table: &[(&str, &str)]) -> Opti
                             1 => (j + 1).to_string(),
                             _ => j.to_string(),
                         };
-                        [format!("{prefix}_{id}{suffix}"), format!("{prefix}{id}{suffix}")]
-                            .iter()
-                            .find_map(|c| find(c).cloned())
+                        // `pos_{joint}`, `pos{joint}`, or the joint first:
+                        // `{joint}_pos_rad`.
+                        [
+                            format!("{prefix}_{id}{suffix}"),
+                            format!("{prefix}{id}{suffix}"),
+                            format!("{id}_{prefix}{suffix}"),
+                        ]
+                        .iter()
+                        .find_map(|c| find(c).cloned())
                     })
                     .collect();
                 if let Some(names) = names {
@@ -206,6 +213,22 @@ mod tests {
                 OneColumn::Name("pos0".into()),
                 OneColumn::Name("pos1".into())
             ]))
+        );
+        // The joint first, as independent tools write it.
+        let r = guess_read(
+            &cols("time_s,shoulder_pos_rad,elbow_pos_rad,shoulder_effort_Nm,elbow_effort_Nm"),
+            &joints,
+        )
+        .unwrap();
+        let p = r.position.unwrap();
+        assert_eq!(
+            (p.column, p.unit.as_deref()),
+            (Some(Column::Name("{joint}_pos_rad".into())), Some("rad"))
+        );
+        let e = r.effort.unwrap();
+        assert_eq!(
+            (e.column, e.unit.as_deref()),
+            (Some(Column::Name("{joint}_effort_Nm".into())), Some("N*m"))
         );
         let e = guess_read(&cols("t,pos0,pos1,x,y"), &joints).unwrap_err();
         assert!(e.contains("no effort column"), "{e}");

@@ -1,0 +1,528 @@
+//! The anti-alias filter a torque went through, found in the data when the
+//! recording does not declare it (`robotid identify`).
+//!
+//! Over one averaged period every signal is a sum of its DFT lines, so the
+//! regression A·θ = b holds line by line (Parseval), and an analog filter
+//! H on the torque multiplies line l of every column by H(f_l): the fit
+//! of H·Â·θ to b̂ is a least-squares problem whose normal equations are a
+//! per-line sum, Σ_l |H_l|²·G_l and Σ_l Re(H̄_l·c_l). The per-line terms
+//! are made once; each candidate filter then costs one weighted sum and a
+//! small solve, so hundreds of candidates (family, order, ripple, cutoff)
+//! are scored in about a second.
+//!
+//! Each candidate is scored on held-out periods: the periods are split in
+//! two interleaved halves, θ fitted on one half's mean and scored on the
+//! other's, both ways. The score is the held-out residue against the noise
+//! floor (the periods' spread), so a right model scores ≈ 1 whatever the
+//! joints' noise levels, and a filter the data do not call for is not
+//! chosen: its score is no better than no filter's.
+//!
+//! The low-frequency content (the motion's few harmonics) fixes the
+//! filter's delay; the Coulomb term's harmonics, which reach far up the
+//! band, fix its magnitude shape, and with it the passband gain a
+//! Chebyshev filter of even order has at DC (0.944 for 0.5 dB ripple),
+//! which scales every parameter alike and no other part of the data shows.
+
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use rustfft::num_complex::Complex64;
+
+use crate::signal::{AnalogFilter, FilterFamily, FilterSpec, Spectra};
+
+/// The regression over the lines of one period, split in two halves of
+/// the periods for held-out scores.
+pub struct LineSystem {
+    /// Lines 0..lines of the period.
+    lines: usize,
+    /// Samples per period.
+    samples: usize,
+    cols: usize,
+    joints: usize,
+    period_s: f64,
+    /// Per line, the packed upper triangle of m_l·Σ_j w_j·Re(Â_jᴴ·Â_j).
+    gram: Vec<f64>,
+    /// Per half and line, m_l·Σ_j w_j·Â_jᴴ·b̂_j (`cols` values).
+    cross: [Vec<Complex64>; 2],
+    /// Per half, Σ_l m_l·Σ_j w_j·|b̂_j|².
+    energy: [f64; 2],
+    /// The columns' lines, `[(joint · cols + col) · lines + line]`.
+    columns: Vec<Complex64>,
+    /// Per half and joint, the torque mean's lines.
+    torque: [Vec<Vec<Complex64>>; 2],
+    /// Per joint, 1/σ² of one torque sample.
+    weight: Vec<f64>,
+    /// Periods in each half.
+    periods: [usize; 2],
+    /// Σ_l m_l over the lines kept: the samples' worth of the band.
+    band_samples: f64,
+}
+
+/// A candidate's held-out score.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Score {
+    /// Held-out residue over the noise floor, all joints weighted by their
+    /// noise (≈ 1 for a right model).
+    pub ratio: f64,
+    /// The same per joint (NaN for a joint whose rows do not enter).
+    pub per_joint: Vec<f64>,
+    /// The parameters fitted on all periods.
+    pub theta: DVector<f64>,
+}
+
+/// The multiplicity of line l of an n-sample real series in Parseval's sum.
+fn multiplicity(l: usize, n: usize) -> f64 {
+    if l == 0 || 2 * l == n {
+        1.0
+    } else {
+        2.0
+    }
+}
+
+impl LineSystem {
+    /// `columns`: the regressor columns' lines over one period
+    /// (`stage::regressor::column_spectra`, `lines` each); `torque`:
+    /// `[joint][period · samples + sample]`, whole periods (at least two);
+    /// `used`: the joints whose rows enter (a joint-wise record's moving
+    /// joint), all when empty.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        columns: Vec<Complex64>,
+        lines: usize,
+        cols: usize,
+        torque: &[Vec<f64>],
+        samples: usize,
+        period_s: f64,
+        used: &[bool],
+        spectra: &Spectra,
+    ) -> Option<LineSystem> {
+        let joints = torque.len();
+        let periods = torque.first().map_or(0, |t| t.len() / samples.max(1));
+        if periods < 2 || columns.len() != joints * cols * lines || lines == 0 || lines > samples / 2 + 1 {
+            return None;
+        }
+        // Each joint's noise: one sample's variance about the periods' mean.
+        let mut weight = Vec::with_capacity(joints);
+        let mut halves: [Vec<Vec<Complex64>>; 2] = [Vec::new(), Vec::new()];
+        let counts = [periods.div_ceil(2), periods / 2];
+        for (j, t) in torque.iter().enumerate() {
+            let mut var = 0.0;
+            let mut half = [vec![0.0; samples], vec![0.0; samples]];
+            for i in 0..samples {
+                let mean = (0..periods).map(|k| t[k * samples + i]).sum::<f64>() / periods as f64;
+                for k in 0..periods {
+                    let x = t[k * samples + i];
+                    var += (x - mean) * (x - mean);
+                    half[k % 2][i] += x / counts[k % 2] as f64;
+                }
+            }
+            let var = var / (samples * (periods - 1)) as f64;
+            let used = used.is_empty() || used.get(j).copied().unwrap_or(false);
+            weight.push(if var > 0.0 && used { 1.0 / var } else { 0.0 });
+            for h in 0..2 {
+                let mut s = spectra.forward(&half[h]);
+                s.truncate(lines);
+                halves[h].push(s);
+            }
+        }
+        if weight.iter().all(|w| *w == 0.0) {
+            return None;
+        }
+        let packed = cols * (cols + 1) / 2;
+        let mut gram = vec![0.0; lines * packed];
+        let mut cross = [
+            vec![Complex64::default(); lines * cols],
+            vec![Complex64::default(); lines * cols],
+        ];
+        let mut energy = [0.0; 2];
+        let mut band_samples = 0.0;
+        let mut a = vec![Complex64::default(); cols];
+        for l in 0..lines {
+            let m = multiplicity(l, samples);
+            band_samples += m;
+            let g = &mut gram[l * packed..][..packed];
+            for j in 0..joints {
+                let w = m * weight[j];
+                for c in 0..cols {
+                    a[c] = columns[(j * cols + c) * lines + l];
+                }
+                let mut k = 0;
+                for c in 0..cols {
+                    for d in c..cols {
+                        g[k] += w * (a[c].re * a[d].re + a[c].im * a[d].im);
+                        k += 1;
+                    }
+                }
+                for h in 0..2 {
+                    let b = halves[h][j][l];
+                    energy[h] += w * b.norm_sqr();
+                    for c in 0..cols {
+                        cross[h][l * cols + c] += w * a[c].conj() * b;
+                    }
+                }
+            }
+        }
+        Some(LineSystem {
+            lines,
+            samples,
+            cols,
+            joints,
+            period_s,
+            gram,
+            cross,
+            energy,
+            columns,
+            torque: halves,
+            weight,
+            periods: counts,
+            band_samples,
+        })
+    }
+
+    /// The frequency of every line, Hz.
+    pub fn frequencies(&self) -> Vec<f64> {
+        (0..self.lines).map(|l| l as f64 / self.period_s).collect()
+    }
+
+    /// The filter's response at every line.
+    pub fn response(&self, spec: Option<&FilterSpec>) -> Option<Vec<Complex64>> {
+        match spec {
+            None => Some(vec![Complex64::new(1.0, 0.0); self.lines]),
+            Some(s) => {
+                let f = AnalogFilter::new(*s).ok()?;
+                Some(self.frequencies().iter().map(|&x| f.response(x)).collect())
+            }
+        }
+    }
+
+    /// The normal equations under the filter response `h`: Σ|h|²·G_l and
+    /// Σ Re(h̄·c_l) of each half.
+    fn normal(&self, h: &[Complex64]) -> (DMatrix<f64>, [DVector<f64>; 2]) {
+        let cols = self.cols;
+        let packed = cols * (cols + 1) / 2;
+        let mut g = vec![0.0; packed];
+        let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
+        for l in 0..self.lines {
+            let s = h[l].norm_sqr();
+            for (x, y) in g.iter_mut().zip(&self.gram[l * packed..][..packed]) {
+                *x += s * y;
+            }
+            for half in 0..2 {
+                for c in 0..cols {
+                    r[half][c] += (h[l].conj() * self.cross[half][l * cols + c]).re;
+                }
+            }
+        }
+        let mut full = DMatrix::zeros(cols, cols);
+        let mut k = 0;
+        for c in 0..cols {
+            for d in c..cols {
+                full[(c, d)] = g[k];
+                full[(d, c)] = g[k];
+                k += 1;
+            }
+        }
+        (full, r)
+    }
+
+    /// The held-out score of the filter response `h`.
+    pub fn score(&self, h: &[Complex64]) -> Option<Score> {
+        let (g, r) = self.normal(h);
+        let solve = |rhs: &DVector<f64>| solve_scaled(&g, rhs);
+        let theta = [solve(&r[0])?, solve(&r[1])?];
+        // Fitted on one half, the other's residue: E − 2θᵀr + θᵀGθ.
+        let held = |fit: usize, on: usize| {
+            let t = &theta[fit];
+            self.energy[on] - 2.0 * t.dot(&r[on]) + t.dot(&(&g * t))
+        };
+        // Its noise part: each held-out half's mean has σ²/P_h per sample.
+        // A line of white noise of variance σ² over N samples has E|n̂|² = N·σ².
+        let n = self.samples as f64;
+        let used = self.weight.iter().filter(|w| **w > 0.0).count() as f64;
+        let floor = |on: usize| used * self.band_samples * n / self.periods[on] as f64;
+        let ratio = 0.5 * (held(0, 1) / floor(1) + held(1, 0) / floor(0));
+        let per_joint = (0..self.joints)
+            .map(|j| {
+                if self.weight[j] == 0.0 {
+                    return f64::NAN;
+                }
+                let mut ratio = 0.0;
+                for (fit, on) in [(0, 1), (1, 0)] {
+                    let t = &theta[fit];
+                    let mut rss = 0.0;
+                    for l in 0..self.lines {
+                        let mut p = Complex64::default();
+                        for c in 0..self.cols {
+                            p += self.columns[(j * self.cols + c) * self.lines + l] * t[c];
+                        }
+                        rss += multiplicity(l, self.samples) * (self.torque[on][j][l] - h[l] * p).norm_sqr();
+                    }
+                    let floor = self.band_samples * n / (self.weight[j] * self.periods[on] as f64);
+                    ratio += 0.5 * rss / floor;
+                }
+                ratio
+            })
+            .collect();
+        let total = (&r[0] * self.periods[0] as f64 + &r[1] * self.periods[1] as f64)
+            / (self.periods[0] + self.periods[1]) as f64;
+        Some(Score {
+            ratio,
+            per_joint,
+            theta: solve(&total)?,
+        })
+    }
+}
+
+/// G·θ = r by Cholesky of the column-scaled G (the columns differ by
+/// orders of magnitude), or None when G is singular.
+fn solve_scaled(g: &DMatrix<f64>, r: &DVector<f64>) -> Option<DVector<f64>> {
+    let n = g.nrows();
+    let d: Vec<f64> = (0..n)
+        .map(|i| if g[(i, i)] > 0.0 { 1.0 / g[(i, i)].sqrt() } else { 0.0 })
+        .collect();
+    let scaled = DMatrix::from_fn(n, n, |i, j| g[(i, j)] * d[i] * d[j]);
+    let rs = DVector::from_fn(n, |i, _| r[i] * d[i]);
+    let x = match scaled.clone().cholesky() {
+        Some(c) => c.solve(&rs),
+        None => scaled.svd(true, true).solve(&rs, 1e-12).ok()?,
+    };
+    Some(DVector::from_fn(n, |i, _| x[i] * d[i]))
+}
+
+/// The anti-alias filter the data call for, with the numbers that decided.
+#[derive(Debug, Clone)]
+pub struct FilterChoice {
+    /// None: no filter fits the held-out periods better than none.
+    pub spec: Option<FilterSpec>,
+    pub score: Score,
+    /// No filter's score.
+    pub none: Score,
+    /// The best candidate of another family or order, if any.
+    pub runner_up: Option<(FilterSpec, f64)>,
+    /// The best shapes at their refined cutoffs, best first: what
+    /// [`refit_filter`] tries on a system of other columns.
+    pub top: Vec<FilterSpec>,
+    /// Candidates scored.
+    pub candidates: usize,
+    /// The relative improvement over no filter a filter needs.
+    pub margin: f64,
+}
+
+/// Chebyshev I ripples tried, dB.
+const RIPPLES: [f64; 7] = [0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 3.0];
+/// Cutoffs on the coarse grid, per family and order.
+const GRID: usize = 14;
+/// Shapes whose cutoff is refined to 1e-6.
+const REFINED: usize = 3;
+
+/// Family, order and ripple of every candidate shape.
+fn shapes() -> Vec<(FilterFamily, usize, Option<f64>)> {
+    let mut out = Vec::new();
+    for order in 1..=8 {
+        out.push((FilterFamily::Butterworth, order, None));
+        if order > 1 {
+            out.push((FilterFamily::Bessel, order, None));
+            for r in RIPPLES {
+                out.push((FilterFamily::Chebyshev1, order, Some(r)));
+            }
+        }
+    }
+    out
+}
+
+/// Scores no filter and every candidate shape with cutoffs from `lowest_hz`
+/// to `highest_hz` (a coarse log grid, then a golden-section refinement of
+/// the best shapes), and keeps a filter only when its held-out score beats
+/// no filter's by more than the score's sampling spread.
+pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Option<FilterChoice> {
+    let none = sys.score(&sys.response(None)?)?;
+    let shapes = shapes();
+    let spec = |(family, order, ripple_db): (FilterFamily, usize, Option<f64>), cutoff_hz: f64| FilterSpec {
+        family,
+        order,
+        cutoff_hz,
+        ripple_db,
+    };
+    let eval = |s: FilterSpec| {
+        sys.response(Some(&s))
+            .and_then(|h| sys.score(&h))
+            .map_or(f64::INFINITY, |x| x.ratio)
+    };
+    // Searched in u = ln(cutoff) + 20, which stays positive for the golden
+    // section's relative tolerance.
+    let (lo, hi) = (lowest_hz.ln() + 20.0, highest_hz.max(lowest_hz * 1.01).ln() + 20.0);
+    let step = (hi - lo) / (GRID - 1) as f64;
+    // Per shape: the best grid cutoff, refined between its neighbours.
+    let best: Vec<(f64, f64)> = shapes
+        .par_iter()
+        .map(|&shape| {
+            let grid: Vec<f64> = (0..GRID)
+                .map(|i| eval(spec(shape, (lo + step * i as f64 - 20.0).exp())))
+                .collect();
+            let k = (0..GRID).min_by(|&a, &b| grid[a].total_cmp(&grid[b])).expect("a grid");
+            let (a, b) = (lo + step * (k as f64 - 1.0), lo + step * (k as f64 + 1.0));
+            let x = crate::stage::period::golden(|x| eval(spec(shape, (x - 20.0).exp())), a, b, 1e-3);
+            let refined = eval(spec(shape, (x - 20.0).exp()));
+            if refined <= grid[k] {
+                ((x - 20.0).exp(), refined)
+            } else {
+                ((lo + step * k as f64 - 20.0).exp(), grid[k])
+            }
+        })
+        .collect();
+    let mut order: Vec<usize> = (0..shapes.len()).collect();
+    order.sort_by(|&a, &b| best[a].1.total_cmp(&best[b].1).then(a.cmp(&b)));
+    // The few best shapes refined to a cutoff within 1e-6: the filter's
+    // delay at the motion's lines goes as 1/cutoff, and a 1e-3 error in it
+    // biases the inertias against the viscous friction by more than their
+    // standard deviation on a long record.
+    let fine = refine(
+        sys,
+        &order
+            .iter()
+            .take(REFINED)
+            .map(|&i| (spec(shapes[i], best[i].0), best[i].1))
+            .collect::<Vec<_>>(),
+        step,
+    );
+    let (chosen, _) = fine[0];
+    let top = shapes
+        .iter()
+        .position(|s| (s.0, s.1, s.2) == (chosen.family, chosen.order, chosen.ripple_db))
+        .expect("a shape");
+    let score = sys.score(&sys.response(Some(&chosen))?)?;
+    // The score is a mean over ≈ joints × samples squared residues: its
+    // relative spread is √(2/that); a filter must beat none by 3 of them.
+    let used = sys.weight.iter().filter(|w| **w > 0.0).count().max(1);
+    let margin = 3.0 * (2.0 / (used as f64 * sys.band_samples)).sqrt();
+    let runner_up = order
+        .iter()
+        .find(|&&i| shapes[i].0 != shapes[top].0 || shapes[i].1 != shapes[top].1)
+        .map(|&i| (spec(shapes[i], best[i].0), best[i].1));
+    let keep = score.ratio < none.ratio * (1.0 - margin);
+    Some(FilterChoice {
+        spec: keep.then_some(chosen),
+        score: if keep { score } else { none.clone() },
+        none,
+        runner_up,
+        top: fine.iter().map(|f| f.0).collect(),
+        candidates: shapes.len() * (GRID + 1) + REFINED + 1,
+        margin,
+    })
+}
+
+/// Each filter's cutoff refined by golden section within ±`step` (natural
+/// log) to 1e-6, kept where it scores better; sorted best first.
+fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(FilterSpec, f64)> {
+    let eval = |s: FilterSpec| {
+        sys.response(Some(&s))
+            .and_then(|h| sys.score(&h))
+            .map_or(f64::INFINITY, |x| x.ratio)
+    };
+    let with = |s: &FilterSpec, u: f64| FilterSpec {
+        cutoff_hz: (u - 20.0).exp(),
+        ..*s
+    };
+    let mut out: Vec<(FilterSpec, f64)> = start
+        .par_iter()
+        .map(|(s, r)| {
+            // u = ln(cutoff) + 20 stays positive for the relative tolerance.
+            let u = s.cutoff_hz.ln() + 20.0;
+            let x = crate::stage::period::golden(|x| eval(with(s, x)), u - step, u + step, 1e-8);
+            let refined = eval(with(s, x));
+            if refined <= *r {
+                (with(s, x), refined)
+            } else {
+                (*s, *r)
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| a.1.total_cmp(&b.1));
+    out
+}
+
+/// The best of `filters` (each cutoff refined within ±10 %) on `sys`, a
+/// system of other columns (another friction model, other kinematics) of
+/// the same recording: a search's best shapes carried over, not searched
+/// again.
+pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterSpec, Score)> {
+    let start: Vec<(FilterSpec, f64)> = filters
+        .iter()
+        .map(|s| {
+            let r = sys
+                .response(Some(s))
+                .and_then(|h| sys.score(&h))
+                .map_or(f64::INFINITY, |x| x.ratio);
+            (*s, r)
+        })
+        .collect();
+    let (best, _) = *refine(sys, &start, 0.1).first()?;
+    Some((best, sys.score(&sys.response(Some(&best))?)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A known filter on a synthetic two-column regression (a smooth
+    /// column and a square wave, as Coulomb friction makes) is found with
+    /// its family, order and cutoff, and no filter is found where none was.
+    #[test]
+    fn a_filter_is_found_and_none_where_none_was() {
+        let samples = 1000;
+        let period = 10.0;
+        let spectra = Spectra::new();
+        let t: Vec<f64> = (0..samples).map(|i| i as f64 * period / samples as f64).collect();
+        let w = std::f64::consts::TAU / period;
+        let smooth: Vec<f64> = t.iter().map(|&x| (w * x).sin() + 0.3 * (3.0 * w * x).cos()).collect();
+        let square: Vec<f64> = t.iter().map(|&x| (w * x).cos().signum()).collect();
+        let lines = samples / 2;
+        let mut columns = Vec::new();
+        for c in [&smooth, &square] {
+            let mut s = spectra.forward(c);
+            s.truncate(lines);
+            columns.extend(s);
+        }
+        let theta = [2.0, 0.7];
+        let truth = FilterSpec {
+            family: FilterFamily::Chebyshev1,
+            order: 6,
+            cutoff_hz: 12.0,
+            ripple_db: Some(0.5),
+        };
+        let filter = AnalogFilter::new(truth).unwrap();
+        for filtered in [true, false] {
+            let mut clean: Vec<Complex64> = (0..=samples / 2)
+                .map(|l| {
+                    let v = columns[l.min(lines - 1)] * theta[0] + columns[lines + l.min(lines - 1)] * theta[1];
+                    let v = if l < lines { v } else { Complex64::default() };
+                    if filtered {
+                        v * filter.response(l as f64 / period)
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            clean[0].im = 0.0;
+            let clean = spectra.inverse(&clean, samples);
+            // Four periods with deterministic pseudo-random noise.
+            let mut x = 7u64;
+            let mut noise = move || {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02
+            };
+            let torque: Vec<f64> = (0..4).flat_map(|_| clean.clone()).map(|v| v + noise()).collect();
+            let sys = LineSystem::new(columns.clone(), lines, 2, &[torque], samples, period, &[], &spectra).unwrap();
+            let choice = choose_filter(&sys, 0.5, 50.0).unwrap();
+            if filtered {
+                let s = choice.spec.expect("a filter");
+                assert_eq!((s.family, s.order), (truth.family, truth.order), "{choice:?}");
+                assert!((s.cutoff_hz / truth.cutoff_hz - 1.0).abs() < 0.02, "{choice:?}");
+                assert!((choice.score.theta[0] / theta[0] - 1.0).abs() < 5e-3, "{choice:?}");
+                assert!(choice.score.ratio < 1.2 && choice.none.ratio > 10.0, "{choice:?}");
+            } else {
+                assert!(choice.spec.is_none(), "{choice:?}");
+                assert!(choice.none.ratio < 1.2, "{choice:?}");
+            }
+        }
+    }
+}
