@@ -15,7 +15,7 @@ use robotid_schemas::{metadata, RawSamples};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::signal::FilterSpec;
 use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
-use robotid_stages::stage::read::{guess_read, log_columns, read, Channel, ReadConfig};
+use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, Channel, ReadConfig};
 
 use crate::Pipeline;
 
@@ -80,35 +80,111 @@ fn channel_toml(c: &Channel) -> anyhow::Result<String> {
     Ok(toml::Value::try_from(c)?.to_string())
 }
 
-/// The read settings: the defaults (`time`, `q_{joint}`, `current_{joint}`
-/// or `torque_{joint}`, MCAP `/joint_states`) when they fit the log, else
-/// guessed from its column names.
+/// Where a log's channels are, and how that was found.
+enum Layout {
+    /// robotid's defaults.
+    Default,
+    /// Guessed from the column names.
+    Named,
+    /// A headerless log: the layout whose positions are smoothest, said.
+    Headerless(String),
+    /// As the user stated it (`--read`).
+    Stated,
+}
+
+/// The read settings: `stated` when given; else the defaults (`time`,
+/// `q_{joint}`, `current_{joint}` or `torque_{joint}`, MCAP
+/// `/joint_states`) when they fit the log, else guessed from its column
+/// names, else, for a headerless text log, the usual layouts tried.
 fn read_settings(
     log: &Path,
     joints: &[String],
     model: &robotid_stages::dynamics::Model,
-) -> anyhow::Result<(ReadConfig, RawSamples, bool)> {
-    match read(log, &ReadConfig::default(), Some(model)) {
-        Ok(raw) => Ok((ReadConfig::default(), raw, false)),
-        Err(default_err) => {
-            let Some(header) = log_columns(log)? else {
-                return Err(anyhow!(default_err).context(format!(
-                    "{}: the channels are not where robotid looks by default, and the log names none: write a pipeline file with a `[read]` table (docs/your-recordings.md)",
-                    log.display()
-                )));
-            };
-            let cfg = guess_read(&header, joints).map_err(|e| {
-                anyhow!(
-                    "{}: {e}; the log has {}: write a pipeline file with a `[read]` table (docs/your-recordings.md)",
-                    log.display(),
-                    header.join(", ")
-                )
-            })?;
-            let raw =
-                read(log, &cfg, Some(model)).with_context(|| format!("{} with the guessed columns", log.display()))?;
-            Ok((cfg, raw, true))
+    stated: Option<&ReadConfig>,
+) -> anyhow::Result<(ReadConfig, RawSamples, Layout)> {
+    if let Some(cfg) = stated {
+        let raw = read(log, cfg, Some(model)).with_context(|| format!("{} with the stated [read]", log.display()))?;
+        return Ok((cfg.clone(), raw, Layout::Stated));
+    }
+    let default_err = match read(log, &ReadConfig::default(), Some(model)) {
+        Ok(raw) => return Ok((ReadConfig::default(), raw, Layout::Default)),
+        Err(e) => e,
+    };
+    if let Some(header) = log_columns(log)? {
+        let cfg = guess_read(&header, joints).map_err(|e| {
+            anyhow!(
+                "{}: {e}; the log has {}: give the columns with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
+                log.display(),
+                header.join(", ")
+            )
+        })?;
+        let raw =
+            read(log, &cfg, Some(model)).with_context(|| format!("{} with the guessed columns", log.display()))?;
+        return Ok((cfg, raw, Layout::Named));
+    }
+    let layouts = log_width(log)?.map_or_else(Vec::new, |w| headerless_layouts(w, joints.len()));
+    // A headerless log: each usual layout read (positions outside the
+    // joints' limits refuse it), the one whose positions are smoothest
+    // kept: encoder positions change little from sample to sample, a
+    // torque carries its noise on every one.
+    let mut tried = Vec::new();
+    let mut best: Option<(f64, ReadConfig, RawSamples, String)> = None;
+    for (cfg, said) in layouts {
+        match read(log, &cfg, Some(model)) {
+            Ok(raw) => {
+                let r = roughness(&raw.q);
+                tried.push(format!("{said}: roughness {r:.3}"));
+                if best.as_ref().is_none_or(|b| r < b.0) {
+                    best = Some((r, cfg, raw, said));
+                }
+            }
+            Err(e) => tried.push(format!("{said}: {e}")),
         }
     }
+    match best {
+        Some((_, cfg, raw, said)) => Ok((
+            cfg,
+            raw,
+            Layout::Headerless(format!(
+                "no header: {said}, the layout whose positions are smoothest (of: {}); state another with --read",
+                tried.join("; ")
+            )),
+        )),
+        None => Err(anyhow!(default_err).context(format!(
+            "{}: the channels are not where robotid looks by default, the log names none{}: give them with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
+            log.display(),
+            if tried.is_empty() {
+                format!(
+                    ", and its width is not 1 + 2·{0} or 1 + 3·{0} columns (time, positions, [velocities,] torques)",
+                    joints.len()
+                )
+            } else {
+                format!(", and no usual layout reads ({})", tried.join("; "))
+            }
+        ))),
+    }
+}
+
+/// A `[read]` table for the pipeline file.
+fn read_table(cfg: &ReadConfig) -> anyhow::Result<String> {
+    let mut t = toml::Table::new();
+    t.insert("read".into(), toml::Value::try_from(cfg)?);
+    Ok(toml::to_string(&t)?)
+}
+
+/// Mean over joints of rms(second difference) / rms(first difference): near
+/// 0 for a smooth, finely sampled signal, near √3 for white noise.
+fn roughness(q: &[Vec<f64>]) -> f64 {
+    let one = |x: &[f64]| {
+        let d1: f64 = x.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum();
+        let d2: f64 = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2)).sum();
+        if d1 > 0.0 {
+            (d2 / d1).sqrt()
+        } else {
+            0.0
+        }
+    };
+    q.iter().map(|x| one(x)).sum::<f64>() / q.len().max(1) as f64
 }
 
 /// The sample rate from the stamps: the mean step over the record, a whole
@@ -161,11 +237,21 @@ fn list(h: &[u32]) -> String {
 /// whose regressor stage (and anti-alias filter, where this one declares
 /// none) the others take, so that their tables share one parameter set.
 pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Result<Design> {
+    design_with(log, robot, first, None)
+}
+
+/// The same with the read settings stated (`--read`).
+pub fn design_with(
+    log: &Path,
+    robot: &Path,
+    first: Option<&Design>,
+    stated: Option<&ReadConfig>,
+) -> anyhow::Result<Design> {
     let regressor = first.map(|d| d.regressor.as_str());
     let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
-    let (read_cfg, raw, guessed) = read_settings(log, &joints, &model)?;
+    let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated)?;
     let mut findings: Vec<(String, String)> = Vec::new();
     let mut head = String::new();
     writeln!(
@@ -174,25 +260,43 @@ pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Resul
         toml_str(&robot.display().to_string())
     )?;
     writeln!(head, "[source]\npath = {}\n", toml_str(&log.display().to_string()))?;
-    if guessed {
-        head.push_str("[read]\n");
-        let mut said = Vec::new();
-        for (key, ch) in [
-            ("time", &read_cfg.time),
-            ("position", &read_cfg.position),
-            ("effort", &read_cfg.effort),
-            ("reference", &read_cfg.reference),
-        ] {
-            if let Some(c) = ch {
-                let v = channel_toml(c)?;
-                writeln!(head, "{key} = {v}")?;
-                said.push(format!("{key} {v}"));
+    match &layout {
+        Layout::Default => {}
+        Layout::Named => {
+            head.push_str("[read]\n");
+            let mut said = Vec::new();
+            for (key, ch) in [
+                ("time", &read_cfg.time),
+                ("position", &read_cfg.position),
+                ("effort", &read_cfg.effort),
+                ("reference", &read_cfg.reference),
+            ] {
+                if let Some(c) = ch {
+                    let v = channel_toml(c)?;
+                    writeln!(head, "{key} = {v}")?;
+                    said.push(format!("{key} {v}"));
+                }
             }
+            head.push('\n');
+            findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
         }
-        head.push('\n');
-        findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
+        Layout::Headerless(said) => {
+            writeln!(head, "{}", read_table(&read_cfg)?)?;
+            findings.push(("read".into(), said.clone()));
+        }
+        Layout::Stated => {
+            writeln!(head, "{}", read_table(&read_cfg)?)?;
+            findings.push(("read".into(), "as stated (--read)".into()));
+        }
     }
     let (fs, fs_said) = sample_rate(&raw);
+    // No arm is logged this slowly; stamps in ms or µs read as s are.
+    if fs < 2.0 {
+        bail!(
+            "{}: the stamps give {fs_said}: is the time column in ms or µs read as seconds? State its unit with --read (a `[read]` table: time = {{ column = …, unit = \"ms\" }})",
+            log.display()
+        );
+    }
     // The anti-alias filter the effort went through, when the recording
     // declares it: undone, and the regressor columns band-limited alike.
     let filter: Option<FilterSpec> = raw
@@ -463,6 +567,11 @@ pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Resul
             let chain = Pipeline::from_toml(&probe, log.with_extension("probe.toml"))?
                 .build()?
                 .run_log(log, "probe", |_| {})?;
+            if tried.is_empty() {
+                if let Some(why) = torque_check(chain.kinematics()?, &model)? {
+                    bail!("{}: {why}", log.display());
+                }
+            }
             let lowest = (4.0 * band).max(fs / 50.0);
             let choice = choose_model(
                 &chain,
@@ -780,6 +889,74 @@ fn choose_model(
         score: Some(score.ratio),
         margin,
     })
+}
+
+/// Each joint's measured torque against the robot file's prediction for the
+/// same motion: fitted as k·τ_file + Fv·q̇ + Fc·sign(q̇) + offset (the file
+/// has no friction, which dominates a wrist), k is the scale of the
+/// rigid-body part. Where that part carries at least half the measured
+/// variance, a robot file is not off by 3× (a current read as torque, a
+/// gear ratio missing), nor of the opposite sign (a reversed channel). A
+/// reason to refuse, naming the joints and the fix, or None.
+fn torque_check(
+    kin: &robotid_schemas::Kinematics,
+    model: &robotid_stages::dynamics::Model,
+) -> anyhow::Result<Option<String>> {
+    use nalgebra::{Matrix4, Vector4};
+    use robotid_stages::stage::regressor::RegressorConfig;
+    let Some(torque) = kin.torque.as_ref() else {
+        return Ok(None);
+    };
+    let base = RegressorConfig {
+        friction: robotid_stages::dynamics::FrictionTerms::None,
+        ..Default::default()
+    }
+    .base_regressor(model)?;
+    let Some(theta) = base.base_values(model) else {
+        return Ok(None);
+    };
+    let predicted = base.matrix(kin) * theta;
+    let n = kin.joints.len();
+    let mut wrong = Vec::new();
+    for (j, b) in torque.iter().enumerate() {
+        let mut g = Matrix4::<f64>::zeros();
+        let mut r = Vector4::<f64>::zeros();
+        for (i, &y) in b.iter().enumerate() {
+            let x = Vector4::new(predicted[i * n + j], kin.qd[j][i], kin.qd[j][i].signum(), 1.0);
+            g += x * x.transpose();
+            r += x * y;
+        }
+        let Some(c) = g.cholesky() else { continue };
+        let k = c.solve(&r)[0];
+        let mean = |v: &mut dyn Iterator<Item = f64>, len: usize| v.sum::<f64>() / len as f64;
+        let (len, pm) = (b.len(), mean(&mut (0..b.len()).map(|i| predicted[i * n + j]), b.len()));
+        let bm = mean(&mut b.iter().copied(), len);
+        let vp: f64 = (0..len).map(|i| (predicted[i * n + j] - pm).powi(2)).sum();
+        let vb: f64 = b.iter().map(|y| (y - bm).powi(2)).sum();
+        let share = k * k * vp / vb;
+        if !(share >= 0.5) {
+            continue;
+        }
+        if k < 0.0 {
+            wrong.push(format!(
+                "{} runs against the torque the robot file predicts (scale {k:.3} of its rigid-body part, which carries {:.0} % of the measured variance)",
+                kin.joints[j],
+                100.0 * share.min(1.0)
+            ));
+        } else if !(1.0 / 3.0..=3.0).contains(&k) {
+            wrong.push(format!(
+                "{} measures {k:.3}× the torque the robot file predicts (its rigid-body part carries {:.0} % of the measured variance)",
+                kin.joints[j],
+                100.0 * share.min(1.0)
+            ));
+        }
+    }
+    Ok((!wrong.is_empty()).then(|| {
+        format!(
+            "the torques disagree with the robot file: {}. Is the effort in N·m at the joint? A current read as torque needs `torque_per_amp` (a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
+            wrong.join("; ")
+        )
+    }))
 }
 
 /// The typed settings of a regressor stage written as text.

@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context as _};
 use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::stage::estimate::EstimateConfig;
+use robotid_stages::stage::estimate::{EstimateConfig, Outcome};
 use robotid_stages::stage::Context;
 
 #[derive(clap::Args)]
@@ -19,7 +19,8 @@ pub struct Args {
     /// Confidence level of the intervals.
     #[arg(long, default_value_t = 0.95)]
     pub confidence: f64,
-    /// Covariance: auto (periods when the tables carry them), periods or residual.
+    /// Covariance: auto (spectrum for tables of one averaged period, periods
+    /// when the tables carry them), spectrum, periods or residual.
     #[arg(long, default_value = "auto")]
     pub covariance: String,
     /// A parameters table whose parameters are taken as known (friction
@@ -56,12 +57,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Metadata to add to an estimate's table, made from its outcome.
+pub type Marks<'a> = &'a dyn Fn(&Outcome) -> Vec<(String, String)>;
+
 /// The estimate of `args`, its table written to `args.out` with
 /// `marks` added to the table's metadata.
-pub fn estimate(
-    args: &Args,
-    marks: Option<&dyn Fn(&robotid_stages::stage::estimate::Outcome) -> Vec<(String, String)>>,
-) -> anyhow::Result<robotid_stages::stage::estimate::Outcome> {
+pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
     let method = match args.method.as_str() {
         "ols" => Estimator::Ols,
         "wls" => Estimator::Wls,
@@ -73,8 +74,9 @@ pub fn estimate(
     let covariance = match args.covariance.as_str() {
         "auto" => Covariance::Auto,
         "periods" => Covariance::Periods,
+        "spectrum" => Covariance::Spectrum,
         "residual" => Covariance::Residual,
-        c => anyhow::bail!("--covariance: `{c}` is not auto, periods or residual"),
+        c => anyhow::bail!("--covariance: `{c}` is not auto, spectrum, periods or residual"),
     };
     let cfg = EstimateConfig {
         method,
@@ -140,7 +142,7 @@ pub fn load_system(paths: &[PathBuf]) -> anyhow::Result<System> {
 
 /// What the reduce found beside the estimate: parameters not identified
 /// at their physical size, and the essential set.
-pub fn findings(out: &robotid_stages::stage::estimate::Outcome) -> String {
+pub fn findings(out: &Outcome) -> String {
     let mut s = String::new();
     for u in &out.unidentified {
         s.push_str(&format!(

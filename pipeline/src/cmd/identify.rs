@@ -2,7 +2,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context as _};
-use robotid::identify::{absolute, design, Design};
+use robotid::identify::{absolute, design_with, Design};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -31,6 +31,11 @@ pub struct Args {
     /// with code 3.
     #[arg(long)]
     pub accept_inadequate: bool,
+    /// Where the channels are, for every recording: a TOML file with a
+    /// `[read]` table as in a pipeline file (columns by name or number,
+    /// units, `header`, `separator`, `torque_per_amp`; docs/pipeline-file.md).
+    #[arg(long)]
+    pub read: Option<PathBuf>,
 }
 
 /// A fit whose residue is over this many times the noise floor on some
@@ -112,11 +117,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seen.push((hash, p));
     }
 
+    let stated: Option<robotid_stages::stage::read::ReadConfig> = match &args.read {
+        None => None,
+        Some(f) => {
+            let text = std::fs::read_to_string(f).with_context(|| f.display().to_string())?;
+            let mut t: toml::Table = text.parse().with_context(|| f.display().to_string())?;
+            let r = t
+                .remove("read")
+                .ok_or_else(|| anyhow::anyhow!("{}: no `[read]` table", f.display()))?;
+            Some(
+                r.try_into()
+                    .with_context(|| format!("{}: its `[read]` table", f.display()))?,
+            )
+        }
+    };
     // Design every recording's pipeline; all take the first one's regressor
     // stage, so that their tables share one parameter set.
     let mut designs: Vec<Design> = Vec::new();
     for (i, log) in all.iter().enumerate() {
-        let d = design(log, &robot, designs.first()).with_context(|| format!("identify {}", log.display()))?;
+        let d = design_with(log, &robot, designs.first(), stated.as_ref())
+            .with_context(|| format!("identify {}", log.display()))?;
         let role = if i < ident.len() { "excitation" } else { "validation" };
         println!(
             "{role} {} ({}):",
@@ -260,6 +280,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     match fitted {
         Ok(()) => {
+            // The model simulators get is the physical one: validated too.
+            if !val_tables.is_empty() {
+                println!("\nthe physically consistent estimate:");
+                super::validate::run(super::validate::Args {
+                    parameters: physical.clone(),
+                    regressors: val_tables.to_vec(),
+                    plot: None,
+                    fail_on_inadequate: false,
+                })?;
+            }
             super::export::run(super::export::Args {
                 robot: robot.clone(),
                 parameters: physical,
@@ -278,6 +308,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 robot.display(),
                 if residual_cov { " --covariance residual" } else { "" }
             )?;
+            if !val_tables.is_empty() {
+                writeln!(
+                    script,
+                    "robotid validate -p parameters_physical.parquet {}",
+                    joined(val_tables)
+                )?;
+            }
             writeln!(
                 script,
                 "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar -o identified",

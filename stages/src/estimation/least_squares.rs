@@ -82,7 +82,8 @@ pub fn stacked_least_squares(sys: &System, weights: Option<&DVector<f64>>, covar
                 "covariance = \"periods\" needs them in the regressor tables (an `align` stage with at least two periods before `regressor`)",
             ))
         }
-        Covariance::Periods => true,
+        // The stacked system has no noise spectrum: the periods' spread.
+        Covariance::Periods | Covariance::Spectrum => true,
         Covariance::Residual | Covariance::Bootstrap => false,
         Covariance::Auto => have_periods,
     };

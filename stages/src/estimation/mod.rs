@@ -84,7 +84,8 @@ pub enum Weights {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Covariance {
-    /// `periods` when every table carries its periods' torques, else `residual`.
+    /// `spectrum` when every table is one averaged period with its periods'
+    /// torques, `periods` when they carry those, else `residual`.
     #[default]
     Auto,
     /// The spread of the estimate across periods: right for coloured noise
@@ -93,6 +94,11 @@ pub enum Covariance {
     Periods,
     /// σ̂²(AᵀA)⁻¹ from the residual: assumes white noise, m − p degrees of freedom.
     Residual,
+    /// The periods' spread per DFT line of the averaged period, pooled over
+    /// neighbouring lines (`summary::SMOOTH_LINES`): the noise's colour as
+    /// `periods` keeps it, with many more degrees of freedom. What `auto`
+    /// takes for tables of one averaged period.
+    Spectrum,
     /// The physically consistent estimate's: a parametric bootstrap of its
     /// fit (reported, not a setting).
     Bootstrap,
@@ -104,6 +110,7 @@ impl Covariance {
             Covariance::Auto => "auto",
             Covariance::Periods => "periods",
             Covariance::Residual => "residual",
+            Covariance::Spectrum => "spectrum",
             Covariance::Bootstrap => "bootstrap",
         }
     }

@@ -79,6 +79,11 @@ pub struct Summary {
     pub equations: usize,
     /// Per recording, Aᵀ·W·D (parameters × periods); None without periods.
     pub period_moments: Vec<Option<DMatrix<f64>>>,
+    /// Per recording, Aᵀ·W·Ĉov(b̄)·W·A from the periods' noise spectrum
+    /// and its degrees of freedom ([`spectrum_moments`]); None where the
+    /// rows are not one averaged period.
+    #[serde(default)]
+    pub spectrum_moments: Vec<Option<(DMatrix<f64>, usize)>>,
     pub known: Option<KnownPart>,
     /// Per joint, the moments the adequacy verdicts need.
     pub joints: Vec<JointMoments>,
@@ -162,6 +167,12 @@ impl Summary {
                 },
             );
         }
+        let spectrum_moments = sys
+            .periods
+            .iter()
+            .enumerate()
+            .map(|(r, tp)| tp.as_ref().and_then(|tp| spectrum_moments(sys, rows, weights, r, tp)))
+            .collect();
         let known = sys.known.as_ref().zip(cross).map(|((_, ck), cross)| KnownPart {
             names: sys
                 .metadata
@@ -180,6 +191,7 @@ impl Summary {
             column_max,
             equations: sys.equations(),
             period_moments,
+            spectrum_moments,
             known,
             joints,
             weighted: weights.is_some(),
@@ -223,6 +235,7 @@ impl Summary {
         self.equations += other.equations;
         self.recordings.extend(other.recordings.iter().cloned());
         self.period_moments.extend(other.period_moments.iter().cloned());
+        self.spectrum_moments.extend(other.spectrum_moments.iter().cloned());
         Ok(())
     }
 
@@ -280,6 +293,19 @@ impl Summary {
         let dof = self.equations.saturating_sub(p).max(1);
         let residual_variance = self.factor.rss / dof as f64;
         let have_periods = self.period_moments.iter().all(Option::is_some);
+        let have_spectrum = have_periods
+            && self.spectrum_moments.len() == self.period_moments.len()
+            && self.spectrum_moments.iter().all(Option::is_some);
+        let covariance = match covariance {
+            Covariance::Auto if have_spectrum => Covariance::Spectrum,
+            Covariance::Spectrum if !have_spectrum => {
+                return Err(Error::missing(
+                    "the torque of every period, over one averaged period",
+                    "covariance = \"spectrum\" needs them in the regressor tables (an `align` and an `average` stage before `regressor`)",
+                ))
+            }
+            c => c,
+        };
         let use_periods = match covariance {
             Covariance::Periods if !have_periods => {
                 return Err(Error::missing(
@@ -287,11 +313,20 @@ impl Summary {
                     "covariance = \"periods\" needs them in the regressor tables (an `align` stage with at least two periods before `regressor`)",
                 ))
             }
-            Covariance::Periods => true,
+            Covariance::Periods | Covariance::Spectrum => true,
             Covariance::Residual | Covariance::Bootstrap => false,
             Covariance::Auto => have_periods,
         };
-        let (mut cov, dof) = if use_periods {
+        let (mut cov, dof) = if covariance == Covariance::Spectrum {
+            // θ = G·b̄: Cov θ = G·(Aᵀ·W·Ĉov(b̄)·W·A)·Gᵀ, summed over recordings.
+            let mut moments = DMatrix::zeros(p, p);
+            let mut dof = 0;
+            for (mm, d) in self.spectrum_moments.iter().flatten() {
+                moments += mm;
+                dof += d;
+            }
+            (&inverse_normal * moments * &inverse_normal, dof)
+        } else if use_periods {
             // θ = G·b̄ with b̄ the mean of P periods: Cov θ = G·Cov(b̄)·Gᵀ,
             // Cov(b̄) from the periods' deviations, Σ(P − 1) degrees of freedom.
             let mut cov = DMatrix::zeros(p, p);
@@ -338,7 +373,9 @@ impl Summary {
             condition,
             rows: m,
             iterations: 1,
-            covariance_from: if use_periods {
+            covariance_from: if covariance == Covariance::Spectrum {
+                Covariance::Spectrum
+            } else if use_periods {
                 Covariance::Periods
             } else {
                 Covariance::Residual
@@ -347,4 +384,99 @@ impl Summary {
             widened,
         })
     }
+}
+
+/// Lines on either side of each whose periods' spread is pooled into its
+/// noise variance: 2·(P − 1) degrees of freedom per line become about
+/// 2·(P − 1)·(2·SMOOTH_LINES + 1), where the spread of a few periods alone
+/// leaves each standard deviation uncertain by ±30 % (six periods).
+pub const SMOOTH_LINES: usize = 8;
+
+/// Aᵀ·W·Ĉov(b̄)·W·A for recording `r`, whose rows are one averaged period
+/// of `n` joints (sample-major) and `tp` its periods' torques: per joint,
+/// the variance of each DFT line of the periods' mean from the periods'
+/// deviations at that line, pooled over ±[`SMOOTH_LINES`] lines (the noise
+/// spectrum is smooth; its colour, which the inverse filter and the band
+/// limit give it, is kept), and Cov(Aᵀn) = (1/N)·Σ_l m_l·v_l·Re(â_l·â_lᴴ)
+/// (Parseval, lines uncorrelated over a whole period). Lines the band
+/// limit zeroed in every period are left out of the pooling. With the
+/// degrees of freedom of the lines nearest DC, where the motion's lines lie.
+fn spectrum_moments(
+    sys: &System,
+    rows: &dyn RowBlocks,
+    weights: Option<&DVector<f64>>,
+    r: usize,
+    tp: &DMatrix<f64>,
+) -> Option<(DMatrix<f64>, usize)> {
+    let n = sys.joints.len();
+    let (len, periods) = (tp.nrows(), tp.ncols());
+    let off = sys.offsets[r];
+    if n == 0 || periods < 2 || !len.is_multiple_of(n) || !off.is_multiple_of(n) || len / n < 4 {
+        return None;
+    }
+    if (0..len).any(|i| sys.joint[off + i] != i % n) {
+        return None;
+    }
+    let samples = len / n;
+    let a = rows.block(off, len);
+    let p = a.ncols();
+    let spectra = crate::signal::Spectra::new();
+    let lines = samples / 2 + 1;
+    let mut out = DMatrix::zeros(p, p);
+    let mut series = vec![0.0; samples];
+    let mut columns = vec![rustfft::num_complex::Complex64::default(); p * lines];
+    for j in 0..n {
+        let mut power = vec![0.0; lines];
+        let means: Vec<f64> = (0..samples).map(|i| tp.row(i * n + j).sum() / periods as f64).collect();
+        for k in 0..periods {
+            for i in 0..samples {
+                let row = i * n + j;
+                series[i] = weights.map_or(1.0, |w| w[off + row]) * (tp[(row, k)] - means[i]);
+            }
+            for (l, v) in spectra.forward(&series).iter().enumerate().take(lines) {
+                power[l] += v.norm_sqr();
+            }
+        }
+        // Per line, the variance density of the mean of the periods:
+        // Σ_k |d̂_k|² estimates (P − 1)·N·σ², and the mean has σ²/P.
+        let scale = 1.0 / ((periods - 1) * samples * periods) as f64;
+        let pooled: Vec<f64> = (0..lines)
+            .map(|l| {
+                let window = &power[l.saturating_sub(SMOOTH_LINES)..(l + SMOOTH_LINES + 1).min(lines)];
+                let live: Vec<f64> = window.iter().copied().filter(|x| *x > 0.0).collect();
+                if live.is_empty() || power[l] == 0.0 && live.len() < window.len() {
+                    0.0
+                } else {
+                    scale * live.iter().sum::<f64>() / live.len() as f64
+                }
+            })
+            .collect();
+        for c in 0..p {
+            for i in 0..samples {
+                series[i] = a[(i * n + j, c)];
+            }
+            let s = spectra.forward(&series);
+            columns[c * lines..][..lines].copy_from_slice(&s[..lines]);
+        }
+        for l in 0..lines {
+            let m = if l == 0 || 2 * l == samples { 1.0 } else { 2.0 };
+            let f = m * pooled[l] / samples as f64;
+            if f == 0.0 {
+                continue;
+            }
+            for c in 0..p {
+                let ac = columns[c * lines + l];
+                for d in c..p {
+                    let ad = columns[d * lines + l];
+                    out[(c, d)] += f * (ac.re * ad.re + ac.im * ad.im);
+                }
+            }
+        }
+    }
+    for c in 0..p {
+        for d in 0..c {
+            out[(c, d)] = out[(d, c)];
+        }
+    }
+    Some((out, 2 * (periods - 1) * (SMOOTH_LINES + 1)))
 }

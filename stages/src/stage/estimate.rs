@@ -193,7 +193,7 @@ impl Component for EstimateConfig {
                 "\"ml\" needs periodic data (average, then differentiate by `dft` or `fourier_fit`)",
             ));
         }
-        if self.method == Estimator::Ml && self.covariance == Covariance::Periods {
+        if self.method == Estimator::Ml && matches!(self.covariance, Covariance::Periods | Covariance::Spectrum) {
             out.push(Problem::new(
                 "covariance",
                 "\"periods\" is not available with method = \"ml\" (its covariance is the information matrix's, Bona eq. 16)",
@@ -638,7 +638,9 @@ fn physical_fit(
     // error of some joints need not fill it), and the fit (a Mahalanobis
     // distance, a bootstrap) cannot use it.
     let p = est.values.len();
-    if est.covariance_from == Covariance::Periods && est.covariance.clone().cholesky().is_none() {
+    if matches!(est.covariance_from, Covariance::Periods | Covariance::Spectrum)
+        && est.covariance.clone().cholesky().is_none()
+    {
         return Err(Error::numerical(
             "physical fit",
             format!(

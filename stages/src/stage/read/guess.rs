@@ -168,6 +168,79 @@ pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, St
     })
 }
 
+/// The layouts a headerless log of `width` fields may have for `n`
+/// joints, as labs write them: time first (s), then per-joint blocks of
+/// positions (rad) and efforts (N·m), in either order, with a block of
+/// velocities between them when there are three (left unread: robotid
+/// differentiates the positions). Each with what it says of the columns.
+pub fn headerless_layouts(width: usize, n: usize) -> Vec<(ReadConfig, String)> {
+    let block = |from: usize, unit: &str| Channel {
+        column: Some(Column::Each((from..from + n).map(OneColumn::Index).collect())),
+        topic: None,
+        field: None,
+        unit: Some(unit.to_string()),
+    };
+    let layout = |q: usize, e: usize, said: String| {
+        (
+            ReadConfig {
+                time: Some(Channel {
+                    column: Some(Column::Index(0)),
+                    topic: None,
+                    field: None,
+                    unit: Some("s".into()),
+                }),
+                position: Some(block(q, "rad")),
+                effort: Some(block(e, "N*m")),
+                header: Some(false),
+                ..ReadConfig::default()
+            },
+            said,
+        )
+    };
+    let span = |a: usize| format!("{a}–{}", a + n - 1);
+    if n == 0 {
+        Vec::new()
+    } else if width == 1 + 2 * n {
+        vec![
+            layout(
+                1,
+                1 + n,
+                format!("time 0 (s), positions {} (rad), torques {} (N·m)", span(1), span(1 + n)),
+            ),
+            layout(
+                1 + n,
+                1,
+                format!("time 0 (s), torques {} (N·m), positions {} (rad)", span(1), span(1 + n)),
+            ),
+        ]
+    } else if width == 1 + 3 * n {
+        vec![
+            layout(
+                1,
+                1 + 2 * n,
+                format!(
+                    "time 0 (s), positions {} (rad), velocities {} (unread), torques {} (N·m)",
+                    span(1),
+                    span(1 + n),
+                    span(1 + 2 * n)
+                ),
+            ),
+            layout(
+                1 + 2 * n,
+                1,
+                format!(
+                    "time 0 (s), torques {} (N·m), velocities {} (unread), positions {} (rad)",
+                    span(1),
+                    span(1 + n),
+                    span(1 + 2 * n)
+                ),
+            ),
+        ]
+    } else {
+        Vec::new()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

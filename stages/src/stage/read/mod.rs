@@ -11,7 +11,7 @@ mod mcap;
 mod parquet;
 mod text;
 
-pub use guess::guess_read;
+pub use guess::{guess_read, headerless_layouts};
 
 use std::path::Path;
 
@@ -309,6 +309,19 @@ pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
             ))
         }
         _ => Ok(None),
+    }
+}
+
+/// The number of fields of a text log's lines (None for other formats).
+pub fn log_width(path: &Path) -> Result<Option<usize>> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if TEXT_EXTENSIONS.contains(&ext.as_str()) {
+        text::width_of(path)
+    } else {
+        Ok(None)
     }
 }
 

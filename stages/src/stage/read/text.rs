@@ -262,6 +262,24 @@ pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
     }
 }
 
+/// The number of fields on a text log's first line (header or data).
+pub(crate) fn width_of(path: &Path) -> Result<Option<usize>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut reader = std::io::BufReader::new(file);
+    let mut line = String::new();
+    loop {
+        line.clear();
+        if reader.read_line(&mut line).map_err(|e| Error::io(path, e))? == 0 {
+            return Ok(None);
+        }
+        let t = line.trim_start_matches('\u{feff}').trim();
+        if t.is_empty() || comment(t) {
+            continue;
+        }
+        return Ok(Some(fields(t, separator_of(t)).count()));
+    }
+}
+
 /// Delimited text: CSV, semicolon, tab or whitespace separated, with or
 /// without a header line, comment lines and a UTF-8 byte-order mark
 /// skipped, either decimal mark. Streamed line by line; only the mapped

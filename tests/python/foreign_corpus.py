@@ -1,0 +1,123 @@
+"""Recordings of a lab's arm made without robotid: Pinocchio's RNEA along a
+Fourier excitation, friction, an analog anti-alias filter simulated by
+scipy on a fine grid, white torque noise and encoder quantisation, logged
+as a headed CSV or a headerless whitespace log, with the truth beside it.
+
+usage: foreign_corpus.py URDF OUT_DIR CASE
+
+CASE names what a lab brings (see CASES). Writes OUT_DIR/excitation.csv
+(or .txt), OUT_DIR/truth.json (joints, friction, filter, noise). Nothing
+here imports or mirrors robotid: the reference is Pinocchio and scipy."""
+import json
+import sys
+
+import numpy as np
+import pinocchio as pin
+from scipy import signal
+
+FS = 500.0
+FINE = 8  # simulation steps per logged sample: the filter sees the torque's kinks
+NOISE = 0.05  # N·m, white, after the filter
+COUNTS = 2**17  # encoder counts per revolution
+
+# Each case: the filter (scipy design arguments, or None), the friction law,
+# periods after one ramp-in period, a constant torque offset, the log form.
+CASES = {
+    "butter4_20": dict(filter=("butter", 4, 20.0, None), friction="sign", periods=5),
+    "bessel6_40": dict(filter=("bessel", 6, 40.0, None), friction="sign", periods=5),
+    "cheby1_6_25": dict(filter=("cheby1", 6, 25.0, 1.0), friction="sign", periods=5),
+    "none_offset": dict(filter=None, friction="sign", periods=5, offset=0.3),
+    "stribeck": dict(filter=("butter", 4, 40.0, None), friction="stribeck", periods=5),
+    "headerless": dict(filter=("butter", 2, 60.0, None), friction="sign", periods=5, form="txt"),
+}
+
+
+def main(urdf, out, case):
+    spec = CASES[case]
+    model = pin.buildModelFromUrdf(urdf)
+    data = model.createData()
+    nq = model.nq
+    names = [model.names[i] for i in range(1, model.njoints)]
+    rng = np.random.default_rng(list(CASES).index(case) + 1)
+    f0, harmonics = 0.1, 5
+    w = 2 * np.pi * f0 * np.arange(1, harmonics + 1)
+    a = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
+    b = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
+
+    def excitation(t):
+        s, c = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))
+        q = (s @ (a / w).T) - (c @ (b / w).T)
+        q -= -(b / w).sum(axis=1)  # q(0) = 0
+        qd = c @ a.T + s @ b.T
+        qdd = -(s @ (a * w).T) + c @ (b * w).T
+        return q, qd, qdd
+
+    period = 1 / f0
+    total = (1 + spec["periods"]) * period
+    t = np.arange(int(round(total * FS * FINE))) / (FS * FINE)
+    q, qd, qdd = excitation(t)
+    # One ramp-in period: the excitation faded in by a smooth window.
+    ramp = np.clip(t / period, 0, 1)
+    g = ramp**3 * (10 - 15 * ramp + 6 * ramp**2)
+    gd = np.where(t < period, 30 * ramp**2 * (1 - ramp) ** 2 / period, 0)
+    gdd = np.where(t < period, 60 * ramp * (1 - ramp) * (1 - 2 * ramp) / period**2, 0)
+    q, qd, qdd = (
+        g[:, None] * q,
+        g[:, None] * qd + gd[:, None] * q,
+        g[:, None] * qdd + 2 * gd[:, None] * qd + gdd[:, None] * q,
+    )
+    fv = rng.uniform(0.3, 1.5, nq)
+    fc = rng.uniform(0.2, 1.8, nq)
+    tau = np.empty_like(q)
+    for k in range(len(t)):
+        tau[k] = pin.rnea(model, data, q[k], qd[k], qdd[k])
+    if spec["friction"] == "sign":
+        tau += fv * qd + fc * np.sign(qd)
+    else:
+        # Stribeck: static friction 1.5× Coulomb, fading over 0.05 rad/s.
+        tau += fv * qd + (fc + 0.5 * fc * np.exp(-((qd / 0.05) ** 2))) * np.sign(qd)
+    tau += spec.get("offset", 0.0)
+    filt = None
+    if spec["filter"]:
+        family, order, cutoff, ripple = spec["filter"]
+        wc = 2 * np.pi * cutoff
+        if family == "butter":
+            num, den = signal.butter(order, wc, analog=True)
+        elif family == "bessel":
+            num, den = signal.bessel(order, wc, analog=True, norm="mag")
+        else:
+            num, den = signal.cheby1(order, ripple, wc, analog=True)
+        sys_ = signal.lti(num, den)
+        tau = np.stack([signal.lsim(sys_, tau[:, j], t)[1] for j in range(nq)], axis=1)
+        filt = dict(family=family, order=order, cutoff_hz=cutoff, ripple_db=ripple)
+    logged = slice(0, None, FINE)
+    t, q, tau = t[logged], q[logged], tau[logged]
+    tau = tau + rng.normal(0, NOISE, tau.shape)
+    step = 2 * np.pi / COUNTS
+    q = np.round(q / step) * step
+    table = np.column_stack([t, q, tau])
+    if spec.get("form") == "txt":
+        np.savetxt(f"{out}/excitation.txt", table, fmt="%.9g", delimiter=" ")
+    else:
+        header = ",".join(["time_s"] + [f"{n}_pos_rad" for n in names] + [f"{n}_effort_Nm" for n in names])
+        np.savetxt(f"{out}/excitation.csv", table, fmt="%.9g", delimiter=",", header=header, comments="")
+    truth = dict(
+        joints=names,
+        fs_hz=FS,
+        f0_hz=f0,
+        harmonics=harmonics,
+        periods_after_ramp_in=spec["periods"],
+        anti_alias=filt,
+        friction=spec["friction"],
+        friction_viscous=fv.tolist(),
+        friction_coulomb=fc.tolist(),
+        offset_Nm=spec.get("offset", 0.0),
+        effort_noise_std_Nm=NOISE,
+        encoder_counts_per_rev=COUNTS,
+    )
+    with open(f"{out}/truth.json", "w") as f:
+        json.dump(truth, f, indent=1)
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:4])
