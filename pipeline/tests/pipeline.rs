@@ -678,6 +678,7 @@ coulomb_transition_rad_s = 0.0106
 [[stage]]
 kind = "estimate"
 method = "ols"
+covariance = "periods"
 physical = true
 [output]
 tables = ["kinematics"]
@@ -701,7 +702,7 @@ tables = ["kinematics"]
     // Said so, the residual's covariance does it.
     std::fs::write(
         &f,
-        text.replace("physical = true", "physical = true\ncovariance = \"residual\""),
+        text.replace("covariance = \"periods\"", "covariance = \"residual\""),
     )
     .unwrap();
     let built = Pipeline::from_path(&f).unwrap().build().unwrap();

@@ -11,20 +11,36 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use robotid_stages::dynamics::{load_robot, BaseRegressor};
-use robotid_stages::estimation::{least_squares, stacked_least_squares, Covariance, System, Verdict};
+use robotid_stages::estimation::{
+    least_squares, solve_least_squares, stacked_least_squares, Covariance, System, Verdict,
+};
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_tests::fixture;
 
 const SAMPLES: usize = 200;
 const PERIODS: usize = 6;
 const PERIOD: f64 = 10.0;
+/// Samples per period of the noise-spectrum test.
+const LONG: usize = 2000;
 
 /// One recording: a random 5-harmonic trajectory, its regressor, and the
 /// torque of each period = model + `model_error` (the same in every period)
 /// + noise.
 fn recording(base: &BaseRegressor, theta: &DVector<f64>, rng: &mut ChaCha8Rng, model_error: f64, noise: f64) -> System {
+    recording_of(base, theta, rng, model_error, noise, SAMPLES)
+}
+
+/// The same with `samples` per period.
+fn recording_of(
+    base: &BaseRegressor,
+    theta: &DVector<f64>,
+    rng: &mut ChaCha8Rng,
+    model_error: f64,
+    noise: f64,
+    samples: usize,
+) -> System {
     let n = base.model.dof();
-    let kin = robotid_tests::fourier_kinematics(base.model.joint_names(), SAMPLES, PERIOD, |_, h| {
+    let kin = robotid_tests::fourier_kinematics(base.model.joint_names(), samples, PERIOD, |_, h| {
         (
             rng.random_range(-0.4..0.4) / h as f64,
             rng.random_range(-0.4..0.4) / h as f64,
@@ -48,7 +64,7 @@ fn recording(base: &BaseRegressor, theta: &DVector<f64>, rng: &mut ChaCha8Rng, m
         var: DVector::from_element(rows, f64::NAN),
         recording: vec![0; rows],
         sample: (0..rows).map(|i| (i / n) as i64).collect(),
-        time: (0..rows).map(|i| (i / n) as f64 * PERIOD / SAMPLES as f64).collect(),
+        time: (0..rows).map(|i| (i / n) as f64 * PERIOD / samples as f64).collect(),
         joint: (0..rows).map(|i| i % n).collect(),
         recordings: vec!["mc".into()],
         joints: kin.joints.clone(),
@@ -132,7 +148,7 @@ fn an_adequate_model_keeps_the_periods_covariance() {
     let (base, theta) = setup();
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let sys = recording(&base, &theta, &mut rng, 0.0, 1.0);
-    let est = least_squares(&sys).unwrap();
+    let est = solve_least_squares(&sys, None, Covariance::Periods).unwrap();
     assert!(!est.widened);
     for a in &est.adequacy {
         let r = a.ratio().unwrap();
@@ -151,13 +167,68 @@ fn the_reduce_and_its_stacked_twin_agree_on_verdicts_and_widening() {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let systems: Vec<System> = (0..3).map(|_| recording(&base, &theta, &mut rng, 0.8, 1.0)).collect();
     let stacked = System::stack(&systems.iter().collect::<Vec<_>>()).unwrap();
-    let a = least_squares(&stacked).unwrap();
-    let b = stacked_least_squares(&stacked, None, Covariance::Auto).unwrap();
+    let a = solve_least_squares(&stacked, None, Covariance::Periods).unwrap();
+    let b = stacked_least_squares(&stacked, None, Covariance::Periods).unwrap();
     assert!(a.widened && b.widened);
     assert_eq!(a.dof, b.dof);
     assert!((&a.covariance - &b.covariance).norm() <= 1e-9 * a.covariance.norm());
     for (x, y) in a.adequacy.iter().zip(&b.adequacy) {
         assert!((x.msr - y.msr).abs() <= 1e-9 * x.msr);
         assert_eq!(x.noise_floor, y.noise_floor);
+    }
+}
+
+/// The covariance from the periods' noise spectrum (what `auto` takes for
+/// one averaged period) on noise the periods' spread alone sees with only
+/// P − 1 = 5 degrees of freedom: coloured (AR(1), φ = 0.8, as an inverse
+/// filter and band limit leave it) and white, over 2000 samples a period
+/// (the spectrum smooth over the ±8 lines pooled). Its 95 % intervals cover the
+/// truth at the nominal rate (±2 %), where σ̂²(AᵀA)⁻¹ from the residual,
+/// which takes the noise as white, covers far less on the coloured noise.
+#[test]
+fn the_noise_spectrum_covariance_covers_coloured_noise_at_the_nominal_rate() {
+    let (base, theta) = setup();
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    let gauss = Normal::new(0.0, 1.0).unwrap();
+    for phi in [0.8f64, 0.0] {
+        let (mut inside, mut inside_residual, mut count) = (0usize, 0usize, 0usize);
+        let trials = 200;
+        for _ in 0..trials {
+            let mut sys = recording_of(&base, &theta, &mut rng, 0.0, 0.0, LONG);
+            let n = base.model.dof();
+            // Per joint, one AR(1) series over all periods, unit variance.
+            let periods = sys.periods[0].as_mut().unwrap();
+            for j in 0..n {
+                let mut x = gauss.sample(&mut rng);
+                for k in 0..PERIODS {
+                    for i in 0..LONG {
+                        x = phi * x + (1.0 - phi * phi).sqrt() * gauss.sample(&mut rng);
+                        periods[(i * n + j, k)] += x;
+                    }
+                }
+            }
+            let rows = sys.b.len();
+            sys.b = DVector::from_fn(rows, |i, _| periods.row(i).sum() / PERIODS as f64);
+            let est = least_squares(&sys).unwrap();
+            assert_eq!(est.covariance_from, Covariance::Spectrum);
+            let residual = solve_least_squares(&sys, None, Covariance::Residual).unwrap();
+            let (half, half_r) = (est.half_width(0.95), residual.half_width(0.95));
+            for i in 0..theta.len() {
+                let d = (est.values[i] - theta[i]).abs();
+                inside += (d <= half[i]) as usize;
+                inside_residual += (d <= half_r[i]) as usize;
+                count += 1;
+            }
+        }
+        let (rate, rate_residual) = (inside as f64 / count as f64, inside_residual as f64 / count as f64);
+        println!(
+            "φ = {phi}: 95 % intervals cover the truth {:.1} % (spectrum), {:.1} % (residual)",
+            100.0 * rate,
+            100.0 * rate_residual
+        );
+        assert!((rate - 0.95).abs() <= 0.02, "φ = {phi}: spectrum coverage {rate}");
+        if phi > 0.0 {
+            assert!(rate_residual < 0.8, "residual coverage {rate_residual}");
+        }
     }
 }

@@ -272,7 +272,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut residual_cov = false;
     let fitted = super::estimate::run(estimate_args(id_tables, Some(&robot), true, &physical)).or_else(|e| {
         residual_cov = true;
-        eprintln!("note: the physical fit with the periods' covariance failed ({e:#}); again with the residual's");
+        eprintln!("note: the physical fit with the estimate's covariance failed ({e:#}); again with the residual's");
         super::estimate::run(super::estimate::Args {
             covariance: "residual".into(),
             ..estimate_args(id_tables, Some(&robot), true, &physical)

@@ -399,8 +399,9 @@ pub const SMOOTH_LINES: usize = 8;
 /// spectrum is smooth; its colour, which the inverse filter and the band
 /// limit give it, is kept), and Cov(Aᵀn) = (1/N)·Σ_l m_l·v_l·Re(â_l·â_lᴴ)
 /// (Parseval, lines uncorrelated over a whole period). Lines the band
-/// limit zeroed in every period are left out of the pooling. With the
-/// degrees of freedom of the lines nearest DC, where the motion's lines lie.
+/// limit zeroed in every period are left out of the pooling. The noise
+/// spectrum must be smooth over ±[`SMOOTH_LINES`] lines: a few per mille
+/// of the band for the thousands of samples a period has on a real arm.
 fn spectrum_moments(
     sys: &System,
     rows: &dyn RowBlocks,
@@ -440,15 +441,40 @@ fn spectrum_moments(
         // Per line, the variance density of the mean of the periods:
         // Σ_k |d̂_k|² estimates (P − 1)·N·σ², and the mean has σ²/P.
         let scale = 1.0 / ((periods - 1) * samples * periods) as f64;
+        // A window symmetric about each line, reflected at DC and at the
+        // last line (a real series' spectrum is even), so that a sloping
+        // spectrum averages to its value at the line.
+        let last = lines - 1;
+        let reflect = |m: isize| -> usize {
+            // Reflected at line 1, DC left out.
+            let m = if m < 1 {
+                (2 - m).unsigned_abs()
+            } else {
+                m.unsigned_abs()
+            };
+            if m > last {
+                (2 * last).saturating_sub(m)
+            } else {
+                m
+            }
+        };
         let pooled: Vec<f64> = (0..lines)
             .map(|l| {
-                let window = &power[l.saturating_sub(SMOOTH_LINES)..(l + SMOOTH_LINES + 1).min(lines)];
-                let live: Vec<f64> = window.iter().copied().filter(|x| *x > 0.0).collect();
-                if live.is_empty() || power[l] == 0.0 && live.len() < window.len() {
-                    0.0
-                } else {
-                    scale * live.iter().sum::<f64>() / live.len() as f64
+                if power[l] == 0.0 {
+                    // A line the band limit zeroed in every period.
+                    return 0.0;
                 }
+                if l == 0 {
+                    // DC is no neighbour of the lines above it: offsets and
+                    // drifts that differ by period live there alone.
+                    return scale * power[0];
+                }
+                let w = SMOOTH_LINES as isize;
+                let (sum, count) = (-w..=w)
+                    .map(|d| power[reflect(l as isize + d)])
+                    .filter(|x| *x > 0.0)
+                    .fold((0.0, 0usize), |(s, c), x| (s + x, c + 1));
+                scale * sum / count as f64
             })
             .collect();
         for c in 0..p {

@@ -644,7 +644,7 @@ fn physical_fit(
         return Err(Error::numerical(
             "physical fit",
             format!(
-                "the estimate's covariance is singular: it comes from the spread of the periods, and P periods give it a rank of at most P − 1, here below the {p} parameters{}: record more than {p} periods, or set covariance = \"residual\"",
+                "the estimate's covariance is singular: it comes from the spread of the periods, and P periods give it a rank of at most P − 1, here below the {p} parameters{}: record more than {p} periods, or set covariance = \"spectrum\" (the periods' spread per frequency line, what `auto` takes for one averaged period), or covariance = \"residual\"",
                 if est.widened {
                     " (widened only by the model error of the joints where it dominates)"
                 } else {
