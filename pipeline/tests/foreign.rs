@@ -188,7 +188,8 @@ fn lab_mistakes_on_foreign_data_are_refused() {
         ),
         ("ms", |v| v[0] *= 1000.0, "is the time column in ms"),
     ];
-    for (name, edit, why) in refused {
+    // identify on the CSV edited by `edit`: its output folder, exit and words.
+    let identify_edited = |name: &str, edit: Edit| {
         let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
         let out = tmp.path().join(name);
         let o = robotid(&[
@@ -199,25 +200,18 @@ fn lab_mistakes_on_foreign_data_are_refused() {
             Path::new("--out"),
             &out,
         ]);
-        let said = text(&o);
-        assert_eq!(o.status.code(), Some(1), "{name}:\n{said}");
+        (out, o.status.code(), text(&o))
+    };
+    for (name, edit, why) in refused {
+        let (out, code, said) = identify_edited(name, edit);
+        assert_eq!(code, Some(1), "{name}:\n{said}");
         assert!(said.contains(why), "{name}:\n{said}");
         assert!(!out.exists(), "{name}: nothing written");
     }
     let cases: [(&str, Edit); 2] = [("scaled2", |v| v[9] *= 2.0), ("scaled1.1", |v| v[9] *= 1.1)];
     for (name, edit) in cases {
-        let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
-        let out = tmp.path().join(name);
-        let o = robotid(&[
-            Path::new("identify"),
-            &csv,
-            Path::new("--robot"),
-            &urdf,
-            Path::new("--out"),
-            &out,
-        ]);
-        let said = text(&o);
-        assert_eq!(o.status.code(), Some(3), "{name}:\n{said}");
+        let (out, code, said) = identify_edited(name, edit);
+        assert_eq!(code, Some(3), "{name}:\n{said}");
         assert!(
             said.contains("not identified") && said.contains("elbow_joint"),
             "{name}:\n{said}"

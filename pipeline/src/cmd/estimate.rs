@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use anyhow::{bail, Context as _};
+use anyhow::bail;
 use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome};
@@ -101,19 +101,15 @@ pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
     })?;
     // The same map and reduce as a pipeline's `estimate` stage: each table
     // folded into its summary, the summaries merged.
+    if let Some((first, again)) = super::same_bytes(&args.regressors)? {
+        bail!(
+            "{} and {} are the same table: given twice, its rows would count twice and the intervals shrink by √2",
+            first.display(),
+            again.display()
+        );
+    }
     let mut parts = Vec::new();
-    let mut seen: Vec<(String, PathBuf)> = Vec::new();
     for p in &args.regressors {
-        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
-        let hash = robotid_stages::formats::sha256_hex(&bytes);
-        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
-            bail!(
-                "{} and {} are the same table: given twice, its rows would count twice and the intervals shrink by √2",
-                first.display(),
-                p.display()
-            );
-        }
-        seen.push((hash, p.clone()));
         let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
         parts.push(reducer.part_of(sys)?);
     }

@@ -103,18 +103,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // The same data under two names would count twice: the intervals
     // shrink by √2, and a validation on its own excitation proves nothing.
-    let mut seen: Vec<(String, &PathBuf)> = Vec::new();
-    for p in &all {
-        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
-        let hash = robotid_stages::formats::sha256_hex(&bytes);
-        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
-            bail!(
-                "{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2, or it would validate itself)",
-                first.display(),
-                p.display()
-            );
-        }
-        seen.push((hash, p));
+    if let Some((first, again)) = super::same_bytes(&all)? {
+        bail!(
+            "{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2, or it would validate itself)",
+            first.display(),
+            again.display()
+        );
     }
 
     let stated: Option<robotid_stages::stage::read::ReadConfig> = match &args.read {

@@ -22,6 +22,21 @@ use robotid_stages::estimation::{parameters_from_table, Parameters};
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_stages::stage::regressor::RegressorConfig;
 
+/// The first two of `paths` that hold the same bytes (by SHA-256), if any:
+/// one file given twice under two names.
+pub fn same_bytes(paths: &[std::path::PathBuf]) -> anyhow::Result<Option<(&Path, &Path)>> {
+    let mut seen: Vec<(String, &Path)> = Vec::new();
+    for p in paths {
+        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
+        let hash = robotid_stages::formats::sha256_hex(&bytes);
+        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
+            return Ok(Some((first, p)));
+        }
+        seen.push((hash, p));
+    }
+    Ok(None)
+}
+
 /// A parameters table with the robot it was identified for and the base
 /// regressor rebuilt from the regressor configuration it carries; refused
 /// when the robot does not give the table's base parameters.

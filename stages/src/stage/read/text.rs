@@ -236,9 +236,9 @@ fn number(text: &str, decimal: Decimal) -> Option<f64> {
     std::str::from_utf8(&buf[..bytes.len()]).ok()?.parse().ok()
 }
 
-/// The names on a text log's first line, or None when it holds numbers
-/// (no header).
-pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
+/// A text log's first line that is neither blank nor a comment, without
+/// its byte-order mark and surrounding space; None for an empty log.
+fn first_line(path: &Path) -> Result<Option<String>> {
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut reader = std::io::BufReader::new(file);
     let mut line = String::new();
@@ -248,36 +248,30 @@ pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
             return Ok(None);
         }
         let t = line.trim_start_matches('\u{feff}').trim();
-        if t.is_empty() || comment(t) {
-            continue;
+        if !(t.is_empty() || comment(t)) {
+            return Ok(Some(t.to_string()));
         }
-        let sep = separator_of(t);
-        let names: Vec<String> = fields(t, sep).map(|f| f.trim().trim_matches('"').to_string()).collect();
-        let numeric = names.iter().all(|f| {
-            number(f, Decimal::Point)
-                .or_else(|| number(f, Decimal::Comma))
-                .is_some()
-        });
-        return Ok((!numeric).then_some(names));
     }
+}
+
+/// The names on a text log's first line, or None when it holds numbers
+/// (no header).
+pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
+    let Some(t) = first_line(path)? else { return Ok(None) };
+    let names: Vec<String> = fields(&t, separator_of(&t))
+        .map(|f| f.trim().trim_matches('"').to_string())
+        .collect();
+    let numeric = names.iter().all(|f| {
+        number(f, Decimal::Point)
+            .or_else(|| number(f, Decimal::Comma))
+            .is_some()
+    });
+    Ok((!numeric).then_some(names))
 }
 
 /// The number of fields on a text log's first line (header or data).
 pub(crate) fn width_of(path: &Path) -> Result<Option<usize>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut reader = std::io::BufReader::new(file);
-    let mut line = String::new();
-    loop {
-        line.clear();
-        if reader.read_line(&mut line).map_err(|e| Error::io(path, e))? == 0 {
-            return Ok(None);
-        }
-        let t = line.trim_start_matches('\u{feff}').trim();
-        if t.is_empty() || comment(t) {
-            continue;
-        }
-        return Ok(Some(fields(t, separator_of(t)).count()));
-    }
+    Ok(first_line(path)?.map(|t| fields(&t, separator_of(&t)).count()))
 }
 
 /// Delimited text: CSV, semicolon, tab or whitespace separated, with or
