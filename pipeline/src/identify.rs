@@ -563,6 +563,14 @@ pub fn design_with(
             .into_iter()
             .chain(torques_stage.as_ref().map(|t| (true, t)))
         {
+            // The Fourier fit at the noise floor leaves the wider band
+            // nothing to gain beyond the score's spread: not tried.
+            if tried
+                .first()
+                .is_some_and(|t: &(bool, String, ModelChoice)| t.2.score.is_some_and(|r| r < 1.0 + t.2.margin))
+            {
+                break;
+            }
             let probe = format!("{head}{}", stages_after(None, stage)?);
             let chain = Pipeline::from_toml(&probe, log.with_extension("probe.toml"))?
                 .build()?
@@ -606,6 +614,8 @@ pub fn design_with(
             "differentiate".into(),
             if scores.contains(',') {
                 format!("{said} (held-out residue over the noise floor, each with its best filter and Coulomb model: {scores})")
+            } else if torques_stage.is_some() && choice.score.is_some() {
+                format!("{said} ({scores}, at the noise floor: the torques' band, up to their lines beyond the excited ones, not tried)")
             } else {
                 said
             },
@@ -805,7 +815,10 @@ fn choose_model(
         })
     };
     let mut scored = vec![(0.0, Some(sign_fit.clone()), true)];
-    for &v in &TRANSITIONS[1..] {
+    // At the noise floor nothing can do better by more than the score's
+    // spread: a smooth turn-over is tried only above it.
+    let at_floor = sign_fit.1.ratio < 1.0 + margin;
+    for &v in TRANSITIONS[1..].iter().filter(|_| !at_floor) {
         let (Some(sys), names) = system(v)? else { continue };
         let fit = score_with(&sys);
         let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
@@ -839,7 +852,13 @@ fn choose_model(
         })
         .collect::<Vec<_>>()
         .join(", ");
-    let transition_said = if pick.0 == 0.0 {
+    let transition_said = if at_floor {
+        format!(
+            "0, sign(q̇): its held-out residue {:.3}× the noise floor leaves no smooth turn-over {:.2} % to gain",
+            sign_fit.1.ratio,
+            100.0 * margin
+        )
+    } else if pick.0 == 0.0 {
         format!("0, sign(q̇): no smooth turn-over with friction ≥ 0 predicts held-out periods better by {:.2} % (held-out residue over the noise floor: {table})", 100.0 * margin)
     } else {
         format!("{} (held-out residue over the noise floor: {table})", pick.0)
