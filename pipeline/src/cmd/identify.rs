@@ -211,6 +211,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let inadequate = inadequate.filter(|_| reliable);
+    // Not periodic: no floor to judge the fit against, which is said.
+    let unjudged: Vec<String> = ols
+        .estimate
+        .adequacy
+        .iter()
+        .filter(|a| a.noise_floor.is_none())
+        .map(|a| format!("{} {:.3e} (N·m)²", a.joint, a.msr))
+        .collect();
+    if !unjudged.is_empty() {
+        eprintln!(
+            "warning: no noise floor to judge the fit against on {}: the identification recordings hold no two steady periods (a record that does not repeat, or 1.5 periods), so a residue far above the noise would pass unseen; record whole periods, or check the residue against the torque sensor's noise",
+            unjudged.join(", ")
+        );
+    }
     let level = if inadequate.is_some() { None } else { Some(0.95) };
     print!("{}", super::estimate::summary_at(&ols.estimate, 0.95, level));
     print!("{}", super::estimate::findings(&ols));
