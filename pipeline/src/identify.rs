@@ -770,7 +770,7 @@ fn choose_model(
             base.names(),
         ))
     };
-    let (Some(sign), names) = system(0.0)? else {
+    let (Some(sign), _) = system(0.0)? else {
         return Ok(ModelChoice {
             filter: None,
             filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
@@ -895,7 +895,6 @@ fn choose_model(
         .map(|(r, j)| format!("{j} {r:.2}"))
         .collect::<Vec<_>>()
         .join(", ");
-    let _ = names;
     Ok(ModelChoice {
         filter,
         filter_said,

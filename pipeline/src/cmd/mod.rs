@@ -22,13 +22,13 @@ use robotid_stages::estimation::{parameters_from_table, Parameters};
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_stages::stage::regressor::RegressorConfig;
 
-/// The first two of `paths` that hold the same bytes (by SHA-256), if any:
+/// The first two of `paths` that hold the same bytes (by the SHA-256 the
+/// reader records, streamed; a ROS 2 bag folder by its files), if any:
 /// one file given twice under two names.
 pub fn same_bytes(paths: &[std::path::PathBuf]) -> anyhow::Result<Option<(&Path, &Path)>> {
     let mut seen: Vec<(String, &Path)> = Vec::new();
     for p in paths {
-        let bytes = std::fs::read(p).with_context(|| p.display().to_string())?;
-        let hash = robotid_stages::formats::sha256_hex(&bytes);
+        let hash = robotid_stages::stage::read::hash_recording(p)?;
         if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
             return Ok(Some((first, p)));
         }

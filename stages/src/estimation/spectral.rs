@@ -226,20 +226,8 @@ impl LineSystem {
 
     /// The held-out score of the filter response `h`.
     pub fn score(&self, h: &[Complex64]) -> Option<Score> {
-        let (g, r) = self.normal(h);
-        let solve = |rhs: &DVector<f64>| solve_scaled(&g, rhs);
-        let theta = [solve(&r[0])?, solve(&r[1])?];
-        // Fitted on one half, the other's residue: E − 2θᵀr + θᵀGθ.
-        let held = |fit: usize, on: usize| {
-            let t = &theta[fit];
-            self.energy[on] - 2.0 * t.dot(&r[on]) + t.dot(&(&g * t))
-        };
-        // Its noise part: each held-out half's mean has σ²/P_h per sample.
-        // A line of white noise of variance σ² over N samples has E|n̂|² = N·σ².
+        let (ratio, g, r, theta) = self.held_out(h)?;
         let n = self.samples as f64;
-        let used = self.weight.iter().filter(|w| **w > 0.0).count() as f64;
-        let floor = |on: usize| used * self.band_samples * n / self.periods[on] as f64;
-        let ratio = 0.5 * (held(0, 1) / floor(1) + held(1, 0) / floor(0));
         let per_joint = (0..self.joints)
             .map(|j| {
                 if self.weight[j] == 0.0 {
@@ -267,8 +255,37 @@ impl LineSystem {
         Some(Score {
             ratio,
             per_joint,
-            theta: solve(&total)?,
+            theta: solve_scaled(&g, &total)?,
         })
+    }
+
+    /// The held-out score alone, of the filter `spec` (None: no filter):
+    /// what a search ranks candidates by (no per-joint split, no fit on
+    /// all periods). Infinite where the regression is singular.
+    pub fn ratio(&self, spec: Option<&FilterSpec>) -> f64 {
+        self.response(spec)
+            .and_then(|h| self.held_out(&h))
+            .map_or(f64::INFINITY, |x| x.0)
+    }
+
+    /// The held-out residue over the noise floor under the filter response
+    /// `h`, with the normal equations and each half's fit.
+    #[allow(clippy::type_complexity)]
+    fn held_out(&self, h: &[Complex64]) -> Option<(f64, DMatrix<f64>, [DVector<f64>; 2], [DVector<f64>; 2])> {
+        let (g, r) = self.normal(h);
+        let theta = [solve_scaled(&g, &r[0])?, solve_scaled(&g, &r[1])?];
+        // Fitted on one half, the other's residue: E − 2θᵀr + θᵀGθ.
+        let held = |fit: usize, on: usize| {
+            let t = &theta[fit];
+            self.energy[on] - 2.0 * t.dot(&r[on]) + t.dot(&(&g * t))
+        };
+        // Its noise part: each held-out half's mean has σ²/P_h per sample.
+        // A line of white noise of variance σ² over N samples has E|n̂|² = N·σ².
+        let n = self.samples as f64;
+        let used = self.weight.iter().filter(|w| **w > 0.0).count() as f64;
+        let floor = |on: usize| used * self.band_samples * n / self.periods[on] as f64;
+        let ratio = 0.5 * (held(0, 1) / floor(1) + held(1, 0) / floor(0));
+        Some((ratio, g, r, theta))
     }
 }
 
@@ -342,11 +359,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
         cutoff_hz,
         ripple_db,
     };
-    let eval = |s: FilterSpec| {
-        sys.response(Some(&s))
-            .and_then(|h| sys.score(&h))
-            .map_or(f64::INFINITY, |x| x.ratio)
-    };
+    let eval = |s: FilterSpec| sys.ratio(Some(&s));
     // Searched in u = ln(cutoff) + 20, which stays positive for the golden
     // section's relative tolerance.
     let (lo, hi) = (lowest_hz.ln() + 20.0, highest_hz.max(lowest_hz * 1.01).ln() + 20.0);
@@ -413,11 +426,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
 /// Each filter's cutoff refined by golden section within ±`step` (natural
 /// log) to 1e-6, kept where it scores better; sorted best first.
 fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(FilterSpec, f64)> {
-    let eval = |s: FilterSpec| {
-        sys.response(Some(&s))
-            .and_then(|h| sys.score(&h))
-            .map_or(f64::INFINITY, |x| x.ratio)
-    };
+    let eval = |s: FilterSpec| sys.ratio(Some(&s));
     let with = |s: &FilterSpec, u: f64| FilterSpec {
         cutoff_hz: (u - 20.0).exp(),
         ..*s
@@ -445,16 +454,7 @@ fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(Filt
 /// the same recording: a search's best shapes carried over, not searched
 /// again.
 pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterSpec, Score)> {
-    let start: Vec<(FilterSpec, f64)> = filters
-        .iter()
-        .map(|s| {
-            let r = sys
-                .response(Some(s))
-                .and_then(|h| sys.score(&h))
-                .map_or(f64::INFINITY, |x| x.ratio);
-            (*s, r)
-        })
-        .collect();
+    let start: Vec<(FilterSpec, f64)> = filters.iter().map(|s| (*s, sys.ratio(Some(s)))).collect();
     let (best, _) = *refine(sys, &start, 0.1).first()?;
     Some((best, sys.score(&sys.response(Some(&best))?)?))
 }

@@ -583,7 +583,7 @@ fn effort_unit_of(c: &Channel, columns: &[String]) -> Option<String> {
 
 /// SHA-256 of a recording: of its file, or for a rosbag2 folder of its
 /// .mcap files' hashes in order.
-fn hash_recording(path: &Path) -> Result<String> {
+pub fn hash_recording(path: &Path) -> Result<String> {
     let files = mcap::bag_files(path)?;
     if let [one] = &files[..] {
         return hash_file(one);
