@@ -450,14 +450,15 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
 
     // The steady part: where the positions repeat one period later. r(i) is
     // the RMS over a window of N/10 samples of q(i) − q(i+N), relative to the
-    // positions' RMS variation over the last period; the steady part starts
-    // where r stays below `steady_tolerance` for good.
+    // positions' RMS variation over the record (not its last period, which
+    // may be rest); the steady part starts where r stays below
+    // `steady_tolerance` for good.
     let nj = raw.joints.len();
     let scale: f64 = (0..nj)
         .map(|j| {
-            let l = &q[j][m - n..];
-            let mean = l.iter().sum::<f64>() / n as f64;
-            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64
+            let l = &q[j][..m];
+            let mean = l.iter().sum::<f64>() / m as f64;
+            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / m as f64
         })
         .sum::<f64>()
         .sqrt()
@@ -508,10 +509,11 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             // sample that still repeats the one a period before it.
             Some((a, b)) if b + w + n < m => {
                 let e = |k: usize| (0..nj).map(|j| (q[j][k] - q[j][k - n]).powi(2)).sum::<f64>().sqrt() / scale;
+                // The first that does not, from the window's start: from
+                // its end, a ramp's crossing of the period before could match.
                 let last = (b + n..b + w + n)
-                    .rev()
-                    .find(|&k| e(k) <= cfg.steady_tolerance)
-                    .unwrap_or(b + n);
+                    .find(|&k| e(k) > cfg.steady_tolerance)
+                    .map_or(b + w + n - 1, |k| k.saturating_sub(1).max(b + n));
                 (a, last + 1)
             }
             Some((a, b)) => (a, b + w + n),
@@ -555,9 +557,18 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             (m - steady_to) as f64 * dt
         ));
     }
-    let from = steady_to - kept * n;
+    // The latest whole periods (past the start-up transient); between two
+    // ramps, centred in the stretch: where a ramp starts at a rest point
+    // the positions repeat a little into it, at both ends alike.
+    let slack = steady_to - steady_from - kept * n;
+    let from = if steady_to < m {
+        steady_from + slack / 2
+    } else {
+        steady_to - kept * n
+    };
+    let to = from + kept * n;
     report.transient_periods = whole - kept;
-    let last = |j: usize| &q[j][steady_to - n..steady_to];
+    let last = |j: usize| &q[j][to - n..to];
     report.period_change = (0..kept)
         .map(|k| {
             let p0 = from + k * n;
@@ -589,7 +600,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             torque: cut(&torque),
         }
     });
-    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..steady_to].to_vec()).collect::<Vec<_>>();
+    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..to].to_vec()).collect::<Vec<_>>();
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
     if kept == 1 {

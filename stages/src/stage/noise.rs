@@ -176,8 +176,8 @@ pub fn noise(
     // Fewer than two periods but a longer steady stretch: the positions'
     // noise is the residual of the least-squares Fourier fit at the excited
     // harmonics over the stretch (what `fourier_fit` does with it); the
-    // torque's, with its many nonlinear harmonics, stays the non-excited
-    // lines' estimate.
+    // torque's, whose many nonlinear harmonics fill the non-excited lines,
+    // is from the stretch and itself one period on (`repeat_variance`).
     let stretch = p.stretch.as_ref().filter(|_| np < 2 && !harmonics.is_empty());
     if let Some(s) = stretch {
         let m = s.len();
@@ -188,6 +188,7 @@ pub fn noise(
             let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, &s.q[j], p.period_s, harmonics);
             let v = s.q[j].iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64;
             var_q[j] = vec![v; n];
+            var_t[j] = vec![repeat_variance(&s.torque[j], n); n];
         }
     }
     let mut md = mean.metadata.clone();
@@ -205,8 +206,8 @@ pub fn noise(
             "time_domain".to_string()
         } else if let Some(s) = stretch {
             format!(
-                "frequency_domain (one period) for torques; fit_residual for positions (least-squares Fourier fit over the steady stretch of {:.2} periods)",
-                s.len() as f64 / n as f64
+                "repeat for torques (half the mean square difference of the steady stretch of {:.2} periods and itself one period on, its windows within 4× the median's); fit_residual for positions (least-squares Fourier fit over the stretch)",
+                s.len() as f64 / n as f64,
             )
         } else {
             "frequency_domain (one period)".to_string()
@@ -221,6 +222,35 @@ pub fn noise(
         },
         summary,
     )
+}
+
+/// The per-sample noise variance of `x`, whose samples repeat `n` later
+/// over its last `len − n`: half the mean square difference, over the
+/// windows (a twentieth of the overlap) within 4× the median window's. The
+/// ends of a steady stretch can hold a ramp whose positions repeat within
+/// the tolerance but whose torques do not; the windows leave them out.
+fn repeat_variance(x: &[f64], n: usize) -> f64 {
+    let overlap = x.len().saturating_sub(n);
+    if overlap == 0 {
+        return f64::NAN;
+    }
+    let w = (overlap / 20).max(1);
+    let windows: Vec<f64> = x[..overlap]
+        .chunks(w)
+        .enumerate()
+        .map(|(b, c)| {
+            c.iter()
+                .enumerate()
+                .map(|(i, v)| (x[b * w + i + n] - v).powi(2))
+                .sum::<f64>()
+                / c.len() as f64
+        })
+        .collect();
+    let mut sorted = windows.clone();
+    sorted.sort_by(f64::total_cmp);
+    let limit = 4.0 * sorted[sorted.len() / 2];
+    let kept: Vec<f64> = windows.into_iter().filter(|&v| v <= limit).collect();
+    0.5 * kept.iter().sum::<f64>() / kept.len() as f64
 }
 
 /// Variance of the P-period average from the noise lines of the record.

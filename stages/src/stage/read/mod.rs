@@ -146,22 +146,25 @@ pub const MAX_TORQUE_FACTOR: f64 = 3.0;
 /// The samples of `col` that are isolated spikes: far (T) from both
 /// neighbours, on the same side of them, while the neighbours agree
 /// (within T/4). T is 50× the median step (a signal's own steps, noise
-/// included, are seldom 10× it) and at least 1e-3 of the column's range
-/// (so that encoder counts on a slow motion are not spikes).
+/// included, are seldom 10× it), at least 1e-3 of the column's range (so
+/// that encoder counts on a slow motion are not spikes) and 3 of its
+/// smallest steps (a held joint's encoder flickering by a count, whose
+/// median step is 0 and range one count, is not either).
 pub fn spikes(col: &[f64]) -> Vec<usize> {
     let n = col.len();
     if n < 5 {
         return Vec::new();
     }
     let mut steps: Vec<f64> = col.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let quantum = steps.iter().copied().filter(|&s| s > 0.0).fold(f64::INFINITY, f64::min);
     let mid = steps.len() / 2;
     let median = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
     // The range without the spikes themselves: from the 1st to 99th percentile.
     let mut sorted = col.to_vec();
     let lo = *sorted.select_nth_unstable_by(n / 100, f64::total_cmp).1;
     let hi = *sorted.select_nth_unstable_by(n - 1 - n / 100, f64::total_cmp).1;
-    let t = (50.0 * median).max(1e-3 * (hi - lo));
-    if !(t > 0.0) {
+    let t = (50.0 * median).max(1e-3 * (hi - lo)).max(3.0 * quantum);
+    if !(t > 0.0 && t.is_finite()) {
         return Vec::new();
     }
     (1..n - 1)
