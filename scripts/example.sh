@@ -56,8 +56,10 @@ rm -rf out/identify
   --validate fixtures/recordings/kuka_axis3_validation/kuka_axis3_validation.mcap --out out/identify/kuka_axis3
 if [ -d ../shared/realdata/kuka_lwr4 ]; then
   r=../shared/realdata/kuka_lwr4
+  # Its wrist's residue is far over the noise floor (exit 3 without the
+  # flag); written anyway, marked inadequate.
   "$bin" identify $r/measurements_1.csv --robot $r/kuka_lwr4.urdf \
-    --validate $r/measurements_2.csv $r/measurements_3.csv --out out/identify/kuka_lwr4
+    --validate $r/measurements_2.csv $r/measurements_3.csv --out out/identify/kuka_lwr4 --accept-inadequate
 fi
 # Optimal excitation for the KUKA axis and the 3-dof arm (Swevers §4).
 "$bin" excite fixtures/excite/kuka_axis3.toml -o out/excite/kuka_axis3

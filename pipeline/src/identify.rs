@@ -39,16 +39,30 @@ pub struct Design {
     /// The kinematics keep the torques' lines beyond the excited ones (the
     /// identification's choice, which validation recordings follow).
     pub wide_band: bool,
-    /// Whole steady periods averaged (0: not periodic). With fewer than
-    /// two, the noise floor comes from the non-excited lines of one period.
+    /// Whole steady periods averaged (0: not periodic).
     pub periods: usize,
+    /// The noise floor comes from samples that repeat: two periods or
+    /// more, or one and a steady stretch beyond it (1.5 periods between
+    /// ramps). Else from one period's non-excited lines, or none.
+    pub repeated: bool,
     /// The excitation period, s (periodic records).
     pub period_s: Option<f64>,
     /// The excited harmonics of each joint (periodic records), and their
     /// union, which the stages use.
     pub harmonics: Vec<Vec<u32>>,
     pub union: Vec<u32>,
+    /// A joint-wise record: the joint that moves, and the held ones at
+    /// their mean positions (rad).
+    pub joint_wise: Option<(String, Vec<(String, f64)>)>,
 }
+
+/// Joint speeds over this (rad/s, or m/s) are a unit read wrong.
+pub const MAX_SPEED: f64 = 40.0;
+
+/// A joint whose strongest line is under this fraction of the most moving
+/// joint's is held: sag and flicker, not excitation (a joint-wise record's
+/// held joints sag by milliradians, its moving one swings by radians).
+pub const HELD_FRACTION: f64 = 0.01;
 
 /// The regressor stage identify uses: symmetric friction, rotor inertia
 /// where the robot file declares drives, and a torque offset per joint:
@@ -297,6 +311,23 @@ pub fn design_with(
             log.display()
         );
     }
+    // No arm's joint turns at 40 rad/s (2300°/s); degrees read as radians
+    // on a robot without limits do (57× its speed).
+    for (j, q) in raw.q.iter().enumerate() {
+        let mut speed: Vec<f64> = q.windows(2).map(|w| (w[1] - w[0]).abs() * fs).collect();
+        if speed.is_empty() {
+            continue;
+        }
+        let at = (0.99 * (speed.len() - 1) as f64) as usize;
+        let fast = *speed.select_nth_unstable_by(at, f64::total_cmp).1;
+        if fast > MAX_SPEED {
+            bail!(
+                "{}: channel `{}` moves at {fast:.1} (its 99th percentile speed, per s), faster than any arm's joint ({MAX_SPEED} rad/s): positions in degrees (or counts) read as radians? State the unit with --read (a `[read]` table: position = {{ column = …, unit = \"deg\" }})",
+                log.display(),
+                raw.joints[j]
+            );
+        }
+    }
     // The anti-alias filter the effort went through, when the recording
     // declares it: undone, and the regressor columns band-limited alike.
     let filter: Option<FilterSpec> = raw
@@ -408,6 +439,7 @@ pub fn design_with(
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
     let steady_periods = p.periods;
+    let repeated = p.periods >= 2 || p.stretch.is_some();
     findings.push((
         "steady".into(),
         format!(
@@ -435,11 +467,32 @@ pub fn design_with(
     let mut union: Vec<u32> = Vec::new();
     let mut per_joint = Vec::new();
     let mut sets = Vec::new();
-    for (j, c) in excitation.iter().enumerate() {
-        let l = excited_lines(c);
-        per_joint.push(format!("{} {}", joints[j], list(&l.harmonics)));
-        union.extend(&l.harmonics);
-        sets.push(l.harmonics);
+    let lines: Vec<_> = excitation.iter().map(|c| excited_lines(c)).collect();
+    let peak = |l: &robotid_stages::stage::period::Lines| l.amplitude.iter().copied().fold(0.0, f64::max);
+    let widest = lines.iter().map(peak).fold(0.0, f64::max);
+    let mut held = Vec::new();
+    for (j, l) in lines.into_iter().enumerate() {
+        // A held joint sags under the moving ones' load and its encoder
+        // flickers, in lines of its own: far below the motion's, it is held.
+        let top = peak(&l);
+        let mut h = l.harmonics;
+        if !h.is_empty() && top < HELD_FRACTION * widest {
+            held.push(format!("{} ({top:.2e} rad)", joints[j]));
+            h.clear();
+        }
+        per_joint.push(format!("{} {}", joints[j], list(&h)));
+        union.extend(&h);
+        sets.push(h);
+    }
+    if !held.is_empty() {
+        findings.push((
+            "held".into(),
+            format!(
+                "{}: their strongest line is under {} % of the most moving joint's ({widest:.3} rad): a sag under load or an encoder's flicker, taken as held still",
+                held.join(", "),
+                100.0 * HELD_FRACTION
+            ),
+        ));
     }
     union.sort_unstable();
     union.dedup();
@@ -453,6 +506,13 @@ pub fn design_with(
     // §3), identified with the decoupled model from that joint's rows.
     let joint_wise = joints.len() > 1 && still.len() == joints.len() - 1;
     let moving = joint_wise.then(|| sets.iter().position(|h| !h.is_empty()).expect("one moves"));
+    let held_at = moving.map(|m| {
+        let at = |c: &Vec<f64>| c.iter().sum::<f64>() / c.len() as f64;
+        let held = (0..joints.len())
+            .filter(|&j| j != m)
+            .map(|j| (joints[j].clone(), at(&mean.q[j])));
+        (joints[m].clone(), held.collect::<Vec<_>>())
+    });
     let mut regressor = regressor;
     if joint_wise {
         let moving = &joints[sets.iter().position(|h| !h.is_empty()).expect("one moves")];
@@ -501,7 +561,12 @@ pub fn design_with(
     // bands are tried, and the held-out periods decide. Without any, the
     // Fourier fit at the excited lines rejects the noise between them.
     let f0 = 1.0 / period;
-    let by_positions = highest_beyond(&mean.q, &union, &joints);
+    // Held joints' positions carry sag and flicker, not the motion's lines.
+    let (moved_q, moved): (Vec<Vec<f64>>, Vec<String>) = (0..joints.len())
+        .filter(|&j| !sets[j].is_empty())
+        .map(|j| (mean.q[j].clone(), joints[j].clone()))
+        .unzip();
+    let by_positions = highest_beyond(&moved_q, &union, &moved);
     let by_torques =
         highest_beyond(&mean.torque, &union, &joints).filter(|(h, _)| by_positions.as_ref().is_none_or(|(p, _)| h > p));
     let dft = |h: u32| {
@@ -676,6 +741,8 @@ pub fn design_with(
         inverse,
         wide_band: wide_band.unwrap_or(false),
         periods: steady_periods,
+        repeated,
+        joint_wise: held_at,
         period_s: Some(period),
         harmonics: sets,
         union,
@@ -914,7 +981,8 @@ fn choose_model(
 /// has no friction, which dominates a wrist), k is the scale of the
 /// rigid-body part. Where that part carries at least half the measured
 /// variance, a robot file is not off by 3× (a current read as torque, a
-/// gear ratio missing), nor of the opposite sign (a reversed channel). A
+/// gear ratio missing), nor of the opposite sign (a reversed channel); a
+/// column that another joint's prediction fits far better is swapped. A
 /// reason to refuse, naming the joints and the fix, or None.
 fn torque_check(
     kin: &robotid_schemas::Kinematics,
@@ -935,24 +1003,55 @@ fn torque_check(
     };
     let predicted = base.matrix(kin) * theta;
     let n = kin.joints.len();
-    let mut wrong = Vec::new();
-    for (j, b) in torque.iter().enumerate() {
+    // Measured torque `b` against joint `p`'s prediction, with viscous,
+    // Coulomb and offset terms of joint `v`'s velocity: the scale k and
+    // the share of the measured variance the prediction carries.
+    let fit = |b: &[f64], p: usize, v: usize| -> Option<(f64, f64)> {
         let mut g = Matrix4::<f64>::zeros();
         let mut r = Vector4::<f64>::zeros();
         for (i, &y) in b.iter().enumerate() {
-            let x = Vector4::new(predicted[i * n + j], kin.qd[j][i], kin.qd[j][i].signum(), 1.0);
+            let x = Vector4::new(predicted[i * n + p], kin.qd[v][i], kin.qd[v][i].signum(), 1.0);
             g += x * x.transpose();
             r += x * y;
         }
-        let Some(c) = g.cholesky() else { continue };
-        let k = c.solve(&r)[0];
-        let mean = |v: &mut dyn Iterator<Item = f64>, len: usize| v.sum::<f64>() / len as f64;
-        let (len, pm) = (b.len(), mean(&mut (0..b.len()).map(|i| predicted[i * n + j]), b.len()));
-        let bm = mean(&mut b.iter().copied(), len);
-        let vp: f64 = (0..len).map(|i| (predicted[i * n + j] - pm).powi(2)).sum();
+        let k = g.cholesky()?.solve(&r)[0];
+        let len = b.len() as f64;
+        let pm = (0..b.len()).map(|i| predicted[i * n + p]).sum::<f64>() / len;
+        let bm = b.iter().sum::<f64>() / len;
+        let vp: f64 = (0..b.len()).map(|i| (predicted[i * n + p] - pm).powi(2)).sum();
         let vb: f64 = b.iter().map(|y| (y - bm).powi(2)).sum();
-        let share = k * k * vp / vb;
+        Some((k, k * k * vp / vb))
+    };
+    let right = |(k, share): (f64, f64)| share >= 0.5 && (1.0 / 3.0..=3.0).contains(&k);
+    let mut wrong = Vec::new();
+    for (j, b) in torque.iter().enumerate() {
+        let Some((k, share)) = fit(b, j, j) else { continue };
+        // Where another joint's prediction fits far better, and that
+        // joint's column fits this one's far better too, they are swapped
+        // (one-way matches are common: single-harmonic motions look alike).
+        let better = |b: &[f64], own: usize, other: usize| {
+            let mine = fit(b, own, own).map_or(0.0, |f| f.1.max(0.0));
+            fit(b, other, other).filter(|&f| right(f) && f.1 > mine + 0.25)
+        };
+        let swapped = || {
+            (0..n)
+                .filter(|&o| o != j && better(&torque[o], o, j).is_some())
+                .filter_map(|o| better(b, j, o).map(|f| (o, f)))
+                .max_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
+                .map(|(o, (_, sh))| {
+                    format!(
+                        " — it matches the prediction for {} instead ({:.0} % of its variance): channels swapped?",
+                        kin.joints[o],
+                        100.0 * sh.min(1.0)
+                    )
+                })
+                .unwrap_or_default()
+        };
         if !(share >= 0.5) {
+            let hint = swapped();
+            if !hint.is_empty() {
+                wrong.push(format!("{}{hint}", kin.joints[j]));
+            }
             continue;
         }
         if k < 0.0 {
@@ -961,17 +1060,18 @@ fn torque_check(
                 kin.joints[j],
                 100.0 * share.min(1.0)
             ));
-        } else if !(1.0 / 3.0..=3.0).contains(&k) {
+        } else if !right((k, share)) {
             wrong.push(format!(
-                "{} measures {k:.3}× the torque the robot file predicts (its rigid-body part carries {:.0} % of the measured variance)",
+                "{} measures {k:.3}× the torque the robot file predicts (its rigid-body part carries {:.0} % of the measured variance){}",
                 kin.joints[j],
-                100.0 * share.min(1.0)
+                100.0 * share.min(1.0),
+                swapped()
             ));
         }
     }
     Ok((!wrong.is_empty()).then(|| {
         format!(
-            "the torques disagree with the robot file: {}. Is the effort in N·m at the joint? A current read as torque needs `torque_per_amp` (a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
+            "the torques disagree with the robot file: {}. Is each effort column its joint's, in N·m at the joint? A current read as torque needs `torque_per_amp` (a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
             wrong.join("; ")
         )
     }))
@@ -1048,6 +1148,8 @@ fn non_periodic(
         inverse: inverse.copied(),
         wide_band: false,
         periods: 0,
+        repeated: false,
+        joint_wise: None,
         period_s: None,
         harmonics: Vec::new(),
         union: Vec::new(),

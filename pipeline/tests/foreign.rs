@@ -30,6 +30,23 @@ fn text(o: &Output) -> String {
 /// own) through robotid's base map, the friction of `truth.json`, no
 /// offsets.
 fn truth(urdf: &Path, dir: &Path, names: &[String]) -> Vec<f64> {
+    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    if names.iter().any(|n| n.starts_with("Mi_")) {
+        // A joint-wise record: the decoupled model Pinocchio gave.
+        return names
+            .iter()
+            .map(|n| {
+                let (kind, joint) = n.split_once('_').unwrap();
+                let j = t["joints"].as_array().unwrap().iter().position(|x| x == joint).unwrap();
+                match kind {
+                    "Fv" => t["friction_viscous"][j].as_f64().unwrap(),
+                    "Fc" => t["friction_coulomb"][j].as_f64().unwrap(),
+                    "Off" => t["offset_Nm"].as_f64().unwrap_or(0.0),
+                    _ => t["decoupled"][joint][kind].as_f64().unwrap(),
+                }
+            })
+            .collect();
+    }
     let model = load_robot(urdf).unwrap();
     let cfg = RegressorConfig {
         friction: robotid_stages::dynamics::FrictionTerms::Symmetric,
@@ -44,7 +61,6 @@ fn truth(urdf: &Path, dir: &Path, names: &[String]) -> Vec<f64> {
         "identify's parameters are the symmetric-friction base set"
     );
     let values = base.base_values(&model).unwrap();
-    let t: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
     let joints: Vec<String> = t["joints"]
         .as_array()
         .unwrap()
@@ -169,8 +185,10 @@ fn edited(dir: &Path, to: &Path, edit: impl Fn(&mut [f64])) -> PathBuf {
 /// What a lab gets wrong, on the UR5's CSV: a torque channel scaled ×2 and
 /// ×1.1 exit with code 3 (the fit's residue over 3× the noise floor),
 /// naming the joints, the estimate marked inadequate and no export; a sign
-/// flipped (against the robot file's prediction) and the time column in ms
-/// (a 0.5 Hz log) are refused before any estimate with the fix; the same
+/// flipped (against the robot file's prediction), two joints' torque
+/// columns swapped (each fits the other's prediction), the time column in
+/// ms (a 0.5 Hz log) and positions in degrees on an arm without limits
+/// (114 "rad/s") are refused before any estimate with the fix; the same
 /// data under two names too.
 #[test]
 fn lab_mistakes_on_foreign_data_are_refused() {
@@ -180,37 +198,55 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     // Columns: time, 6 positions, 6 torques; the elbow's torque is 9.
     type Edit = fn(&mut [f64]);
-    let refused: [(&str, Edit, &str); 2] = [
+    // The same arm without joint limits (every joint continuous): only
+    // the speed tells degrees from radians there.
+    let unlimited = tmp.path().join("ur5_continuous.urdf");
+    let text_of = std::fs::read_to_string(&urdf).unwrap();
+    std::fs::write(&unlimited, text_of.replace("type=\"revolute\"", "type=\"continuous\"")).unwrap();
+    let refused: [(&str, Edit, &str, &Path); 4] = [
         (
             "flipped",
             |v| v[9] = -v[9],
             "elbow_joint runs against the torque the robot file predicts",
+            &urdf,
         ),
-        ("ms", |v| v[0] *= 1000.0, "is the time column in ms"),
+        ("ms", |v| v[0] *= 1000.0, "is the time column in ms", &urdf),
+        (
+            "swapped",
+            |v| v.swap(8, 9),
+            "it matches the prediction for shoulder_lift_joint instead",
+            &urdf,
+        ),
+        (
+            "degrees",
+            |v| v[1..7].iter_mut().for_each(|q| *q = q.to_degrees()),
+            "positions in degrees (or counts) read as radians?",
+            &unlimited,
+        ),
     ];
     // identify on the CSV edited by `edit`: its output folder, exit and words.
-    let identify_edited = |name: &str, edit: Edit| {
+    let identify_edited = |name: &str, edit: Edit, robot: &Path| {
         let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
         let out = tmp.path().join(name);
         let o = robotid(&[
             Path::new("identify"),
             &csv,
             Path::new("--robot"),
-            &urdf,
+            robot,
             Path::new("--out"),
             &out,
         ]);
         (out, o.status.code(), text(&o))
     };
-    for (name, edit, why) in refused {
-        let (out, code, said) = identify_edited(name, edit);
+    for (name, edit, why, robot) in refused {
+        let (out, code, said) = identify_edited(name, edit, robot);
         assert_eq!(code, Some(1), "{name}:\n{said}");
         assert!(said.contains(why), "{name}:\n{said}");
         assert!(!out.exists(), "{name}: nothing written");
     }
     let cases: [(&str, Edit); 2] = [("scaled2", |v| v[9] *= 2.0), ("scaled1.1", |v| v[9] *= 1.1)];
     for (name, edit) in cases {
-        let (out, code, said) = identify_edited(name, edit);
+        let (out, code, said) = identify_edited(name, edit, &urdf);
         assert_eq!(code, Some(3), "{name}:\n{said}");
         assert!(
             said.contains("not identified") && said.contains("elbow_joint"),
@@ -271,7 +307,9 @@ fn ratios(table: &Path) -> Vec<(String, f64)> {
 /// A corpus of what labs bring, made by `tests/python/foreign_corpus.py`
 /// (Pinocchio and scipy, no robotid code) on the UR5: undeclared filters of
 /// three families, none with a torque offset, a Stribeck friction robotid
-/// does not model, a headerless whitespace log. On each, identify either
+/// does not model, a headerless whitespace log, 1.5 and 2.5 periods between
+/// ramps, a joint-wise record (one joint moving, the others sagging and
+/// flickering by a count, 16 s of rest at the end). On each, identify either
 /// gets ≥ 85 % of the base parameters within 2 std of the truth with the
 /// residue ≤ 1.2× the floor on every joint, or refuses (exit 3) naming
 /// the joints; never exit 0 over 3× the floor.
@@ -290,6 +328,9 @@ fn the_foreign_corpus_is_identified_or_refused() {
         "none_offset",
         "stribeck",
         "headerless",
+        "ramps_1p5",
+        "ramps_2p5",
+        "jointwise",
     ] {
         let dir = tmp.path().join(case);
         std::fs::create_dir_all(&dir).unwrap();

@@ -223,7 +223,30 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
         s(&f(3)),
         "--out",
         s(&out),
+        "--accept-inadequate",
     ]);
+    // The wrist's residue is far over the floor that 1.94 periods give
+    // (1.2e-4 (N·m)² on lwr_6_joint, from the repeated 0.94 period): said
+    // (without the flag identify exits 3); taken here as the lab would.
+    let wrist = text.lines().find(|l| l.starts_with("lwr_6_joint ")).unwrap_or_default();
+    assert!(wrist.ends_with("model error dominates"), "{text}");
+    // Each held-out file's relative error, least squares then the physical
+    // fit: file 3 at 9.40 % and 5.92 % (5.92 % before the floor changed).
+    let rel: Vec<f64> = text
+        .lines()
+        .filter(|l| l.contains("measurements_3/regressor.parquet: relative error"))
+        .map(|l| {
+            l.split("relative error ")
+                .nth(1)
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap()
+        })
+        .collect();
+    assert!(rel.len() == 2 && rel[0] < 9.5 && rel[1] < 6.0, "{rel:?}\n{text}");
     let d = design(&f(1), &robot, None).unwrap();
     let p = d.period_s.unwrap();
     assert!((p - 4.0 * std::f64::consts::PI).abs() < 2e-3, "{p}\n{text}");

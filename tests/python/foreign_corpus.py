@@ -21,7 +21,10 @@ NOISE = 0.05  # N·m, white, after the filter
 COUNTS = 2**17  # encoder counts per revolution
 
 # Each case: the filter (scipy design arguments, or None), the friction law,
-# periods after one ramp-in period, a constant torque offset, the log form.
+# periods at full amplitude, the ramps before and after them (s; the ramp-in
+# defaults to one period), a constant torque offset, the log form, the joints
+# that move (the others held by a stiff position loop: they sag under gravity
+# and their encoders flicker by a count), rest at the end (s).
 CASES = {
     "butter4_20": dict(filter=("butter", 4, 20.0, None), friction="sign", periods=5),
     "bessel6_40": dict(filter=("bessel", 6, 40.0, None), friction="sign", periods=5),
@@ -29,6 +32,9 @@ CASES = {
     "none_offset": dict(filter=None, friction="sign", periods=5, offset=0.3),
     "stribeck": dict(filter=("butter", 4, 40.0, None), friction="stribeck", periods=5),
     "headerless": dict(filter=("butter", 2, 60.0, None), friction="sign", periods=5, form="txt"),
+    "ramps_1p5": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=1.5, ramp_in=0.5, ramp_out=0.5),
+    "ramps_2p5": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=2.5, ramp_in=0.5, ramp_out=0.5),
+    "jointwise": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=4, moving=[1], ramp_out=1.0, rest=16.0),
 }
 
 
@@ -53,14 +59,34 @@ def main(urdf, out, case):
         return q, qd, qdd
 
     period = 1 / f0
-    total = (1 + spec["periods"]) * period
+    ramp_in = spec.get("ramp_in", period)
+    ramp_out = spec.get("ramp_out", 0.0)
+    rest = spec.get("rest", 0.0)
+    moving = spec.get("moving", list(range(nq)))
+    held = [j for j in range(nq) if j not in moving]
+    a[held], b[held] = 0.0, 0.0
+    total = ramp_in + spec["periods"] * period + ramp_out + rest
     t = np.arange(int(round(total * FS * FINE))) / (FS * FINE)
-    q, qd, qdd = excitation(t)
-    # One ramp-in period: the excitation faded in by a smooth window.
-    ramp = np.clip(t / period, 0, 1)
-    g = ramp**3 * (10 - 15 * ramp + 6 * ramp**2)
-    gd = np.where(t < period, 30 * ramp**2 * (1 - ramp) ** 2 / period, 0)
-    gdd = np.where(t < period, 60 * ramp * (1 - ramp) * (1 - 2 * ramp) / period**2, 0)
+    # The excitation starts at full phase when the ramp-in ends; before it,
+    # it is faded in by a smooth window, after the periods faded out.
+    q, qd, qdd = excitation(t - ramp_in)
+
+    def window(x, length):  # quintic 0 -> 1 over [0, length], and its derivatives
+        r = np.clip(x / length, 0, 1) if length > 0 else (x >= 0).astype(float)
+        inside = (x > 0) & (x < length)
+        return (
+            r**3 * (10 - 15 * r + 6 * r**2),
+            np.where(inside, 30 * r**2 * (1 - r) ** 2 / max(length, 1e-12), 0),
+            np.where(inside, 60 * r * (1 - r) * (1 - 2 * r) / max(length, 1e-12) ** 2, 0),
+        )
+
+    up, upd, updd = window(t, ramp_in)
+    end = ramp_in + spec["periods"] * period
+    down, downd, downdd = window(end + ramp_out - t, ramp_out) if ramp_out > 0 else window(end - t + 1e-12, 0)
+    downd, downdd = -downd, downdd
+    g = up * down
+    gd = upd * down + up * downd
+    gdd = updd * down + 2 * upd * downd + up * downdd
     q, qd, qdd = (
         g[:, None] * q,
         g[:, None] * qd + gd[:, None] * q,
@@ -77,6 +103,10 @@ def main(urdf, out, case):
         # Stribeck: static friction 1.5× Coulomb, fading over 0.05 rad/s.
         tau += fv * qd + (fc + 0.5 * fc * np.exp(-((qd / 0.05) ** 2))) * np.sign(qd)
     tau += spec.get("offset", 0.0)
+    if held:
+        # A stiff position loop (5000 N·m/rad) holds them: they sag by the
+        # change of their gravity load as the moving joint swings.
+        q[:, held] -= (tau[:, held] - tau[0, held]) / 5000.0
     filt = None
     if spec["filter"]:
         family, order, cutoff, ripple = spec["filter"]
@@ -94,6 +124,9 @@ def main(urdf, out, case):
     t, q, tau = t[logged], q[logged], tau[logged]
     tau = tau + rng.normal(0, NOISE, tau.shape)
     step = 2 * np.pi / COUNTS
+    if held:
+        # Held exactly half a count off a boundary, their encoders flicker.
+        q[:, held] += step / 2 + rng.normal(0, step / 4, (len(t), len(held)))
     q = np.round(q / step) * step
     table = np.column_stack([t, q, tau])
     if spec.get("form") == "txt":
@@ -106,7 +139,11 @@ def main(urdf, out, case):
         fs_hz=FS,
         f0_hz=f0,
         harmonics=harmonics,
-        periods_after_ramp_in=spec["periods"],
+        periods=spec["periods"],
+        ramp_in_s=ramp_in,
+        ramp_out_s=ramp_out,
+        rest_s=rest,
+        moving=[names[j] for j in moving],
         anti_alias=filt,
         friction=spec["friction"],
         friction_viscous=fv.tolist(),
@@ -115,6 +152,20 @@ def main(urdf, out, case):
         effort_noise_std_Nm=NOISE,
         encoder_counts_per_rev=COUNTS,
     )
+    if held:
+        # The joint-wise (decoupled) model of each moving joint, the others
+        # at rest: τ = Mi·q̈ + Gs·sin q + Gc·cos q + friction.
+        decoupled = {}
+        for j in moving:
+            z = np.zeros(nq)
+            up = z.copy()
+            up[j] = np.pi / 2
+            decoupled[names[j]] = dict(
+                Mi=float(pin.crba(model, data, z)[j, j]),
+                Gs=float(pin.rnea(model, data, up, z, z)[j]),
+                Gc=float(pin.rnea(model, data, z, z, z)[j]),
+            )
+        truth["decoupled"] = decoupled
     with open(f"{out}/truth.json", "w") as f:
         json.dump(truth, f, indent=1)
 

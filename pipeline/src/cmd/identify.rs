@@ -142,6 +142,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         designs.push(d);
     }
+    lock_unrecorded(&mut designs, ident.len());
     if args.print_pipeline {
         println!("\n# {}/pipelines/{}.toml\n{}", out.display(), names[0], designs[0].text);
     }
@@ -200,9 +201,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map(|v| vec![(robotid_schemas::metadata::INADEQUATE.to_string(), v)])
             .unwrap_or_default()
     };
-    // A floor from one period's non-excited lines (no spread to take it
-    // from) may hold real content or miss noise: said, not refused on.
-    let reliable = designs[..ident.len()].iter().all(|d| d.periods >= 2);
+    // A floor from one period's non-excited lines (nothing repeats to take
+    // it from) may hold real content or miss noise: said, not refused on.
+    let reliable = designs[..ident.len()].iter().all(|d| d.repeated);
     let ols = super::estimate::estimate(&estimate_args(id_tables, Some(&robot), false, &parameters), Some(&mark))?;
     let inadequate = verdict(&ols.estimate);
     if let Some(v) = inadequate.as_ref().filter(|_| !reliable) {
@@ -221,7 +222,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     if !unjudged.is_empty() {
         eprintln!(
-            "warning: no noise floor to judge the fit against on {}: the identification recordings hold no two steady periods (a record that does not repeat, or 1.5 periods), so a residue far above the noise would pass unseen; record whole periods, or check the residue against the torque sensor's noise",
+            "warning: no noise floor to judge the fit against on {}: the identification recordings do not repeat, so a residue far above the noise would pass unseen; record whole periods, or check the residue against the torque sensor's noise",
             unjudged.join(", ")
         );
     }
@@ -273,17 +274,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ))
         .into());
     }
-    // The model for simulators needs every link a real body.
+    // The model for simulators needs every link a real body; the decoupled
+    // model of joint-wise records has none to fit.
+    if designs.iter().any(|d| d.joint_wise.is_some()) {
+        println!("no physical fit and no export for simulators: joint-wise records give the decoupled model (each joint's inertia, gravity and friction), not the links' bodies");
+    } else {
+        physical_fit(id_tables, val_tables, &robot, &out, &mut script, &joined)?;
+    }
+    let sh = out.join("identify.sh");
+    std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
+    cleanup.1 = true;
+    println!(
+        "\nidentified: {} (pipelines in {}, commands in {})",
+        out.display(),
+        out.join("pipelines").display(),
+        sh.display()
+    );
+    Ok(())
+}
+
+/// The physically consistent estimate, validated, and the exports.
+fn physical_fit(
+    id_tables: &[PathBuf],
+    val_tables: &[PathBuf],
+    robot: &Path,
+    out: &Path,
+    script: &mut String,
+    joined: &dyn Fn(&[PathBuf]) -> String,
+) -> anyhow::Result<()> {
     let physical = out.join("parameters_physical.parquet");
     // The spread across few periods can leave the covariance singular
     // (arm3, 4 periods, 25 parameters): then the residual's is used.
     let mut residual_cov = false;
-    let fitted = super::estimate::run(estimate_args(id_tables, Some(&robot), true, &physical)).or_else(|e| {
+    let fitted = super::estimate::run(estimate_args(id_tables, Some(robot), true, &physical)).or_else(|e| {
         residual_cov = true;
         eprintln!("note: the physical fit with the estimate's covariance failed ({e:#}); again with the residual's");
         super::estimate::run(super::estimate::Args {
             covariance: "residual".into(),
-            ..estimate_args(id_tables, Some(&robot), true, &physical)
+            ..estimate_args(id_tables, Some(robot), true, &physical)
         })
     });
     match fitted {
@@ -299,7 +327,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 })?;
             }
             super::export::run(super::export::Args {
-                robot: robot.clone(),
+                robot: robot.to_path_buf(),
                 parameters: physical,
                 format: vec![
                     super::export::Format::Urdf,
@@ -331,15 +359,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         Err(e) => eprintln!("warning: no export for simulators: the physically consistent estimate failed: {e:#}"),
     }
-    let sh = out.join("identify.sh");
-    std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
-    cleanup.1 = true;
-    println!(
-        "\nidentified: {} (pipelines in {}, commands in {})",
-        out.display(),
-        out.join("pipelines").display(),
-        sh.display()
-    );
     Ok(())
 }
 
@@ -356,5 +375,42 @@ fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, physical: bool, out: 
         robot: robot.map(Path::to_path_buf),
         prior_weight: None,
         out: out.to_path_buf(),
+    }
+}
+
+/// Joint-wise records that move only some joints give no parameter of the
+/// others: those joints are locked where the records held them (said), so
+/// that the estimate is of the joints that moved. Validation records (after
+/// the first `identifying`) are locked alike: one parameter set.
+fn lock_unrecorded(designs: &mut [Design], identifying: usize) {
+    let Some(all) = designs[..identifying]
+        .iter()
+        .map(|d| d.joint_wise.as_ref())
+        .collect::<Option<Vec<_>>>()
+    else {
+        return;
+    };
+    let moved: Vec<&str> = all.iter().map(|(m, _)| m.as_str()).collect();
+    let Some((_, held)) = all.first() else { return };
+    let locked: Vec<(String, f64)> = held
+        .iter()
+        .filter(|(j, _)| !moved.contains(&j.as_str()))
+        .cloned()
+        .collect();
+    if locked.is_empty() {
+        return;
+    }
+    let said = locked
+        .iter()
+        .map(|(j, q)| format!("{j} at {q:.4} rad"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    println!("  locked: {said}: no joint-wise record moves them (each gets its own record to be identified)");
+    let table: String = locked.iter().map(|(j, q)| format!("{j} = {q:?}\n")).collect();
+    for d in designs.iter_mut() {
+        d.text.push_str(&format!(
+            "\n# Held in every joint-wise record: locked where they were held.\n[lock]\n{table}"
+        ));
+        d.findings.push(("locked".into(), said.clone()));
     }
 }

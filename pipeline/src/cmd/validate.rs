@@ -51,6 +51,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         sys.recordings.join(", ")
     );
     print!("{}", robotid::validation::table(&stats));
+    print!("{}", robotid::validation::per_recording(&sys, &predicted));
     let inadequate: Vec<&str> = stats
         .iter()
         .filter(|s| s.verdict() == robotid::validation::Verdict::ModelErrorDominates)
