@@ -39,9 +39,16 @@ pub struct LineSystem {
     cols: usize,
     joints: usize,
     period_s: f64,
-    /// Per line, the packed upper triangle of m_l·Σ_j w_j·Re(Â_jᴴ·Â_j).
+    /// Per line, the columns with content there (`active[starts[l]..
+    /// starts[l + 1]]`): far up the band only the non-smooth (Coulomb)
+    /// ones, so a candidate's sums cost what the lines hold.
+    active: Vec<u32>,
+    starts: Vec<usize>,
+    /// Per line, the upper triangle of m_l·Σ_j w_j·Re(Â_jᴴ·Â_j) over its
+    /// active columns, row by row (`gram_starts[l]..`).
     gram: Vec<f64>,
-    /// Per half and line, m_l·Σ_j w_j·Â_jᴴ·b̂_j (`cols` values).
+    gram_starts: Vec<usize>,
+    /// Per half and line, m_l·Σ_j w_j·Â_jᴴ·b̂_j over its active columns.
     cross: [Vec<Complex64>; 2],
     /// Per half, Σ_l m_l·Σ_j w_j·|b̂_j|².
     energy: [f64; 2],
@@ -161,14 +168,43 @@ impl LineSystem {
                 }
             }
         }
+        // A column is active on a line where its power there is over 1e-28
+        // of its total; by Cauchy–Schwarz the entries left out are under
+        // 1e-14 of their totals' geometric mean, far below what the fit sees.
+        let offsets = packed_rows(cols);
+        let total: Vec<f64> = (0..cols)
+            .map(|c| (0..lines).map(|l| gram[l * packed + offsets[c]]).sum())
+            .collect();
+        let (mut active, mut starts) = (Vec::new(), vec![0]);
+        let (mut sparse, mut gram_starts) = (Vec::new(), vec![0]);
+        let mut sparse_cross = [Vec::new(), Vec::new()];
+        for l in 0..lines {
+            let g = &gram[l * packed..][..packed];
+            let from = active.len();
+            active.extend((0..cols as u32).filter(|&c| g[offsets[c as usize]] > 1e-28 * total[c as usize]));
+            let on = &active[from..];
+            for (i, &c) in on.iter().enumerate() {
+                for &d in &on[i..] {
+                    sparse.push(g[offsets[c as usize] + (d - c) as usize]);
+                }
+                for h in 0..2 {
+                    sparse_cross[h].push(cross[h][l * cols + c as usize]);
+                }
+            }
+            starts.push(active.len());
+            gram_starts.push(sparse.len());
+        }
         Some(LineSystem {
             lines,
             samples,
             cols,
             joints,
             period_s,
-            gram,
-            cross,
+            active,
+            starts,
+            gram: sparse,
+            gram_starts,
+            cross: sparse_cross,
             energy,
             columns,
             torque: halves,
@@ -201,14 +237,18 @@ impl LineSystem {
         let packed = cols * (cols + 1) / 2;
         let mut g = vec![0.0; packed];
         let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
+        let offsets = packed_rows(cols);
         for l in 0..self.lines {
             let s = h[l].norm_sqr();
-            for (x, y) in g.iter_mut().zip(&self.gram[l * packed..][..packed]) {
-                *x += s * y;
-            }
-            for half in 0..2 {
-                for c in 0..cols {
-                    r[half][c] += (h[l].conj() * self.cross[half][l * cols + c]).re;
+            let on = &self.active[self.starts[l]..self.starts[l + 1]];
+            let mut y = self.gram[self.gram_starts[l]..].iter();
+            for (i, &c) in on.iter().enumerate() {
+                let row = offsets[c as usize] - c as usize;
+                for &d in &on[i..] {
+                    g[row + d as usize] += s * y.next().expect("one per pair");
+                }
+                for half in 0..2 {
+                    r[half][c as usize] += (h[l].conj() * self.cross[half][self.starts[l] + i]).re;
                 }
             }
         }
@@ -287,6 +327,11 @@ impl LineSystem {
         let ratio = 0.5 * (held(0, 1) / floor(1) + held(1, 0) / floor(0));
         Some((ratio, g, r, theta))
     }
+}
+
+/// Where each row of a packed upper triangle of `cols` columns starts.
+fn packed_rows(cols: usize) -> Vec<usize> {
+    (0..cols).map(|c| c * cols - c * c.saturating_sub(1) / 2).collect()
 }
 
 /// G·θ = r by Cholesky of the column-scaled G (the columns differ by
