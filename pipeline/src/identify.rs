@@ -809,7 +809,7 @@ fn choose_model(
 ) -> anyhow::Result<ModelChoice> {
     use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem, Score};
     use robotid_stages::signal::Spectra;
-    use robotid_stages::stage::regressor::{column_spectra, RegressorConfig};
+    use robotid_stages::stage::regressor::{column_spectra_of, RegressorConfig};
     let kin = chain.kinematics()?;
     let p = chain.periods.as_ref().ok_or_else(|| anyhow!("no aligned periods"))?;
     let samples = p.samples_per_period;
@@ -822,7 +822,10 @@ fn choose_model(
         Some(m) => (0..kin.joints.len()).map(|j| j == m).collect(),
         None => Vec::new(),
     };
-    let system = |v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
+    // The columns' lines with sign(q̇); another transition changes only
+    // the Coulomb columns, whose lines are made again and put in place.
+    let mut first: Option<(Vec<_>, Vec<String>)> = None;
+    let mut system = |v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
         let cfg = RegressorConfig {
             coulomb_transition_rad_s: Some(v),
             band_limit_hz: None,
@@ -830,11 +833,29 @@ fn choose_model(
             ..template.clone()
         };
         let base = cfg.base_regressor(model)?;
-        let cols = base.parameters();
-        let spec = column_spectra(&base, kin, lines - 1, &spectra);
+        let (cols, names) = (base.parameters(), base.names());
+        let coulomb: Vec<usize> = (0..cols).filter(|&c| names[c].starts_with("Fc")).collect();
+        let spec = match &first {
+            Some((lines0, names0)) if *names0 == names => {
+                let mut spec = lines0.clone();
+                let fresh = column_spectra_of(&base, kin, lines - 1, &spectra, Some(&coulomb));
+                for j in 0..kin.joints.len() {
+                    for &c in &coulomb {
+                        let at = (j * cols + c) * lines;
+                        spec[at..at + lines].copy_from_slice(&fresh[at..at + lines]);
+                    }
+                }
+                spec
+            }
+            _ => {
+                let spec = column_spectra_of(&base, kin, lines - 1, &spectra, None);
+                first = Some((spec.clone(), names.clone()));
+                spec
+            }
+        };
         Ok((
             LineSystem::new(spec, lines, cols, &p.torque, samples, p.period_s, &used, &spectra),
-            base.names(),
+            names,
         ))
     };
     let (Some(sign), _) = system(0.0)? else {

@@ -897,6 +897,18 @@ pub fn column_spectra(
     keep: usize,
     spectra: &Spectra,
 ) -> Vec<rustfft::num_complex::Complex64> {
+    column_spectra_of(base, kin, keep, spectra, None)
+}
+
+/// [`column_spectra`] of the columns `only` (all when None; the others'
+/// lines left zero): what changes when only those columns' model does.
+pub fn column_spectra_of(
+    base: &BaseRegressor,
+    kin: &Kinematics,
+    keep: usize,
+    spectra: &Spectra,
+    only: Option<&[usize]>,
+) -> Vec<rustfft::num_complex::Complex64> {
     use rustfft::num_complex::Complex64;
     let samples = kin.time.len();
     let n = base.model.dof();
@@ -936,7 +948,7 @@ pub fn column_spectra(
         }
         let a = base.matrix(&shifted);
         for j in 0..n {
-            for c in 0..cols {
+            for c in (0..cols).filter(|c| only.is_none_or(|o| o.contains(c))) {
                 for k in 0..samples {
                     series[k] = a[(k * n + j, c)];
                 }
