@@ -281,6 +281,69 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     assert!(!out.exists(), "nothing written");
 }
 
+/// Under `run`, with a pipeline a lab writes for the UR5's CSV: one torque
+/// channel scaled ×2, or its sign flipped, is named against the robot
+/// file's prediction (its own correlation with it is over 0.8; ×2 reads
+/// 1.83×: the file has no friction, and the undeclared filter's DC gain is
+/// 0.944).
+#[test]
+fn lab_mistakes_under_run_are_named() {
+    let (Some(dir), Some(urdf)) = (foreign("ur5"), example_urdf("ur_description/urdf/ur5_robot.urdf")) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    type Edit = fn(&mut [f64]);
+    let cases: [(&str, Edit, &str); 2] = [
+        ("scaled2", |v| v[9] *= 2.0, "elbow_joint measures 1.8"),
+        ("flipped", |v| v[9] = -v[9], "elbow_joint runs against it"),
+    ];
+    for (name, edit, said) in cases {
+        let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
+        let pipeline = tmp.path().join(format!("{name}.toml"));
+        std::fs::write(
+            &pipeline,
+            format!(
+                r#"version = 1
+robot = "{}"
+[source]
+path = "{}"
+[read]
+time = {{ column = "time_s", unit = "s" }}
+position = {{ column = "{{joint}}_pos_rad", unit = "rad" }}
+effort = {{ column = "{{joint}}_effort_Nm", unit = "N*m" }}
+[[stage]]
+kind = "align"
+[[stage]]
+kind = "average"
+[[stage]]
+kind = "noise"
+harmonics = [1, 2, 3, 4, 5]
+[[stage]]
+kind = "differentiate"
+method = "fourier_fit"
+harmonics = [1, 2, 3, 4, 5]
+[[stage]]
+kind = "regressor"
+"#,
+                urdf.display(),
+                csv.display()
+            ),
+        )
+        .unwrap();
+        let o = robotid(&[Path::new("run"), &pipeline, Path::new("--out"), &tmp.path().join(name)]);
+        let text = text(&o);
+        assert!(o.status.success(), "{name}:\n{text}");
+        assert!(text.contains(said), "{name}:\n{text}");
+        for other in [
+            "shoulder_pan_joint measures",
+            "shoulder_lift_joint measures",
+            "wrist_1_joint measures",
+        ] {
+            assert!(!text.contains(other), "{name}: {other}\n{text}");
+        }
+    }
+}
+
 /// The adequacy ratios (residue over the noise floor) per joint of a
 /// parameters table.
 fn ratios(table: &Path) -> Vec<(String, f64)> {

@@ -604,9 +604,11 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
     if kept == 1 {
-        report.notes.push(
-            "only one full steady period: no averaging; noise comes from the non-excited lines only, with no time-domain estimate".into(),
-        );
+        report.notes.push(if stretch.is_some() {
+            "only one full steady period: no averaging; the torque noise comes from the steady stretch and itself one period on".into()
+        } else {
+            "only one full steady period: no averaging; noise comes from the non-excited lines only, with no time-domain estimate".into()
+        });
     }
     let mut md = raw.metadata.clone();
     md.insert(metadata::PERIOD_S.into(), period.to_string());
