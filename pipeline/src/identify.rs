@@ -115,17 +115,26 @@ fn read_settings(
     joints: &[String],
     model: &robotid_stages::dynamics::Model,
     stated: Option<&ReadConfig>,
+    torque_per_amp: Option<&[f64]>,
 ) -> anyhow::Result<(ReadConfig, RawSamples, Layout)> {
+    // Every candidate reads currents with the gains given.
+    let with_gains = |mut cfg: ReadConfig| {
+        if let Some(k) = torque_per_amp {
+            cfg.torque_per_amp = Some(k.to_vec());
+        }
+        cfg
+    };
     if let Some(cfg) = stated {
-        let raw = read(log, cfg, Some(model)).with_context(|| format!("{} with the stated [read]", log.display()))?;
-        return Ok((cfg.clone(), raw, Layout::Stated));
+        let cfg = with_gains(cfg.clone());
+        let raw = read(log, &cfg, Some(model)).with_context(|| format!("{} with the stated [read]", log.display()))?;
+        return Ok((cfg, raw, Layout::Stated));
     }
-    let default_err = match read(log, &ReadConfig::default(), Some(model)) {
-        Ok(raw) => return Ok((ReadConfig::default(), raw, Layout::Default)),
+    let default_err = match read(log, &with_gains(ReadConfig::default()), Some(model)) {
+        Ok(raw) => return Ok((with_gains(ReadConfig::default()), raw, Layout::Default)),
         Err(e) => e,
     };
     if let Some(header) = log_columns(log)? {
-        let cfg = guess_read(&header, joints).map_err(|e| {
+        let cfg = guess_read(&header, joints).map(with_gains).map_err(|e| {
             anyhow!(
                 "{}: {e}; the log has {}: give the columns with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
                 log.display(),
@@ -144,6 +153,7 @@ fn read_settings(
     let mut tried = Vec::new();
     let mut best: Option<(f64, ReadConfig, RawSamples, String)> = None;
     for (cfg, said) in layouts {
+        let cfg = with_gains(cfg);
         match read(log, &cfg, Some(model)) {
             Ok(raw) => {
                 let r = roughness(&raw.q);
@@ -251,21 +261,23 @@ fn list(h: &[u32]) -> String {
 /// whose regressor stage (and anti-alias filter, where this one declares
 /// none) the others take, so that their tables share one parameter set.
 pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Result<Design> {
-    design_with(log, robot, first, None)
+    design_with(log, robot, first, None, None)
 }
 
-/// The same with the read settings stated (`--read`).
+/// The same with the read settings stated (`--read`) and the drives'
+/// joint torque per ampere (`--torque-per-amp`, for current channels).
 pub fn design_with(
     log: &Path,
     robot: &Path,
     first: Option<&Design>,
     stated: Option<&ReadConfig>,
+    torque_per_amp: Option<&[f64]>,
 ) -> anyhow::Result<Design> {
     let regressor = first.map(|d| d.regressor.as_str());
     let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
-    let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated)?;
+    let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
     let mut findings: Vec<(String, String)> = Vec::new();
     let mut head = String::new();
     writeln!(
@@ -274,7 +286,18 @@ pub fn design_with(
         toml_str(&robot.display().to_string())
     )?;
     writeln!(head, "[source]\npath = {}\n", toml_str(&log.display().to_string()))?;
+    let gains = |head: &mut String| -> anyhow::Result<()> {
+        if let Some(k) = &read_cfg.torque_per_amp {
+            writeln!(head, "torque_per_amp = {}", toml::Value::try_from(k)?)?;
+        }
+        Ok(())
+    };
     match &layout {
+        Layout::Default if read_cfg.torque_per_amp.is_some() => {
+            head.push_str("[read]\n");
+            gains(&mut head)?;
+            head.push('\n');
+        }
         Layout::Default => {}
         Layout::Named => {
             head.push_str("[read]\n");
@@ -291,6 +314,7 @@ pub fn design_with(
                     said.push(format!("{key} {v}"));
                 }
             }
+            gains(&mut head)?;
             head.push('\n');
             findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
         }
@@ -1092,7 +1116,7 @@ fn torque_check(
     }
     Ok((!wrong.is_empty()).then(|| {
         format!(
-            "the torques disagree with the robot file: {}. Is each effort column its joint's, in N·m at the joint? A current read as torque needs `torque_per_amp` (a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
+            "the torques disagree with the robot file: {}. Is each effort column its joint's, in N·m at the joint? A current read as torque needs the drives' gains (`--torque-per-amp`, `torque_per_amp` in a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
             wrong.join("; ")
         )
     }))

@@ -281,6 +281,66 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     assert!(!out.exists(), "nothing written");
 }
 
+/// The UR5's CSV with motor currents instead of torques (`{joint}_current_A`,
+/// drive gains 10, 12, 8, 5, 4, 3 N·m/A, a robot file without drives):
+/// refused as 0.08–0.3× the predicted torque without the gains, identified
+/// with `--torque-per-amp` (≥ 85 % of the base parameters within 2 std).
+#[test]
+fn currents_are_identified_with_the_drives_gains() {
+    let (Some(dir), Some(urdf)) = (foreign("ur5"), example_urdf("ur_description/urdf/ur5_robot.urdf")) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let gains = [10.0, 12.0, 8.0, 5.0, 4.0, 3.0];
+    let src = std::fs::read_to_string(dir.join("excitation.csv")).unwrap();
+    let mut lines = src.lines();
+    let mut csv = lines.next().unwrap().replace("_effort_Nm", "_current_A");
+    csv.push('\n');
+    for l in lines {
+        let v: Vec<String> = l
+            .split(',')
+            .enumerate()
+            .map(|(i, x)| {
+                let x: f64 = x.parse().unwrap();
+                format!("{:?}", if i >= 7 { x / gains[i - 7] } else { x })
+            })
+            .collect();
+        csv.push_str(&v.join(","));
+        csv.push('\n');
+    }
+    let log = tmp.path().join("currents.csv");
+    std::fs::write(&log, csv).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .arg("identify")
+            .arg(&log)
+            .arg("--robot")
+            .arg(&urdf)
+            .arg("--out")
+            .arg(out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = run(&tmp.path().join("without"), &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    assert!(text(&o).contains("--torque-per-amp"), "{}", text(&o));
+    let out = tmp.path().join("with");
+    let o = run(&out, &["--torque-per-amp", "10,12,8,5,4,3"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let p = parameters_from_table(&read_parquet(&out.join("parameters.parquet")).unwrap()).unwrap();
+    let truth = truth(&urdf, &dir, &p.names);
+    let within = (0..p.names.len())
+        .filter(|&i| ((p.values[i] - truth[i]) / p.std[i]).abs() <= 2.0)
+        .count();
+    eprintln!("currents: {within}/{} within 2 std", p.names.len());
+    assert!(
+        within as f64 >= 0.85 * p.names.len() as f64,
+        "{within} of {}",
+        p.names.len()
+    );
+}
+
 /// Under `run`, with a pipeline a lab writes for the UR5's CSV: one torque
 /// channel scaled ×2, or its sign flipped, is named against the robot
 /// file's prediction (its own correlation with it is over 0.8; ×2 reads

@@ -36,6 +36,11 @@ pub struct Args {
     /// units, `header`, `separator`, `torque_per_amp`; docs/pipeline-file.md).
     #[arg(long)]
     pub read: Option<PathBuf>,
+    /// The drives' joint torque per ampere, N·m/A (one per joint, or one
+    /// for all), for logs whose effort channels are motor currents and a
+    /// robot file that declares no drives.
+    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    pub torque_per_amp: Vec<f64>,
 }
 
 /// A fit whose residue is over this many times the noise floor on some
@@ -127,9 +132,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     // Design every recording's pipeline; all take the first one's regressor
     // stage, so that their tables share one parameter set.
+    let joints = robotid_stages::dynamics::load_robot(&robot)?.joint_names().len();
+    let gains: Option<Vec<f64>> = match args.torque_per_amp[..] {
+        [] => None,
+        [k] => Some(vec![k; joints]),
+        ref k if k.len() == joints => Some(k.to_vec()),
+        ref k => bail!(
+            "--torque-per-amp: {} values for {joints} joints: give one per joint, or one for all",
+            k.len()
+        ),
+    };
+    if let Some(k) = gains
+        .as_ref()
+        .and_then(|g| g.iter().find(|k| !(k.is_finite() && **k != 0.0)))
+    {
+        bail!("--torque-per-amp: {k} N·m/A is not a drive's gain");
+    }
     let mut designs: Vec<Design> = Vec::new();
     for (i, log) in all.iter().enumerate() {
-        let d = design_with(log, &robot, designs.first(), stated.as_ref())
+        let d = design_with(log, &robot, designs.first(), stated.as_ref(), gains.as_deref())
             .with_context(|| format!("identify {}", log.display()))?;
         let role = if i < ident.len() { "excitation" } else { "validation" };
         println!(
