@@ -85,6 +85,33 @@ fn counts_and_degrees_are_converted() {
     assert!(e.contains("radians_per_count"), "{e}");
 }
 
+/// Line ends as logs come: "\r\n" and a lone "\r" (old Mac loggers) read
+/// the same samples as "\n"; a file without line ends is refused at its
+/// first MiB, not read whole.
+#[test]
+fn line_ends_as_they_come() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    let csv = std::fs::read_to_string(dir.path().join("rec.csv")).unwrap();
+    let reference = read(&dir.path().join("rec.csv"), &cfg, Some(&model)).unwrap();
+    for (name, end) in [("crlf.csv", "\r\n"), ("cr.csv", "\r")] {
+        let p = dir.path().join(name);
+        std::fs::write(&p, csv.replace('\n', end)).unwrap();
+        let raw = read(&p, &cfg, Some(&model)).unwrap();
+        assert_eq!(
+            (&raw.time, &raw.q, &raw.effort),
+            (&reference.time, &reference.q, &reference.effort),
+            "{name}"
+        );
+    }
+    let p = dir.path().join("one_line.csv");
+    std::fs::write(&p, "1.0,".repeat(300_000)).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(e.contains("one_line.csv") && e.contains("without a line end"), "{e}");
+    assert!(e.len() < 400, "the message does not hold the line: {} bytes", e.len());
+}
+
 #[test]
 fn bad_inputs_name_file_channel_and_sample() {
     let dir = tempfile::tempdir().unwrap();

@@ -236,6 +236,47 @@ fn number(text: &str, decimal: Decimal) -> Option<f64> {
     std::str::from_utf8(&buf[..bytes.len()]).ok()?.parse().ok()
 }
 
+/// The longest line a text log may have: a log of hundreds of channels
+/// writes some kilobytes; a file without line ends is not read whole.
+const MAX_LINE: usize = 1 << 20;
+
+/// Appends the next line (its end kept) to `line` and returns the bytes
+/// read, 0 at the end. A line ends at "\n", "\r\n" or a lone "\r" (old
+/// Mac logs, which `read_line` would take as one line); one of over
+/// [`MAX_LINE`] bytes is an `InvalidInput` error.
+fn read_record(reader: &mut impl BufRead, line: &mut String) -> std::io::Result<usize> {
+    let mut bytes = Vec::new();
+    let mut end = None;
+    while end.is_none() {
+        let buf = reader.fill_buf()?;
+        if buf.is_empty() {
+            break;
+        }
+        let used = match buf.iter().position(|&b| b == b'\n' || b == b'\r') {
+            Some(i) => {
+                end = Some(buf[i]);
+                i + 1
+            }
+            None => buf.len(),
+        };
+        bytes.extend_from_slice(&buf[..used]);
+        reader.consume(used);
+        if bytes.len() > MAX_LINE {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("over {MAX_LINE} bytes without a line end"),
+            ));
+        }
+    }
+    if end == Some(b'\r') && reader.fill_buf()?.first() == Some(&b'\n') {
+        bytes.push(b'\n');
+        reader.consume(1);
+    }
+    let read = bytes.len();
+    line.push_str(&String::from_utf8(bytes).map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?);
+    Ok(read)
+}
+
 /// A text log's first line that is neither blank nor a comment, without
 /// its byte-order mark and surrounding space; None for an empty log.
 fn first_line(path: &Path) -> Result<Option<String>> {
@@ -244,7 +285,14 @@ fn first_line(path: &Path) -> Result<Option<String>> {
     let mut line = String::new();
     loop {
         line.clear();
-        if reader.read_line(&mut line).map_err(|e| Error::io(path, e))? == 0 {
+        let read = read_record(&mut reader, &mut line).map_err(|e| match e.kind() {
+            std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => Error::Format {
+                path: path.to_path_buf(),
+                msg: format!("its first line: {e}"),
+            },
+            _ => Error::io(path, e),
+        })?;
+        if read == 0 {
             return Ok(None);
         }
         let t = line.trim_start_matches('\u{feff}').trim();
@@ -292,10 +340,14 @@ pub(crate) fn read_text(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
     let mut next = |line: &mut String, line_no: &mut usize| -> Result<bool> {
         loop {
             line.clear();
-            let read = reader.read_line(line).map_err(|e| match e.kind() {
+            let read = read_record(&mut reader, line).map_err(|e| match e.kind() {
                 std::io::ErrorKind::InvalidData => Error::Format {
                     path: path.to_path_buf(),
                     msg: format!("line {}: not UTF-8 text (is it a binary file?)", *line_no + 1),
+                },
+                std::io::ErrorKind::InvalidInput => Error::Format {
+                    path: path.to_path_buf(),
+                    msg: format!("line {}: {e} (is it a text log?)", *line_no + 1),
                 },
                 _ => Error::io(path, e),
             })?;
