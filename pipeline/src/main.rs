@@ -71,9 +71,26 @@ enum Command {
 /// `robotid dataset`: the other binary's exit code is this one's.
 fn forward(args: impl IntoIterator<Item = std::ffi::OsString>) -> ExitCode {
     cmd::dataset::run(args).unwrap_or_else(|e| {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", causes(&e));
         ExitCode::FAILURE
     })
+}
+
+/// The cause chain on one line, outermost first; a cause whose words the
+/// line already holds (an I/O error its wrapper quotes) said once.
+fn causes(e: &anyhow::Error) -> String {
+    let mut said = String::new();
+    for cause in e.chain() {
+        let c = cause.to_string();
+        if said.contains(&c) {
+            continue;
+        }
+        if !said.is_empty() {
+            said.push_str(": ");
+        }
+        said.push_str(&c);
+    }
+    said.replace('\n', "; ")
 }
 
 fn main() -> ExitCode {
@@ -119,7 +136,7 @@ fn main() -> ExitCode {
                 });
             match problems {
                 Some(p) => eprintln!("error: {p}"),
-                None => eprintln!("error: {}", format!("{e:#}").replace('\n', "; ")),
+                None => eprintln!("error: {}", causes(&e)),
             }
             ExitCode::FAILURE
         }

@@ -46,6 +46,38 @@ fn errors_are_one_line_and_exit_non_zero() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown table kind `nonsense`"));
 }
 
+/// Messages that say what to do: a missing file's OS error once, the
+/// table kinds there are, an `--out` that is a file called one.
+#[test]
+fn messages_say_it_once_and_what_there_is() {
+    let dir = tempfile::tempdir().unwrap();
+    let stderr = |args: &[&std::ffi::OsStr]| {
+        let out = robotid().args(args).output().unwrap();
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let missing = dir.path().join("nonexist.toml");
+    let err = stderr(&["run".as_ref(), missing.as_os_str()]);
+    assert_eq!(err.matches("No such file").count(), 1, "{err}");
+    let err = stderr(&["schema".as_ref(), "foo".as_ref()]);
+    assert!(
+        err.contains("`foo`") && err.contains("regressor, r_factor, parameters"),
+        "{err}"
+    );
+    let file = dir.path().join("a_file");
+    std::fs::write(&file, "").unwrap();
+    let robot = root().join("fixtures/robots/arm3.toml");
+    let err = stderr(&[
+        "identify".as_ref(),
+        robot.as_os_str(),
+        "--robot".as_ref(),
+        robot.as_os_str(),
+        "--out".as_ref(),
+        file.as_os_str(),
+    ]);
+    assert!(err.contains("a_file: --out is a file, not a folder"), "{err}");
+}
+
 #[test]
 fn simulate_writes_the_recording_and_its_truth() {
     let dir = tempfile::tempdir().unwrap();

@@ -8,7 +8,7 @@ pub enum SchemaError {
     NotRobotid { key: &'static str },
     #[error("expected a `{expected}` table, found `{found}`")]
     WrongKind { expected: String, found: String },
-    #[error("unknown table kind `{found}`")]
+    #[error("unknown table kind `{found}` (the kinds: {})", crate::TableKind::ALL.map(|k| k.name()).join(", "))]
     UnknownKind { found: String },
     #[error("table `{table}` has version {found}, this build reads version {expected}")]
     WrongVersion {

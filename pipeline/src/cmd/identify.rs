@@ -95,6 +95,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out/identify").join(&names[0]));
+    if out.exists() && !out.is_dir() {
+        bail!("{}: --out is a file, not a folder; give a folder", out.display());
+    }
     if out.exists() && std::fs::read_dir(&out).map(|mut d| d.next().is_some()).unwrap_or(true) {
         bail!(
             "{}: the output folder is not empty; give another with --out, or remove it",
