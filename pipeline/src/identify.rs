@@ -56,9 +56,6 @@ pub struct Design {
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
 }
 
-/// Joint speeds over this (rad/s, or m/s) are a unit read wrong.
-pub const MAX_SPEED: f64 = 40.0;
-
 /// A joint whose strongest line is under this fraction of the most moving
 /// joint's is held: sag and flicker, not excitation (a joint-wise record's
 /// held joints sag by milliradians, its moving one swings by radians).
@@ -302,12 +299,7 @@ pub fn design_with(
         Layout::Named => {
             head.push_str("[read]\n");
             let mut said = Vec::new();
-            for (key, ch) in [
-                ("time", &read_cfg.time),
-                ("position", &read_cfg.position),
-                ("effort", &read_cfg.effort),
-                ("reference", &read_cfg.reference),
-            ] {
+            for (key, ch) in read_cfg.channels() {
                 if let Some(c) = ch {
                     let v = channel_toml(c)?;
                     writeln!(head, "{key} = {v}")?;
@@ -334,23 +326,6 @@ pub fn design_with(
             "{}: the stamps give {fs_said}: is the time column in ms or µs read as seconds? State its unit with --read (a `[read]` table: time = {{ column = …, unit = \"ms\" }})",
             log.display()
         );
-    }
-    // No arm's joint turns at 40 rad/s (2300°/s); degrees read as radians
-    // on a robot without limits do (57× its speed).
-    for (j, q) in raw.q.iter().enumerate() {
-        let mut speed: Vec<f64> = q.windows(2).map(|w| (w[1] - w[0]).abs() * fs).collect();
-        if speed.is_empty() {
-            continue;
-        }
-        let at = (0.99 * (speed.len() - 1) as f64) as usize;
-        let fast = *speed.select_nth_unstable_by(at, f64::total_cmp).1;
-        if fast > MAX_SPEED {
-            bail!(
-                "{}: channel `{}` moves at {fast:.1} (its 99th percentile speed, per s), faster than any arm's joint ({MAX_SPEED} rad/s): positions in degrees (or counts) read as radians? State the unit with --read (a `[read]` table: position = {{ column = …, unit = \"deg\" }})",
-                log.display(),
-                raw.joints[j]
-            );
-        }
     }
     // The anti-alias filter the effort went through, when the recording
     // declares it: undone, and the regressor columns band-limited alike.

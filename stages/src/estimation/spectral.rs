@@ -234,31 +234,24 @@ impl LineSystem {
     /// Σ Re(h̄·c_l) of each half.
     fn normal(&self, h: &[Complex64]) -> (DMatrix<f64>, [DVector<f64>; 2]) {
         let cols = self.cols;
-        let packed = cols * (cols + 1) / 2;
-        let mut g = vec![0.0; packed];
+        let mut full = DMatrix::zeros(cols, cols);
         let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
-        let offsets = packed_rows(cols);
         for l in 0..self.lines {
             let s = h[l].norm_sqr();
             let on = &self.active[self.starts[l]..self.starts[l + 1]];
             let mut y = self.gram[self.gram_starts[l]..].iter();
             for (i, &c) in on.iter().enumerate() {
-                let row = offsets[c as usize] - c as usize;
                 for &d in &on[i..] {
-                    g[row + d as usize] += s * y.next().expect("one per pair");
+                    full[(c as usize, d as usize)] += s * y.next().expect("one per pair");
                 }
                 for half in 0..2 {
                     r[half][c as usize] += (h[l].conj() * self.cross[half][self.starts[l] + i]).re;
                 }
             }
         }
-        let mut full = DMatrix::zeros(cols, cols);
-        let mut k = 0;
         for c in 0..cols {
-            for d in c..cols {
-                full[(c, d)] = g[k];
-                full[(d, c)] = g[k];
-                k += 1;
+            for d in c + 1..cols {
+                full[(d, c)] = full[(c, d)];
             }
         }
         (full, r)

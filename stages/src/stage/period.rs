@@ -113,6 +113,7 @@ fn refine(
     keep: f64,
 ) -> Result<PeriodEstimate, String> {
     let m = grid.len();
+    // Every comparison below over the best `keep` of its windows.
     let mismatch =
         |x: &[Vec<f64>], grid: &[f64], dt: f64, range: (usize, usize), s: f64| trimmed(x, grid, dt, range, s, keep);
     // The autocorrelation's peak can sit a few steps off (a transient, joints

@@ -220,15 +220,20 @@ pub fn unit_scale(kind: &str, unit: &str) -> Result<Scale> {
 }
 
 impl ReadConfig {
-    /// Structural problems (units known, channel given one way), keyed.
-    pub fn problems(&self) -> Vec<Problem> {
-        let mut out = Vec::new();
-        for (kind, ch) in [
+    /// Each channel kind with what is said of it, in the file's order.
+    pub fn channels(&self) -> [(&'static str, &Option<Channel>); 4] {
+        [
             ("time", &self.time),
             ("position", &self.position),
             ("effort", &self.effort),
             ("reference", &self.reference),
-        ] {
+        ]
+    }
+
+    /// Structural problems (units known, channel given one way), keyed.
+    pub fn problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        for (kind, ch) in self.channels() {
             if let Some(c) = ch {
                 if let Some(u) = &c.unit {
                     if let Err(e) = unit_scale(kind, u) {
@@ -490,6 +495,7 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     check_finite(&source, &position, &names[0])?;
     if let Some(m) = model {
         check_limits(&source, &position, &names[0], &joints, m)?;
+        check_speeds(&source, &time, &position, &names[0])?;
     }
     check_finite(&source, &effort, &names[1])?;
     if let Some(r) = &reference {
@@ -663,6 +669,41 @@ fn check_torques(
                 msg: format!(
                     "torque {:.6e} N·m is beyond {factor}× joint `{joint}`'s limit of {limit} N·m: a corrupt sample or the wrong unit (current read as torque, a torque constant too large); `max_torque_factor` in [read] sets the bound",
                     col[k]
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Joint speeds over this (rad/s, or m/s) are a unit read wrong: no arm's
+/// joint turns at 2300°/s; degrees read as radians on a robot without
+/// limits do (57× its speed).
+pub const MAX_SPEED: f64 = 40.0;
+
+/// Positions whose 99th-percentile speed is over [`MAX_SPEED`], refused at
+/// the first sample that fast (a percentile: a corrupt sample is a spike,
+/// said later).
+fn check_speeds(source: &str, time: &[f64], q: &[Vec<f64>], names: &[String]) -> Result<()> {
+    for (col, name) in q.iter().zip(names) {
+        let speed = |k: usize| (col[k + 1] - col[k]).abs() / (time[k + 1] - time[k]);
+        let mut speeds: Vec<f64> = (0..col.len().saturating_sub(1))
+            .filter(|&k| time[k + 1] > time[k])
+            .map(speed)
+            .collect();
+        if speeds.is_empty() {
+            continue;
+        }
+        let at = (0.99 * (speeds.len() - 1) as f64) as usize;
+        let fast = *speeds.select_nth_unstable_by(at, f64::total_cmp).1;
+        if fast > MAX_SPEED {
+            let k = (0..col.len() - 1).find(|&k| time[k + 1] > time[k] && speed(k) > MAX_SPEED);
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: name.clone(),
+                sample: k,
+                msg: format!(
+                    "the positions move at {fast:.1} per s (99th percentile), faster than any arm's joint ({MAX_SPEED} rad/s): positions in degrees (or counts) read as radians? (Or a time column in s declared as ms.) Give the channel's `unit` (\"deg\")"
                 ),
             });
         }
