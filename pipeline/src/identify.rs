@@ -833,7 +833,7 @@ fn choose_model(
         };
         let base = cfg.base_regressor(model)?;
         let (cols, names) = (base.parameters(), base.names());
-        let coulomb: Vec<usize> = (0..cols).filter(|&c| names[c].starts_with("Fc")).collect();
+        let coulomb: Vec<usize> = (0..cols).filter(|&c| base.is_coulomb(c)).collect();
         let spec = match &first {
             Some((lines0, names0)) if *names0 == names => {
                 let mut spec = lines0.clone();

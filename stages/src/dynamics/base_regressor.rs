@@ -217,6 +217,39 @@ impl BaseRegressor {
         self.columns.len()
     }
 
+    /// The joint and the index among its friction columns (as
+    /// `friction_values` orders them) of base column `c` when it is a
+    /// friction term: a function of that joint's velocity alone, in that
+    /// joint's row alone. None for every other column.
+    pub fn friction_term(&self, c: usize) -> Option<(usize, usize)> {
+        let n = self.model.dof();
+        let full = self.columns[c].0;
+        let (first, per, before) = match self.kind {
+            ModelKind::Chain => (10 * n, self.terms.per_joint(), self.terms.rotor as usize),
+            ModelKind::Decoupled => (
+                0,
+                super::decoupled::per_joint(self.terms.friction, self.terms.offset),
+                3,
+            ),
+        };
+        let at = full.checked_sub(first)?;
+        let (joint, k) = (at / per.max(1), (at % per.max(1)).checked_sub(before)?);
+        (joint < n && k < self.terms.friction.width()).then_some((joint, k))
+    }
+
+    /// Whether base column `c` is a Coulomb friction term (sign or tanh of
+    /// the joint's velocity).
+    pub fn is_coulomb(&self, c: usize) -> bool {
+        self.friction_term(c)
+            .is_some_and(|(_, k)| self.terms.friction.is_coulomb(k))
+    }
+
+    /// The value of friction term `(joint, index)` at joint velocity `qd`,
+    /// as the regressor makes it.
+    pub fn friction_value(&self, (joint, index): (usize, usize), qd: f64) -> f64 {
+        super::torque_regressor::friction_values(self.terms.friction, &self.model.friction[joint], qd).0[index]
+    }
+
     pub fn workspace(&self) -> Workspace {
         Workspace {
             data: Data::new(&self.model),

@@ -11,13 +11,8 @@ use nalgebra::DMatrix;
 use super::torque_regressor::{friction_columns, friction_names};
 use super::{FrictionTerms, Model};
 
-fn per_joint(friction: FrictionTerms, offset: bool) -> usize {
-    3 + offset as usize
-        + match friction {
-            FrictionTerms::None => 0,
-            FrictionTerms::Symmetric => 2,
-            FrictionTerms::Asymmetric => 4,
-        }
+pub(crate) fn per_joint(friction: FrictionTerms, offset: bool) -> usize {
+    3 + offset as usize + friction.width()
 }
 
 /// Parameter names: `Mi_<joint>`, `Gs_<joint>`, `Gc_<joint>`, then

@@ -47,6 +47,33 @@ pub enum FrictionTerms {
     Asymmetric,
 }
 
+impl FrictionTerms {
+    /// Columns per joint.
+    pub fn width(self) -> usize {
+        match self {
+            FrictionTerms::None => 0,
+            FrictionTerms::Symmetric => 2,
+            FrictionTerms::Asymmetric => 4,
+        }
+    }
+
+    /// Whether column `index` of a joint's friction (as [`friction_values`]
+    /// orders them) is Coulomb's: sign or tanh of q̇, one-sided or not.
+    pub fn is_coulomb(self, index: usize) -> bool {
+        match self {
+            FrictionTerms::None => false,
+            FrictionTerms::Symmetric => index == 1,
+            FrictionTerms::Asymmetric => index >= 2,
+        }
+    }
+
+    /// Whether column `index` is smooth in q̇: only the symmetric viscous
+    /// one (linear); the others have a kink or a jump at q̇ = 0.
+    pub fn is_smooth(self, index: usize) -> bool {
+        self == FrictionTerms::Symmetric && index == 0
+    }
+}
+
 impl RegressorTerms {
     /// Rotor inertia and symmetric friction: Swevers' and Bona's models.
     pub const DEFAULT: RegressorTerms = RegressorTerms {
@@ -56,14 +83,8 @@ impl RegressorTerms {
         spring: None,
     };
 
-    fn per_joint(&self) -> usize {
-        self.rotor as usize
-            + match self.friction {
-                FrictionTerms::None => 0,
-                FrictionTerms::Symmetric => 2,
-                FrictionTerms::Asymmetric => 4,
-            }
-            + self.offset as usize
+    pub(crate) fn per_joint(&self) -> usize {
+        self.rotor as usize + self.friction.width() + self.offset as usize
     }
 
     /// Number of parameters for `n` joints.

@@ -134,61 +134,64 @@ impl LineSystem {
         if weight.iter().all(|w| *w == 0.0) {
             return None;
         }
-        let packed = cols * (cols + 1) / 2;
-        let mut gram = vec![0.0; lines * packed];
-        let mut cross = [
-            vec![Complex64::default(); lines * cols],
-            vec![Complex64::default(); lines * cols],
-        ];
-        let mut energy = [0.0; 2];
+        // Each column's power on each line, m_l·Σ_j w_j·|Â_jc|²: a column is
+        // active on a line where it is over 1e-28 of its total; by
+        // Cauchy–Schwarz the entries left out are under 1e-14 of their
+        // totals' geometric mean, far below what the fit sees. Far up the
+        // band only the non-smooth (Coulomb) columns are, and the sums
+        // below are made over the active ones only.
+        let at = |j: usize, c: usize, l: usize| columns[(j * cols + c) * lines + l];
+        let mut power = vec![0.0; lines * cols];
         let mut band_samples = 0.0;
-        let mut a = vec![Complex64::default(); cols];
         for l in 0..lines {
             let m = multiplicity(l, samples);
             band_samples += m;
-            let g = &mut gram[l * packed..][..packed];
             for j in 0..joints {
                 let w = m * weight[j];
                 for c in 0..cols {
-                    a[c] = columns[(j * cols + c) * lines + l];
+                    let a = at(j, c, l);
+                    power[l * cols + c] += w * (a.re * a.re + a.im * a.im);
                 }
-                let mut k = 0;
-                for c in 0..cols {
-                    for d in c..cols {
-                        g[k] += w * (a[c].re * a[d].re + a[c].im * a[d].im);
+            }
+        }
+        let total: Vec<f64> = (0..cols)
+            .map(|c| (0..lines).map(|l| power[l * cols + c]).sum())
+            .collect();
+        let (mut active, mut starts) = (Vec::new(), vec![0]);
+        let (mut sparse, mut gram_starts) = (Vec::new(), vec![0]);
+        let mut sparse_cross = [Vec::new(), Vec::new()];
+        let mut energy = [0.0; 2];
+        let mut a = vec![Complex64::default(); cols];
+        for l in 0..lines {
+            let m = multiplicity(l, samples);
+            let from = active.len();
+            active.extend((0..cols as u32).filter(|&c| power[l * cols + c as usize] > 1e-28 * total[c as usize]));
+            let on = &active[from..];
+            let g = sparse.len();
+            sparse.resize(g + on.len() * (on.len() + 1) / 2, 0.0);
+            let x = sparse_cross[0].len();
+            for h in 0..2 {
+                sparse_cross[h].resize(x + on.len(), Complex64::default());
+            }
+            for j in 0..joints {
+                let w = m * weight[j];
+                for (i, &c) in on.iter().enumerate() {
+                    a[i] = at(j, c as usize, l);
+                }
+                let a = &a[..on.len()];
+                let mut k = g;
+                for i in 0..a.len() {
+                    for d in i..a.len() {
+                        sparse[k] += w * (a[i].re * a[d].re + a[i].im * a[d].im);
                         k += 1;
                     }
                 }
                 for h in 0..2 {
                     let b = halves[h][j][l];
                     energy[h] += w * b.norm_sqr();
-                    for c in 0..cols {
-                        cross[h][l * cols + c] += w * a[c].conj() * b;
+                    for (i, v) in sparse_cross[h][x..].iter_mut().enumerate() {
+                        *v += w * a[i].conj() * b;
                     }
-                }
-            }
-        }
-        // A column is active on a line where its power there is over 1e-28
-        // of its total; by Cauchy–Schwarz the entries left out are under
-        // 1e-14 of their totals' geometric mean, far below what the fit sees.
-        let offsets = packed_rows(cols);
-        let total: Vec<f64> = (0..cols)
-            .map(|c| (0..lines).map(|l| gram[l * packed + offsets[c]]).sum())
-            .collect();
-        let (mut active, mut starts) = (Vec::new(), vec![0]);
-        let (mut sparse, mut gram_starts) = (Vec::new(), vec![0]);
-        let mut sparse_cross = [Vec::new(), Vec::new()];
-        for l in 0..lines {
-            let g = &gram[l * packed..][..packed];
-            let from = active.len();
-            active.extend((0..cols as u32).filter(|&c| g[offsets[c as usize]] > 1e-28 * total[c as usize]));
-            let on = &active[from..];
-            for (i, &c) in on.iter().enumerate() {
-                for &d in &on[i..] {
-                    sparse.push(g[offsets[c as usize] + (d - c) as usize]);
-                }
-                for h in 0..2 {
-                    sparse_cross[h].push(cross[h][l * cols + c as usize]);
                 }
             }
             starts.push(active.len());
@@ -320,11 +323,6 @@ impl LineSystem {
         let ratio = 0.5 * (held(0, 1) / floor(1) + held(1, 0) / floor(0));
         Some((ratio, g, r, theta))
     }
-}
-
-/// Where each row of a packed upper triangle of `cols` columns starts.
-fn packed_rows(cols: usize) -> Vec<usize> {
-    (0..cols).map(|c| c * cols - c * c.saturating_sub(1) / 2).collect()
 }
 
 /// G·θ = r by Cholesky of the column-scaled G (the columns differ by

@@ -55,18 +55,20 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
     // A joint moving less than 1 % of the most moving one is mostly noise
     // once normalised: it would blur the others' period.
     let widest = centred.iter().map(|c| c.2).fold(0.0, f64::max);
-    let x: Vec<Vec<f64>> = centred
-        .into_iter()
-        .filter(|(_, mean, sd)| *sd > 1e-9 * mean.abs().max(1.0) && *sd > 1e-2 * widest)
-        .map(|(v, mean, sd)| v.iter().map(|y| (y - mean) / sd).collect())
-        .collect();
-    if x.is_empty() {
+    let x = Channels::new(
+        centred
+            .into_iter()
+            .filter(|(_, mean, sd)| *sd > 1e-9 * mean.abs().max(1.0) && *sd > 1e-2 * widest)
+            .map(|(v, mean, sd)| v.iter().map(|y| (y - mean) / sd).collect())
+            .collect(),
+    );
+    if x.x.is_empty() {
         return Err("no joint moves".into());
     }
     // Periods up to half the record first, compared past a start-up
     // transient; a lab's 1.5 periods between ramps only repeat at a longer
     // lag, and are compared whole.
-    let first = coarse_period(&x, dt, 0.5)
+    let first = coarse_period(&x.x, dt, 0.5)
         .and_then(|c| refine(&x, &grid, dt, c, (m / 4, m), 0.01, 1.0))
         .and_then(|p| settle(&x, &grid, dt, p, (m / 4, m)))
         .and_then(|s| accept(&x, &grid, dt, s));
@@ -83,7 +85,7 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
         ),
         Err(e) => e,
     };
-    let second = coarse_period(&x, dt, 0.8)
+    let second = coarse_period(&x.x, dt, 0.8)
         .and_then(|c| refine(&x, &grid, dt, c, (0, m), 0.05, 0.75))
         .and_then(|p| settle(&x, &grid, dt, p, (0, m)))
         .and_then(|s| accept(&x, &grid, dt, s));
@@ -104,7 +106,7 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
 /// `dt`) compared with themselves one period on, from grid points
 /// `start..end`; searched within ±`scan` of it first.
 fn refine(
-    x: &[Vec<f64>],
+    x: &Channels,
     grid: &[f64],
     dt: f64,
     coarse: f64,
@@ -115,7 +117,7 @@ fn refine(
     let m = grid.len();
     // Every comparison below over the best `keep` of its windows.
     let mismatch =
-        |x: &[Vec<f64>], grid: &[f64], dt: f64, range: (usize, usize), s: f64| trimmed(x, grid, dt, range, s, keep);
+        |x: &Channels, grid: &[f64], dt: f64, range: (usize, usize), s: f64| trimmed(x, grid, dt, range, s, keep);
     // The autocorrelation's peak can sit a few steps off (a transient, joints
     // whose lines disagree; over a short overlap, the ends' amplitudes):
     // scan ±`scan` of it (at least ±8 samples), in at most 257 steps of at
@@ -157,7 +159,7 @@ fn refine(
     let (d0, dp, dm) = (d(period), d(period + h), d(period - h));
     let curvature = (dp + dm - 2.0 * d0) / (h * h);
     let overlap = ((end.min(m - (k as f64 * period / dt) as usize)).saturating_sub(start) as f64).max(2.0);
-    let samples = overlap * x.len() as f64;
+    let samples = overlap * x.x.len() as f64;
     let noise_std = if curvature > 0.0 {
         (d0.max(0.0) / (samples * curvature)).sqrt()
     } else {
@@ -185,7 +187,7 @@ fn refine(
 
 /// `p` if it is certain and the channels repeat with it over `range`.
 fn accept(
-    x: &[Vec<f64>],
+    x: &Channels,
     grid: &[f64],
     dt: f64,
     (p, range): (PeriodEstimate, (usize, usize)),
@@ -204,8 +206,8 @@ fn accept(
 /// `period` later: the longest run of windows (a twentieth of a period)
 /// whose mismatch is within 4× the median window's; `range` itself when
 /// every window is.
-fn repeating(x: &[Vec<f64>], dt: f64, period: f64, range @ (start, end): (usize, usize)) -> (usize, usize) {
-    let m = x[0].len();
+fn repeating(x: &Channels, dt: f64, period: f64, range @ (start, end): (usize, usize)) -> (usize, usize) {
+    let m = x.x[0].len();
     let shift = (period / dt).round() as usize;
     let last = end.min(m.saturating_sub(shift));
     let w = ((period / dt) as usize / 20).max(1);
@@ -218,7 +220,7 @@ fn repeating(x: &[Vec<f64>], dt: f64, period: f64, range @ (start, end): (usize,
         .map(|b| {
             let span = start + b * w..(start + (b + 1) * w).min(last);
             let len = span.len() as f64;
-            span.map(|i| x.iter().map(|c| (c[i] - c[i + shift]).powi(2)).sum::<f64>())
+            span.map(|i| x.x.iter().map(|c| (c[i] - c[i + shift]).powi(2)).sum::<f64>())
                 .sum::<f64>()
                 / len
         })
@@ -246,7 +248,7 @@ fn repeating(x: &[Vec<f64>], dt: f64, period: f64, range @ (start, end): (usize,
 /// `p` refined again where the record repeats, when a part of `range`
 /// does not (a ramp before or after the periods would bias it).
 fn settle(
-    x: &[Vec<f64>],
+    x: &Channels,
     grid: &[f64],
     dt: f64,
     p: PeriodEstimate,
@@ -270,7 +272,7 @@ pub const MIN_CYCLES: f64 = 1.25;
 
 /// `period` if the channels match themselves one period on (from grid
 /// points `range`) far better than half a period on, as periodic ones do.
-fn check(x: &[Vec<f64>], grid: &[f64], dt: f64, period: f64, range: (usize, usize)) -> Result<f64, String> {
+fn check(x: &Channels, grid: &[f64], dt: f64, period: f64, range: (usize, usize)) -> Result<f64, String> {
     let d0 = mismatch(x, grid, dt, range, period);
     let half = mismatch(x, grid, dt, range, 0.5 * period);
     if d0 < 0.05 * half {
@@ -430,7 +432,7 @@ fn coarse_period(x: &[Vec<f64>], dt: f64, reach: f64) -> Result<f64, String> {
 
 /// `mismatch` over the `keep` fraction of 20 windows of `range` that
 /// match best: a ramp at either end of a short record leaves the mean.
-fn trimmed(x: &[Vec<f64>], grid: &[f64], dt: f64, range @ (start, end): (usize, usize), s: f64, keep: f64) -> f64 {
+fn trimmed(x: &Channels, grid: &[f64], dt: f64, range @ (start, end): (usize, usize), s: f64, keep: f64) -> f64 {
     if keep >= 1.0 {
         return mismatch(x, grid, dt, range, s);
     }
@@ -449,7 +451,7 @@ fn trimmed(x: &[Vec<f64>], grid: &[f64], dt: f64, range @ (start, end): (usize, 
 
 /// Mean squared difference of the channels and themselves shifted by `s`
 /// seconds, over grid points `start..end` (as far as the shift allows).
-fn mismatch(x: &[Vec<f64>], grid: &[f64], dt: f64, (start, end): (usize, usize), s: f64) -> f64 {
+fn mismatch(x: &Channels, grid: &[f64], dt: f64, (start, end): (usize, usize), s: f64) -> f64 {
     let shift = (s / dt).floor() as usize;
     let m = grid.len();
     if start + shift + 2 >= m {
@@ -467,20 +469,44 @@ fn mismatch(x: &[Vec<f64>], grid: &[f64], dt: f64, (start, end): (usize, usize),
         f3 - f2,
     );
     let mut sum = 0.0;
-    for c in x {
-        // The slope at k times dt: centred inside, one-sided at the ends.
-        let slope = |k: usize| match k {
-            0 => c[1] - c[0],
-            k if k == m - 1 => c[k] - c[k - 1],
-            k => 0.5 * (c[k + 1] - c[k - 1]),
-        };
-        for i in start..start + count {
-            let k = i + shift;
-            let v = h00 * c[k] + h10 * slope(k) + h01 * c[k + 1] + h11 * slope(k + 1);
-            sum += (v - c[i]).powi(2);
+    for (c, d) in x.x.iter().zip(&x.slope) {
+        let here = &c[start..start + count];
+        let (at, next) = (&c[start + shift..][..count], &c[start + shift + 1..][..count]);
+        let (dat, dnext) = (&d[start + shift..][..count], &d[start + shift + 1..][..count]);
+        for i in 0..count {
+            let v = h00 * at[i] + h10 * dat[i] + h01 * next[i] + h11 * dnext[i];
+            sum += (v - here[i]).powi(2);
         }
     }
-    sum / (count * x.len()) as f64
+    sum / (count * x.x.len()) as f64
+}
+
+/// The normalised channels on the uniform grid, with the slope each one's
+/// cubic Hermite interpolation takes at every sample (centred inside,
+/// one-sided at the ends, as `resample`'s): made once for the hundreds of
+/// shifted comparisons a period search makes.
+struct Channels {
+    x: Vec<Vec<f64>>,
+    slope: Vec<Vec<f64>>,
+}
+
+impl Channels {
+    fn new(x: Vec<Vec<f64>>) -> Channels {
+        let slope = x
+            .iter()
+            .map(|c| {
+                let m = c.len();
+                (0..m)
+                    .map(|k| match k {
+                        0 => c[1] - c[0],
+                        k if k == m - 1 => c[k] - c[k - 1],
+                        k => 0.5 * (c[k + 1] - c[k - 1]),
+                    })
+                    .collect()
+            })
+            .collect();
+        Channels { x, slope }
+    }
 }
 
 /// The minimum of a unimodal `f` on [a, b], by golden section until the

@@ -932,6 +932,17 @@ pub fn column_spectra(
 
 /// [`column_spectra`] of the columns `only` (all when None; the others'
 /// lines left zero): what changes when only those columns' model does.
+///
+/// Only the friction terms with a jump or a kink at q̇ = 0 (Coulomb's,
+/// one-sided viscous) reach past the sample rate, their harmonics falling
+/// as 1/k: they are made on the fine grid, from their joint's velocity
+/// alone. The other columns are smooth functions of band-limited motions
+/// (products of sines and cosines of the positions with velocities and
+/// accelerations), whose lines die out well below the sample rate: at the
+/// samples their lines are those of the fine grid to rounding, for
+/// 1/[`OVERSAMPLING`] of the work. A smooth column whose upper half of
+/// lines is not empty to that level (a motion sampled coarsely) goes on
+/// the fine grid too (test `smooth_columns_need_no_fine_grid`).
 pub fn column_spectra_of(
     base: &BaseRegressor,
     kin: &Kinematics,
@@ -939,16 +950,38 @@ pub fn column_spectra_of(
     spectra: &Spectra,
     only: Option<&[usize]>,
 ) -> Vec<rustfft::num_complex::Complex64> {
+    column_spectra_on(base, kin, keep, spectra, only, |c| {
+        base.friction_term(c)
+            .is_some_and(|(_, k)| !base.terms.friction.is_smooth(k))
+    })
+}
+
+/// The power a smooth column's upper half of lines may hold, relative to
+/// its whole, for its lines at the samples to be the fine grid's: an
+/// amplitude of 1e-12, rounding.
+const SMOOTH_TAIL: f64 = 1e-24;
+
+/// [`column_spectra_of`] with the columns to make on the fine grid chosen
+/// by `fine` (the others at the samples, unless their lines say otherwise).
+fn column_spectra_on(
+    base: &BaseRegressor,
+    kin: &Kinematics,
+    keep: usize,
+    spectra: &Spectra,
+    only: Option<&[usize]>,
+    fine: impl Fn(usize) -> bool,
+) -> Vec<rustfft::num_complex::Complex64> {
     use rustfft::num_complex::Complex64;
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
     let fine_len = (samples * OVERSAMPLING) as f64;
     let keep = keep.min(samples.saturating_sub(1) / 2);
+    let nyquist = samples.saturating_sub(1) / 2;
     let spectrum = |x: &Vec<f64>| {
         let mut s = spectra.forward(x);
         s.iter_mut()
-            .skip(samples.saturating_sub(1) / 2 + 1)
+            .skip(nyquist + 1)
             .for_each(|v| *v = Complex64::new(0.0, 0.0));
         s
     };
@@ -961,36 +994,94 @@ pub fn column_spectra_of(
     let mut shifted = kin.clone();
     shifted.torque = None;
     let mut series = vec![0.0; samples];
-    for r in 0..OVERSAMPLING {
-        // x(t + τ) with τ = r·T/(N·L): line l turns by e^{2πi·l·r/(N·L)}.
-        // Once per copy, not per joint, column and line.
-        let turns: Vec<Complex64> = (0..=samples / 2)
+    // x(t + τ) with τ = r·T/(N·L): line l turns by e^{2πi·l·r/(N·L)}, and
+    // back for the shifted copy's lines. Once per copy, not per column.
+    let turns = |r: usize| -> Vec<Complex64> {
+        (0..=samples / 2)
             .map(|l| Complex64::from_polar(1.0, std::f64::consts::TAU * (l * r) as f64 / fine_len))
-            .collect();
-        let shift = |spec: &Vec<Complex64>| -> Vec<f64> {
-            let s: Vec<Complex64> = spec.iter().zip(&turns).map(|(v, t)| v * t).collect();
-            spectra.inverse(&s, samples)
-        };
+            .collect()
+    };
+    let shift = |spec: &Vec<Complex64>, turns: &[Complex64]| -> Vec<f64> {
+        let s: Vec<Complex64> = spec.iter().zip(turns).map(|(v, t)| v * t).collect();
+        spectra.inverse(&s, samples)
+    };
+    let copy = |shifted: &mut Kinematics, turns: &[Complex64], whole: bool| {
         for j in 0..n {
-            shifted.q[j] = shift(&sq[j]);
-            shifted.qd[j] = shift(&sqd[j]);
-            shifted.qdd[j] = shift(&sqdd[j]);
+            shifted.qd[j] = shift(&sqd[j], turns);
+            if whole {
+                shifted.q[j] = shift(&sq[j], turns);
+                shifted.qdd[j] = shift(&sqdd[j], turns);
+            }
         }
+    };
+    let add = |acc: &mut [Complex64], j: usize, c: usize, y: &[Complex64], turns: &[Complex64]| {
+        let out = &mut acc[(j * cols + c) * (keep + 1)..][..keep + 1];
+        for (l, o) in out.iter_mut().enumerate() {
+            *o += y[l] * turns[l].conj();
+        }
+    };
+    let wanted: Vec<usize> = (0..cols).filter(|c| only.is_none_or(|o| o.contains(c))).collect();
+    let (mut on_fine, at_samples): (Vec<usize>, Vec<usize>) = wanted.into_iter().partition(|&c| fine(c));
+    if !at_samples.is_empty() {
+        let still = turns(0);
+        copy(&mut shifted, &still, true);
         let a = base.matrix(&shifted);
-        for j in 0..n {
-            for c in (0..cols).filter(|c| only.is_none_or(|o| o.contains(c))) {
+        for &c in &at_samples {
+            let (mut tail, mut total) = (0.0, 0.0);
+            let mut lines = Vec::with_capacity(n);
+            for j in 0..n {
                 for k in 0..samples {
                     series[k] = a[(k * n + j, c)];
                 }
                 let y = spectra.forward(&series);
-                let out = &mut acc[(j * cols + c) * (keep + 1)..][..keep + 1];
-                for (l, o) in out.iter_mut().enumerate() {
-                    *o += y[l] * turns[l].conj();
-                }
+                total += y[..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
+                tail += y[nyquist / 2..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
+                lines.push(y);
+            }
+            if tail > SMOOTH_TAIL * total {
+                on_fine.push(c);
+                continue;
+            }
+            for (j, y) in lines.iter().enumerate() {
+                add(&mut acc, j, c, y, &still);
             }
         }
     }
-    acc.iter_mut().for_each(|v| *v /= OVERSAMPLING as f64);
+    // A fine column that is one joint's friction term is made from that
+    // joint's velocity alone; any other needs the whole regressor per copy.
+    let terms: Vec<(usize, Option<(usize, usize)>)> = on_fine.iter().map(|&c| (c, base.friction_term(c))).collect();
+    let whole = terms.iter().any(|(_, t)| t.is_none());
+    for r in (0..OVERSAMPLING).filter(|_| !on_fine.is_empty()) {
+        let turns = turns(r);
+        copy(&mut shifted, &turns, whole);
+        let a = whole.then(|| base.matrix(&shifted));
+        for &(c, term) in &terms {
+            match (term, &a) {
+                (Some((j, k)), _) => {
+                    for (x, &v) in series.iter_mut().zip(&shifted.qd[j]) {
+                        *x = base.friction_value((j, k), v);
+                    }
+                    add(&mut acc, j, c, &spectra.forward(&series), &turns);
+                }
+                (None, Some(a)) => {
+                    for j in 0..n {
+                        for k in 0..samples {
+                            series[k] = a[(k * n + j, c)];
+                        }
+                        add(&mut acc, j, c, &spectra.forward(&series), &turns);
+                    }
+                }
+                (None, None) => unreachable!("the whole regressor is made for such columns"),
+            }
+        }
+    }
+    for &c in &on_fine {
+        for j in 0..n {
+            acc[(j * cols + c) * (keep + 1)..][..keep + 1]
+                .iter_mut()
+                .for_each(|v| *v /= OVERSAMPLING as f64);
+        }
+    }
     acc
 }
 
@@ -1103,6 +1194,94 @@ mod tests {
                 (fast / exact - 1.0).abs() < tol,
                 "coupling {coupling}: {fast} vs {exact}"
             );
+        }
+    }
+
+    /// The columns' lines at the samples, where they are smooth, equal
+    /// those of the fine grid to rounding; the rough ones (Coulomb's) are
+    /// made on the fine grid from the joint's velocity alone, bit for bit
+    /// as from the whole regressor. A UR5 swinging every joint over ±1.5
+    /// rad at 20 harmonics (the chain's rotations compound the lines), at
+    /// 5 and 20 samples per highest harmonic's period, sign(q̇) and tanh.
+    #[test]
+    fn smooth_columns_need_no_fine_grid() {
+        use crate::dynamics::{load_robot, BaseRegressor, RegressorModel};
+        use std::f64::consts::TAU;
+        let model = load_robot(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/robots/ur5.toml"
+        )))
+        .unwrap();
+        let n = model.dof();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let spectra = crate::signal::Spectra::new();
+        for (samples, transition) in [(200, 0.0), (800, 0.01), (800, 0.0)] {
+            let harmonics = 20;
+            let a: Vec<Vec<(f64, f64)>> = (0..n)
+                .map(|_| {
+                    (1..=harmonics)
+                        .map(|h| (1.5 / harmonics as f64 / (h as f64).sqrt(), rng.random_range(0.0..TAU)))
+                        .collect()
+                })
+                .collect();
+            let w = TAU / 10.0;
+            let time: Vec<f64> = (0..samples).map(|k| 10.0 * k as f64 / samples as f64).collect();
+            let wave = |j: usize, d: u32| -> Vec<f64> {
+                time.iter()
+                    .map(|t| {
+                        a[j].iter()
+                            .enumerate()
+                            .map(|(h, (amp, ph))| {
+                                let wh = w * (h + 1) as f64;
+                                let x = wh * t + ph + d as f64 * std::f64::consts::FRAC_PI_2;
+                                amp * wh.powi(d as i32) * x.sin()
+                            })
+                            .sum()
+                    })
+                    .collect()
+            };
+            let kin = robotid_schemas::Kinematics {
+                joints: model.joint_names(),
+                time: time.clone(),
+                q: (0..n).map(|j| wave(j, 0)).collect(),
+                qd: (0..n).map(|j| wave(j, 1)).collect(),
+                qdd: (0..n).map(|j| wave(j, 2)).collect(),
+                torque: None,
+                metadata: Default::default(),
+            };
+            let base = BaseRegressor::new(
+                &model,
+                &RegressorModel {
+                    offset: true,
+                    coulomb_transition_rad_s: Some(transition),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let keep = (samples - 1) / 2;
+            let fast = super::column_spectra_of(&base, &kin, keep, &spectra, None);
+            let all_fine = super::column_spectra_on(&base, &kin, keep, &spectra, None, |_| true);
+            let cols = base.parameters();
+            // Relative to the column's size over all joints (a chain's
+            // column is zero on some rows up to rounding).
+            let mut worst: f64 = 0.0;
+            for c in 0..cols {
+                let at = |j: usize| (j * cols + c) * (keep + 1)..(j * cols + c + 1) * (keep + 1);
+                let norm = (0..n)
+                    .flat_map(|j| &all_fine[at(j)])
+                    .map(|v| v.norm_sqr())
+                    .sum::<f64>()
+                    .sqrt();
+                for j in 0..n {
+                    let (x, y) = (&fast[at(j)], &all_fine[at(j)]);
+                    if base.is_coulomb(c) {
+                        assert_eq!(x, y, "{samples} samples: Coulomb column {c}, joint {j}");
+                    }
+                    let diff = x.iter().zip(y).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max);
+                    worst = worst.max(diff / norm);
+                }
+            }
+            assert!(worst < 1e-12, "{samples} samples, v = {transition}: {worst:e}");
         }
     }
 }
