@@ -13,9 +13,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context as _};
 use robotid_schemas::{metadata, RawSamples};
 use robotid_stages::dynamics::load_robot;
+use robotid_stages::dynamics::{FrictionTerms, ModelKind};
 use robotid_stages::signal::FilterSpec;
 use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, Channel, ReadConfig};
+use robotid_stages::stage::regressor::RegressorConfig;
 
 use crate::Pipeline;
 
@@ -32,7 +34,7 @@ pub struct Design {
     pub findings: Vec<(String, String)>,
     pub periodic: bool,
     /// Its regressor stage (the tables of one identification share one).
-    pub regressor: String,
+    pub regressor: RegressorConfig,
     /// The anti-alias filter undone (declared, found in the spectrum, or
     /// the identification recording's) and the band it is undone in, Hz.
     pub inverse: Option<(FilterSpec, f64)>,
@@ -61,18 +63,33 @@ pub struct Design {
 /// held joints sag by milliradians, its moving one swings by radians).
 pub const HELD_FRACTION: f64 = 0.01;
 
-/// The regressor stage identify uses: symmetric friction, rotor inertia
-/// where the robot file declares drives, and a torque offset per joint:
-/// torque sensors and current amplifiers carry offsets, and a Coulomb
-/// pair that differs by direction is a symmetric one plus an offset.
-/// With an inverse-filtered torque, the columns are band-limited to the
-/// same band (periodic records only: the stage drops it on others).
-pub fn regressor_stage(band_limit_hz: Option<f64>) -> String {
-    let mut s = "[[stage]]\nkind = \"regressor\"\nfriction = \"symmetric\"\noffset = true\n".to_string();
-    if let Some(b) = band_limit_hz {
-        s.push_str(&format!("band_limit_hz = {b:?}\n"));
+/// The regressor stage identify starts from: symmetric friction, rotor
+/// inertia where the robot file declares drives, and a torque offset per
+/// joint: torque sensors and current amplifiers carry offsets, and a sign(q̇)
+/// Coulomb pair that differs by direction is a symmetric one plus an
+/// offset (with a smooth turn-over it is not: held-out periods then choose
+/// Bona's asymmetric friction). With an inverse-filtered torque, the
+/// columns are band-limited to the same band (periodic records only).
+pub fn identify_regressor(band_limit_hz: Option<f64>) -> RegressorConfig {
+    RegressorConfig {
+        friction: FrictionTerms::Symmetric,
+        offset: true,
+        band_limit_hz,
+        ..RegressorConfig::default()
     }
-    s
+}
+
+/// A joint-wise record's model (Bona §3): the decoupled one, from the
+/// moving joint's rows.
+fn joint_wise_model(c: &mut RegressorConfig) {
+    c.model = ModelKind::Decoupled;
+    c.rotor = Some(false);
+    c.joint_wise = true;
+}
+
+/// The regressor stage as a pipeline file writes it.
+fn regressor_toml(c: &RegressorConfig) -> anyhow::Result<String> {
+    Ok(format!("[[stage]]\nkind = \"regressor\"\n{}", toml::to_string(c)?))
 }
 
 /// The `inverse_filter` stage for a declared filter, undone up to `band`.
@@ -270,7 +287,7 @@ pub fn design_with(
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> anyhow::Result<Design> {
-    let regressor = first.map(|d| d.regressor.as_str());
+    let regressor = first.map(|d| d.regressor.clone());
     let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
@@ -363,9 +380,7 @@ pub fn design_with(
             "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
         )),
     }
-    let regressor = regressor
-        .map(str::to_string)
-        .unwrap_or_else(|| regressor_stage(inverse.map(|(_, b)| b)));
+    let regressor = regressor.unwrap_or_else(|| identify_regressor(inverse.map(|(_, b)| b)));
     findings.push(("sample_rate_hz".into(), fs_said));
 
     let period = match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
@@ -520,11 +535,7 @@ pub fn design_with(
             format!("only {moving} moves: a joint-wise experiment (Bona §3), the decoupled model from its rows only"),
         ));
         if own_regressor {
-            regressor = regressor.replacen(
-                "kind = \"regressor\"\n",
-                "kind = \"regressor\"\nmodel = \"decoupled\"\nrotor = false\njoint_wise = true\n",
-                1,
-            );
+            joint_wise_model(&mut regressor);
         }
     } else if !still.is_empty() {
         bail!(
@@ -533,7 +544,7 @@ pub fn design_with(
             still.join(", ")
         );
     }
-    if !own_regressor && joint_wise != regressor.contains("joint_wise = true") {
+    if !own_regressor && joint_wise != regressor.joint_wise {
         bail!(
             "{}: {} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
             log.display(),
@@ -648,7 +659,7 @@ pub fn design_with(
             let choice = choose_model(
                 &chain,
                 &model,
-                &regressor_config(&regressor)?,
+                &regressor,
                 moving,
                 inverse.as_ref().map(|(f, _)| *f),
                 fs,
@@ -688,20 +699,17 @@ pub fn design_with(
             if let Some(spec) = choice.filter {
                 let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
                 inverse = Some((spec, band));
-                regressor = regressor_stage(Some(band));
-                if joint_wise {
-                    regressor = regressor.replacen(
-                        "kind = \"regressor\"\n",
-                        "kind = \"regressor\"\nmodel = \"decoupled\"\nrotor = false\njoint_wise = true\n",
-                        1,
-                    );
-                }
+                regressor.band_limit_hz = Some(band);
             }
             findings.retain(|(k, _)| k != "inverse_filter");
             findings.push(("inverse_filter".into(), choice.filter_said.clone()));
         }
         if let Some(v) = choice.transition.filter(|v| *v > 0.0) {
-            regressor.push_str(&format!("coulomb_transition_rad_s = {v:?}\n"));
+            regressor.coulomb_transition_rad_s = Some(v);
+        }
+        regressor.friction = choice.friction;
+        if let Some(said) = choice.friction_said {
+            findings.push(("friction".into(), said));
         }
         findings.push(("coulomb_transition_rad_s".into(), choice.transition_said));
         findings.push(("held_out".into(), choice.held_out_said));
@@ -727,7 +735,7 @@ pub fn design_with(
     });
     let mut text = head;
     text.push_str(&stages_after(inverse.as_ref(), &differentiate)?);
-    writeln!(text, "{regressor}")?;
+    writeln!(text, "{}", regressor_toml(&regressor)?)?;
     writeln!(
         text,
         "[output]\ntables = [\"period_mean\", \"noise\", \"kinematics\", \"regressor\"]\n"
@@ -783,6 +791,10 @@ struct ModelChoice {
     transition: Option<f64>,
     transition_said: String,
     held_out_said: String,
+    /// Symmetric friction, or Bona's asymmetric one where held-out periods
+    /// prefer it, and why (None: not tried).
+    friction: FrictionTerms,
+    friction_said: Option<String>,
     /// The held-out score of the choice (None: fewer than two periods).
     score: Option<f64>,
     /// The relative improvement one choice needs over a simpler one.
@@ -808,7 +820,7 @@ fn choose_model(
 ) -> anyhow::Result<ModelChoice> {
     use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem, Score};
     use robotid_stages::signal::Spectra;
-    use robotid_stages::stage::regressor::{column_spectra_of, RegressorConfig};
+    use robotid_stages::stage::regressor::column_spectra_of;
     let kin = chain.kinematics()?;
     let p = chain.periods.as_ref().ok_or_else(|| anyhow!("no aligned periods"))?;
     let samples = p.samples_per_period;
@@ -824,8 +836,9 @@ fn choose_model(
     // The columns' lines with sign(q̇); another transition changes only
     // the Coulomb columns, whose lines are made again and put in place.
     let mut first: Option<(Vec<_>, Vec<String>)> = None;
-    let mut system = |v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
+    let mut system = |friction: FrictionTerms, v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
         let cfg = RegressorConfig {
+            friction,
             coulomb_transition_rad_s: Some(v),
             band_limit_hz: None,
             joint_wise: false,
@@ -857,7 +870,7 @@ fn choose_model(
             names,
         ))
     };
-    let (Some(sign), _) = system(0.0)? else {
+    let (Some(sign), _) = system(template.friction, 0.0)? else {
         return Ok(ModelChoice {
             filter: None,
             filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
@@ -865,6 +878,8 @@ fn choose_model(
             transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
             held_out_said: "not scored: fewer than two steady periods".into(),
             score: None,
+            friction: template.friction,
+            friction_said: None,
             margin,
         });
     };
@@ -906,7 +921,9 @@ fn choose_model(
     // spread: a smooth turn-over is tried only above it.
     let at_floor = sign_fit.1.ratio < 1.0 + margin;
     for &v in TRANSITIONS[1..].iter().filter(|_| !at_floor) {
-        let (Some(sys), names) = system(v)? else { continue };
+        let (Some(sys), names) = system(template.friction, v)? else {
+            continue;
+        };
         let fit = score_with(&sys);
         let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
         scored.push((v, fit, ok));
@@ -923,6 +940,44 @@ fn choose_model(
         &scored[0]
     };
     let (filter, score) = pick.1.clone().expect("scored");
+    // A Coulomb pair that differs by direction is a symmetric one plus the
+    // offset only with sign(q̇); with a smooth turn-over, and with viscous
+    // friction that differs by direction, Bona's asymmetric friction is
+    // another model: tried at the chosen turn-over, kept when held-out
+    // periods prefer it by the score's spread.
+    let symmetric = template.friction == FrictionTerms::Symmetric && !at_floor;
+    let asymmetric = match symmetric {
+        true => match system(FrictionTerms::Asymmetric, pick.0)? {
+            (Some(sys), names) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
+            (None, _) => None,
+        },
+        false => None,
+    };
+    let (friction, friction_said, filter, score) = match asymmetric {
+        Some((f, s)) if s.ratio < score.ratio * (1.0 - margin) => (
+            FrictionTerms::Asymmetric,
+            Some(format!(
+                "asymmetric (Bona eq. 2: viscous and Coulomb for each direction): held-out residue {:.3}× the noise floor, symmetric {:.3}×",
+                s.ratio, score.ratio
+            )),
+            f,
+            s,
+        ),
+        other => (
+            template.friction,
+            symmetric.then(|| match &other {
+                Some((_, s)) => format!(
+                    "symmetric (and an offset): asymmetric friction predicts held-out periods {:.3}× the noise floor, not better than {:.3}× by {:.2} %",
+                    s.ratio,
+                    score.ratio,
+                    100.0 * margin
+                ),
+                None => "symmetric (and an offset): asymmetric friction is singular or has friction < 0 on these periods".into(),
+            }),
+            filter,
+            score,
+        ),
+    };
     let describe_fit = |f: &Option<(Option<FilterSpec>, Score)>| match f {
         Some((Some(s), x)) if declared.is_none() => format!("{:.3} ({})", x.ratio, describe(s)),
         Some((_, x)) => format!("{:.3}", x.ratio),
@@ -992,6 +1047,8 @@ fn choose_model(
             score.ratio
         ),
         score: Some(score.ratio),
+        friction,
+        friction_said,
         margin,
     })
 }
@@ -1097,18 +1154,6 @@ fn torque_check(
     }))
 }
 
-/// The typed settings of a regressor stage written as text.
-fn regressor_config(stage: &str) -> anyhow::Result<robotid_stages::stage::regressor::RegressorConfig> {
-    let mut t: toml::Table = stage.parse()?;
-    let mut s = t
-        .remove("stage")
-        .and_then(|s| s.as_array().and_then(|a| a.first().cloned()))
-        .and_then(|s| s.as_table().cloned())
-        .ok_or_else(|| anyhow!("a regressor stage"))?;
-    s.remove("kind");
-    Ok(toml::Value::Table(s).try_into()?)
-}
-
 /// Joints × samples of one period: the count behind a held-out score.
 fn chain_samples(kin: &robotid_schemas::Kinematics) -> usize {
     kin.joints.len() * kin.time.len()
@@ -1132,15 +1177,14 @@ fn non_periodic(
     mut findings: Vec<(String, String)>,
     raw: &RawSamples,
     fs: f64,
-    regressor: &str,
+    regressor: &RegressorConfig,
     inverse: Option<&(FilterSpec, f64)>,
 ) -> anyhow::Result<Design> {
     // Band-limiting the columns needs whole periods.
-    let regressor: String = regressor
-        .lines()
-        .filter(|l| !l.starts_with("band_limit_hz"))
-        .map(|l| format!("{l}\n"))
-        .collect();
+    let regressor = RegressorConfig {
+        band_limit_hz: None,
+        ..regressor.clone()
+    };
     let reach = power_band_hz(&raw.q, fs, 0.9999);
     let cutoff = (4.0 * reach).max(5.0).min(fs / 8.0);
     let cutoff = (cutoff * 100.0).round() / 100.0;
@@ -1158,7 +1202,7 @@ fn non_periodic(
         text,
         "[[stage]]\nkind = \"differentiate\"\nmethod = \"filtered\"\nfilter = {{ family = \"butterworth\", order = 2, cutoff_hz = {cutoff:?} }}\n"
     )?;
-    writeln!(text, "{regressor}")?;
+    writeln!(text, "{}", regressor_toml(&regressor)?)?;
     writeln!(text, "[output]\ntables = [\"kinematics\", \"regressor\"]\n")?;
     Ok(Design {
         text: with_inferred(text, &findings),

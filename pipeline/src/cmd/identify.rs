@@ -205,6 +205,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "inverse_filter",
                 "differentiate",
                 "coulomb_transition_rad_s",
+                "friction",
                 "held_out",
             ]
             .contains(&k.as_str())
