@@ -102,6 +102,21 @@ pub enum Error {
     /// Recordings failed: nothing was estimated from the rest.
     #[error("estimate: recording(s) {} failed, so no parameters were estimated (fix them or leave them out of the source)", .names.join(", "))]
     RecordingsFailed { names: Vec<String> },
+    /// A plan made in code could not be written as a pipeline file.
+    #[error("writing a pipeline file: {0}")]
+    Write(#[from] toml::ser::Error),
+    /// `identify` refused a recording, or found no pipeline for it: why,
+    /// with the numbers.
+    #[error("{}: {message}", log.display())]
+    Identify { log: PathBuf, message: String },
+    /// A step of `identify` on a recording failed: which, and the cause.
+    #[error("{}: {step}", log.display())]
+    IdentifyStep {
+        log: PathBuf,
+        step: String,
+        #[source]
+        source: Box<Error>,
+    },
     /// Pictures or a report could not be made.
     #[error("{what}: {msg}")]
     Output { what: String, msg: String },

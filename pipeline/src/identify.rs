@@ -7,18 +7,24 @@
 //! `[inferred]` table saying how each was found, so that running it again
 //! gives the same tables byte for byte, and a user can pin and edit it.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail, Context as _};
-use robotid_schemas::{metadata, RawSamples};
+use robotid_schemas::{metadata, RawSamples, TableKind};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::dynamics::{FrictionTerms, ModelKind};
-use robotid_stages::signal::FilterSpec;
+use robotid_stages::signal::{FilterFamily, FilterSpec};
+use robotid_stages::stage::align::AlignConfig;
+use robotid_stages::stage::average::AverageConfig;
+use robotid_stages::stage::differentiate::{DifferentiateConfig, Differentiation};
+use robotid_stages::stage::inverse_filter::InverseFilterConfig;
+use robotid_stages::stage::noise::NoiseConfig;
 use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
-use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, Channel, ReadConfig};
+use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, ReadConfig};
 use robotid_stages::stage::regressor::RegressorConfig;
+use robotid_stages::stage::Chain;
 
+use crate::error::{Error, Result};
+use crate::plan::{Plan, StageConfig};
 use crate::Pipeline;
 
 /// Steady tolerances `align` is given in turn until one keeps a period:
@@ -28,7 +34,9 @@ const STEADY_LADDER: [f64; 5] = [0.01, 0.02, 0.03, 0.05, 0.1];
 /// A pipeline designed from a recording.
 #[derive(Debug, Clone)]
 pub struct Design {
-    /// The pipeline file.
+    /// The pipeline, typed…
+    pub plan: Plan,
+    /// …and as its file is written.
     pub text: String,
     /// What was found, one line each (also in the file's `[inferred]`).
     pub findings: Vec<(String, String)>,
@@ -87,25 +95,48 @@ fn joint_wise_model(c: &mut RegressorConfig) {
     c.joint_wise = true;
 }
 
-/// The regressor stage as a pipeline file writes it.
-fn regressor_toml(c: &RegressorConfig) -> anyhow::Result<String> {
-    Ok(format!("[[stage]]\nkind = \"regressor\"\n{}", toml::to_string(c)?))
-}
-
 /// The `inverse_filter` stage for a declared filter, undone up to `band`.
-fn inverse_filter_stage((f, band): &(FilterSpec, f64)) -> anyhow::Result<String> {
+fn inverse_filter(&(f, band): &(FilterSpec, f64)) -> StageConfig {
+    StageConfig::InverseFilter(InverseFilterConfig {
+        filter: Some(f),
+        zpk: None,
+        bandwidth_hz: band,
+    })
+}
+
+/// identify's refusal of `log`, or what it could not find there.
+fn refuse(log: &Path, message: impl Into<String>) -> Error {
+    Error::Identify {
+        log: log.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// A step of identify on `log` that failed, with its cause.
+fn at_step<E: Into<Error>>(log: &Path, step: impl Into<String>) -> impl FnOnce(E) -> Error {
+    let (log, step) = (log.to_path_buf(), step.into());
+    move |e| Error::IdentifyStep {
+        log,
+        step,
+        source: Box::new(e.into()),
+    }
+}
+
+/// A probe's stages run on the samples already read (the log is read once).
+fn probe(plan: &Plan, stages: Vec<StageConfig>, log: &Path, raw: &RawSamples) -> Result<Chain> {
+    let plan = Plan { stages, ..plan.clone() };
+    let built = Pipeline::from_plan(&plan)?.build()?;
+    let mut chain = Chain::from_raw(log.display().to_string(), "probe", raw.clone());
+    built.run_stages(&mut chain, |_| {})?;
+    Ok(chain)
+}
+
+/// The pipeline file identify writes: the plan, and a word on `[inferred]`.
+pub fn file_text(plan: &Plan) -> Result<String> {
     Ok(format!(
-        "[[stage]]\nkind = \"inverse_filter\"\nfilter = {}\nbandwidth_hz = {band:?}\n",
-        toml::Value::try_from(f)?
+        "# Designed by `robotid identify`: every value written out, and how each was\n# found in the `inferred` table (copied into every table). Pin it, edit it, run it.\n{}",
+        plan.to_toml()?
     ))
-}
-
-fn toml_str(s: &str) -> String {
-    toml::Value::String(s.to_string()).to_string()
-}
-
-fn channel_toml(c: &Channel) -> anyhow::Result<String> {
-    Ok(toml::Value::try_from(c)?.to_string())
 }
 
 /// Where a log's channels are, and how that was found.
@@ -130,7 +161,7 @@ fn read_settings(
     model: &robotid_stages::dynamics::Model,
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
-) -> anyhow::Result<(ReadConfig, RawSamples, Layout)> {
+) -> Result<(ReadConfig, RawSamples, Layout)> {
     // Every candidate reads currents with the gains given.
     let with_gains = |mut cfg: ReadConfig| {
         if let Some(k) = torque_per_amp {
@@ -140,7 +171,7 @@ fn read_settings(
     };
     if let Some(cfg) = stated {
         let cfg = with_gains(cfg.clone());
-        let raw = read(log, &cfg, Some(model)).with_context(|| format!("{} with the stated [read]", log.display()))?;
+        let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the stated [read]"))?;
         return Ok((cfg, raw, Layout::Stated));
     }
     let default_err = match read(log, &with_gains(ReadConfig::default()), Some(model)) {
@@ -149,14 +180,15 @@ fn read_settings(
     };
     if let Some(header) = log_columns(log)? {
         let cfg = guess_read(&header, joints).map(with_gains).map_err(|e| {
-            anyhow!(
-                "{}: {e}; the log has {}: give the columns with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
-                log.display(),
-                header.join(", ")
+            refuse(
+                log,
+                format!(
+                    "{e}; the log has {}: give the columns with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
+                    header.join(", ")
+                ),
             )
         })?;
-        let raw =
-            read(log, &cfg, Some(model)).with_context(|| format!("{} with the guessed columns", log.display()))?;
+        let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the guessed columns"))?;
         return Ok((cfg, raw, Layout::Named));
     }
     let layouts = log_width(log)?.map_or_else(Vec::new, |w| headerless_layouts(w, joints.len()));
@@ -188,9 +220,8 @@ fn read_settings(
                 tried.join("; ")
             )),
         )),
-        None => Err(anyhow!(default_err).context(format!(
-            "{}: the channels are not where robotid looks by default, the log names none{}: give them with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
-            log.display(),
+        None => Err(at_step(log, format!(
+            "the channels are not where robotid looks by default, the log names none{}: give them with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
             if tried.is_empty() {
                 format!(
                     ", and its width is not 1 + 2·{0} or 1 + 3·{0} columns (time, positions, [velocities,] torques)",
@@ -199,15 +230,8 @@ fn read_settings(
             } else {
                 format!(", and no usual layout reads ({})", tried.join("; "))
             }
-        ))),
+        ))(default_err)),
     }
-}
-
-/// A `[read]` table for the pipeline file.
-fn read_table(cfg: &ReadConfig) -> anyhow::Result<String> {
-    let mut t = toml::Table::new();
-    t.insert("read".into(), toml::Value::try_from(cfg)?);
-    Ok(toml::to_string(&t)?)
 }
 
 /// Mean over joints of rms(second difference) / rms(first difference): near
@@ -274,7 +298,7 @@ fn list(h: &[u32]) -> String {
 /// paths are written into it). `first`: the first recording's design,
 /// whose regressor stage (and anti-alias filter, where this one declares
 /// none) the others take, so that their tables share one parameter set.
-pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> anyhow::Result<Design> {
+pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> Result<Design> {
     design_with(log, robot, first, None, None)
 }
 
@@ -286,63 +310,40 @@ pub fn design_with(
     first: Option<&Design>,
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
-) -> anyhow::Result<Design> {
+) -> Result<Design> {
     let regressor = first.map(|d| d.regressor.clone());
     let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
     let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
     let mut findings: Vec<(String, String)> = Vec::new();
-    let mut head = String::new();
-    writeln!(
-        head,
-        "version = 1\nrobot = {}\n",
-        toml_str(&robot.display().to_string())
-    )?;
-    writeln!(head, "[source]\npath = {}\n", toml_str(&log.display().to_string()))?;
-    let gains = |head: &mut String| -> anyhow::Result<()> {
-        if let Some(k) = &read_cfg.torque_per_amp {
-            writeln!(head, "torque_per_amp = {}", toml::Value::try_from(k)?)?;
-        }
-        Ok(())
-    };
+    let mut plan = Plan::draft(
+        &log.with_extension("toml"),
+        Some(robot.to_path_buf()),
+        log.display().to_string(),
+        read_cfg.clone(),
+    );
     match &layout {
-        Layout::Default if read_cfg.torque_per_amp.is_some() => {
-            head.push_str("[read]\n");
-            gains(&mut head)?;
-            head.push('\n');
-        }
         Layout::Default => {}
         Layout::Named => {
-            head.push_str("[read]\n");
             let mut said = Vec::new();
             for (key, ch) in read_cfg.channels() {
                 if let Some(c) = ch {
-                    let v = channel_toml(c)?;
-                    writeln!(head, "{key} = {v}")?;
-                    said.push(format!("{key} {v}"));
+                    said.push(format!("{key} {}", toml::Value::try_from(c)?));
                 }
             }
-            gains(&mut head)?;
-            head.push('\n');
             findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
         }
-        Layout::Headerless(said) => {
-            writeln!(head, "{}", read_table(&read_cfg)?)?;
-            findings.push(("read".into(), said.clone()));
-        }
-        Layout::Stated => {
-            writeln!(head, "{}", read_table(&read_cfg)?)?;
-            findings.push(("read".into(), "as stated (--read)".into()));
-        }
+        Layout::Headerless(said) => findings.push(("read".into(), said.clone())),
+        Layout::Stated => findings.push(("read".into(), "as stated (--read)".into())),
     }
     let (fs, fs_said) = sample_rate(&raw);
     // No arm is logged this slowly; stamps in ms or µs read as s are.
     if fs < 2.0 {
-        bail!(
-            "{}: the stamps give {fs_said}: is the time column in ms or µs read as seconds? State its unit with --read (a `[read]` table: time = {{ column = …, unit = \"ms\" }})",
-            log.display()
-        );
+        return Err(refuse(
+            log,
+            format!("the stamps give {fs_said}: is the time column in ms or µs read as seconds? State its unit with --read (a `[read]` table: time = {{ column = …, unit = \"ms\" }})"),
+        ));
     }
     // The anti-alias filter the effort went through, when the recording
     // declares it: undone, and the regressor columns band-limited alike.
@@ -351,7 +352,7 @@ pub fn design_with(
         .get(metadata::ANALOG_FILTER)
         .map(|j| serde_json::from_str(j))
         .transpose()
-        .with_context(|| format!("{}: its `{}`", log.display(), metadata::ANALOG_FILTER))?;
+        .map_err(|e| refuse(log, format!("its `{}`: {e}", metadata::ANALOG_FILTER)))?;
     // Undone up to 0.8 of the cutoff (a 4th-order Butterworth is still
     // within 0.7 dB there), below Nyquist.
     let inverse = filter.map(|f| (f, (0.8 * f.cutoff_hz).min(0.4 * fs)));
@@ -415,21 +416,25 @@ pub fn design_with(
         Ok(p) => p,
         Err(why) => {
             findings.push(("periodic".into(), format!("no: {why}")));
-            return non_periodic(head, findings, &raw, fs, &regressor, inverse.as_ref());
+            return non_periodic(plan, findings, &raw, fs, &regressor, inverse.as_ref());
         }
     };
     findings.push(("period_s".into(), period_said));
-    drop(raw);
+    let align = |tol: f64| {
+        StageConfig::Align(AlignConfig {
+            period_s: Some(period),
+            sample_rate_hz: Some(fs),
+            steady_tolerance: tol,
+            ..AlignConfig::default()
+        })
+    };
 
     // The steady periods: align with the default tolerance, then looser.
     let mut last_err = None;
     let mut found = None;
     for tol in STEADY_LADDER {
-        let text = format!(
-            "{head}[[stage]]\nkind = \"align\"\nperiod_s = {period:?}\nsample_rate_hz = {fs:?}\nsteady_tolerance = {tol}\n\n[[stage]]\nkind = \"average\"\n"
-        );
-        let built = Pipeline::from_toml(&text, log.with_extension("probe.toml"))?.build()?;
-        match built.run_log(log, "probe", |_| {}) {
+        let stages = vec![align(tol), StageConfig::Average(AverageConfig::default())];
+        match probe(&plan, stages, log, &raw) {
             Ok(chain) => {
                 found = Some((tol, chain));
                 break;
@@ -443,12 +448,14 @@ pub fn design_with(
             .find(|(k, _)| k == "conflict")
             .map(|(_, w)| format!(" ({w})"))
             .unwrap_or_default();
-        bail!(
-            "{}: periodic with {period} s{conflict}, but no stretch of steady periods within {} % of each other: {}",
-            log.display(),
-            100.0 * STEADY_LADDER[STEADY_LADDER.len() - 1],
-            last_err.map(|e| e.to_string()).unwrap_or_default()
-        );
+        return Err(refuse(
+            log,
+            format!(
+                "periodic with {period} s{conflict}, but no stretch of steady periods within {} % of each other: {}",
+                100.0 * STEADY_LADDER[STEADY_LADDER.len() - 1],
+                last_err.map(|e| e.to_string()).unwrap_or_default()
+            ),
+        ));
     };
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
@@ -538,19 +545,23 @@ pub fn design_with(
             joint_wise_model(&mut regressor);
         }
     } else if !still.is_empty() {
-        bail!(
-            "{}: joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
-            log.display(),
-            still.join(", ")
-        );
+        return Err(refuse(
+            log,
+            format!(
+                "joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
+                still.join(", ")
+            ),
+        ));
     }
     if !own_regressor && joint_wise != regressor.joint_wise {
-        bail!(
-            "{}: {} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
-            log.display(),
-            if joint_wise { "one joint moves" } else { "every joint moves" },
-            if joint_wise { "moved every joint" } else { "moved one joint" }
-        );
+        return Err(refuse(
+            log,
+            format!(
+                "{} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
+                if joint_wise { "one joint moves" } else { "every joint moves" },
+                if joint_wise { "moved every joint" } else { "moved one joint" }
+            ),
+        ));
     }
     findings.push((
         "harmonics".into(),
@@ -579,12 +590,17 @@ pub fn design_with(
     let by_positions = highest_beyond(&moved_q, &union, &moved);
     let by_torques =
         highest_beyond(&mean.torque, &union, &joints).filter(|(h, _)| by_positions.as_ref().is_none_or(|(p, _)| h > p));
+    let differentiate = |method, harmonics, bandwidth_hz| {
+        StageConfig::Differentiate(DifferentiateConfig {
+            method,
+            harmonics,
+            bandwidth_hz,
+            filter: None,
+        })
+    };
     let dft = |h: u32| {
         let band = (h as f64 + 0.5) * f0;
-        (
-            band,
-            format!("[[stage]]\nkind = \"differentiate\"\nmethod = \"dft\"\nbandwidth_hz = {band:?}\n"),
-        )
+        (band, differentiate(Differentiation::Dft, None, Some(band)))
     };
     let positions_stage = match &by_positions {
         Some((h, whose)) => {
@@ -596,10 +612,7 @@ pub fn design_with(
             )
         }
         None => (
-            format!(
-                "[[stage]]\nkind = \"differentiate\"\nmethod = \"fourier_fit\"\nharmonics = {}\n",
-                list(&union)
-            ),
+            differentiate(Differentiation::FourierFit, Some(union.clone()), None),
             "fourier_fit at the excited lines: the positions hold no others".to_string(),
             f0 * union.iter().max().copied().unwrap_or(1) as f64,
         ),
@@ -612,19 +625,15 @@ pub fn design_with(
             band,
         )
     });
-    let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &str| -> anyhow::Result<String> {
-        let mut text = String::new();
-        writeln!(
-            text,
-            "[[stage]]\nkind = \"align\"\nperiod_s = {period:?}\nsample_rate_hz = {fs:?}\nsteady_tolerance = {tol}\n"
-        )?;
-        if let Some(inv) = inverse {
-            writeln!(text, "{}", inverse_filter_stage(inv)?)?;
-        }
-        writeln!(text, "[[stage]]\nkind = \"average\"\n")?;
-        writeln!(text, "[[stage]]\nkind = \"noise\"\nharmonics = {}\n", list(&union))?;
-        writeln!(text, "{differentiate}")?;
-        Ok(text)
+    let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &StageConfig| {
+        let mut stages = vec![align(tol)];
+        stages.extend(inverse.map(inverse_filter));
+        stages.push(StageConfig::Average(AverageConfig::default()));
+        stages.push(StageConfig::Noise(NoiseConfig {
+            harmonics: Some(union.clone()),
+        }));
+        stages.push(differentiate.clone());
+        stages
     };
     let mut inverse = inverse;
     let mut wide_band = first.map(|d| d.wide_band);
@@ -646,17 +655,15 @@ pub fn design_with(
             {
                 break;
             }
-            let probe = format!("{head}{}", stages_after(None, stage)?);
-            let chain = Pipeline::from_toml(&probe, log.with_extension("probe.toml"))?
-                .build()?
-                .run_log(log, "probe", |_| {})?;
+            let chain = probe(&plan, stages_after(None, stage), log, &raw)?;
             if tried.is_empty() {
                 if let Some(why) = torque_check(chain.kinematics()?, &model)? {
-                    bail!("{}: {why}", log.display());
+                    return Err(refuse(log, why));
                 }
             }
             let lowest = (4.0 * band).max(fs / 50.0);
             let choice = choose_model(
+                log,
                 &chain,
                 &model,
                 &regressor,
@@ -733,15 +740,18 @@ pub fn design_with(
         findings.push(("differentiate".into(), said.clone()));
         stage.clone()
     });
-    let mut text = head;
-    text.push_str(&stages_after(inverse.as_ref(), &differentiate)?);
-    writeln!(text, "{}", regressor_toml(&regressor)?)?;
-    writeln!(
-        text,
-        "[output]\ntables = [\"period_mean\", \"noise\", \"kinematics\", \"regressor\"]\n"
-    )?;
+    plan.stages = stages_after(inverse.as_ref(), &differentiate);
+    plan.stages.push(StageConfig::Regressor(regressor.clone()));
+    plan.tables = vec![
+        TableKind::PeriodMean,
+        TableKind::Noise,
+        TableKind::Kinematics,
+        TableKind::Regressor,
+    ];
+    plan.inferred = findings.iter().cloned().collect();
     Ok(Design {
-        text: with_inferred(text, &findings),
+        text: file_text(&plan)?,
+        plan,
         findings,
         periodic: true,
         regressor,
@@ -810,6 +820,7 @@ struct ModelChoice {
 /// stay ≥ 0 (tanh is linear near 0 and trades against viscous friction).
 #[allow(clippy::too_many_arguments)]
 fn choose_model(
+    log: &Path,
     chain: &robotid_stages::stage::Chain,
     model: &robotid_stages::dynamics::Model,
     template: &robotid_stages::stage::regressor::RegressorConfig,
@@ -817,12 +828,15 @@ fn choose_model(
     declared: Option<FilterSpec>,
     fs: f64,
     lowest_hz: f64,
-) -> anyhow::Result<ModelChoice> {
+) -> Result<ModelChoice> {
     use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem, Score};
     use robotid_stages::signal::Spectra;
     use robotid_stages::stage::regressor::column_spectra_of;
     let kin = chain.kinematics()?;
-    let p = chain.periods.as_ref().ok_or_else(|| anyhow!("no aligned periods"))?;
+    let p = chain
+        .periods
+        .as_ref()
+        .ok_or_else(|| refuse(log, "no aligned periods to choose the model on"))?;
     let samples = p.samples_per_period;
     let lines = samples.saturating_sub(1) / 2 + 1;
     let spectra = Spectra::new();
@@ -836,7 +850,7 @@ fn choose_model(
     // The columns' lines with sign(q̇); another transition changes only
     // the Coulomb columns, whose lines are made again and put in place.
     let mut first: Option<(Vec<_>, Vec<String>)> = None;
-    let mut system = |friction: FrictionTerms, v: f64| -> anyhow::Result<(Option<LineSystem>, Vec<String>)> {
+    let mut system = |friction: FrictionTerms, v: f64| -> Result<(Option<LineSystem>, Vec<String>)> {
         let cfg = RegressorConfig {
             friction,
             coulomb_transition_rad_s: Some(v),
@@ -888,7 +902,7 @@ fn choose_model(
         Some(_) => None,
         None => Some(
             choose_filter(&sign, lowest_hz, 0.5 * fs)
-                .ok_or_else(|| anyhow!("the held-out scores of the filters: the regression is singular"))?,
+                .ok_or_else(|| refuse(log, "the held-out scores of the filters: the regression is singular"))?,
         ),
     };
     let score_with = |sys: &LineSystem| -> Option<(Option<FilterSpec>, Score)> {
@@ -906,7 +920,7 @@ fn choose_model(
     };
     let sign_fit = match &search {
         Some(c) => (c.spec, c.score.clone()),
-        None => score_with(&sign).ok_or_else(|| anyhow!("the regression is singular"))?,
+        None => score_with(&sign).ok_or_else(|| refuse(log, "the held-out score: the regression is singular"))?,
     };
     let moving_name = moving.map(|m| kin.joints[m].as_str());
     let friction_ok = |names: &[String], s: &Score| {
@@ -1061,10 +1075,7 @@ fn choose_model(
 /// gear ratio missing), nor of the opposite sign (a reversed channel); a
 /// column that another joint's prediction fits far better is swapped. A
 /// reason to refuse, naming the joints and the fix, or None.
-fn torque_check(
-    kin: &robotid_schemas::Kinematics,
-    model: &robotid_stages::dynamics::Model,
-) -> anyhow::Result<Option<String>> {
+fn torque_check(kin: &robotid_schemas::Kinematics, model: &robotid_stages::dynamics::Model) -> Result<Option<String>> {
     use nalgebra::{Matrix4, Vector4};
     use robotid_stages::stage::regressor::RegressorConfig;
     let Some(torque) = kin.torque.as_ref() else {
@@ -1173,13 +1184,13 @@ fn describe(s: &FilterSpec) -> String {
 /// A record that does not repeat: derivatives by a zero-phase 2nd-order
 /// Butterworth (Swevers' data filter).
 fn non_periodic(
-    head: String,
+    mut plan: Plan,
     mut findings: Vec<(String, String)>,
     raw: &RawSamples,
     fs: f64,
     regressor: &RegressorConfig,
     inverse: Option<&(FilterSpec, f64)>,
-) -> anyhow::Result<Design> {
+) -> Result<Design> {
     // Band-limiting the columns needs whole periods.
     let regressor = RegressorConfig {
         band_limit_hz: None,
@@ -1194,18 +1205,24 @@ fn non_periodic(
             "filtered, 2nd-order Butterworth at {cutoff} Hz (Swevers' 5 Hz data filter, or 4× the {reach:.3} Hz holding 99.99 % of the positions' power when higher; at most fs/8)"
         ),
     ));
-    let mut text = head;
-    if let Some(inv) = inverse {
-        writeln!(text, "{}", inverse_filter_stage(inv)?)?;
-    }
-    writeln!(
-        text,
-        "[[stage]]\nkind = \"differentiate\"\nmethod = \"filtered\"\nfilter = {{ family = \"butterworth\", order = 2, cutoff_hz = {cutoff:?} }}\n"
-    )?;
-    writeln!(text, "{}", regressor_toml(&regressor)?)?;
-    writeln!(text, "[output]\ntables = [\"kinematics\", \"regressor\"]\n")?;
+    plan.stages.extend(inverse.map(inverse_filter));
+    plan.stages.push(StageConfig::Differentiate(DifferentiateConfig {
+        method: Differentiation::Filtered,
+        harmonics: None,
+        bandwidth_hz: None,
+        filter: Some(FilterSpec {
+            family: FilterFamily::Butterworth,
+            order: 2,
+            cutoff_hz: cutoff,
+            ripple_db: None,
+        }),
+    }));
+    plan.stages.push(StageConfig::Regressor(regressor.clone()));
+    plan.tables = vec![TableKind::Kinematics, TableKind::Regressor];
+    plan.inferred = findings.iter().cloned().collect();
     Ok(Design {
-        text: with_inferred(text, &findings),
+        text: file_text(&plan)?,
+        plan,
         findings,
         periodic: false,
         regressor,
@@ -1220,15 +1237,10 @@ fn non_periodic(
     })
 }
 
-fn with_inferred(mut text: String, findings: &[(String, String)]) -> String {
-    text.push_str("# What `robotid identify` found in the recording, copied into every table.\n[inferred]\n");
-    for (k, v) in findings {
-        let _ = writeln!(text, "{k} = {}", toml_str(v));
-    }
-    text
-}
-
 /// The absolute form of a path that exists.
-pub fn absolute(p: &Path) -> anyhow::Result<PathBuf> {
-    std::fs::canonicalize(p).with_context(|| p.display().to_string())
+pub fn absolute(p: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(p).map_err(|source| Error::Io {
+        path: p.to_path_buf(),
+        source,
+    })
 }

@@ -85,6 +85,13 @@ impl Pipeline {
         })
     }
 
+    /// A plan made in code ([`Plan::draft`]), as its file would be read:
+    /// written with [`Plan::to_toml`] and parsed, so that its hash, lines
+    /// and checks are a file's.
+    pub fn from_plan(plan: &Plan) -> Result<Pipeline> {
+        Self::from_toml(&plan.to_toml()?, &plan.file)
+    }
+
     /// Step 2, context: every problem knowable without reading samples.
     pub fn lint(&self) -> Result<Resolved> {
         Ok(lint(&self.plan)?)

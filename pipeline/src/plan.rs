@@ -18,7 +18,7 @@ use robotid_stages::stage::noise::NoiseConfig;
 use robotid_stages::stage::read::ReadConfig;
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::stage::{Component, Context, LintContext, Problem, Product, Stage};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Place, Placed, Problems};
 
@@ -50,14 +50,14 @@ struct PipelineFile {
     inferred: std::collections::BTreeMap<String, String>,
 }
 
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SourceConfig {
     /// A log file, a folder of logs, or a glob; relative to the pipeline file.
     pub path: String,
 }
 
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputConfig {
     /// Tables written per recording: raw_samples, period_mean, noise, kinematics, regressor, r_factor.
@@ -67,7 +67,7 @@ pub struct OutputConfig {
 
 /// The stages, in the order the pipeline file lists them. A closed set:
 /// adding one is a new variant here and a line in [`each_stage!`].
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum StageConfig {
     Align(AlignConfig),
@@ -151,7 +151,74 @@ pub struct Plan {
     pub inferred: std::collections::BTreeMap<String, String>,
 }
 
+/// A pipeline file as [`Plan::to_toml`] writes it (the fields of the file
+/// [`parse`] reads, in its order).
+#[derive(Serialize)]
+struct Written<'a> {
+    version: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    robot: Option<&'a Path>,
+    source: SourceConfig,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    read: Option<&'a ReadConfig>,
+    stage: &'a [StageConfig],
+    output: OutputConfig,
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    lock: &'a std::collections::BTreeMap<String, f64>,
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    inferred: &'a std::collections::BTreeMap<String, String>,
+}
+
 impl Plan {
+    /// A plan made in code (`robotid identify`'s) rather than parsed: no
+    /// stages yet, the tables none; `file` is where it will be written
+    /// (relative paths and messages refer to it). Its text, hash and
+    /// lines are those of [`Plan::to_toml`] once parsed ([`crate::Pipeline::from_plan`]).
+    pub fn draft(file: &Path, robot: Option<PathBuf>, source: String, read: ReadConfig) -> Plan {
+        Plan {
+            file: file.to_path_buf(),
+            hash: String::new(),
+            robot,
+            source,
+            read,
+            stages: Vec::new(),
+            lines: Vec::new(),
+            tables: Vec::new(),
+            lock: Default::default(),
+            inferred: Default::default(),
+        }
+    }
+
+    /// The pipeline file of this plan: parsed at the plan's `file`, it
+    /// gives the plan back (test `pipeline_files_round_trip`). `[read]`
+    /// is written when it is not the default.
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        // `robot` was resolved against the file's folder: a relative one
+        // is written back relative to it; an absolute one stays absolute
+        // (identify's plans are written elsewhere than `file`).
+        let robot = self.robot.as_deref().map(|r| {
+            if r.is_absolute() {
+                r
+            } else {
+                r.strip_prefix(self.base_dir()).unwrap_or(r)
+            }
+        });
+        toml::to_string(&Written {
+            version: FORMAT_VERSION,
+            robot,
+            source: SourceConfig {
+                path: self.source.clone(),
+            },
+            read: (self.read != ReadConfig::default()).then_some(&self.read),
+            stage: &self.stages,
+            output: OutputConfig {
+                tables: self.tables.iter().map(|t| t.name().to_string()).collect(),
+            },
+            lock: &self.lock,
+            inferred: &self.inferred,
+        })
+    }
+
     /// Which joints of the robot's description move, which are locked.
     pub fn locks(&self) -> robotid_stages::dynamics::Locks {
         robotid_stages::dynamics::Locks {

@@ -973,3 +973,27 @@ fn real_kuka_lwr4_period_found_in_the_record() {
         assert!((period - want).abs() < 1e-4 * want, "{name}: {period} against {want}");
     }
 }
+
+/// A plan written with `Plan::to_toml` and parsed again is the same plan
+/// (identify's plans are made in code and written so): every fixture
+/// pipeline, which between them hold every stage kind, `[read]`, `[lock]`
+/// and relative paths.
+#[test]
+fn pipeline_files_round_trip() {
+    let mut kinds = std::collections::BTreeSet::new();
+    for entry in std::fs::read_dir(fixture("pipelines")).unwrap() {
+        let path = entry.unwrap().path();
+        let plan = Pipeline::from_path(&path).unwrap().plan;
+        let text = plan.to_toml().unwrap();
+        let again = Pipeline::from_toml(&text, &path).unwrap().plan;
+        let key = |p: &robotid::plan::Plan| {
+            format!(
+                "{:?}",
+                (&p.robot, &p.source, &p.read, &p.stages, &p.tables, &p.lock, &p.inferred)
+            )
+        };
+        assert_eq!(key(&again), key(&plan), "{}:\n{text}", path.display());
+        kinds.extend(plan.stages.iter().map(|s| s.name()));
+    }
+    assert!(kinds.len() >= 7, "{kinds:?}");
+}

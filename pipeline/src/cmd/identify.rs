@@ -153,8 +153,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let mut designs: Vec<Design> = Vec::new();
     for (i, log) in all.iter().enumerate() {
-        let d = design_with(log, &robot, designs.first(), stated.as_ref(), gains.as_deref())
-            .with_context(|| format!("identify {}", log.display()))?;
+        // Its errors name the recording.
+        let d = design_with(log, &robot, designs.first(), stated.as_ref(), gains.as_deref())?;
         let role = if i < ident.len() { "excitation" } else { "validation" };
         println!(
             "{role} {} ({}):",
@@ -166,7 +166,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         designs.push(d);
     }
-    lock_unrecorded(&mut designs, ident.len());
+    lock_unrecorded(&mut designs, ident.len())?;
     if args.print_pipeline {
         println!("\n# {}/pipelines/{}.toml\n{}", out.display(), names[0], designs[0].text);
     }
@@ -407,23 +407,23 @@ fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, physical: bool, out: 
 /// others: those joints are locked where the records held them (said), so
 /// that the estimate is of the joints that moved. Validation records (after
 /// the first `identifying`) are locked alike: one parameter set.
-fn lock_unrecorded(designs: &mut [Design], identifying: usize) {
+fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> robotid::Result<()> {
     let Some(all) = designs[..identifying]
         .iter()
         .map(|d| d.joint_wise.as_ref())
         .collect::<Option<Vec<_>>>()
     else {
-        return;
+        return Ok(());
     };
     let moved: Vec<&str> = all.iter().map(|(m, _)| m.as_str()).collect();
-    let Some((_, held)) = all.first() else { return };
+    let Some((_, held)) = all.first() else { return Ok(()) };
     let locked: Vec<(String, f64)> = held
         .iter()
         .filter(|(j, _)| !moved.contains(&j.as_str()))
         .cloned()
         .collect();
     if locked.is_empty() {
-        return;
+        return Ok(());
     }
     let said = locked
         .iter()
@@ -431,11 +431,11 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) {
         .collect::<Vec<_>>()
         .join(", ");
     println!("  locked: {said}: no joint-wise record moves them (each gets its own record to be identified)");
-    let table: String = locked.iter().map(|(j, q)| format!("{j} = {q:?}\n")).collect();
     for d in designs.iter_mut() {
-        d.text.push_str(&format!(
-            "\n# Held in every joint-wise record: locked where they were held.\n[lock]\n{table}"
-        ));
+        d.plan.lock.extend(locked.iter().cloned());
         d.findings.push(("locked".into(), said.clone()));
+        d.plan.inferred.insert("locked".into(), said.clone());
+        d.text = robotid::identify::file_text(&d.plan)?;
     }
+    Ok(())
 }
