@@ -338,13 +338,6 @@ pub fn design_with(
         Layout::Stated => findings.push(("read".into(), "as stated (--read)".into())),
     }
     let (fs, fs_said) = sample_rate(&raw);
-    // No arm is logged this slowly; stamps in ms or µs read as s are.
-    if fs < 2.0 {
-        return Err(refuse(
-            log,
-            format!("the stamps give {fs_said}: is the time column in ms or µs read as seconds? State its unit with --read (a `[read]` table: time = {{ column = …, unit = \"ms\" }})"),
-        ));
-    }
     // The anti-alias filter the effort went through, when the recording
     // declares it: undone, and the regressor columns band-limited alike.
     let filter: Option<FilterSpec> = raw
@@ -657,7 +650,7 @@ pub fn design_with(
             }
             let chain = probe(&plan, stages_after(None, stage), log, &raw)?;
             if tried.is_empty() {
-                if let Some(why) = torque_check(chain.kinematics()?, &model)? {
+                if let Some(why) = torque_check(chain.kinematics()?, &model) {
                     return Err(refuse(log, why));
                 }
             }
@@ -1067,102 +1060,23 @@ fn choose_model(
     })
 }
 
-/// Each joint's measured torque against the robot file's prediction for the
-/// same motion: fitted as k·τ_file + Fv·q̇ + Fc·sign(q̇) + offset (the file
-/// has no friction, which dominates a wrist), k is the scale of the
-/// rigid-body part. Where that part carries at least half the measured
-/// variance, a robot file is not off by 3× (a current read as torque, a
-/// gear ratio missing), nor of the opposite sign (a reversed channel); a
-/// column that another joint's prediction fits far better is swapped. A
-/// reason to refuse, naming the joints and the fix, or None.
-fn torque_check(kin: &robotid_schemas::Kinematics, model: &robotid_stages::dynamics::Model) -> Result<Option<String>> {
-    use nalgebra::{Matrix4, Vector4};
-    use robotid_stages::stage::regressor::RegressorConfig;
-    let Some(torque) = kin.torque.as_ref() else {
-        return Ok(None);
-    };
-    let base = RegressorConfig {
-        friction: robotid_stages::dynamics::FrictionTerms::None,
-        ..Default::default()
-    }
-    .base_regressor(model)?;
-    let Some(theta) = base.base_values(model) else {
-        return Ok(None);
-    };
-    let predicted = base.matrix(kin) * theta;
-    let n = kin.joints.len();
-    // Measured torque `b` against joint `p`'s prediction, with viscous,
-    // Coulomb and offset terms of joint `v`'s velocity: the scale k and
-    // the share of the measured variance the prediction carries.
-    let fit = |b: &[f64], p: usize, v: usize| -> Option<(f64, f64)> {
-        let mut g = Matrix4::<f64>::zeros();
-        let mut r = Vector4::<f64>::zeros();
-        for (i, &y) in b.iter().enumerate() {
-            let x = Vector4::new(predicted[i * n + p], kin.qd[v][i], kin.qd[v][i].signum(), 1.0);
-            g += x * x.transpose();
-            r += x * y;
-        }
-        let k = g.cholesky()?.solve(&r)[0];
-        let len = b.len() as f64;
-        let pm = (0..b.len()).map(|i| predicted[i * n + p]).sum::<f64>() / len;
-        let bm = b.iter().sum::<f64>() / len;
-        let vp: f64 = (0..b.len()).map(|i| (predicted[i * n + p] - pm).powi(2)).sum();
-        let vb: f64 = b.iter().map(|y| (y - bm).powi(2)).sum();
-        Some((k, k * k * vp / vb))
-    };
-    let right = |(k, share): (f64, f64)| share >= 0.5 && (1.0 / 3.0..=3.0).contains(&k);
-    let mut wrong = Vec::new();
-    for (j, b) in torque.iter().enumerate() {
-        let Some((k, share)) = fit(b, j, j) else { continue };
-        // Where another joint's prediction fits far better, and that
-        // joint's column fits this one's far better too, they are swapped
-        // (one-way matches are common: single-harmonic motions look alike).
-        let better = |b: &[f64], own: usize, other: usize| {
-            let mine = fit(b, own, own).map_or(0.0, |f| f.1.max(0.0));
-            fit(b, other, other).filter(|&f| right(f) && f.1 > mine + 0.25)
-        };
-        let swapped = || {
-            (0..n)
-                .filter(|&o| o != j && better(&torque[o], o, j).is_some())
-                .filter_map(|o| better(b, j, o).map(|f| (o, f)))
-                .max_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
-                .map(|(o, (_, sh))| {
-                    format!(
-                        " — it matches the prediction for {} instead ({:.0} % of its variance): channels swapped?",
-                        kin.joints[o],
-                        100.0 * sh.min(1.0)
-                    )
-                })
-                .unwrap_or_default()
-        };
-        if !(share >= 0.5) {
-            let hint = swapped();
-            if !hint.is_empty() {
-                wrong.push(format!("{}{hint}", kin.joints[j]));
-            }
-            continue;
-        }
-        if k < 0.0 {
-            wrong.push(format!(
-                "{} runs against the torque the robot file predicts (scale {k:.3} of its rigid-body part, which carries {:.0} % of the measured variance)",
-                kin.joints[j],
-                100.0 * share.min(1.0)
-            ));
-        } else if !right((k, share)) {
-            wrong.push(format!(
-                "{} measures {k:.3}× the torque the robot file predicts (its rigid-body part carries {:.0} % of the measured variance){}",
-                kin.joints[j],
-                100.0 * share.min(1.0),
-                swapped()
-            ));
-        }
-    }
-    Ok((!wrong.is_empty()).then(|| {
+/// The torques against the robot file's prediction for the same motion
+/// (`dynamics::torque_agreement`): a joint whose rigid-body part carries at
+/// least half its measured variance is not off by 3× (a current read as
+/// torque, a gear ratio missing) nor of the opposite sign (a reversed
+/// channel); a column another joint's prediction fits far better, both
+/// ways, is swapped. A reason to refuse, naming the joints and the fix.
+fn torque_check(kin: &robotid_schemas::Kinematics, model: &robotid_stages::dynamics::Model) -> Option<String> {
+    let wrong: Vec<String> = robotid_stages::dynamics::torque_agreement(kin, model)
+        .iter()
+        .filter_map(|a| a.wrong(3.0))
+        .collect();
+    (!wrong.is_empty()).then(|| {
         format!(
             "the torques disagree with the robot file: {}. Is each effort column its joint's, in N·m at the joint? A current read as torque needs the drives' gains (`--torque-per-amp`, `torque_per_amp` in a `[read]` table given with --read, or the robot file's drives); a gear ratio missing or applied twice, or a reversed sign or axis, needs fixing in the log or the robot file",
             wrong.join("; ")
         )
-    }))
+    })
 }
 
 /// Joints × samples of one period: the count behind a held-out score.

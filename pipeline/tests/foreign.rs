@@ -210,7 +210,12 @@ fn lab_mistakes_on_foreign_data_are_refused() {
             "elbow_joint runs against the torque the robot file predicts",
             &urdf,
         ),
-        ("ms", |v| v[0] *= 1000.0, "is the time column in ms", &urdf),
+        (
+            "ms",
+            |v| v[0] *= 1000.0,
+            "A time column in ms or µs read as seconds?",
+            &urdf,
+        ),
         (
             "swapped",
             |v| v.swap(8, 9),
@@ -342,10 +347,11 @@ fn currents_are_identified_with_the_drives_gains() {
 }
 
 /// Under `run`, with a pipeline a lab writes for the UR5's CSV: one torque
-/// channel scaled ×2, or its sign flipped, is named against the robot
-/// file's prediction (its own correlation with it is over 0.8; ×2 reads
-/// 1.83×: the file has no friction, and the undeclared filter's DC gain is
-/// 0.944).
+/// channel scaled ×2, its sign flipped, or two joints' columns swapped are
+/// named against the robot file's prediction (×2 reads 1.88×: the
+/// undeclared filter's DC gain is 0.944), the others not; the time column
+/// in ms and positions in degrees are refused, naming the channel, the
+/// sample and the unit to give.
 #[test]
 fn lab_mistakes_under_run_are_named() {
     let (Some(dir), Some(urdf)) = (foreign("ur5"), example_urdf("ur_description/urdf/ur5_robot.urdf")) else {
@@ -353,11 +359,29 @@ fn lab_mistakes_under_run_are_named() {
     };
     let tmp = tempfile::tempdir().unwrap();
     type Edit = fn(&mut [f64]);
-    let cases: [(&str, Edit, &str); 2] = [
-        ("scaled2", |v| v[9] *= 2.0, "elbow_joint measures 1.8"),
-        ("flipped", |v| v[9] = -v[9], "elbow_joint runs against it"),
+    let cases: [(&str, Edit, bool, &str); 5] = [
+        ("scaled2", |v| v[9] *= 2.0, true, "elbow_joint measures 1.8"),
+        ("flipped", |v| v[9] = -v[9], true, "elbow_joint runs against the torque"),
+        (
+            "swapped",
+            |v| v.swap(8, 9),
+            true,
+            "matches the prediction for elbow_joint instead",
+        ),
+        (
+            "ms",
+            |v| v[0] *= 1000.0,
+            false,
+            "channel `time`, sample 1: the stamps step by 2 s",
+        ),
+        (
+            "degrees",
+            |v| v[1..7].iter_mut().for_each(|x| *x = x.to_degrees()),
+            false,
+            "degrees read as radians? give `unit = \"deg\"`",
+        ),
     ];
-    for (name, edit, said) in cases {
+    for (name, edit, ok, said) in cases {
         let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
         let pipeline = tmp.path().join(format!("{name}.toml"));
         std::fs::write(
@@ -392,12 +416,13 @@ kind = "regressor"
         .unwrap();
         let o = robotid(&[Path::new("run"), &pipeline, Path::new("--out"), &tmp.path().join(name)]);
         let text = text(&o);
-        assert!(o.status.success(), "{name}:\n{text}");
+        assert_eq!(o.status.success(), ok, "{name}:\n{text}");
         assert!(text.contains(said), "{name}:\n{text}");
         for other in [
             "shoulder_pan_joint measures",
-            "shoulder_lift_joint measures",
+            "shoulder_pan_joint runs",
             "wrist_1_joint measures",
+            "wrist_1_joint runs",
         ] {
             assert!(!text.contains(other), "{name}: {other}\n{text}");
         }

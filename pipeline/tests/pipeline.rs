@@ -929,7 +929,7 @@ fn wrong_declarations_are_named_with_their_numbers() {
         ),
     );
     assert!(
-        notes.contains("measured torques are 0.01") && notes.contains("N·m at the joint"),
+        notes.contains("a3 measures 0.01") && notes.contains("N·m at the joint"),
         "{notes}"
     );
 }

@@ -3,6 +3,7 @@
 //! algorithm per file, each cross-checked against the Lagrangian twin in
 //! `lagrange.rs`.
 
+mod agreement;
 mod base_parameters;
 mod base_regressor;
 mod batch;
@@ -20,6 +21,7 @@ mod torque_regressor;
 mod urdf;
 mod urdf_export;
 
+pub use agreement::{torque_agreement, Agreement};
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
 pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace};
 pub use batch::{BatchData, Batched, LANES};

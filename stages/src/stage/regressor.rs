@@ -269,52 +269,21 @@ impl Stage for Regressor {
     }
 }
 
-/// The measured torques against those the robot file predicts for the same
-/// motion (its own parameters through the same regressor): b ≈ k·τ_file
-/// with k = bᵀτ/τᵀτ and their correlation, from bᵀb, τᵀτ and bᵀτ, over
-/// all joints and then each (`[joint]`). A robot file is rarely exact, but
-/// it is not off by a factor of 3: a k far from 1 where the two correlate
-/// says the torque is not in N·m at the joint (current read as torque, a
-/// missing gear ratio or torque constant); a strong negative correlation
-/// says a joint or channel is reversed. One joint's channel where its
-/// prediction explains it (correlation over 0.8) is not off by 1.5× either
-/// (a channel scaled, a drive's gain): named. None when nothing is wrong or
-/// the file cannot tell (no inertias, no correlation).
-fn torque_against_robot_file(joints: &[String], bb: &[f64], pp: &[f64], bp: &[f64]) -> Option<String> {
-    let sum = |v: &[f64]| v.iter().sum::<f64>();
-    let (bbs, pps, bps) = (sum(bb), sum(pp), sum(bp));
-    if !(bbs > 0.0 && pps > 0.0) {
-        return None;
-    }
-    let (k, corr) = (bps / pps, bps / (bbs * pps).sqrt());
-    if corr > 0.5 && !(1.0 / 3.0..=3.0).contains(&k) {
-        return Some(format!(
-            "warning: the measured torques are {k:.3}× those the robot file predicts for this motion (correlation {corr:.2}): is the effort in N·m at the joint? (current read as torque, a gear ratio or torque constant missing or applied twice)"
-        ));
-    } else if corr < -0.5 {
-        return Some(format!(
-            "warning: the measured torques run against those the robot file predicts for this motion (correlation {corr:.2}, scale {k:.3}): a joint axis or the effort's sign reversed?"
-        ));
-    }
-    let off: Vec<String> = (0..joints.len())
-        .filter(|&j| bb[j] > 0.0 && pp[j] > 0.0)
-        .filter_map(|j| {
-            let (k, corr) = (bp[j] / pp[j], bp[j] / (bb[j] * pp[j]).sqrt());
-            if corr < -0.5 {
-                Some(format!(
-                    "{} runs against it (correlation {corr:.2}, scale {k:.3})",
-                    joints[j]
-                ))
-            } else if corr > 0.8 && !(1.0 / 1.5..=1.5).contains(&k) {
-                Some(format!("{} measures {k:.3}× it (correlation {corr:.2})", joints[j]))
-            } else {
-                None
-            }
-        })
+/// The measured torques against the robot file's prediction for the same
+/// motion (`dynamics::torque_agreement`): a robot file is rarely exact,
+/// but where a joint's rigid-body part explains its torque, it is not off
+/// by 1.5× (a channel scaled, a drive's gain, a current read as torque, a
+/// gear ratio missing) nor reversed, and a column that another joint's
+/// prediction fits far better, both ways, is swapped: named. None when
+/// nothing is wrong or the file cannot tell.
+fn torque_against_robot_file(kin: &Kinematics, model: &Model) -> Option<String> {
+    let off: Vec<String> = crate::dynamics::torque_agreement(kin, model)
+        .iter()
+        .filter_map(|a| a.wrong(1.5))
         .collect();
     (!off.is_empty()).then(|| {
         format!(
-            "warning: against the torque the robot file predicts for this motion, {}: a channel scaled, reversed or swapped, or a drive's gain or torque constant off?",
+            "warning: against the robot file: {}: is each effort column its joint's, in N·m at the joint? (a channel scaled, reversed or swapped, a current read as torque, a gear ratio or torque constant missing or applied twice)",
             off.join("; ")
         )
     })
@@ -532,16 +501,9 @@ pub fn regressor_rows(
         Some(m) => m,
         None => &system.a,
     };
-    let theta = base
-        .base_values(&base.model)
-        .filter(|t| t.len() == system.parameters() && t.iter().any(|v| *v != 0.0));
-    let pass = row_pass(source, &system, theta.as_ref());
-    let condition = normalised_condition(source, &system, &pass.gram);
-    let mut bb = vec![0.0; system.joints.len()];
-    for (i, v) in system.b.iter().enumerate() {
-        bb[system.joint[i]] += v * v;
-    }
-    let torque_note = torque_against_robot_file(&system.joints, &bb, &pass.pp, &pass.bp);
+    let gram = row_pass(source, &system);
+    let condition = normalised_condition(source, &system, &gram);
+    let torque_note = torque_against_robot_file(kin, &base.model);
     system.expressions = base.expressions();
     system.recordings = vec![recording.to_string()];
     system.periods = vec![period_torques];
@@ -559,22 +521,14 @@ pub fn regressor_rows(
     })
 }
 
-/// What one pass over A's rows gives: AᵀA, and for the torque check
-/// (A·θ)ᵀ(A·θ) and bᵀ(A·θ) at the robot file's θ, per joint.
-struct RowPass {
-    gram: DMatrix<f64>,
-    pp: Vec<f64>,
-    bp: Vec<f64>,
-}
-
-/// The pass in fixed blocks of rows ([`block_rows`]) across threads,
+/// AᵀA, in fixed blocks of rows ([`block_rows`]) across threads,
 /// summed in block order: the result does not depend on the thread count,
 /// nor on whether A is whole or made.
-fn row_pass(rows: &dyn RowBlocks, sys: &System, theta: Option<&DVector<f64>>) -> RowPass {
+fn row_pass(rows: &dyn RowBlocks, sys: &System) -> DMatrix<f64> {
     use rayon::prelude::*;
     let (m, p, joints) = (sys.rows(), sys.parameters(), sys.joints.len());
     let block = block_rows(joints);
-    let parts: Vec<RowPass> = (0..m.div_ceil(block))
+    let parts: Vec<DMatrix<f64>> = (0..m.div_ceil(block))
         .into_par_iter()
         .map(|bi| {
             let (start, k) = (bi * block, block.min(m - bi * block));
@@ -605,30 +559,10 @@ fn row_pass(rows: &dyn RowBlocks, sys: &System, theta: Option<&DVector<f64>>) ->
                     p as isize,
                 );
             }
-            let (mut pp, mut bp) = (vec![0.0; joints], vec![0.0; joints]);
-            if let Some(t) = theta {
-                let predicted = &a * t;
-                for (i, v) in predicted.iter().enumerate() {
-                    let j = sys.joint[start + i];
-                    pp[j] += v * v;
-                    bp[j] += v * sys.b[start + i];
-                }
-            }
-            RowPass { gram: g, pp, bp }
+            g
         })
         .collect();
-    parts.into_iter().fold(
-        RowPass {
-            gram: DMatrix::zeros(p, p),
-            pp: vec![0.0; joints],
-            bp: vec![0.0; joints],
-        },
-        |acc, x| RowPass {
-            gram: acc.gram + x.gram,
-            pp: acc.pp.iter().zip(&x.pp).map(|(a, b)| a + b).collect(),
-            bp: acc.bp.iter().zip(&x.bp).map(|(a, b)| a + b).collect(),
-        },
-    )
+    parts.into_iter().fold(DMatrix::zeros(p, p), |acc, g| acc + g)
 }
 
 /// Condition number of the column-normalised A (Swevers' criterion), over
@@ -1188,7 +1122,7 @@ mod tests {
                 nalgebra::DVector::zeros(m),
                 nalgebra::DVector::zeros(m),
             );
-            let gram = super::row_pass(&a, &sys, None).gram;
+            let gram = super::row_pass(&a, &sys);
             let (fast, exact) = (super::normalised_condition(&a, &sys, &gram), by_svd(&a));
             assert!(
                 (fast / exact - 1.0).abs() < tol,

@@ -492,6 +492,7 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         }
     }
     check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
+    check_rate(&source, &time)?;
     check_finite(&source, &position, &names[0])?;
     if let Some(m) = model {
         check_limits(&source, &position, &names[0], &joints, m)?;
@@ -707,6 +708,33 @@ fn check_speeds(source: &str, time: &[f64], q: &[Vec<f64>], names: &[String]) ->
                 ),
             });
         }
+    }
+    Ok(())
+}
+
+/// No arm is logged this slowly (Hz): stamps in ms or µs read as seconds
+/// are (a 500 Hz log in ms reads as 0.5 Hz).
+pub const MIN_RATE_HZ: f64 = 2.0;
+
+/// Stamps whose median step is over 1/[`MIN_RATE_HZ`] s, refused at the
+/// first such step.
+fn check_rate(source: &str, time: &[f64]) -> Result<()> {
+    let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    if steps.is_empty() {
+        return Ok(());
+    }
+    let mid = steps.len() / 2;
+    let step = *steps.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if step > 1.0 / MIN_RATE_HZ {
+        return Err(Error::Data {
+            source_name: source.to_string(),
+            channel: "time".into(),
+            sample: time.windows(2).position(|w| w[1] - w[0] >= step).map(|k| k + 1),
+            msg: format!(
+                "the stamps step by {step} s (median), a {:.3} Hz log: no arm is logged under {MIN_RATE_HZ} Hz. A time column in ms or µs read as seconds? Give its `unit` (\"ms\", \"us\")",
+                1.0 / step
+            ),
+        });
     }
     Ok(())
 }
