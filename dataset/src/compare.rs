@@ -239,6 +239,9 @@ pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> anyhow::Result<Report> {
 }
 
 fn read(path: &Path) -> anyhow::Result<(DataFrame, Option<String>)> {
+    // A table robotid wrote carries its content's CRC: checked first (a
+    // flipped reference cell passed as a difference, or as none).
+    robotid_stages::formats::parquet::read_parquet(path)?;
     let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     let mut reader = ParquetReader::new(file);
     let kind = reader

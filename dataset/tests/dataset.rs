@@ -333,3 +333,31 @@ fn a_hive_style_fleet_is_summarised_per_recording_and_joint_with_drift() {
     assert_eq!(unit("Fv").as_deref(), Some(fv_unit));
     assert_eq!(b.schema().metadata()["robotid.table"], "dataset_summary");
 }
+
+/// A cell changed behind robotid's back (another tool rewrote the table,
+/// its CRC now stale) is corruption, named, not a difference in the data
+/// (a flipped reference cell passed `compare`).
+#[test]
+fn a_table_changed_behind_its_crc_is_named_corrupt() {
+    let ws = workspace(&["arm3"]);
+    let (one, two) = (ws.path().join("one"), ws.path().join("two"));
+    run(&ws.path().join("pipelines/arm3.toml"), &one, 2);
+    copy_dir(&one, &two);
+    let table = two.join("arm3/kinematics.parquet");
+    let batch = read_parquet(&table).unwrap();
+    let changed = with_value(&batch, "q_j1", 3, 0.5);
+    let mut w =
+        parquet::arrow::ArrowWriter::try_new(std::fs::File::create(&table).unwrap(), batch.schema(), None).unwrap();
+    w.write(&changed).unwrap();
+    w.close().unwrap();
+    let report = compare(&one, &two, &exact()).unwrap();
+    assert!(!report.passed(), "{report:?}");
+    assert!(
+        report
+            .problems
+            .iter()
+            .any(|p| p.contains("kinematics.parquet") && p.contains("corrupt: its content's CRC-32")),
+        "{:?}",
+        report.problems
+    );
+}

@@ -176,6 +176,11 @@ fn read_settings(
     }
     let default_err = match read(log, &with_gains(ReadConfig::default()), Some(model)) {
         Ok(raw) => return Ok((with_gains(ReadConfig::default()), raw, Layout::Default)),
+        // The file itself is unreadable (missing, empty, truncated,
+        // corrupt): no layout would read it, and none is blamed.
+        Err(e @ (robotid_stages::Error::Io { .. } | robotid_stages::Error::Format { .. })) => {
+            return Err(at_step(log, "read")(e))
+        }
         Err(e) => e,
     };
     if let Some(header) = log_columns(log)? {

@@ -37,17 +37,22 @@ pub(crate) const GREY: RGBColor = RGBColor(170, 170, 170);
 pub(crate) const BLUE_: RGBColor = RGBColor(31, 119, 180);
 pub(crate) const ORANGE: RGBColor = RGBColor(255, 127, 14);
 
+/// The axes' ranges over the series' finite points, padded; unit ones
+/// where there are none (an axis over ±f64::MAX spun the tick search).
 fn range(series: &[Series]) -> (f64, f64, f64, f64) {
     let mut r = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for (pts, _, _) in series {
-        for &(x, y) in pts.iter().filter(|p| p.1.is_finite()) {
+        for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
             r = (r.0.min(x), r.1.max(x), r.2.min(y), r.3.max(y));
         }
+    }
+    if r.0 > r.1 {
+        r = (0.0, 1.0, 0.0, 1.0);
     }
     if r.0 >= r.1 {
         r.1 = r.0 + 1.0;
     }
-    let pad = ((r.3 - r.2) * 0.05).max(1e-12);
+    let pad = ((r.3 - r.2) * 0.05).clamp(1e-12, 1e300);
     (r.0, r.1, r.2 - pad, r.3 + pad)
 }
 

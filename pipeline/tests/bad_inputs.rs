@@ -224,6 +224,114 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         ],
         says: vec!["spike.csv".into(), "q_a3".into(), "1500".into(), "spike".into()],
     });
+    // Settings that ran to wrong numbers (round 3): an inverse filter
+    // undone beyond Nyquist (a 150 Hz log), a harmonic past the period's
+    // lines, an infinite jitter.
+    for (name, from, to, says) in [
+        (
+            "bandwidth_hz over Nyquist",
+            "bandwidth_hz = 20.0",
+            "bandwidth_hz = 100.0",
+            "75 Hz",
+        ),
+        (
+            "harmonics = [100000]",
+            "kind = \"noise\"",
+            "kind = \"noise\"\nharmonics = [100000]",
+            "`harmonics` must be at most 749",
+        ),
+    ] {
+        let f = w.join(format!("pipelines/{}.toml", name.replace([' ', '=', '[', ']'], "_")));
+        edit(&pipeline, &f, &[(from, to)]);
+        cases.push(Case {
+            name,
+            args: vec!["run".into(), s(&f), "--out".into(), s(&out)],
+            says: vec![says.into()],
+        });
+    }
+    let jitter = w.join("sims/jitter.toml");
+    edit(
+        &sim,
+        &jitter,
+        &[("transient_s = 5.0", "transient_s = 5.0\njitter_std_s = inf")],
+    );
+    cases.push(Case {
+        name: "jitter_std_s = inf",
+        args: vec!["simulate".into(), s(&jitter), "--out".into(), s(&out)],
+        says: vec!["jitter.toml".into(), "jitter_std_s".into()],
+    });
+    // Robot files with bodies no robot has (run panicked in the SVD), and a
+    // URDF whose joints form a cycle (model inspect aborted at 9.66 GB).
+    for (name, from, to, says) in [
+        ("ixx = inf", "ixx = 1.0", "ixx = inf", "inertia = inf"),
+        ("a 1e300 kg link", "mass = 120.0", "mass = 1e300", "mass = 1e300"),
+    ] {
+        let file = format!("{}.toml", name.replace([' ', '='], "_"));
+        edit(&robot, &w.join("robots").join(&file), &[(from, to)]);
+        let f = w.join(format!("pipelines/robot_{file}"));
+        edit(
+            &pipeline,
+            &f,
+            &[("../robots/kuka_axis3.toml", &format!("../robots/{file}"))],
+        );
+        cases.push(Case {
+            name,
+            args: vec!["run".into(), s(&f), "--out".into(), s(&out)],
+            says: vec![file.clone(), says.into()],
+        });
+    }
+    let cycle = w.join("robots/cycle.urdf");
+    std::fs::write(
+        &cycle,
+        r#"<robot name="c"><link name="base"/><link name="a"/><link name="b"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/></joint>
+<joint name="j2" type="revolute"><parent link="b"/><child link="b"/><axis xyz="0 0 1"/></joint></robot>"#,
+    )
+    .unwrap();
+    cases.push(Case {
+        name: "a URDF joint that is its own parent",
+        args: vec!["model".into(), "inspect".into(), s(&cycle)],
+        says: vec!["cycle.urdf".into(), "joint `j2` is its own parent".into()],
+    });
+    // A parameters table holding inf (written with a valid CRC): report
+    // spun in its axis code, predict and validate gave NaN.
+    let inf = w.join("inf.parquet");
+    let batch = robotid_stages::formats::parquet::read_parquet(&params).unwrap();
+    let i = batch.schema().index_of("value").unwrap();
+    let mut columns = batch.columns().to_vec();
+    let mut v: Vec<f64> = columns[i]
+        .as_any()
+        .downcast_ref::<arrow::array::Float64Array>()
+        .unwrap()
+        .values()
+        .to_vec();
+    v[0] = f64::INFINITY;
+    columns[i] = std::sync::Arc::new(arrow::array::Float64Array::from(v));
+    let batch = arrow::array::RecordBatch::try_new(batch.schema(), columns).unwrap();
+    robotid_stages::formats::parquet::write_parquet(&inf, &batch).unwrap();
+    let regressor = s(&out.join("kuka_axis3/regressor.parquet"));
+    for (name, args) in [
+        (
+            "report of an inf parameter",
+            vec!["report", "-p", "INF", "--excitation", "REG", "-o", "OUT"],
+        ),
+        ("validate with an inf parameter", vec!["validate", "-p", "INF", "REG"]),
+    ] {
+        let report = s(&w.join("report.html"));
+        cases.push(Case {
+            name,
+            args: args
+                .iter()
+                .map(|a| match *a {
+                    "INF" => s(&inf),
+                    "REG" => regressor.clone(),
+                    "OUT" => report.clone(),
+                    other => other.to_string(),
+                })
+                .collect(),
+            says: vec!["inf.parquet".into(), "holds inf".into()],
+        });
+    }
     let before_out = bytes_of(&out);
     let inputs = [w.join("recordings"), w.join("csv"), w.join("robots"), w.join("sims")];
     let before_in: Vec<_> = inputs.iter().map(|d| bytes_of(d)).collect();

@@ -468,3 +468,54 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
         );
     }
 }
+
+/// identify holds its output folder while it writes: a second identify
+/// into it refuses while the first's process lives, touching nothing; the
+/// partial folder of one that was killed is cleared by the next run, said,
+/// rather than blocking it ("not empty"); a finished run leaves no lock.
+#[test]
+fn the_output_folder_is_locked_and_a_killed_runs_is_cleared() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = simulate_arm3(dir.path(), 9, 10.0, &[vec![1, 2, 3], vec![1, 2, 4], vec![2, 3, 5]]);
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let out = dir.path().join("id");
+    let lock = out.join(".robotid-identify.lock");
+    let partial = out.join("parameters.parquet");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(&partial, b"partial").unwrap();
+    let identify = || {
+        Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .args(["identify", s(&csv), "--robot", s(&robot), "--out", s(&out)])
+            .output()
+            .unwrap()
+    };
+    // This test's own process stands for a running identify.
+    std::fs::write(&lock, std::process::id().to_string()).unwrap();
+    let o = identify();
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains(&format!(
+            "another robotid identify (process {}) is writing",
+            std::process::id()
+        )),
+        "{said}"
+    );
+    assert_eq!(std::fs::read(&partial).unwrap(), b"partial");
+    // A process that has ended stands for a killed one.
+    let mut gone = Command::new("true").spawn().unwrap();
+    let pid = gone.id();
+    gone.wait().unwrap();
+    std::fs::write(&lock, pid.to_string()).unwrap();
+    let o = identify();
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains(&format!(
+            "the partial output of an identify that stopped (process {pid}) is removed"
+        )),
+        "{said}"
+    );
+    assert!(parameters_from_table(&read_parquet(&partial).unwrap()).is_ok());
+    assert!(!lock.exists(), "the lock is released");
+}

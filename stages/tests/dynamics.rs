@@ -225,3 +225,83 @@ fn urdf_export_round_trips() {
         assert!(worst < 1e-9, "{robot}: {worst}");
     }
 }
+
+/// URDFs that are not trees are refused by name, at once: a joint that is
+/// its own parent, a link with two parents, a cycle away from the root
+/// (they made `model inspect` and `lint` allocate 9.66 GB and abort).
+#[test]
+fn urdfs_that_are_not_trees_are_refused() {
+    use robotid_stages::dynamics::parse_urdf;
+    let link = |n: &str| {
+        format!(
+            r#"<link name="{n}"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>"#
+        )
+    };
+    let joint = |n: &str, p: &str, c: &str| {
+        format!(
+            r#"<joint name="{n}" type="revolute"><parent link="{p}"/><child link="{c}"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>"#
+        )
+    };
+    let urdf = |links: &[&str], joints: &[(&str, &str, &str)]| {
+        let l: String = links.iter().map(|n| link(n)).collect();
+        let j: String = joints.iter().map(|(n, p, c)| joint(n, p, c)).collect();
+        format!(r#"<robot name="r">{l}{j}</robot>"#)
+    };
+    let cases = [
+        (
+            urdf(&["base", "a", "b"], &[("j1", "base", "a"), ("j2", "b", "b")]),
+            "joint `j2` is its own parent",
+        ),
+        (
+            urdf(
+                &["base", "a", "b"],
+                &[("j1", "base", "a"), ("j2", "a", "b"), ("j3", "base", "b")],
+            ),
+            "link `b` is the child of joints `j2` and `j3`",
+        ),
+        (
+            urdf(
+                &["base", "a", "b", "c"],
+                &[("j1", "base", "a"), ("j2", "b", "c"), ("j3", "c", "b")],
+            ),
+            "link `b` is not connected to the root link `base`",
+        ),
+    ];
+    for (text, says) in cases {
+        let e = parse_urdf(&text, Path::new("r.urdf")).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
+}
+
+/// Descriptions with values no robot has are refused by joint and key:
+/// an infinite inertia or a 1e300 kg link (`lint` passed them, `run`
+/// panicked in the SVD), a NaN origin in a URDF (`model inspect` never
+/// returned).
+#[test]
+fn impossible_bodies_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let load = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        dynamics::load_robot(&p).unwrap_err().to_string()
+    };
+    let toml = std::fs::read_to_string(fixture("robots/arm3.toml")).unwrap();
+    for (edit, says) in [
+        (("ixx = 3.6", "ixx = inf"), "joint 2 (`j2`): its link's inertia = inf"),
+        (
+            ("mass = 40.0", "mass = 1e300"),
+            "joint 2 (`j2`): its link's mass = 1e300",
+        ),
+    ] {
+        assert!(toml.contains(edit.0));
+        let e = load("arm3.toml", &toml.replacen(edit.0, edit.1, 1));
+        assert!(e.contains(says), "{e}");
+    }
+    // The first joint's origin, its x made NaN.
+    let urdf = std::fs::read_to_string(fixture("robots/ur5.urdf")).unwrap();
+    let joint = urdf.find("<joint").unwrap();
+    let at = joint + urdf[joint..].find("<origin xyz=\"").unwrap() + "<origin xyz=\"".len();
+    let x = urdf[at..].find(' ').unwrap();
+    let e = load("ur5.urdf", &format!("{}nan{}", &urdf[..at], &urdf[at + x..]));
+    assert!(e.contains("joint 1 (`shoulder_pan_joint`): origin = NaN"), "{e}");
+}

@@ -564,6 +564,14 @@ fn ros2_joint_states_epoch_times_and_reordered_names() {
         matches!(&e, Error::Data { sample: Some(7), msg, .. } if msg.contains("`j1` appears twice")),
         "{e}"
     );
+    // Messages with no names (it panicked): refused at the first.
+    let nameless = dir.path().join("nameless.mcap");
+    write(&nameless, &|_| vec![]);
+    let e = read(&nameless, &cfg, None).map(|r| r.len()).unwrap_err();
+    assert!(
+        matches!(&e, Error::Data { sample: Some(0), msg, .. } if msg.contains("not all in the message's names []")),
+        "{e}"
+    );
 }
 
 /// A rosbag2 folder (`metadata.yaml` and its split `.mcap` files) reads as
@@ -1043,4 +1051,56 @@ fn mcap_flipped_bit_is_refused_or_harmless() {
     }
     println!("200 single-bit flips: {refused} refused, {harmless} in bytes the read does not use");
     assert!(refused > 100, "{refused} refused");
+}
+
+/// A Parquet recording robotid wrote carries its content's CRC, and read
+/// checks it: one value changed behind the writer's back (the file
+/// otherwise valid) is refused as corrupt, where it changed the results
+/// silently; a log without a CRC (another tool's) reads as before.
+#[test]
+fn a_changed_value_in_a_written_recording_is_refused() {
+    use arrow::array::{Array, Float64Array, RecordBatch};
+    use std::sync::Arc;
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let path = dir.path().join("rec.parquet");
+    let batch = robotid_stages::formats::parquet::read_parquet(&path).unwrap();
+    assert!(batch.schema().metadata().contains_key("robotid.content_crc32"));
+    // Another writer's file of the same rows, metadata and all, with one
+    // position nudged by 1e-9 rad (or without the CRC).
+    let rewrite = |to: &Path, nudge: f64, keep_crc: bool| {
+        let mut columns = batch.columns().to_vec();
+        let q = batch.schema().index_of("q_j2").unwrap();
+        let mut v: Vec<f64> = columns[q]
+            .as_any()
+            .downcast_ref::<Float64Array>()
+            .unwrap()
+            .values()
+            .to_vec();
+        v[500] += nudge;
+        columns[q] = Arc::new(Float64Array::from(v));
+        let mut md = batch.schema().metadata().clone();
+        if !keep_crc {
+            md.remove("robotid.content_crc32");
+        }
+        let schema = Arc::new(batch.schema().as_ref().clone().with_metadata(md));
+        let b = RecordBatch::try_new(schema.clone(), columns).unwrap();
+        let mut w = parquet::arrow::ArrowWriter::try_new(std::fs::File::create(to).unwrap(), schema, None).unwrap();
+        w.write(&b).unwrap();
+        w.close().unwrap();
+    };
+    let cfg = ReadConfig::default();
+    let same = dir.path().join("same.parquet");
+    rewrite(&same, 0.0, true);
+    assert!(read(&same, &cfg, Some(&model)).is_ok());
+    let changed = dir.path().join("changed.parquet");
+    rewrite(&changed, 1e-9, true);
+    let e = err_of(read(&changed, &cfg, Some(&model)).map(|r| r.len()));
+    assert!(
+        e.contains("changed.parquet") && e.contains("corrupt: its content's CRC-32"),
+        "{e}"
+    );
+    let foreign = dir.path().join("foreign.parquet");
+    rewrite(&foreign, 1e-9, false);
+    assert!(read(&foreign, &cfg, Some(&model)).is_ok());
 }

@@ -73,16 +73,76 @@ fn over_floor(est: &robotid_stages::estimation::Estimate) -> Vec<(String, f64)> 
         .collect()
 }
 
-/// Removes the output folder unless told the work is done: a failed
-/// identify leaves nothing behind.
+/// The lock identify holds on its output folder while it writes: a file
+/// holding its process id. Another identify into the folder refuses; one
+/// whose process is gone (killed) left a partial folder, which the next
+/// run clears (said).
+const LOCK: &str = ".robotid-identify.lock";
+
+/// Removes the output folder unless told the work is done, and the lock
+/// when it is: a failed identify leaves nothing behind.
 struct Cleanup<'a>(&'a Path, bool);
 
 impl Drop for Cleanup<'_> {
     fn drop(&mut self) {
-        if !self.1 {
+        if self.1 {
+            let _ = std::fs::remove_file(self.0.join(LOCK));
+        } else {
             let _ = std::fs::remove_dir_all(self.0);
         }
     }
+}
+
+/// Whether process `pid` is running (Linux's /proc; elsewhere assumed so,
+/// and the folder is left to the user).
+fn running(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.is_dir() || proc.join(pid.to_string()).exists()
+}
+
+/// Takes the output folder: an empty or absent one, or the partial output
+/// of an identify that was killed (cleared); refuses a folder in use or
+/// holding anything else.
+fn take_folder(out: &Path) -> anyhow::Result<()> {
+    let lock = out.join(LOCK);
+    if let Ok(text) = std::fs::read_to_string(&lock) {
+        match text.trim().parse::<u32>() {
+            Ok(pid) if running(pid) => bail!(
+                "{}: another robotid identify (process {pid}) is writing into this folder; wait for it, or give another with --out",
+                out.display()
+            ),
+            _ => {
+                eprintln!(
+                    "note: {}: the partial output of an identify that stopped (process {}) is removed",
+                    out.display(),
+                    text.trim()
+                );
+                std::fs::remove_dir_all(out).with_context(|| out.display().to_string())?;
+            }
+        }
+    }
+    if out.exists() && std::fs::read_dir(out).map(|mut d| d.next().is_some()).unwrap_or(true) {
+        bail!(
+            "{}: the output folder is not empty; give another with --out, or remove it",
+            out.display()
+        );
+    }
+    std::fs::create_dir_all(out).with_context(|| out.display().to_string())?;
+    // Two runs that both found it empty: one lock file wins.
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&lock)
+        .map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => anyhow::anyhow!(
+                "{}: another robotid identify started writing into this folder just now; give another with --out",
+                out.display()
+            ),
+            _ => anyhow::Error::new(e).context(lock.display().to_string()),
+        })?;
+    use std::io::Write as _;
+    write!(f, "{}", std::process::id()).with_context(|| lock.display().to_string())?;
+    Ok(())
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -98,12 +158,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("{}: --out is a file, not a folder; give a folder", out.display());
     }
-    if out.exists() && std::fs::read_dir(&out).map(|mut d| d.next().is_some()).unwrap_or(true) {
-        bail!(
-            "{}: the output folder is not empty; give another with --out, or remove it",
-            out.display()
-        );
-    }
     for p in &all {
         if absolute(&out).is_ok_and(|o| p.starts_with(o)) {
             bail!("{}: the output folder holds the recordings", out.display());
@@ -118,6 +172,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             again.display()
         );
     }
+
+    // From here the folder is this run's: removed if it fails.
+    take_folder(&out)?;
+    let mut cleanup = Cleanup(&out, false);
 
     let stated: Option<robotid_stages::stage::read::ReadConfig> = match &args.read {
         None => None,
@@ -172,7 +230,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     std::fs::create_dir_all(out.join("pipelines")).with_context(|| out.display().to_string())?;
-    let mut cleanup = Cleanup(&out, false);
     let mut script = String::from(
         "#!/usr/bin/env bash\n# What `robotid identify` ran, as commands to pin and edit (from this folder).\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\n",
     );

@@ -205,7 +205,75 @@ pub struct Model {
     pub drives_declared: bool,
 }
 
+/// The largest values a body of a robot arm may have in a description:
+/// far beyond any arm, far below where products of them overflow (a
+/// 1e300 kg link made the SVD of the regressor panic, a NaN origin hung
+/// the base-parameter search).
+const MAX_MASS_KG: f64 = 1e6;
+const MAX_LENGTH_M: f64 = 1e3;
+const MAX_INERTIA: f64 = 1e9;
+
 impl Model {
+    /// Every number of the description finite and of a size a robot can
+    /// have: masses up to 1e6 kg, lengths (origins, centres of mass, the
+    /// end effector) within 1e3 m, inertias within 1e9 kg·m², drives and
+    /// friction finite. The first value that is not, by joint and key.
+    fn check_sizes(&self) -> Result<(), Problem> {
+        let within = |v: f64, max: f64| v.is_finite() && v.abs() <= max;
+        let bad = |key: &str, what: String, v: f64, range: &str| {
+            Err(Problem::new(key, format!("{what} = {v:?} is not a robot's ({range})")))
+        };
+        for v in self.gravity.iter().chain(self.end_effector.iter()) {
+            if !within(*v, MAX_LENGTH_M) {
+                return bad("gravity", "gravity or end effector".into(), *v, "finite");
+            }
+        }
+        for (i, (j, l)) in self.joints.iter().zip(&self.links).enumerate() {
+            let ctx = format!("joint {} (`{}`)", i + 1, j.name);
+            for v in j.origin_xyz.iter() {
+                if !within(*v, MAX_LENGTH_M) {
+                    return bad("origin", format!("{ctx}: origin"), *v, "finite, within 1e3 m");
+                }
+            }
+            for v in j.origin_rot.iter().chain(j.axis.iter()) {
+                if !v.is_finite() {
+                    return bad("origin", format!("{ctx}: origin rotation or axis"), *v, "finite");
+                }
+            }
+            if !(l.mass <= MAX_MASS_KG) {
+                return bad("mass", format!("{ctx}: its link's mass"), l.mass, "0 to 1e6 kg");
+            }
+            for v in l.com.iter() {
+                if !within(*v, MAX_LENGTH_M) {
+                    return bad("com", format!("{ctx}: its link's centre of mass"), *v, "within 1e3 m");
+                }
+            }
+            for v in l.inertia_com.iter() {
+                if !within(*v, MAX_INERTIA) {
+                    return bad("inertia", format!("{ctx}: its link's inertia"), *v, "within 1e9 kg·m²");
+                }
+            }
+            let (d, f) = (&self.drives[i], &self.friction[i]);
+            for (key, v) in [
+                ("gear_ratio", d.gear_ratio),
+                ("torque_constant", d.torque_constant),
+                ("encoder_counts_per_rev", d.encoder_counts_per_rev),
+                ("rotor_inertia", d.rotor_inertia),
+                ("viscous", f.viscous_pos),
+                ("viscous", f.viscous_neg),
+                ("coulomb", f.coulomb_pos),
+                ("coulomb", f.coulomb_neg),
+                ("offset", f.offset),
+                ("coulomb_transition", f.transition),
+            ] {
+                if !v.is_finite() {
+                    return bad(key, format!("{ctx}: {key}"), v, "finite");
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// A model with no joints yet, for loaders to fill.
     pub fn empty(name: &str, gravity: Vector3<f64>) -> Model {
         Model {
@@ -250,6 +318,7 @@ impl Model {
                 return Err(Problem::new("joint", format!("{n} joints but {len} {what}")));
             }
         }
+        self.check_sizes()?;
         for (i, (j, l)) in self.joints.iter().zip(&self.links).enumerate() {
             let ctx = format!("joint {} (`{}`)", i + 1, j.name);
             if !(l.mass >= 0.0) || !l.mass.is_finite() {

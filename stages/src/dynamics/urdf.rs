@@ -182,6 +182,35 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
             roots
         )));
     };
+    // A URDF is a tree: each link the child of one joint at most, and every
+    // link reached from the root (a joint cycle hung the walk below).
+    let mut parent_of: HashMap<&str, &str> = HashMap::new();
+    for j in &robot.joints {
+        if j.parent.link == j.child.link {
+            return Err(err(format!(
+                "joint `{}` is its own parent: link `{}` on both sides",
+                j.name, j.child.link
+            )));
+        }
+        if let Some(other) = parent_of.insert(j.child.link.as_str(), j.name.as_str()) {
+            return Err(err(format!(
+                "link `{}` is the child of joints `{other}` and `{}`: a URDF is a tree (closed chains are not supported)",
+                j.child.link, j.name
+            )));
+        }
+    }
+    let mut reached = vec![root];
+    let mut at = 0;
+    while let Some(&l) = reached.get(at) {
+        reached.extend(children.get(l).into_iter().flatten().map(|j| j.child.link.as_str()));
+        at += 1;
+    }
+    if let Some(away) = robot.links.iter().find(|l| !reached.contains(&l.name.as_str())) {
+        return Err(err(format!(
+            "link `{}` is not connected to the root link `{root}`: its joints form a cycle",
+            away.name
+        )));
+    }
     // Whether a link's subtree holds a moving joint.
     fn moving_below<'a>(
         link: &'a str,

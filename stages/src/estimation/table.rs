@@ -120,6 +120,17 @@ pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
         Ok(DVector::from_fn(c.len(), |i, _| c.value(i)))
     };
     let names = s("name")?;
+    let values = f("value")?;
+    // An estimate is finite: a table that says otherwise was not written
+    // by an estimate (an edited one without its CRC), and would make every
+    // prediction NaN.
+    if let Some(i) = (0..values.len()).find(|&i| !values[i].is_finite()) {
+        return Err(Error::NotFinite {
+            what: "the parameters table's `value`".into(),
+            value: values[i],
+            at: format!("parameter `{}` (row {i})", names[i]),
+        });
+    }
     let p = names.len();
     let mut covariance = DMatrix::zeros(p, p);
     for (j, name) in names.iter().enumerate() {
@@ -128,7 +139,7 @@ pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
     }
     Ok(Parameters {
         units: s("unit")?,
-        values: f("value")?,
+        values,
         std: f("std")?,
         names,
         covariance,

@@ -337,7 +337,7 @@ impl SimConfig {
             }
             _ => {}
         }
-        if !(t.jitter_std_s >= 0.0) || !(0.0..1.0).contains(&t.drop_probability) {
+        if !(t.jitter_std_s >= 0.0 && t.jitter_std_s.is_finite() && (0.0..1.0).contains(&t.drop_probability)) {
             errs.push(Problem::new(
                 "timing.jitter_std_s",
                 "must be ≥ 0 and drop_probability in [0, 1)",

@@ -293,14 +293,34 @@ impl Chain {
     /// The harmonics the recording's provenance names, and a note that a
     /// stage (`stage`) took them by default.
     pub fn default_harmonics(&mut self, stage: &str, given: Option<&Vec<u32>>) -> Result<Vec<u32>> {
-        if let Some(h) = given {
-            return Ok(h.clone());
+        let h = match given {
+            Some(h) => h.clone(),
+            None => {
+                let h = self.recording_harmonics()?;
+                self.report.notes.push(format!(
+                    "{stage}: default harmonics = {h:?} (the recording's {})",
+                    metadata::HARMONICS
+                ));
+                h
+            }
+        };
+        // A period of N samples holds lines up to (N − 1)/2: a harmonic
+        // beyond would be read off an alias.
+        let n = self
+            .periods
+            .as_ref()
+            .map(|p| p.samples_per_period)
+            .or_else(|| self.mean.as_ref().map(|m| m.time.len()));
+        if let Some(n) = n {
+            let top = (n.saturating_sub(1) / 2) as u32;
+            if let Some(&k) = h.iter().find(|&&k| k > top) {
+                return Err(Error::setting(
+                    "harmonics",
+                    format!("at most {top}: a period of {n} samples holds no line above it"),
+                    k,
+                ));
+            }
         }
-        let h = self.recording_harmonics()?;
-        self.report.notes.push(format!(
-            "{stage}: default harmonics = {h:?} (the recording's {})",
-            metadata::HARMONICS
-        ));
         Ok(h)
     }
 

@@ -144,6 +144,20 @@ impl Stage for InverseFilter {
         if chain.periods.is_none() && chain.raw.is_some() {
             chain.uniform_raw()?;
         }
+        // Over Nyquist, 1/H would amplify whatever lies between the filter's
+        // cutoff and fs/2 (noise, aliases) without bound: refused.
+        let fs = match (&chain.periods, &chain.raw) {
+            (Some(p), _) => Some(p.sample_rate_hz()),
+            (None, Some(raw)) => Some(Chain::record_rate(raw)),
+            (None, None) => None,
+        };
+        if let Some(fs) = fs.filter(|fs| bw > 0.5 * fs) {
+            return Err(Error::setting(
+                "bandwidth_hz",
+                format!("at most the samples' Nyquist frequency, {} Hz", 0.5 * fs),
+                bw,
+            ));
+        }
         match (&mut chain.periods, &mut chain.raw) {
             (Some(p), _) => inverse_filter_periods(p, &*self.response, bw, &self.spectra),
             (None, Some(raw)) => {

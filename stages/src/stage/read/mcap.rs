@@ -551,7 +551,9 @@ pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Res
                         // Names are matched on every message whose names differ
                         // from the last: a publisher that reorders its joints
                         // is followed, one that drops or repeats a name refused.
-                        if (changed || s.order.is_none()) && s.names != *names {
+                        // (A first message with no names matches the empty
+                        // start: it is matched too, and refused.)
+                        if s.order.is_none() || (changed && s.names != *names) {
                             if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
                                 return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
                             }

@@ -37,7 +37,17 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
     wanted.sort();
     wanted.dedup();
     let indices: Vec<usize> = wanted.iter().map(|w| schema.index_of(w).expect("resolved")).collect();
-    let mask = ProjectionMask::roots(builder.parquet_schema(), indices);
+    // A log robotid wrote carries its content's CRC: then every column is
+    // read, to check it (a flipped bit changed results silently), else
+    // only the mapped ones.
+    let stored = schema.metadata().get(metadata::CONTENT_CRC32).cloned();
+    let mut crc = stored
+        .as_ref()
+        .map(|_| crate::formats::parquet::ContentCrc::new(&schema));
+    let mask = match stored {
+        Some(_) => ProjectionMask::all(),
+        None => ProjectionMask::roots(builder.parquet_schema(), indices),
+    };
     // The row count is the file's word: no more than its bytes can hold.
     let rows = (builder.metadata().file_metadata().num_rows().max(0) as usize).min(bytes);
     let reader = builder
@@ -49,6 +59,9 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
         wanted.iter().map(|w| (w.clone(), Vec::with_capacity(rows))).collect();
     for batch in reader {
         let batch = batch.map_err(|e| fmt(format!("corrupt or truncated: {e}")))?;
+        if let Some(c) = crc.as_mut() {
+            c.update(&batch);
+        }
         for (name, out) in columns.iter_mut() {
             let a = batch.column(batch.schema().index_of(name).expect("projected"));
             if let Some(f) = a.as_any().downcast_ref::<Float64Array>() {
@@ -63,6 +76,14 @@ fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns>
                     msg: format!("expected Float64 or Int64, found {}", a.data_type()),
                 });
             }
+        }
+    }
+    if let (Some(stored), Some(c)) = (stored, crc) {
+        let found = format!("{:08x}", c.finish());
+        if stored != found {
+            return Err(fmt(format!(
+                "corrupt: its content's CRC-32 is {found}, written as {stored} (a changed byte on disk or in transfer); restore it or make it again"
+            )));
         }
     }
     let md: BTreeMap<String, String> = schema
