@@ -26,6 +26,9 @@ pub const STAGING: &str = ".robotid-staging-";
 pub const MANIFEST: &str = "run.json";
 
 const COMMIT: &str = "COMMIT";
+/// Inside the staging folder: the previous run's tables this one does not
+/// make, removed at the end of the commit.
+const STALE: &str = ".stale";
 /// Inside the staging folder: what goes to the `--plot` folder, and that
 /// folder's path (a run finishing another's commit needs it).
 const PLOTS: &str = ".plots";
@@ -70,8 +73,15 @@ impl Staging {
         self.plot.as_ref().map(|_| self.dir.join(PLOTS))
     }
 
-    /// Moves everything staged into place; the run's outputs appear.
+    /// Moves everything staged into place; the run's outputs appear, and
+    /// the tables the previous run listed that this one does not make go
+    /// (they would stand beside a manifest that does not name them).
     pub fn commit(mut self) -> Result<()> {
+        let stale: Vec<String> = listed(&self.out)
+            .into_iter()
+            .filter(|rel| !self.dir.join(rel).exists())
+            .collect();
+        std::fs::write(self.dir.join(STALE), stale.join("\n")).map_err(io(&self.dir))?;
         std::fs::write(self.dir.join(COMMIT), b"").map_err(io(&self.dir))?;
         finish(&self.dir, &self.out)?;
         self.committed = true;
@@ -123,12 +133,43 @@ fn finish(dir: &Path, out: &Path) -> Result<()> {
     }
     for entry in std::fs::read_dir(dir).map_err(io(dir))?.flatten() {
         let name = entry.file_name();
-        if name == COMMIT || name == PLOTS || name == PLOT_TARGET {
+        if name == COMMIT || name == PLOTS || name == PLOT_TARGET || name == STALE {
             continue;
         }
         move_tree(&entry.path(), &out.join(&name))?;
     }
+    let stale = std::fs::read_to_string(dir.join(STALE)).unwrap_or_default();
+    for rel in stale.lines().filter(|l| !l.is_empty()) {
+        let _ = std::fs::remove_file(out.join(rel));
+    }
     std::fs::remove_dir_all(dir).map_err(io(dir))
+}
+
+/// The files the run manifest in `out` names (its tables and parameters),
+/// relative to `out`; none without a readable manifest. Only plain
+/// relative paths inside `out` are taken.
+fn listed(out: &Path) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(out.join(MANIFEST)) else {
+        return Vec::new();
+    };
+    let Ok(m) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return Vec::new();
+    };
+    let tables = m["recordings"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|r| r["tables"].as_object())
+        .flat_map(|t| t.values());
+    tables
+        .chain(std::iter::once(&m["parameters"]))
+        .filter_map(|v| v.as_str())
+        .filter(|rel| {
+            let p = Path::new(rel);
+            p.is_relative() && p.components().all(|c| matches!(c, std::path::Component::Normal(_)))
+        })
+        .map(str::to_string)
+        .collect()
 }
 
 /// Moves a file or folder tree to `to`, file by file (replacing files,
@@ -142,10 +183,22 @@ fn move_tree(from: &Path, to: &Path) -> Result<()> {
         return Ok(());
     }
     if std::fs::rename(from, to).is_err() {
-        // Another file system: copy beside the target, then rename.
-        let tmp = to.with_extension(format!("robotid-copy-{}", std::process::id()));
-        std::fs::copy(from, &tmp).map_err(io(&tmp))?;
-        std::fs::rename(&tmp, to).map_err(io(to))?;
+        // Another file system: copy beside the target, then rename. The
+        // copy is named as every temporary file is (`.<name>.tmp-<pid>`),
+        // and removed when the copy or rename fails; one a killed run
+        // left is removed by the next ([`clean_leftovers`]).
+        let name = to
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let tmp = to.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+        let copied = std::fs::copy(from, &tmp)
+            .map_err(io(&tmp))
+            .and_then(|_| std::fs::rename(&tmp, to).map_err(io(to)));
+        if let Err(e) = copied {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
         std::fs::remove_file(from).map_err(io(from))?;
     }
     Ok(())

@@ -225,3 +225,33 @@ fn concurrent_runs_never_mix() {
     }
     println!("5 pairs of concurrent runs: {refused} refused, the folder whole every time");
 }
+
+/// A run that writes fewer tables than the run before it into the same
+/// folder removes those it does not make: the folder holds what its
+/// manifest names (the earlier run's tables stood beside the new run.json).
+#[test]
+fn a_run_with_fewer_tables_leaves_none_of_the_earlier_ones() {
+    let ws = workspace(&["kuka_axis3"]);
+    let out = ws.path().join("out");
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("kuka_axis3/kinematics.parquet").exists());
+    let text = std::fs::read_to_string(&pipeline).unwrap();
+    let fewer = ws.path().join("pipelines/fewer.toml");
+    let line = text.lines().find(|l| l.starts_with("tables = ")).unwrap();
+    std::fs::write(&fewer, text.replace(line, "tables = [\"period_mean\", \"regressor\"]")).unwrap();
+    let o = robotid(&["run", fewer.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let files: Vec<String> = visible(&out).into_keys().collect();
+    assert_eq!(
+        files,
+        [
+            "kuka_axis3/period_mean.parquet",
+            "kuka_axis3/regressor.parquet",
+            "parameters.parquet",
+            "run.json"
+        ],
+        "{files:?}"
+    );
+}

@@ -126,6 +126,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             l.mass
         );
     }
+    // Bodies a simulator takes: finite, of a robot's size, inertias that
+    // satisfy the triangle inequality (a table holding ixx = 1e30 wrote a
+    // URDF that broke it).
+    if let Err(p) = identified.validate() {
+        bail!(
+            "{}: the identified bodies are not physical: {p}; no model is written",
+            args.parameters.display()
+        );
+    }
     let warnings = far_from_the_robot_file(&base.model, &identified, &params.metadata);
     for w in &warnings {
         eprintln!("warning: {w}");
