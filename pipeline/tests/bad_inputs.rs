@@ -293,6 +293,21 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         args: vec!["model".into(), "inspect".into(), s(&cycle)],
         says: vec!["cycle.urdf".into(), "joint `j2` is its own parent".into()],
     });
+    // A 65-joint chain: lint and model inspect took over 300 s on 200.
+    let chain = w.join("robots/chain65.urdf");
+    let mut urdf = String::from("<robot name=\"chain\"><link name=\"l0\"/>");
+    for k in 1..=65 {
+        urdf.push_str(&format!(
+            "<link name=\"l{k}\"><inertial><mass value=\"1\"/><inertia ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.01\"/></inertial></link><joint name=\"j{k}\" type=\"continuous\"><parent link=\"l{}\"/><child link=\"l{k}\"/><origin xyz=\"0 0 0.1\"/><axis xyz=\"0 1 0\"/></joint>",
+            k - 1
+        ));
+    }
+    std::fs::write(&chain, urdf + "</robot>").unwrap();
+    cases.push(Case {
+        name: "a 65-joint chain",
+        args: vec!["model".into(), "inspect".into(), s(&chain)],
+        says: vec!["chain65.urdf".into(), "65 moving joints".into()],
+    });
     // A parameters table holding inf (written with a valid CRC): report
     // spun in its axis code, predict and validate gave NaN.
     let inf = w.join("inf.parquet");

@@ -212,6 +212,9 @@ pub struct Model {
 const MAX_MASS_KG: f64 = 1e6;
 const MAX_LENGTH_M: f64 = 1e3;
 const MAX_INERTIA: f64 = 1e9;
+/// The most moving joints a model may have: arms have 6 or 7, humanoids a
+/// few dozen; a 200-joint chain kept `lint` busy for over 300 s.
+pub const MAX_JOINTS: usize = 64;
 
 impl Model {
     /// Every number of the description finite and of a size a robot can
@@ -307,6 +310,12 @@ impl Model {
         let n = self.dof();
         if n == 0 {
             return Err(Problem::new("joint", "the robot has no moving joint"));
+        }
+        if n > MAX_JOINTS {
+            return Err(Problem::new(
+                "joint",
+                format!("{n} moving joints: robotid identifies arms of up to {MAX_JOINTS} (the base-parameter search grows as the cube of the joints); lock the others"),
+            ));
         }
         for (what, len) in [
             ("links", self.links.len()),
