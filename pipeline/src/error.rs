@@ -102,6 +102,9 @@ pub enum Error {
     /// Recordings failed: nothing was estimated from the rest.
     #[error("estimate: recording(s) {} failed, so no parameters were estimated (fix them or leave them out of the source)", .names.join(", "))]
     RecordingsFailed { names: Vec<String> },
+    /// Two recordings of one estimate hold the same bytes.
+    #[error("{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2); nothing was estimated", first.display(), again.display())]
+    SameRecording { first: PathBuf, again: PathBuf },
     /// A plan made in code could not be written as a pipeline file.
     #[error("writing a pipeline file: {0}")]
     Write(#[from] toml::ser::Error),

@@ -293,6 +293,24 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         args: vec!["model".into(), "inspect".into(), s(&cycle)],
         says: vec!["cycle.urdf".into(), "joint `j2` is its own parent".into()],
     });
+    // One recording under two names, estimated together (the intervals
+    // shrank by √2).
+    let twice = w.join("recordings/twice");
+    std::fs::create_dir_all(&twice).unwrap();
+    for name in ["a.mcap", "b.mcap"] {
+        std::fs::copy(&log, twice.join(name)).unwrap();
+    }
+    let twice_pipeline = w.join("pipelines/twice.toml");
+    edit(
+        &pipeline,
+        &twice_pipeline,
+        &[("../recordings/kuka_axis3/kuka_axis3.mcap", "../recordings/twice")],
+    );
+    cases.push(Case {
+        name: "one recording under two names",
+        args: vec!["run".into(), s(&twice_pipeline), "--out".into(), s(&out)],
+        says: vec!["a.mcap and".into(), "b.mcap hold the same bytes".into()],
+    });
     // A 65-joint chain: lint and model inspect took over 300 s on 200.
     let chain = w.join("robots/chain65.urdf");
     let mut urdf = String::from("<robot name=\"chain\"><link name=\"l0\"/>");
