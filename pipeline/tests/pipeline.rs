@@ -23,7 +23,7 @@ fn rendered_in_a_browser(html: &Path) {
             .output()
             .is_ok_and(|o| o.status.success())
     }) else {
-        println!("skipped: no Chromium here (bash scripts/setup.sh installs it)");
+        robotid_tests::absent("no Chromium here (bash scripts/setup.sh installs it)");
         return;
     };
     let profile = tempfile::tempdir().unwrap();

@@ -124,8 +124,10 @@ fn three_dof_arm_matches_lagrangian() {
 
 #[test]
 fn real_kuka_lwr4_urdf_loads_and_matches_lagrangian() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/kuka_lwr4/kuka_lwr4.urdf");
-    let model = dynamics::load_robot(&path).unwrap();
+    let Some(dir) = robotid_tests::realdata("kuka_lwr4") else {
+        return;
+    };
+    let model = dynamics::load_robot(&dir.join("kuka_lwr4.urdf")).unwrap();
     assert_eq!(model.dof(), 7);
     assert_eq!(model.warnings.len(), 1, "{:?}", model.warnings);
     assert!(model.warnings[0].contains("box_lwr_base_joint"));

@@ -1,7 +1,6 @@
 //! The regressor against RNEA: Φ(q, q̇, q̈)·θ = τ for every shipped robot.
 
 use robotid_tests::fixture;
-use std::path::Path;
 
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
@@ -10,12 +9,15 @@ use robotid_stages::dynamics::{self, regressor, standard_parameters, Data, Frict
 
 #[test]
 fn regressor_times_parameters_is_rnea() {
+    // The real LWR4+'s URDF when it lies beside the repository.
+    let lwr4 = robotid_tests::realdata("kuka_lwr4").map(|d| d.join("kuka_lwr4.urdf"));
     let robots = [
         fixture("robots/kuka_axis3.toml"),
         fixture("robots/arm3.toml"),
         fixture("robots/ur5.toml"),
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/kuka_lwr4/kuka_lwr4.urdf"),
-    ];
+    ]
+    .into_iter()
+    .chain(lwr4);
     let terms = RegressorTerms {
         rotor: true,
         friction: FrictionTerms::Asymmetric,

@@ -15,7 +15,8 @@ pub fn fixture(rel: &str) -> PathBuf {
 }
 
 /// The real recordings beside the repository (`../shared/realdata/NAME`),
-/// or None with a message saying the test is skipped.
+/// or None with a message saying the test is skipped; under CI their
+/// absence fails instead.
 pub fn realdata(name: &str) -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/realdata")
@@ -23,7 +24,7 @@ pub fn realdata(name: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!("skipped: {} is absent", dir.display());
+        absent(&format!("{} is absent", dir.display()));
         None
     }
 }
@@ -146,7 +147,7 @@ pub fn foreign(name: &str) -> Option<PathBuf> {
 /// Says a test's input is absent: skipped with a message, or under CI
 /// (where everything is installed and `../shared` lies beside the clone)
 /// a failure, so that no test passes vacuously there.
-fn absent(what: &str) {
+pub fn absent(what: &str) {
     if std::env::var_os("CI").is_some_and(|v| !v.is_empty()) {
         panic!("{what}, under CI");
     }

@@ -39,14 +39,13 @@ fn rnea_and_regressor_match_pinocchio() {
     let mut cases: Vec<(std::path::PathBuf, BTreeMap<String, f64>)> = vec![
         (root.join("fixtures/robots/ur5.urdf"), BTreeMap::new()),
         (
-            root.join("../shared/realdata/kuka_lwr4/kuka_lwr4.urdf"),
-            BTreeMap::new(),
-        ),
-        (
             telescope,
             BTreeMap::from([("slide".to_string(), 0.23), ("finger1".to_string(), 0.015)]),
         ),
     ];
+    if let Some(dir) = robotid_tests::realdata("kuka_lwr4") {
+        cases.push((dir.join("kuka_lwr4.urdf"), BTreeMap::new()));
+    }
     if let Some(p) = panda_urdf() {
         cases.push((p, BTreeMap::from([("panda_finger_joint1".to_string(), 0.02)])));
     }
