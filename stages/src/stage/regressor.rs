@@ -837,7 +837,13 @@ fn band_limited_matrix(
     let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
     for j in 0..n {
         for c in 0..cols {
-            spec[..=keep].copy_from_slice(&lines[(j * cols + c) * (keep + 1)..][..keep + 1]);
+            let own = &lines[(j * cols + c) * (keep + 1)..][..keep + 1];
+            // A chain's column is zero on the rows of joints before its
+            // link, and a friction column off its joint: zeros stay zeros.
+            if own.iter().all(|v| v.re == 0.0 && v.im == 0.0) {
+                continue;
+            }
+            spec[..=keep].copy_from_slice(own);
             let back = spectra.inverse(&spec, samples);
             for k in 0..samples {
                 a[(k * n + j, c)] = back[k];
@@ -967,6 +973,11 @@ fn column_spectra_on(
                 for k in 0..samples {
                     series[k] = a[(k * n + j, c)];
                 }
+                // Zero on this joint's rows (a link beyond it): no lines.
+                if series.iter().all(|v| *v == 0.0) {
+                    lines.push(Vec::new());
+                    continue;
+                }
                 let y = spectra.forward(&series);
                 total += y[..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
                 tail += y[nyquist / 2..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
@@ -976,7 +987,7 @@ fn column_spectra_on(
                 on_fine.push(c);
                 continue;
             }
-            for (j, y) in lines.iter().enumerate() {
+            for (j, y) in lines.iter().enumerate().filter(|(_, y)| !y.is_empty()) {
                 add(&mut acc, j, c, y, &still);
             }
         }
