@@ -187,6 +187,9 @@ fn lint_reports_every_problem_with_its_place() {
 
 #[test]
 fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
+    if robotid_tests::realdata("kuka_lwr4").is_none() {
+        return;
+    }
     let file = fixture("").join("pipelines/kuka_lwr4.toml");
     let out = tempfile::tempdir().unwrap();
     let results = run_pipeline(&file, out.path(), None);
