@@ -205,7 +205,7 @@ fn move_tree(from: &Path, to: &Path) -> Result<()> {
 }
 
 /// Whether a process of this id runs (Linux: its /proc entry).
-fn alive(pid: u32) -> bool {
+pub fn alive(pid: u32) -> bool {
     Path::new("/proc").join(pid.to_string()).exists()
 }
 

@@ -93,13 +93,6 @@ impl Drop for Cleanup<'_> {
     }
 }
 
-/// Whether process `pid` is running (Linux's /proc; elsewhere assumed so,
-/// and the folder is left to the user).
-fn running(pid: u32) -> bool {
-    let proc = Path::new("/proc");
-    !proc.is_dir() || proc.join(pid.to_string()).exists()
-}
-
 /// Takes the output folder: an empty or absent one, or the partial output
 /// of an identify that was killed (cleared); refuses a folder in use or
 /// holding anything else.
@@ -107,7 +100,7 @@ fn take_folder(out: &Path) -> anyhow::Result<()> {
     let lock = out.join(LOCK);
     if let Ok(text) = std::fs::read_to_string(&lock) {
         match text.trim().parse::<u32>() {
-            Ok(pid) if running(pid) => bail!(
+            Ok(pid) if robotid::output::alive(pid) => bail!(
                 "{}: another robotid identify (process {pid}) is writing into this folder; wait for it, or give another with --out",
                 out.display()
             ),
