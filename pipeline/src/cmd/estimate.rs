@@ -1,9 +1,9 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::stage::estimate::{EstimateConfig, Outcome};
+use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part, Reducer};
 use robotid_stages::stage::Context;
 
 #[derive(clap::Args)]
@@ -46,15 +46,19 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let level = args.confidence;
     let out = estimate(&args, None)?;
+    print_outcome(&args, &out);
+    Ok(())
+}
+
+/// What `run` prints of an estimate: the known, the table, the findings.
+pub fn print_outcome(args: &Args, out: &Outcome) {
     if let Some(k) = &args.known {
         println!("known ({}): {}", k.display(), out.known.join(", "));
     }
-    print!("{}", summary(&out.estimate, level));
-    print!("{}", findings(&out));
+    print!("{}", summary(&out.estimate, args.confidence));
+    print!("{}", findings(out));
     println!("parameters in {}", args.out.display());
-    Ok(())
 }
 
 /// Metadata to add to an estimate's table, made from its outcome.
@@ -63,6 +67,13 @@ pub type Marks<'a> = &'a dyn Fn(&Outcome) -> Vec<(String, String)>;
 /// The estimate of `args`, its table written to `args.out` with
 /// `marks` added to the table's metadata.
 pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
+    let reducer = reducer(args)?;
+    let parts = parts(&reducer, &args.regressors)?;
+    reduce(&reducer, &parts, &args.out, marks)
+}
+
+/// The reduce step that `args` ask for.
+pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
     let method = match args.method.as_str() {
         "ols" => Estimator::Ols,
         "wls" => Estimator::Wls,
@@ -94,37 +105,48 @@ pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
         Some(r) => Some(std::sync::Arc::new(robotid_stages::dynamics::load_robot(r)?)),
         None => None,
     };
-    let reducer = cfg.reducer(&Context {
+    Ok(cfg.reducer(&Context {
         base_dir: PathBuf::from("."),
         model,
         ..Default::default()
-    })?;
-    // The same map and reduce as a pipeline's `estimate` stage: each table
-    // folded into its summary, the summaries merged.
-    if let Some((first, again)) = super::same_bytes(&args.regressors)? {
+    })?)
+}
+
+/// The map step of a pipeline's `estimate` stage over tables: each folded
+/// into its summary. Parts do not depend on the covariance or the physical
+/// fit: one read serves an estimate and its physical fit.
+pub fn parts(reducer: &Reducer, regressors: &[PathBuf]) -> anyhow::Result<Vec<Part>> {
+    if let Some((first, again)) = super::same_bytes(regressors)? {
         bail!(
             "{} and {} are the same table: given twice, its rows would count twice and the intervals shrink by √2",
             first.display(),
             again.display()
         );
     }
-    let mut parts = Vec::new();
-    for p in &args.regressors {
-        let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
-        parts.push(reducer.part_of(sys)?);
-    }
-    let out = reducer.reduce(&parts, &Default::default())?;
-    let table = match marks.map(|m| m(&out)).filter(|m| !m.is_empty()) {
-        None => out.table.clone(),
+    regressors
+        .iter()
+        .map(|p| {
+            let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
+            Ok(reducer.part_of(sys)?)
+        })
+        .collect()
+}
+
+/// The summaries merged and solved; the table written to `out` with
+/// `marks` added to its metadata.
+pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks>) -> anyhow::Result<Outcome> {
+    let outcome = reducer.reduce(parts, &Default::default())?;
+    let table = match marks.map(|m| m(&outcome)).filter(|m| !m.is_empty()) {
+        None => outcome.table.clone(),
         Some(m) => {
-            let mut md = out.table.schema().metadata().clone();
+            let mut md = outcome.table.schema().metadata().clone();
             md.extend(m);
-            let schema = std::sync::Arc::new(out.table.schema().as_ref().clone().with_metadata(md));
-            out.table.clone().with_schema(schema)?
+            let schema = std::sync::Arc::new(outcome.table.schema().as_ref().clone().with_metadata(md));
+            outcome.table.clone().with_schema(schema)?
         }
     };
-    write_parquet(&args.out, &table)?;
-    Ok(out)
+    write_parquet(out, &table)?;
+    Ok(outcome)
 }
 
 /// Stacks regressor tables named on the command line.

@@ -279,7 +279,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // A floor from one period's non-excited lines (nothing repeats to take
     // it from) may hold real content or miss noise: said, not refused on.
     let reliable = designs[..ident.len()].iter().all(|d| d.repeated);
-    let ols = super::estimate::estimate(&estimate_args(id_tables, Some(&robot), false, &parameters), Some(&mark))?;
+    // One read of the tables: the estimate and its physical fit reduce the
+    // same parts.
+    let ols_args = estimate_args(id_tables, Some(&robot), false, &parameters);
+    let reducer = super::estimate::reducer(&ols_args)?;
+    let parts = super::estimate::parts(&reducer, id_tables)?;
+    let ols = super::estimate::reduce(&reducer, &parts, &parameters, Some(&mark))?;
     let inadequate = verdict(&ols.estimate);
     if let Some(v) = inadequate.as_ref().filter(|_| !reliable) {
         eprintln!(
@@ -354,7 +359,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if designs.iter().any(|d| d.joint_wise.is_some()) {
         println!("no physical fit and no export for simulators: joint-wise records give the decoupled model (each joint's inertia, gravity and friction), not the links' bodies");
     } else {
-        physical_fit(id_tables, val_tables, &robot, &out, &mut script, &joined)?;
+        physical_fit(&parts, id_tables, val_tables, &robot, &out, &mut script, &joined)?;
     }
     let sh = out.join("identify.sh");
     std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
@@ -370,6 +375,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The physically consistent estimate, validated, and the exports.
 fn physical_fit(
+    parts: &[robotid_stages::stage::estimate::Part],
     id_tables: &[PathBuf],
     val_tables: &[PathBuf],
     robot: &Path,
@@ -381,10 +387,16 @@ fn physical_fit(
     // The spread across few periods can leave the covariance singular
     // (arm3, 4 periods, 25 parameters): then the residual's is used.
     let mut residual_cov = false;
-    let fitted = super::estimate::run(estimate_args(id_tables, Some(robot), true, &physical)).or_else(|e| {
+    let fit = |args: super::estimate::Args| -> anyhow::Result<()> {
+        let reducer = super::estimate::reducer(&args)?;
+        let outcome = super::estimate::reduce(&reducer, parts, &physical, None)?;
+        super::estimate::print_outcome(&args, &outcome);
+        Ok(())
+    };
+    let fitted = fit(estimate_args(id_tables, Some(robot), true, &physical)).or_else(|e| {
         residual_cov = true;
         eprintln!("note: the physical fit with the estimate's covariance failed ({e:#}); again with the residual's");
-        super::estimate::run(super::estimate::Args {
+        fit(super::estimate::Args {
             covariance: "residual".into(),
             ..estimate_args(id_tables, Some(robot), true, &physical)
         })
