@@ -2,12 +2,20 @@
 //!
 //! A run writes everything (tables, the estimate, pictures, the report)
 //! into a staging folder inside `--out`, `.robotid-staging-<pid>`, and
-//! [`Staging::commit`] moves it into place when every step succeeded. A run
-//! that fails removes its staging folder, so the output folder is as it
-//! was. A run killed before its commit leaves a staging folder that the
-//! next run removes; one killed during its commit (after the `COMMIT`
-//! marker) is finished by the next run: each file move is a rename, so a
-//! reader sees either the old set or the new. One run at a time holds the
+//! [`Staging::commit`] puts it in place when every step succeeded: it
+//! builds the folder's next state beside it (`.<out>.robotid-next-<pid>`,
+//! hard links of the staged files over those of the folder, less the
+//! previous run's tables this one does not make) and exchanges the two
+//! folders in one `renameat2(RENAME_EXCHANGE)`, so a reader sees the old
+//! set or the new, never a mixture, and a commit failing before the
+//! exchange leaves the folder as it was. A run that fails removes its
+//! staging folder. A run killed before the exchange leaves a staging
+//! folder (and perhaps a next folder) that the next run removes.
+//!
+//! Where the exchange cannot be made (the parent folder not writable,
+//! `--out` a mount point, a file system without it) the commit moves the
+//! staged files in one rename each after a `COMMIT` marker, and a run
+//! killed during those moves is finished by the next run. One run at a time holds the
 //! folder (an OS lock on `.robotid.lock`, released even by kill -9); a
 //! second is refused with the first's process id. `--out` where the inputs
 //! are is refused.
@@ -21,11 +29,14 @@ use crate::error::{Error, Result};
 pub const LOCK: &str = ".robotid.lock";
 /// Prefix of a run's staging folder inside the output folder.
 pub const STAGING: &str = ".robotid-staging-";
-/// Written into the staging folder when its moves begin.
 /// The run manifest, written last into every run's output folder.
 pub const MANIFEST: &str = "run.json";
 
+/// Written into the staging folder when its moves begin (the commit
+/// without an exchange).
 const COMMIT: &str = "COMMIT";
+/// Infix of the folder a commit builds beside the output folder.
+const NEXT: &str = ".robotid-next-";
 /// Inside the staging folder: the previous run's tables this one does not
 /// make, removed at the end of the commit.
 const STALE: &str = ".stale";
@@ -81,6 +92,21 @@ impl Staging {
             .into_iter()
             .filter(|rel| !self.dir.join(rel).exists())
             .collect();
+        let plots = self.staged_plot().filter(|p| p.exists());
+        let plots_swapped = match (&plots, &self.plot) {
+            (Some(staged), Some(target)) => exchange(staged, target, &[], &[]),
+            _ => true,
+        };
+        if plots_swapped && exchange(&self.dir, &self.out, &stale, &[COMMIT, PLOTS, PLOT_TARGET, STALE]) {
+            let _ = std::fs::remove_dir_all(&self.dir);
+            self.committed = true;
+            return Ok(());
+        }
+        if plots_swapped {
+            if let Some(staged) = plots {
+                std::fs::remove_dir_all(&staged).map_err(io(&staged))?;
+            }
+        }
         std::fs::write(self.dir.join(STALE), stale.join("\n")).map_err(io(&self.dir))?;
         std::fs::write(self.dir.join(COMMIT), b"").map_err(io(&self.dir))?;
         finish(&self.dir, &self.out)?;
@@ -143,6 +169,99 @@ fn finish(dir: &Path, out: &Path) -> Result<()> {
         let _ = std::fs::remove_file(out.join(rel));
     }
     std::fs::remove_dir_all(dir).map_err(io(dir))
+}
+
+/// Puts `staged` in place in `target` in one step: `target`'s next state
+/// is built beside it (hard links of `staged`'s files over `target`'s, less
+/// the relative paths in `drop` and `staged`'s top-level `control` files,
+/// and less the staging folders and temporaries of runs) and exchanged
+/// with it atomically; the old state is then removed. False, and nothing
+/// changed, when that cannot be done here (then the caller moves the files
+/// one by one). `staged` is left as it was either way.
+fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> bool {
+    let Some(next) = next_folder(target) else { return false };
+    let Some(target) = std::fs::canonicalize(target).ok() else { return false };
+    let target = target.as_path();
+    let _ = std::fs::remove_dir_all(&next);
+    let built = std::fs::create_dir(&next).is_ok()
+        && link_tree(staged, &next, &mut |rel| {
+            !(rel.components().count() == 1 && control.iter().any(|c| rel == Path::new(c)))
+        })
+        && link_tree(target, &next, &mut |rel| {
+            let name = rel.to_string_lossy();
+            !(rel.components().count() == 1 && name.starts_with(STAGING))
+                && !drop.iter().any(|d| Path::new(d) == rel)
+        })
+        && std::fs::metadata(target).is_ok_and(|m| std::fs::set_permissions(&next, m.permissions()).is_ok())
+        && rename_exchange(&next, target);
+    // After the exchange `next` names the old state; before it, the
+    // half-built new one.
+    let _ = std::fs::remove_dir_all(&next);
+    built
+}
+
+/// `.<name>.robotid-next-<pid>` beside `target` (the folder a symbolic
+/// link names, which keeps naming it).
+fn next_folder(target: &Path) -> Option<PathBuf> {
+    let target = std::fs::canonicalize(target).ok()?;
+    let name = target.file_name()?.to_string_lossy().into_owned();
+    Some(target.with_file_name(format!(".{name}{NEXT}{}", std::process::id())))
+}
+
+/// Hard-links the files under `from` into `to` where `to` has nothing yet
+/// (folders merged, made with their permissions), for the relative paths
+/// `keep` takes. False on any failure.
+fn link_tree(from: &Path, to: &Path, keep: &mut dyn FnMut(&Path) -> bool) -> bool {
+    fn walk(root: &Path, from: &Path, to: &Path, keep: &mut dyn FnMut(&Path) -> bool) -> bool {
+        let Ok(entries) = std::fs::read_dir(from) else { return false };
+        for e in entries {
+            let Ok(e) = e else { return false };
+            let src = e.path();
+            let Ok(rel) = src.strip_prefix(root) else { return false };
+            if !keep(rel) {
+                continue;
+            }
+            let dst = to.join(e.file_name());
+            let Ok(kind) = e.file_type() else { return false };
+            if kind.is_dir() {
+                if !dst.exists() {
+                    let made = std::fs::create_dir(&dst).is_ok()
+                        && std::fs::metadata(&src).is_ok_and(|m| std::fs::set_permissions(&dst, m.permissions()).is_ok());
+                    if !made {
+                        return false;
+                    }
+                } else if !dst.is_dir() {
+                    continue; // a file of the new state where the old had a folder
+                }
+                if !walk(root, &src, &dst, keep) {
+                    return false;
+                }
+            } else if std::fs::symlink_metadata(&dst).is_err() && std::fs::hard_link(&src, &dst).is_err() {
+                return false;
+            }
+        }
+        true
+    }
+    walk(from, from, to, keep)
+}
+
+/// Linux's atomic exchange of two paths.
+#[cfg(target_os = "linux")]
+fn rename_exchange(a: &Path, b: &Path) -> bool {
+    use std::os::unix::ffi::OsStrExt;
+    let (Ok(a), Ok(b)) = (
+        std::ffi::CString::new(a.as_os_str().as_bytes()),
+        std::ffi::CString::new(b.as_os_str().as_bytes()),
+    ) else {
+        return false;
+    };
+    // SAFETY: two NUL-terminated paths that outlive the call.
+    unsafe { libc::renameat2(libc::AT_FDCWD, a.as_ptr(), libc::AT_FDCWD, b.as_ptr(), libc::RENAME_EXCHANGE) == 0 }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn rename_exchange(_: &Path, _: &Path) -> bool {
+    false
 }
 
 /// The files the run manifest in `out` names (its tables and parameters),
@@ -325,6 +444,20 @@ fn recover(out: &Path) -> Result<()> {
         }
     }
     clean_leftovers(out);
+    // Next folders of killed commits, beside `out`.
+    if let Some(next) = next_folder(out) {
+        let name = next.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        let prefix = name.trim_end_matches(|c: char| c.is_ascii_digit());
+        if let Some(parent) = next.parent().and_then(|p| std::fs::read_dir(p).ok()) {
+            for e in parent.flatten() {
+                let n = e.file_name().to_string_lossy().into_owned();
+                let pid = n.strip_prefix(prefix).and_then(|p| p.parse::<u32>().ok());
+                if pid.is_some_and(|p| !alive(p)) {
+                    let _ = std::fs::remove_dir_all(e.path());
+                }
+            }
+        }
+    }
     Ok(())
 }
 

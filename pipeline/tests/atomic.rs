@@ -166,16 +166,23 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
         std::thread::sleep(at);
         let _ = child.kill(); // SIGKILL
         let _ = child.wait();
+        // What a reader sees right after the kill: the old set or the new
+        // one (the folders exchanged in one step), never a mixture.
         let seen = visible(&out);
-        // What a reader sees right after the kill: the old set, or the new
-        // set partly moved in (the commit had begun; the next run finishes it).
+        assert!(seen == old || seen == new, "trial {k}: a mixture of old and new outputs");
         drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
         let after = bytes_of(&out);
+        let parent: Vec<String> = std::fs::read_dir(ws.path())
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(".robotid-next-"))
+            .collect();
+        assert!(parent.is_empty(), "trial {k}: a killed commit's folder stayed: {parent:?}");
+        assert_eq!(after, seen, "trial {k}: the next run's start changed what was visible");
         if after == old {
             as_old += 1;
-            assert_eq!(seen, old, "trial {k}: changed, then back?");
         } else {
-            assert_eq!(after, new, "trial {k}: neither the old outputs nor the new");
             as_new += 1;
             // Back to the old set for the next trial.
             std::fs::remove_dir_all(&out).unwrap();
@@ -183,7 +190,7 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
             assert!(o.status.success());
         }
     }
-    println!("{trials} kill -9 trials: {as_old} left the old outputs, {as_new} the new (commit done or finished by the next run)");
+    println!("{trials} kill -9 trials: {as_old} left the old outputs, {as_new} the new");
     assert!(as_old > 0, "no kill landed before the commit");
 }
 
@@ -254,4 +261,38 @@ fn a_run_with_fewer_tables_leaves_none_of_the_earlier_ones() {
         ],
         "{files:?}"
     );
+}
+
+/// The commit exchanges the whole folder: files of the user's in it stay
+/// (and stay the same files), a symbolic link given as `--out` stays a link
+/// to the folder it named, and nothing is left beside it.
+#[test]
+fn the_commit_keeps_what_is_not_the_runs() {
+    let ws = workspace(&["kuka_axis3"]);
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let real = ws.path().join("real");
+    std::fs::create_dir_all(real.join("notes")).unwrap();
+    std::fs::write(real.join("notes/lab.txt"), b"arm 3, cold start").unwrap();
+    std::fs::write(real.join("README"), b"mine").unwrap();
+    let link = ws.path().join("out");
+    std::os::unix::fs::symlink(&real, &link).unwrap();
+    use std::os::unix::fs::MetadataExt;
+    let ino = std::fs::metadata(real.join("README")).unwrap().ino();
+    for _ in 0..2 {
+        let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", link.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read(real.join("notes/lab.txt")).unwrap(), b"arm 3, cold start");
+    assert_eq!(std::fs::metadata(real.join("README")).unwrap().ino(), ino);
+    assert!(real.join("run.json").exists() && real.join("kuka_axis3/regressor.parquet").exists());
+    let beside: Vec<String> = std::fs::read_dir(ws.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(beside.is_empty(), "{beside:?}");
+    let hidden: Vec<String> = bytes_of(&real).into_keys().filter(|k| k.starts_with('.')).collect();
+    assert!(hidden.is_empty(), "{hidden:?}");
 }
