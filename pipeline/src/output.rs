@@ -180,7 +180,9 @@ fn finish(dir: &Path, out: &Path) -> Result<()> {
 /// one by one). `staged` is left as it was either way.
 fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> bool {
     let Some(next) = next_folder(target) else { return false };
-    let Some(target) = std::fs::canonicalize(target).ok() else { return false };
+    let Some(target) = std::fs::canonicalize(target).ok() else {
+        return false;
+    };
     let target = target.as_path();
     let _ = std::fs::remove_dir_all(&next);
     let built = std::fs::create_dir(&next).is_ok()
@@ -189,8 +191,7 @@ fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> 
         })
         && link_tree(target, &next, &mut |rel| {
             let name = rel.to_string_lossy();
-            !(rel.components().count() == 1 && name.starts_with(STAGING))
-                && !drop.iter().any(|d| Path::new(d) == rel)
+            !(rel.components().count() == 1 && name.starts_with(STAGING)) && !drop.iter().any(|d| Path::new(d) == rel)
         })
         && std::fs::metadata(target).is_ok_and(|m| std::fs::set_permissions(&next, m.permissions()).is_ok())
         && rename_exchange(&next, target);
@@ -213,7 +214,9 @@ fn next_folder(target: &Path) -> Option<PathBuf> {
 /// `keep` takes. False on any failure.
 fn link_tree(from: &Path, to: &Path, keep: &mut dyn FnMut(&Path) -> bool) -> bool {
     fn walk(root: &Path, from: &Path, to: &Path, keep: &mut dyn FnMut(&Path) -> bool) -> bool {
-        let Ok(entries) = std::fs::read_dir(from) else { return false };
+        let Ok(entries) = std::fs::read_dir(from) else {
+            return false;
+        };
         for e in entries {
             let Ok(e) = e else { return false };
             let src = e.path();
@@ -226,7 +229,8 @@ fn link_tree(from: &Path, to: &Path, keep: &mut dyn FnMut(&Path) -> bool) -> boo
             if kind.is_dir() {
                 if !dst.exists() {
                     let made = std::fs::create_dir(&dst).is_ok()
-                        && std::fs::metadata(&src).is_ok_and(|m| std::fs::set_permissions(&dst, m.permissions()).is_ok());
+                        && std::fs::metadata(&src)
+                            .is_ok_and(|m| std::fs::set_permissions(&dst, m.permissions()).is_ok());
                     if !made {
                         return false;
                     }
@@ -256,7 +260,15 @@ fn rename_exchange(a: &Path, b: &Path) -> bool {
         return false;
     };
     // SAFETY: two NUL-terminated paths that outlive the call.
-    unsafe { libc::renameat2(libc::AT_FDCWD, a.as_ptr(), libc::AT_FDCWD, b.as_ptr(), libc::RENAME_EXCHANGE) == 0 }
+    unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        ) == 0
+    }
 }
 
 #[cfg(not(target_os = "linux"))]

@@ -169,7 +169,10 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
         // What a reader sees right after the kill: the old set or the new
         // one (the folders exchanged in one step), never a mixture.
         let seen = visible(&out);
-        assert!(seen == old || seen == new, "trial {k}: a mixture of old and new outputs");
+        assert!(
+            seen == old || seen == new,
+            "trial {k}: a mixture of old and new outputs"
+        );
         drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
         let after = bytes_of(&out);
         let parent: Vec<String> = std::fs::read_dir(ws.path())
@@ -178,7 +181,10 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .filter(|n| n.contains(".robotid-next-"))
             .collect();
-        assert!(parent.is_empty(), "trial {k}: a killed commit's folder stayed: {parent:?}");
+        assert!(
+            parent.is_empty(),
+            "trial {k}: a killed commit's folder stayed: {parent:?}"
+        );
         assert_eq!(after, seen, "trial {k}: the next run's start changed what was visible");
         if after == old {
             as_old += 1;

@@ -221,3 +221,46 @@ fn a_least_squares_estimate_is_not_exported() {
     assert!(err.contains("--physical"), "{err}");
     assert!(!out.join("identified.urdf").exists() && !out.join("identified.xml").exists());
 }
+
+/// A physical estimate whose table says a link's ixx is 1e30 (written with
+/// a valid checksum, as a tool editing it would): export refuses it, naming
+/// the link and the value, and writes nothing (it wrote a URDF breaking
+/// the triangle inequality).
+#[test]
+fn an_impossible_body_is_not_exported() {
+    use robotid_schemas::metadata::PHYSICAL_STANDARD;
+    use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+    let ws = workspace(&["ur5"]);
+    let out = ur5_identified(ws.path(), true);
+    let batch = read_parquet(&out.join("parameters.parquet")).unwrap();
+    let mut md = batch.schema().metadata().clone();
+    let mut standard: Vec<f64> = serde_json::from_str(&md[PHYSICAL_STANDARD]).unwrap();
+    standard[0] = 1e30; // XX of the first link
+    md.insert(PHYSICAL_STANDARD.to_string(), serde_json::to_string(&standard).unwrap());
+    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
+    let edited = out.join("edited.parquet");
+    let batch = arrow::array::RecordBatch::try_new(schema, batch.columns().to_vec()).unwrap();
+    write_parquet(&edited, &batch).unwrap();
+    let stem = out.join("identified");
+    let o = robotid(&[
+        "export",
+        "--robot",
+        &ws.path().join("robots/ur5.toml").display().to_string(),
+        "-p",
+        &edited.display().to_string(),
+        "--format",
+        "urdf,mjcf,sidecar",
+        "-o",
+        &stem.display().to_string(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "exit 0: {err}");
+    assert!(err.contains("1e30") && err.contains("shoulder"), "{err}");
+    let written: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("identified"))
+        .map(|e| e.file_name())
+        .collect();
+    assert!(written.is_empty(), "{written:?}");
+}
