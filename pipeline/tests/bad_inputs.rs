@@ -224,6 +224,75 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         ],
         says: vec!["spike.csv".into(), "q_a3".into(), "1500".into(), "spike".into()],
     });
+    // A repeated stamp (a message logged twice) ran to NaN torques under
+    // identify, a header without rows panicked there: both refused at the
+    // read, under run and identify.
+    let mut repeated = seconds.clone();
+    repeated.insert(1000, seconds[1000].clone());
+    std::fs::write(
+        csv.join("repeat.csv"),
+        format!("time,q_a3,torque_a3\n{}\n", repeated.join("\n")),
+    )
+    .unwrap();
+    std::fs::write(csv.join("header.csv"), "time,q_a3,torque_a3\n").unwrap();
+    for (name, log, says) in [
+        (
+            "a repeated timestamp",
+            "repeat",
+            vec!["repeat.csv", "sample 1001", "repeats"],
+        ),
+        ("a header without rows", "header", vec!["header.csv", "0 sample"]),
+    ] {
+        cases.push(Case {
+            name,
+            args: vec![
+                "run".into(),
+                s(&text_pipeline(log, &format!("{log}.csv"))),
+                "--out".into(),
+                s(&out),
+            ],
+            says: says.iter().map(|x| x.to_string()).collect(),
+        });
+        cases.push(Case {
+            name,
+            args: vec![
+                "identify".into(),
+                s(&csv.join(format!("{log}.csv"))),
+                "--robot".into(),
+                s(&robot),
+                "--out".into(),
+                s(&w.join("identified")),
+            ],
+            says: says.iter().map(|x| x.to_string()).collect(),
+        });
+    }
+    // Drive gains stated for channels that are torques were dropped
+    // without a word (the user believes them currents).
+    let clean: Vec<String> = (0..3000)
+        .map(|k| {
+            let t = k as f64 / 150.0;
+            format!("{t},{},{}", 0.3 * (0.6283 * t).sin(), 100.0 * (0.6283 * t).cos())
+        })
+        .collect();
+    std::fs::write(
+        csv.join("torque.csv"),
+        format!("time,q_a3,torque_a3_Nm\n{}\n", clean.join("\n")),
+    )
+    .unwrap();
+    cases.push(Case {
+        name: "gains for torque channels",
+        args: vec![
+            "identify".into(),
+            s(&csv.join("torque.csv")),
+            "--robot".into(),
+            s(&robot),
+            "--torque-per-amp".into(),
+            "2.5".into(),
+            "--out".into(),
+            s(&w.join("identified")),
+        ],
+        says: vec!["torque.csv".into(), "torque_per_amp".into(), "N*m".into()],
+    });
     // Settings that ran to wrong numbers (round 3): an inverse filter
     // undone beyond Nyquist (a 150 Hz log), a harmonic past the period's
     // lines, an infinite jitter.

@@ -39,7 +39,7 @@ pub struct Args {
     /// The drives' joint torque per ampere, N·m/A (one per joint, or one
     /// for all), for logs whose effort channels are motor currents and a
     /// robot file that declares no drives.
-    #[arg(long, value_delimiter = ',', num_args = 1..)]
+    #[arg(long, value_delimiter = ',', num_args = 1.., allow_negative_numbers = true)]
     pub torque_per_amp: Vec<f64>,
 }
 

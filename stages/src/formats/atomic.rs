@@ -19,7 +19,11 @@ pub fn write_atomic(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> Resu
     })?;
     let tmp = dir.join(format!(".{}.tmp-{}", name.to_string_lossy(), std::process::id()));
     let result = (|| {
-        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        // The folder missing, said of the folder (not of the hidden file).
+        let file = File::create(&tmp).map_err(|e| match dir.is_dir() {
+            true => Error::io(&tmp, e),
+            false => Error::io(dir, e),
+        })?;
         let mut w = BufWriter::new(file);
         fill(&mut w)?;
         w.flush().map_err(|e| Error::io(&tmp, e))?;

@@ -479,6 +479,18 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         };
         md.insert(metadata::READ_NOTES.into(), all);
     }
+    // Gains stated for torques would be dropped without a word: the user
+    // thinks the channels are currents.
+    if cfg.torque_per_amp.is_some() && matches!(unit_scale("effort", &effort_unit), Ok(Scale::Factor(_))) {
+        return Err(data_err(
+            "effort",
+            None,
+            format!(
+                "`torque_per_amp` is given, but the effort channels ({}) are in {effort_unit}, a torque: the gains would not be used. Drop them, or say the channels are currents (`unit = \"A\"`)",
+                names[1].first().map(String::as_str).unwrap_or("?")
+            ),
+        ));
+    }
     convert("effort", &effort_unit, &mut effort)?;
     if let Some(r) = &mut reference {
         convert("reference", &unit(&cfg.reference, "rad"), r)?;
@@ -492,6 +504,7 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         }
     }
     check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
+    check_increasing(&source, &time)?;
     check_rate(&source, &time)?;
     check_finite(&source, &position, &names[0])?;
     if let Some(m) = model {
@@ -715,6 +728,34 @@ fn check_speeds(source: &str, time: &[f64], q: &[Vec<f64>], names: &[String]) ->
 /// No arm is logged this slowly (Hz): stamps in ms or µs read as seconds
 /// are (a 500 Hz log in ms reads as 0.5 Hz).
 pub const MIN_RATE_HZ: f64 = 2.0;
+
+/// Every stage after the read takes the stamps as strictly increasing (a
+/// repeated stamp is a zero step, a division by zero downstream): a log
+/// with fewer than two samples, or whose stamps repeat or go back, is
+/// refused at the first such sample.
+fn check_increasing(source: &str, time: &[f64]) -> Result<()> {
+    let err = |sample: Option<usize>, msg: String| Error::Data {
+        source_name: source.to_string(),
+        channel: "time".into(),
+        sample,
+        msg,
+    };
+    if time.len() < 2 {
+        return Err(err(None, format!("{} sample(s): nothing to identify from", time.len())));
+    }
+    match time.windows(2).position(|w| !(w[1] > w[0])) {
+        Some(k) => Err(err(
+            Some(k + 1),
+            format!(
+                "timestamps must increase: {} s {} {} s (a message logged twice, or out of order: drop the repeat or sort the log by time)",
+                time[k + 1],
+                if time[k + 1] == time[k] { "repeats" } else { "follows" },
+                time[k]
+            ),
+        )),
+        None => Ok(()),
+    }
+}
 
 /// Stamps whose median step is over 1/[`MIN_RATE_HZ`] s, refused at the
 /// first such step.
