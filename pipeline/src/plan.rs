@@ -404,7 +404,10 @@ pub fn check_chain(plan: &Plan, model: Option<&Model>, start: Product, provenanc
             provenance,
             stages: &names,
         };
-        for p in s.lint(&ctx) {
+        // A robot that failed to load is reported once, by the caller, not
+        // again by every stage that needs it.
+        let robot_failed = plan.robot.is_some() && model.is_none();
+        for p in s.lint(&ctx).into_iter().filter(|p| !(robot_failed && p.needs_robot)) {
             problems.push(at(plan.place(i, &p.key), p.message));
         }
         if let Some(a) = s.makes() {
@@ -524,14 +527,7 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
             None
         };
     }
-    // A robot that failed to load is reported once, above, not again by every stage that needs it.
-    let robot_failed = plan.robot.is_some() && model.is_none();
-    for p in check_chain(plan, model.as_ref(), start, provenance) {
-        if robot_failed && p.message.contains("needs the robot") {
-            continue;
-        }
-        problems.push(p);
-    }
+    problems.extend(check_chain(plan, model.as_ref(), start, provenance));
     if problems.is_empty() {
         Ok(Resolved { model, logs, start })
     } else {

@@ -260,7 +260,14 @@ pub fn tables_of(
                 m.metadata = with(&m.metadata);
                 m.to_record_batch()?
             }
-            TableKind::Kinematics | TableKind::Parameters => {
+            TableKind::Parameters => {
+                return Err(robotid_stages::Error::setting(
+                    "output.tables",
+                    "a table made per recording (parameters come from the estimate, over all recordings)",
+                    "parameters",
+                ))
+            }
+            TableKind::Kinematics => {
                 let mut m = chain.kinematics()?.clone();
                 m.metadata = with(&m.metadata);
                 m.to_record_batch()?

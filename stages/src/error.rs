@@ -146,6 +146,9 @@ pub struct Problem {
     /// The key, e.g. `harmonics`, or `` for the stage as a whole.
     pub key: String,
     pub message: String,
+    /// The setting needs the robot file: not said again when the file was
+    /// given but failed to load (that is reported once, on its own).
+    pub needs_robot: bool,
 }
 
 impl std::fmt::Display for Problem {
@@ -168,6 +171,7 @@ impl Problem {
                 format!("{parent}.{}", self.key)
             },
             message: self.message,
+            needs_robot: self.needs_robot,
         }
     }
 
@@ -175,6 +179,15 @@ impl Problem {
         Problem {
             key: key.into(),
             message: message.into(),
+            needs_robot: false,
+        }
+    }
+
+    /// A setting that needs the robot file, which the pipeline lacks.
+    pub fn needs_robot(key: impl Into<String>, message: impl Into<String>) -> Problem {
+        Problem {
+            needs_robot: true,
+            ..Problem::new(key, message)
         }
     }
 }

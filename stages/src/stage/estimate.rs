@@ -205,7 +205,7 @@ impl Component for EstimateConfig {
             }
         }
         if self.physical && ctx.model.is_none() {
-            out.push(Problem::new("physical", "needs the robot: set `robot`"));
+            out.push(Problem::needs_robot("physical", "needs the robot: set `robot`"));
         }
         out
     }

@@ -153,7 +153,10 @@ impl Component for RegressorConfig {
                     out.push(Problem::new("", e.to_string()));
                 }
             }
-            None => out.push(Problem::new("", "needs the robot: set `robot` at the top of the file")),
+            None => out.push(Problem::needs_robot(
+                "",
+                "needs the robot: set `robot` at the top of the file",
+            )),
         }
         if let Some(b) = self.band_limit_hz.filter(|b| !(*b > 0.0 && b.is_finite())) {
             out.push(Problem::new(
