@@ -12,13 +12,13 @@ use std::path::{Path, PathBuf};
 use robotid_schemas::{metadata, RawSamples, TableKind};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::dynamics::{FrictionTerms, ModelKind};
+use robotid_stages::signal::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::signal::{FilterFamily, FilterSpec};
 use robotid_stages::stage::align::AlignConfig;
 use robotid_stages::stage::average::AverageConfig;
 use robotid_stages::stage::differentiate::{DifferentiateConfig, Differentiation};
 use robotid_stages::stage::inverse_filter::InverseFilterConfig;
 use robotid_stages::stage::noise::NoiseConfig;
-use robotid_stages::stage::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, ReadConfig};
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::stage::Chain;
@@ -487,7 +487,7 @@ pub fn design_with(
     let mut per_joint = Vec::new();
     let mut sets = Vec::new();
     let lines: Vec<_> = excitation.iter().map(|c| excited_lines(c)).collect();
-    let peak = |l: &robotid_stages::stage::period::Lines| l.amplitude.iter().copied().fold(0.0, f64::max);
+    let peak = |l: &robotid_stages::signal::period::Lines| l.amplitude.iter().copied().fold(0.0, f64::max);
     let widest = lines.iter().map(peak).fold(0.0, f64::max);
     let mut held = Vec::new();
     for (j, l) in lines.into_iter().enumerate() {

@@ -190,8 +190,9 @@ fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> 
             !(rel.components().count() == 1 && control.iter().any(|c| rel == Path::new(c)))
         })
         && link_tree(target, &next, &mut |rel| {
-            let name = rel.to_string_lossy();
-            !(rel.components().count() == 1 && name.starts_with(STAGING)) && !drop.iter().any(|d| Path::new(d) == rel)
+            let staging = rel.components().count() == 1 && rel.to_string_lossy().starts_with(STAGING);
+            let dropped = drop.iter().any(|d| Path::new(d) == rel);
+            !staging && !dropped
         })
         && std::fs::metadata(target).is_ok_and(|m| std::fs::set_permissions(&next, m.permissions()).is_ok())
         && rename_exchange(&next, target);

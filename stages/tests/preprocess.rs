@@ -575,7 +575,7 @@ fn filtered_differentiation_of_jittered_stamps() {
         "{notes:?}"
     );
     // The jittered result on the twin's times.
-    let on_twin = robotid_stages::stage::align::resample(&kin.time, &kin.qd[0], &twin.time);
+    let on_twin = robotid_stages::signal::resample::resample(&kin.time, &kin.qd[0], &twin.time);
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let inner = 200..twin.time.len() - 200;
     let diff: Vec<f64> = inner.clone().map(|k| on_twin[k] - twin.qd[0][k]).collect();
@@ -583,7 +583,7 @@ fn filtered_differentiation_of_jittered_stamps() {
     let resampled = rms(&diff) / scale;
     // As before: the jittered samples taken as uniform at the mean rate.
     let uniform = differentiate_record(&raw, 150.0, &AnalogFilter::new(lowpass).unwrap(), &Spectra::new());
-    let as_if = robotid_stages::stage::align::resample(&raw.time, &uniform.qd[0], &twin.time);
+    let as_if = robotid_stages::signal::resample::resample(&raw.time, &uniform.qd[0], &twin.time);
     let old: Vec<f64> = inner.map(|k| as_if[k] - twin.qd[0][k]).collect();
     let naive = rms(&old) / scale;
     println!("velocity error against the jitter-free twin: resampled {resampled:.2e}, as if uniform {naive:.2e}");

@@ -409,7 +409,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
                 .collect();
             let k = (0..GRID).min_by(|&a, &b| grid[a].total_cmp(&grid[b])).expect("a grid");
             let (a, b) = (lo + step * (k as f64 - 1.0), lo + step * (k as f64 + 1.0));
-            let x = crate::stage::period::golden(|x| eval(spec(shape, (x - 20.0).exp())), a, b, 1e-3);
+            let x = crate::signal::golden(|x| eval(spec(shape, (x - 20.0).exp())), a, b, 1e-3);
             let refined = eval(spec(shape, (x - 20.0).exp()));
             if refined <= grid[k] {
                 ((x - 20.0).exp(), refined)
@@ -472,7 +472,7 @@ fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(Filt
         .map(|(s, r)| {
             // u = ln(cutoff) + 20 stays positive for the relative tolerance.
             let u = s.cutoff_hz.ln() + 20.0;
-            let x = crate::stage::period::golden(|x| eval(with(s, x)), u - step, u + step, 1e-8);
+            let x = crate::signal::golden(|x| eval(with(s, x)), u - step, u + step, 1e-8);
             let refined = eval(with(s, x));
             if refined <= *r {
                 (with(s, x), refined)

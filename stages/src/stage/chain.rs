@@ -377,12 +377,12 @@ impl Chain {
         }
         let m = ((t[t.len() - 1] - t0) * fs + 1e-9).floor() as usize + 1;
         let grid: Vec<f64> = (0..m).map(|k| t0 + k as f64 * dt).collect();
-        let error = crate::stage::align::leave_one_out_error(t, &raw.q);
+        let error = crate::signal::resample::leave_one_out_error(t, &raw.q);
         let (steps_min, steps_max) = t
             .windows(2)
             .map(|w| w[1] - w[0])
             .fold((f64::MAX, 0.0f64), |(a, b), s| (a.min(s), b.max(s)));
-        let res = |c: &mut Vec<f64>, t: &[f64]| *c = crate::stage::align::resample(t, c, &grid);
+        let res = |c: &mut Vec<f64>, t: &[f64]| *c = crate::signal::resample::resample(t, c, &grid);
         let time = raw.time.clone();
         raw.q.iter_mut().for_each(|c| res(c, &time));
         raw.effort.iter_mut().for_each(|c| res(c, &time));

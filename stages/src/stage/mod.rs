@@ -21,7 +21,6 @@ pub mod differentiate;
 pub mod estimate;
 pub mod inverse_filter;
 pub mod noise;
-pub mod period;
 pub mod read;
 pub mod regressor;
 

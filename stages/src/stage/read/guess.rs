@@ -131,9 +131,20 @@ fn template(names: &[String], joints: &[String]) -> Column {
     Column::Each(names.iter().cloned().map(OneColumn::Name).collect())
 }
 
+/// The channel a header does not name (with the joints it was looked for).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NoColumn {
+    #[error("no time column (time, time_s, t, timestamp, stamp, time_ns, …)")]
+    Time,
+    #[error("no position column for each of the joints {0} (q_<joint>, q<number>, pos…, counts…)")]
+    Position(String),
+    #[error("no effort column for each of the joints {0} (tau…, torque…, effort…, current…)")]
+    Effort(String),
+}
+
 /// The read settings for a log whose columns are `header`, or what could
 /// not be found.
-pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, String> {
+pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, NoColumn> {
     let time = TIME
         .iter()
         .find_map(|&(n, unit)| {
@@ -144,21 +155,11 @@ pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, St
                 unit: Some(unit.to_string()),
             })
         })
-        .ok_or("no time column (time, time_s, t, timestamp, stamp, time_ns, …)")?;
+        .ok_or(NoColumn::Time)?;
     let position = channel(header, joints, POSITION)
         .or_else(|| channel(header, joints, COUNTS))
-        .ok_or_else(|| {
-            format!(
-                "no position column for each of the joints {} (q_<joint>, q<number>, pos…, counts…)",
-                joints.join(", ")
-            )
-        })?;
-    let effort = channel(header, joints, EFFORT).ok_or_else(|| {
-        format!(
-            "no effort column for each of the joints {} (tau…, torque…, effort…, current…)",
-            joints.join(", ")
-        )
-    })?;
+        .ok_or_else(|| NoColumn::Position(joints.join(", ")))?;
+    let effort = channel(header, joints, EFFORT).ok_or_else(|| NoColumn::Effort(joints.join(", ")))?;
     Ok(ReadConfig {
         time: Some(time),
         position: Some(position),
@@ -304,6 +305,6 @@ mod tests {
             (Some(Column::Name("{joint}_effort_Nm".into())), Some("N*m"))
         );
         let e = guess_read(&cols("t,pos0,pos1,x,y"), &joints).unwrap_err();
-        assert!(e.contains("no effort column"), "{e}");
+        assert_eq!(e, NoColumn::Effort("shoulder, elbow".into()));
     }
 }

@@ -172,14 +172,14 @@ type Raw<'a> = (u8, &'a [u8], &'a [u8]);
 /// The records laid end to end in `buf`, each bounded by it: a length that
 /// runs past the end is an error, never an allocation (a reader that took a
 /// fuzzed chunk's record length at its word asked for 352 GB and aborted).
-fn records(mut buf: &[u8]) -> impl Iterator<Item = std::result::Result<Raw<'_>, String>> {
+fn records(mut buf: &[u8]) -> impl Iterator<Item = std::result::Result<Raw<'_>, Corrupt>> {
     std::iter::from_fn(move || {
         if buf.is_empty() {
             return None;
         }
         let all = std::mem::take(&mut buf);
         let Some((head, rest)) = all.split_at_checked(9) else {
-            return Some(Err(format!("a record's header cut short ({} bytes left)", all.len())));
+            return Some(Err(Corrupt::HeaderCut(all.len())));
         };
         let (op, len) = (head[0], u64::from_le_bytes(head[1..].try_into().expect("8 bytes")));
         match usize::try_from(len).ok().filter(|&n| n <= rest.len()) {
@@ -187,10 +187,11 @@ fn records(mut buf: &[u8]) -> impl Iterator<Item = std::result::Result<Raw<'_>, 
                 buf = &rest[n..];
                 Some(Ok((op, &rest[..n], &all[..9 + n])))
             }
-            None => Some(Err(format!(
-                "a record (opcode {op:#04x}) declares {len} bytes where {} are left",
-                rest.len()
-            ))),
+            None => Some(Err(Corrupt::RecordCut {
+                op,
+                len,
+                left: rest.len(),
+            })),
         }
     })
 }
@@ -203,7 +204,7 @@ fn unchunk<'a>(
     data: &'a [u8],
     mut out: Vec<u8>,
     zstd: &mut Option<zstd::bulk::Decompressor<'static>>,
-) -> std::result::Result<Cow<'a, [u8]>, String> {
+) -> std::result::Result<Cow<'a, [u8]>, Corrupt> {
     use std::io::Read;
     let declared = header.uncompressed_size as usize; // bounded by `check_chunk`
     out.clear();
@@ -212,39 +213,70 @@ fn unchunk<'a>(
         "zstd" => {
             let z = match zstd {
                 Some(z) => z,
-                None => zstd.insert(zstd::bulk::Decompressor::new().map_err(|e| e.to_string())?),
+                None => zstd.insert(zstd::bulk::Decompressor::new().map_err(Corrupt::Zstd)?),
             };
             out.reserve(declared);
-            z.decompress_to_buffer(data, &mut out)
-                .map_err(|e| format!("zstd: {e}"))?;
+            z.decompress_to_buffer(data, &mut out).map_err(Corrupt::Zstd)?;
             out.into()
         }
         "lz4" => {
             out.reserve(declared);
-            let decoder = lz4::Decoder::new(data).map_err(|e| format!("lz4: {e}"))?;
+            let decoder = lz4::Decoder::new(data).map_err(Corrupt::Lz4)?;
             decoder
                 .take(declared as u64 + 1)
                 .read_to_end(&mut out)
-                .map_err(|e| format!("lz4: {e}"))?;
+                .map_err(Corrupt::Lz4)?;
             out.into()
         }
-        other => return Err(format!("chunk compression `{other}` is not read (zstd, lz4 or none)")),
+        other => return Err(Corrupt::Compression(other.to_string())),
     };
     if out.len() != declared {
-        return Err(format!(
-            "a chunk declares {declared} bytes uncompressed and holds {}",
-            out.len()
-        ));
+        return Err(Corrupt::Length {
+            declared,
+            held: out.len(),
+        });
     }
     if header.uncompressed_crc != 0 && crc32fast::hash(&out) != header.uncompressed_crc {
-        return Err("a chunk's records do not match its CRC".into());
+        return Err(Corrupt::Crc);
     }
     Ok(out)
 }
 
+/// What is wrong inside an MCAP file's records.
+#[derive(Debug, thiserror::Error)]
+enum Corrupt {
+    #[error("a record's header cut short ({0} bytes left)")]
+    HeaderCut(usize),
+    #[error("a record (opcode {op:#04x}) declares {len} bytes where {left} are left")]
+    RecordCut { op: u8, len: u64, left: usize },
+    #[error("zstd: {0}")]
+    Zstd(#[source] std::io::Error),
+    #[error("lz4: {0}")]
+    Lz4(#[source] std::io::Error),
+    #[error("chunk compression `{0}` is not read (zstd, lz4 or none)")]
+    Compression(String),
+    #[error("a chunk declares {declared} bytes uncompressed and holds {held}")]
+    Length { declared: usize, held: usize },
+    #[error("a chunk's records do not match its CRC")]
+    Crc,
+    #[error("an unreadable chunk header")]
+    ChunkHeader,
+    #[error("{0}")]
+    Mcap(#[source] mcap::McapError),
+    #[error(
+        "corrupt: a chunk of {stored} bytes ({how}) declares {declared} bytes uncompressed (at most {bound} here)"
+    )]
+    Oversize {
+        stored: u64,
+        how: String,
+        declared: u64,
+        bound: u64,
+    },
+}
+
 /// A chunk's declared size is what its records are decompressed into: a
 /// corrupt one could ask for terabytes. Bounded by what the data can hold.
-fn check_chunk(header: &mcap::records::ChunkHeader, stored: usize) -> std::result::Result<(), String> {
+fn check_chunk(header: &mcap::records::ChunkHeader, stored: usize) -> std::result::Result<(), Corrupt> {
     let (declared, stored) = (header.uncompressed_size, stored as u64);
     let bound = if header.compression.is_empty() {
         stored
@@ -257,9 +289,12 @@ fn check_chunk(header: &mcap::records::ChunkHeader, stored: usize) -> std::resul
         } else {
             header.compression.as_str()
         };
-        return Err(format!(
-            "corrupt: a chunk of {stored} bytes ({how}) declares {declared} bytes uncompressed (at most {bound} here)"
-        ));
+        return Err(Corrupt::Oversize {
+            stored,
+            how: how.to_string(),
+            declared,
+            bound,
+        });
     }
     Ok(())
 }
@@ -313,7 +348,7 @@ fn for_each_message<'m>(
         messages: usize,
     }
     let mut by_id: Vec<Seen> = Vec::new();
-    let corrupt = |count: usize, e: String| fmt(format!("corrupt or truncated after {count} messages: {e}"));
+    let corrupt = |count: usize, e: Corrupt| fmt(format!("corrupt or truncated after {count} messages: {e}"));
     // One record of the data section or of a chunk: schemas and channels
     // recorded, messages passed to `f`.
     let mut take = |opcode: u8, body: &[u8], count: &mut usize| -> Result<()> {
@@ -370,7 +405,7 @@ fn for_each_message<'m>(
             }
             _ => Ok(()),
         };
-        step.map_err(|e| corrupt(*count, e.to_string()))
+        step.map_err(|e| corrupt(*count, Corrupt::Mcap(e)))
     };
     // In file order, what holds records: chunks (decompressed on the pool)
     // and records outside chunks (as they are). `waiting` is decompressed
@@ -380,7 +415,7 @@ fn for_each_message<'m>(
     let mut chunks_waiting = 0;
     let mut ready = Vec::new();
     let mut buffers: Vec<Vec<u8>> = Vec::new();
-    type Held<'a> = std::result::Result<Cow<'a, [u8]>, String>;
+    type Held<'a> = std::result::Result<Cow<'a, [u8]>, Corrupt>;
     let mut step = |waiting: &mut Vec<Holder<'m>>, ready: &mut Vec<Held<'m>>, count: &mut usize| -> Result<()> {
         let mut next = Vec::new();
         let spare = buffers.len().saturating_sub(waiting.len());
@@ -428,9 +463,9 @@ fn for_each_message<'m>(
                     data: Cow::Borrowed(data),
                 }) = mcap::parse_record(opcode, body)
                 else {
-                    return Err(corrupt(count, "an unreadable chunk header".into()));
+                    return Err(corrupt(count, Corrupt::ChunkHeader));
                 };
-                check_chunk(&header, data.len()).map_err(fmt)?;
+                check_chunk(&header, data.len()).map_err(|e| fmt(e.to_string()))?;
                 waiting.push(Holder::Chunk(header, data));
                 chunks_waiting += 1;
             }
@@ -444,7 +479,7 @@ fn for_each_message<'m>(
                     }
                 }
                 Ok(_) => {}
-                Err(e) => return Err(corrupt(count, e.to_string())),
+                Err(e) => return Err(corrupt(count, Corrupt::Mcap(e))),
             },
             op::DATA_END => break,
             _ => {}

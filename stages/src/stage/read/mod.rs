@@ -11,7 +11,7 @@ mod mcap;
 mod parquet;
 mod text;
 
-pub use guess::{guess_read, headerless_layouts};
+pub use guess::{guess_read, headerless_layouts, NoColumn};
 
 use std::path::Path;
 

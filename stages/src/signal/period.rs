@@ -13,7 +13,8 @@
 
 use realfft::RealFftPlanner;
 
-use super::align::resample;
+use super::golden;
+use super::resample::resample;
 
 /// An inferred period, its standard uncertainty, and the number of periods
 /// in the record.
@@ -24,20 +25,41 @@ pub struct PeriodEstimate {
     pub cycles: f64,
 }
 
+/// Why no period was found in a record.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoPeriod {
+    #[error("{0} samples are too few to find a period")]
+    TooFewSamples(usize),
+    #[error("the stamps do not increase")]
+    StampsDoNotIncrease,
+    #[error("no joint moves")]
+    NoJointMoves,
+    #[error("the record ({span_s:.3} s) holds less than {periods} periods of the {period_s:.3} s it repeats with")]
+    TooShort { span_s: f64, periods: f64, period_s: f64 },
+    #[error("the best candidate, {period_s:.6} s, is uncertain (± {std_s:.1e} s): the periods of the record differ too much")]
+    Uncertain { period_s: f64, std_s: f64 },
+    #[error("not periodic: shifted by the best candidate, {period_s:.4} s, the positions still differ by {percent:.1} % of their spread")]
+    Mismatch { period_s: f64, percent: f64 },
+    #[error("the positions never decorrelate: no period in the record")]
+    NeverDecorrelates,
+    #[error("not periodic: the positions' autocorrelation never comes back above {best:.2} (a periodic record comes back near 1)")]
+    NoReturn { best: f64 },
+}
+
 /// The period of `q` (per joint, sampled at `t`, seconds), or why there is
 /// none: the record is not periodic, or holds less than `MIN_CYCLES`
 /// periods.
-pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String> {
+pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
     let n = t.len();
     if n < 16 {
-        return Err(format!("{n} samples are too few to find a period"));
+        return Err(NoPeriod::TooFewSamples(n));
     }
     let span = t[n - 1] - t[0];
     let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
     steps.sort_by(f64::total_cmp);
     let dt = steps[steps.len() / 2];
     if !(dt > 0.0) {
-        return Err("the stamps do not increase".into());
+        return Err(NoPeriod::StampsDoNotIncrease);
     }
     // Uniform grid and normalised channels (joints that do not move carry
     // nothing about the period).
@@ -63,7 +85,7 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
             .collect(),
     );
     if x.x.is_empty() {
-        return Err("no joint moves".into());
+        return Err(NoPeriod::NoJointMoves);
     }
     // Periods up to half the record first, compared past a start-up
     // transient; a lab's 1.5 periods between ramps only repeat at a longer
@@ -79,10 +101,11 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
                 ..p
             })
         }
-        Ok(p) => format!(
-            "the record ({span:.3} s) holds less than two periods of the {:.3} s it repeats with",
-            p.period_s
-        ),
+        Ok(p) => NoPeriod::TooShort {
+            span_s: span,
+            periods: 2.0,
+            period_s: p.period_s,
+        },
         Err(e) => e,
     };
     let second = coarse_period(&x.x, dt, 0.8)
@@ -94,10 +117,11 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, String>
             cycles: span / p.period_s,
             ..p
         }),
-        Ok(p) if span < MIN_CYCLES * p.period_s => Err(format!(
-            "the record ({span:.3} s) holds less than {MIN_CYCLES} periods of the {:.3} s it repeats with",
-            p.period_s
-        )),
+        Ok(p) if span < MIN_CYCLES * p.period_s => Err(NoPeriod::TooShort {
+            span_s: span,
+            periods: MIN_CYCLES,
+            period_s: p.period_s,
+        }),
         _ => Err(e),
     }
 }
@@ -113,7 +137,7 @@ fn refine(
     all @ (start, end): (usize, usize),
     scan: f64,
     keep: f64,
-) -> Result<PeriodEstimate, String> {
+) -> Result<PeriodEstimate, NoPeriod> {
     let m = grid.len();
     // Every comparison below over the best `keep` of its windows.
     let mismatch =
@@ -191,12 +215,12 @@ fn accept(
     grid: &[f64],
     dt: f64,
     (p, range): (PeriodEstimate, (usize, usize)),
-) -> Result<PeriodEstimate, String> {
+) -> Result<PeriodEstimate, NoPeriod> {
     if !(p.std_s < 1e-3 * p.period_s) {
-        return Err(format!(
-            "the best candidate, {:.6} s, is uncertain (± {:.1e} s): the periods of the record differ too much",
-            p.period_s, p.std_s
-        ));
+        return Err(NoPeriod::Uncertain {
+            period_s: p.period_s,
+            std_s: p.std_s,
+        });
     }
     check(x, grid, dt, p.period_s, range)?;
     Ok(p)
@@ -253,7 +277,7 @@ fn settle(
     dt: f64,
     p: PeriodEstimate,
     range: (usize, usize),
-) -> Result<(PeriodEstimate, (usize, usize)), String> {
+) -> Result<(PeriodEstimate, (usize, usize)), NoPeriod> {
     // The stretch found at a period off by the ramps' bias is itself a
     // little off: found again at the refined period, until it holds.
     let (mut p, mut range, mut scan) = (p, range, 0.05);
@@ -272,16 +296,16 @@ pub const MIN_CYCLES: f64 = 1.25;
 
 /// `period` if the channels match themselves one period on (from grid
 /// points `range`) far better than half a period on, as periodic ones do.
-fn check(x: &Channels, grid: &[f64], dt: f64, period: f64, range: (usize, usize)) -> Result<f64, String> {
+fn check(x: &Channels, grid: &[f64], dt: f64, period: f64, range: (usize, usize)) -> Result<f64, NoPeriod> {
     let d0 = mismatch(x, grid, dt, range, period);
     let half = mismatch(x, grid, dt, range, 0.5 * period);
     if d0 < 0.05 * half {
         Ok(period)
     } else {
-        Err(format!(
-            "not periodic: shifted by the best candidate, {period:.4} s, the positions still differ by {:.1} % of their spread",
-            100.0 * (d0 / 2.0).sqrt()
-        ))
+        Err(NoPeriod::Mismatch {
+            period_s: period,
+            percent: 100.0 * (d0 / 2.0).sqrt(),
+        })
     }
 }
 
@@ -379,7 +403,7 @@ pub fn power_band_hz(x: &[Vec<f64>], fs: f64, fraction: f64) -> f64 {
 /// The period to a grid step: the first autocorrelation peak within 10 %
 /// of the largest one, past the central lobe, at lags up to `reach` of
 /// the record.
-fn coarse_period(x: &[Vec<f64>], dt: f64, reach: f64) -> Result<f64, String> {
+fn coarse_period(x: &[Vec<f64>], dt: f64, reach: f64) -> Result<f64, NoPeriod> {
     let m = x[0].len();
     // At most 2¹⁶ points: decimated (the period is refined afterwards).
     let step = m.div_ceil(1 << 16);
@@ -395,24 +419,22 @@ fn coarse_period(x: &[Vec<f64>], dt: f64, reach: f64) -> Result<f64, String> {
         for (b, v) in buf.iter_mut().zip(c.iter().step_by(step)) {
             *b = *v;
         }
-        fwd.process(&mut buf, &mut spec).map_err(|e| e.to_string())?;
+        // Buffers of the plans' own sizes: the transforms cannot fail.
+        fwd.process(&mut buf, &mut spec).expect("sized by the plan");
         spec.iter_mut().for_each(|s| *s *= s.conj());
-        inv.process(&mut spec, &mut buf).map_err(|e| e.to_string())?;
+        // The inverse only fails on a DC or Nyquist line with an imaginary
+        // part, which |X|² has not.
+        inv.process(&mut spec, &mut buf).expect("a real power spectrum");
         acf.iter_mut().zip(&buf).for_each(|(a, b)| *a += b);
     }
     // Unbiased: each lag's sum over its overlap.
     let r: Vec<f64> = (0..(reach * len as f64) as usize)
         .map(|l| acf[l] / (len - l) as f64 / acf[0] * len as f64)
         .collect();
-    let first_dip = r
-        .iter()
-        .position(|&v| v < 0.0)
-        .ok_or("the positions never decorrelate: no period in the record")?;
+    let first_dip = r.iter().position(|&v| v < 0.0).ok_or(NoPeriod::NeverDecorrelates)?;
     let best = r[first_dip..].iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     if !(best > 0.5) {
-        return Err(format!(
-            "not periodic: the positions' autocorrelation never comes back above {best:.2} (a periodic record comes back near 1)"
-        ));
+        return Err(NoPeriod::NoReturn { best });
     }
     let mut lag = (first_dip..r.len())
         .find(|&l| r[l] >= 0.9 * best)
@@ -507,26 +529,6 @@ impl Channels {
             .collect();
         Channels { x, slope }
     }
-}
-
-/// The minimum of a unimodal `f` on [a, b], by golden section until the
-/// interval is `rel` of its midpoint; one evaluation per step.
-pub fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, rel: f64) -> f64 {
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut fc, mut fd) = (f(c), f(d));
-    while (b - a).abs() > rel * (0.5 * (a + b)).abs() {
-        if fc < fd {
-            (b, d, fd) = (d, c, fc);
-            c = b - g * (b - a);
-            fc = f(c);
-        } else {
-            (a, c, fc) = (c, d, fd);
-            d = a + g * (b - a);
-            fd = f(d);
-        }
-    }
-    0.5 * (a + b)
 }
 
 #[cfg(test)]
@@ -689,7 +691,13 @@ mod tests {
             })
             .collect();
         let e = infer_period(&t, &[walk]).unwrap_err();
-        assert!(e.contains("not periodic") || e.contains("never decorrelate"), "{e}");
+        assert!(
+            matches!(
+                e,
+                NoPeriod::Mismatch { .. } | NoPeriod::NoReturn { .. } | NoPeriod::NeverDecorrelates
+            ),
+            "{e}"
+        );
         let ramp: Vec<f64> = t.iter().map(|&ti| 0.1 * ti).collect();
         assert!(infer_period(&t, &[ramp]).is_err());
     }
