@@ -18,7 +18,7 @@ pub mod validation;
 
 pub use error::{Error, Problems, Result};
 pub use pipeline::{Built, Pipeline, RunReport};
-pub use run::RunOptions;
+pub use run::{RecordingResult, RunOptions};
 
 // The pipeline-file documentation, whose Rust example is compiled and run
 // as a doc test.

@@ -63,6 +63,10 @@ pub struct RunReport {
     pub recordings: Vec<RecordingResult>,
     pub estimate: Option<Estimated>,
     pub parameters: Option<PathBuf>,
+    /// The run's report (with `opts.plot` and an estimate).
+    pub report: Option<PathBuf>,
+    /// What went wrong without failing the run (a report not written).
+    pub warnings: Vec<String>,
     pub seconds: f64,
 }
 
@@ -276,11 +280,18 @@ impl Built {
         Ok(chain)
     }
 
-    /// Every recording, then the estimate when the pipeline has one.
-    /// Tables go under `opts.out`, one folder per recording, all at once
-    /// when everything succeeded; when a recording fails nothing is written
-    /// (the report says which and why).
+    /// Every recording, then the estimate when the pipeline has one, and
+    /// with `opts.plot` the pictures and the run's report. Tables go under
+    /// `opts.out`, one folder per recording, all at once when everything
+    /// succeeded; when a recording fails nothing is written (the report
+    /// says which and why). The one run flow: the command line prints it.
     pub fn run(&self, opts: &RunOptions) -> Result<RunReport> {
+        self.run_observed(opts, |_| {})
+    }
+
+    /// [`Built::run`], with `recorded` shown every recording's result as
+    /// soon as all are through (before the estimate, which may fail).
+    pub fn run_observed(&self, opts: &RunOptions, recorded: impl FnOnce(&[RecordingResult])) -> Result<RunReport> {
         let started = Instant::now();
         let staging = crate::output::prepare(&opts.out, opts.plot.as_deref(), &self.logs)?;
         let staged = RunOptions {
@@ -289,17 +300,27 @@ impl Built {
             ..opts.clone()
         };
         let mut recordings = self.run_recordings(&staged);
+        recorded(&recordings);
         if recordings.iter().any(|r| r.outcome.is_err()) {
             // Nothing is written: the staging folder goes with `staging`.
             return Ok(RunReport {
                 recordings,
                 estimate: None,
                 parameters: None,
+                report: None,
+                warnings: Vec::new(),
                 seconds: started.elapsed().as_secs_f64(),
             });
         }
         let estimate = self.finish_run(&recordings, staging.staged_out())?;
         let placed = |p: &Path| crate::output::placed(p, &staging, opts);
+        let (mut report, mut warnings) = (None, Vec::new());
+        if let (Some((_, path)), Some(dir)) = (&estimate, staging.staged_plot()) {
+            match crate::report::write_run_report(path, &recordings, &dir) {
+                Ok(r) => report = Some(placed(&r)),
+                Err(e) => warnings.push(format!("no report: {e}")),
+            }
+        }
         let (estimate, parameters) = match estimate {
             Some((e, p)) => (Some(e), Some(placed(&p))),
             None => (None, None),
@@ -314,6 +335,8 @@ impl Built {
             recordings,
             estimate,
             parameters,
+            report,
+            warnings,
             seconds: started.elapsed().as_secs_f64(),
         })
     }

@@ -37,81 +37,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
     });
-    // Everything is written into a staging folder and appears at the end,
-    // or not at all (robotid::output).
-    let staging = robotid::output::prepare(&out, args.plot.as_deref(), &built.logs)?;
-    let final_opts = RunOptions {
-        out: out.clone(),
-        threads: args.threads,
-        progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
-        plot: args.plot.clone(),
-    };
-    let opts = RunOptions {
-        out: staging.staged_out().to_path_buf(),
-        plot: staging.staged_plot(),
-        ..final_opts.clone()
-    };
-    let placed = |p: &std::path::Path| robotid::output::placed(p, &staging, &final_opts);
-    let recordings = built.run_recordings(&opts);
-    println!(
-        "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
-        "recording", "samples", "periods", "dropped s", "jitter s", "var tau time", "var tau freq"
-    );
+    // Everything appears at the end, or not at all (robotid::output); the
+    // recordings are shown as soon as all are through.
     let mut failed = 0;
-    for r in &recordings {
-        match &r.outcome {
-            Ok(o) => {
-                let o = &o.report;
-                let torque: Vec<&ChannelNoise> = o.noise.iter().filter(|c| c.channel == "torque").collect();
-                let mean = |f: &dyn Fn(&ChannelNoise) -> f64| {
-                    if torque.is_empty() {
-                        "-".to_string()
-                    } else {
-                        format!("{:.3e}", torque.iter().map(|c| f(c)).sum::<f64>() / torque.len() as f64)
-                    }
-                };
-                println!(
-                    "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  ok",
-                    r.name,
-                    o.samples,
-                    match (o.periods_kept, o.periods_found) {
-                        (Some(k), Some(f)) => format!("{k}/{f}"),
-                        _ => "-".into(),
-                    },
-                    o.dropped_s.map_or("-".into(), |d| format!("{d:.3}")),
-                    o.jitter_rms_s.map_or("-".into(), |d| format!("{d:.1e}")),
-                    mean(&|c| c.var_time),
-                    mean(&|c| c.var_freq),
-                );
-                for n in &o.notes {
-                    println!("    note: {n}");
-                }
-                if args.timings {
-                    let t: Vec<String> = o
-                        .timings
-                        .iter()
-                        .map(|(s, d)| format!("{s} {:.1} ms", d * 1e3))
-                        .collect();
-                    println!("    timings: {}", t.join(", "));
-                }
-            }
-            Err(e) => {
-                failed += 1;
-                println!("{:<28} failed: {e}", r.name);
-            }
-        }
-    }
-    println!(
-        "{} of {} recording(s) done in {:.2} s; output folder {}",
-        recordings.len() - failed,
-        recordings.len(),
-        started.elapsed().as_secs_f64(),
-        out.display()
-    );
+    let run = built.run_observed(
+        &RunOptions {
+            out: out.clone(),
+            threads: args.threads,
+            progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            plot: args.plot.clone(),
+        },
+        |recordings| {
+            failed = print_recordings(recordings, args.timings);
+            println!(
+                "{} of {} recording(s) done in {:.2} s; output folder {}",
+                recordings.len() - failed,
+                recordings.len(),
+                started.elapsed().as_secs_f64(),
+                out.display()
+            );
+        },
+    )?;
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); nothing was written (a run's outputs appear together or not at all)");
     }
-    if let Some((est, path)) = built.finish_run(&recordings, staging.staged_out())? {
+    if let (Some(est), Some(path)) = (&run.estimate, &run.parameters) {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
         print!("{}", super::estimate::summary(&est.estimate, level));
         if let Some(fit) = &est.physical {
@@ -145,21 +95,74 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 -z
             );
         }
-        print!("{}", super::estimate::findings(&est));
+        print!("{}", super::estimate::findings(est));
         if !est.outliers.is_empty() {
             println!(
                 "warning: recording(s) {} fit the pooled estimate far worse than the others (over 3× their median residue): check them, or leave them out",
                 est.outliers.join(", ")
             );
         }
-        println!("parameters in {}", placed(&path).display());
-        if let Some(dir) = staging.staged_plot() {
-            match robotid::report::write_run_report(&path, &recordings, &dir) {
-                Ok(report) => println!("report in {}", placed(&report).display()),
-                Err(e) => eprintln!("warning: no report: {e}"),
+        println!("parameters in {}", path.display());
+        if let Some(report) = &run.report {
+            println!("report in {}", report.display());
+        }
+    }
+    for w in &run.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+/// The recordings' table (with their notes, and timings when asked); how
+/// many failed.
+fn print_recordings(recordings: &[robotid::RecordingResult], timings: bool) -> usize {
+    println!(
+        "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
+        "recording", "samples", "periods", "dropped s", "jitter s", "var tau time", "var tau freq"
+    );
+    let mut failed = 0;
+    for r in recordings {
+        match &r.outcome {
+            Ok(o) => {
+                let o = &o.report;
+                let torque: Vec<&ChannelNoise> = o.noise.iter().filter(|c| c.channel == "torque").collect();
+                let mean = |f: &dyn Fn(&ChannelNoise) -> f64| {
+                    if torque.is_empty() {
+                        "-".to_string()
+                    } else {
+                        format!("{:.3e}", torque.iter().map(|c| f(c)).sum::<f64>() / torque.len() as f64)
+                    }
+                };
+                println!(
+                    "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  ok",
+                    r.name,
+                    o.samples,
+                    match (o.periods_kept, o.periods_found) {
+                        (Some(k), Some(f)) => format!("{k}/{f}"),
+                        _ => "-".into(),
+                    },
+                    o.dropped_s.map_or("-".into(), |d| format!("{d:.3}")),
+                    o.jitter_rms_s.map_or("-".into(), |d| format!("{d:.1e}")),
+                    mean(&|c| c.var_time),
+                    mean(&|c| c.var_freq),
+                );
+                for n in &o.notes {
+                    println!("    note: {n}");
+                }
+                if timings {
+                    let t: Vec<String> = o
+                        .timings
+                        .iter()
+                        .map(|(s, d)| format!("{s} {:.1} ms", d * 1e3))
+                        .collect();
+                    println!("    timings: {}", t.join(", "));
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                println!("{:<28} failed: {e}", r.name);
             }
         }
     }
-    staging.commit()?;
-    Ok(())
+    failed
 }
