@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use polars::prelude::*;
 use serde::Deserialize;
 
+use crate::error::{io, Error, Result};
 use crate::runs::parquet_files;
 
 /// Tolerances: defaults, then the first matching per-column rule, and which
@@ -186,7 +187,7 @@ impl Report {
 
 /// Compares every table of tree `a` with the same path in tree `b` (the
 /// reference). Either root may also be a single Parquet file.
-pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> anyhow::Result<Report> {
+pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> Result<Report> {
     // A single table on either side: the same file name in the other
     // side's folder, if that is one.
     let single = a.is_file() || b.is_file();
@@ -233,27 +234,34 @@ pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> anyhow::Result<Report> {
         }
     }
     if !tol.columns.is_empty() && report.problems.is_empty() && report.tables.iter().all(|t| t.columns.is_empty()) {
-        anyhow::bail!("no column matches --columns {}", tol.columns.join(","));
+        return Err(Error::Setting(format!(
+            "no column matches --columns {}",
+            tol.columns.join(",")
+        )));
     }
     Ok(report)
 }
 
-fn read(path: &Path) -> anyhow::Result<(DataFrame, Option<String>)> {
+fn read(path: &Path) -> Result<(DataFrame, Option<String>)> {
     // A table robotid wrote carries its content's CRC: checked first (a
     // flipped reference cell passed as a difference, or as none).
     robotid_stages::formats::parquet::read_parquet(path)?;
-    let file = std::fs::File::open(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let file = std::fs::File::open(path).map_err(io(path))?;
     let mut reader = ParquetReader::new(file);
     let kind = reader
         .get_metadata()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+        .map_err(|source| Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?
         .key_value_metadata()
         .as_ref()
         .and_then(|kv| kv.iter().find(|k| k.key == "robotid.table"))
         .and_then(|k| k.value.clone());
-    let df = reader
-        .finish()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let df = reader.finish().map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     Ok((df, kind))
 }
 
@@ -290,7 +298,7 @@ fn plain(v: &AnyValue) -> String {
     }
 }
 
-fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> anyhow::Result<TableDiff> {
+fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
     let (da, kind_a) = read(pa)?;
     let (db, kind_b) = read(pb)?;
     // A table rewritten by another tool may have lost its kind: reported,

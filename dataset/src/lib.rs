@@ -10,9 +10,11 @@
 //! polars' build time.
 
 pub mod compare;
+pub mod error;
 pub mod runs;
 pub mod summary;
 
 pub use compare::{compare, Report, Tolerances};
+pub use error::{Error, Result};
 pub use runs::{discover, Run};
 pub use summary::{summarize, Summary};

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
+use crate::error::{io, Error, Result};
 use serde::Deserialize;
 
 /// `run.json`, the run's manifest (the fields the dataset layer reads).
@@ -42,19 +42,22 @@ pub struct Run {
 
 /// Every run below each root, sorted by root and then path; a root that
 /// holds no run is an error (a typo should not give an empty dataset).
-pub fn discover(roots: &[PathBuf]) -> anyhow::Result<Vec<Run>> {
+pub fn discover(roots: &[PathBuf]) -> Result<Vec<Run>> {
     let mut runs = Vec::new();
     for root in roots {
         if !root.is_dir() {
-            bail!("{}: not a folder", root.display());
+            return Err(Error::Invalid {
+                path: root.clone(),
+                msg: "not a folder".into(),
+            });
         }
         let mut dirs = Vec::new();
         find_runs(root, &mut dirs)?;
         if dirs.is_empty() {
-            bail!(
-                "{}: no run below it (no run.json; write one with `robotid run --out`)",
-                root.display()
-            );
+            return Err(Error::Invalid {
+                path: root.clone(),
+                msg: "no run below it (no run.json; write one with `robotid run --out`)".into(),
+            });
         }
         dirs.sort();
         for dir in dirs {
@@ -73,9 +76,12 @@ pub fn discover(roots: &[PathBuf]) -> anyhow::Result<Vec<Run>> {
                 })
                 .collect();
             let path = dir.join("run.json");
-            let text = std::fs::read_to_string(&path).with_context(|| path.display().to_string())?;
-            let manifest: Manifest = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a robotid run manifest", path.display()))?;
+            let text = std::fs::read_to_string(&path).map_err(io(&path))?;
+            let manifest: Manifest = serde_json::from_str(&text).map_err(|source| Error::Json {
+                path: path.clone(),
+                what: "not a robotid run manifest",
+                source,
+            })?;
             runs.push(Run {
                 dir,
                 name,
@@ -88,16 +94,16 @@ pub fn discover(roots: &[PathBuf]) -> anyhow::Result<Vec<Run>> {
 }
 
 /// Folders with a run.json; a run's own subfolders are not searched further.
-fn find_runs(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
+fn find_runs(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     if dir.join("run.json").is_file() {
         out.push(dir.to_path_buf());
         return Ok(());
     }
-    let entries = std::fs::read_dir(dir).with_context(|| dir.display().to_string())?;
+    let entries = std::fs::read_dir(dir).map_err(io(dir))?;
     for e in entries {
-        let e = e.with_context(|| dir.display().to_string())?;
+        let e = e.map_err(io(dir))?;
         // Hidden folders are a run's staging area or tool state.
-        if e.file_type()?.is_dir() && !e.file_name().to_string_lossy().starts_with('.') {
+        if e.file_type().map_err(io(&e.path()))?.is_dir() && !e.file_name().to_string_lossy().starts_with('.') {
             find_runs(&e.path(), out)?;
         }
     }
@@ -105,10 +111,10 @@ fn find_runs(dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
 }
 
 /// Every `.parquet` file below `dir`, as sorted paths relative to it.
-pub fn parquet_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
-    fn walk(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) -> anyhow::Result<()> {
-        for e in std::fs::read_dir(dir).with_context(|| dir.display().to_string())? {
-            let p = e.with_context(|| dir.display().to_string())?.path();
+pub fn parquet_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+        for e in std::fs::read_dir(dir).map_err(io(dir))? {
+            let p = e.map_err(io(dir))?.path();
             if p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')) {
                 continue;
             } else if p.is_dir() {
@@ -120,7 +126,10 @@ pub fn parquet_files(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         Ok(())
     }
     if !dir.is_dir() {
-        bail!("{}: not a folder", dir.display());
+        return Err(Error::Invalid {
+            path: dir.to_path_buf(),
+            msg: "not a folder".into(),
+        });
     }
     let mut out = Vec::new();
     walk(dir, dir, &mut out)?;

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::Context as _;
+use crate::error::{io, Error, Result};
 use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{Field, Schema};
 use polars::prelude::*;
@@ -27,11 +27,14 @@ pub struct Summary {
 }
 
 /// A Parquet file's key-value metadata (its footer only).
-fn file_keys(path: &Path) -> anyhow::Result<BTreeMap<String, String>> {
-    let file = std::fs::File::open(path).with_context(|| path.display().to_string())?;
+fn file_keys(path: &Path) -> Result<BTreeMap<String, String>> {
+    let file = std::fs::File::open(path).map_err(io(path))?;
     let md = ParquetReader::new(file)
         .get_metadata()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+        .map_err(|source| Error::Read {
+            path: path.to_path_buf(),
+            source,
+        })?
         .clone();
     Ok(md
         .key_value_metadata()
@@ -60,7 +63,7 @@ struct Parameter {
 }
 
 /// The parameters of every run that estimated, in one lazy scan.
-fn scan_parameters(runs: &[Run]) -> anyhow::Result<BTreeMap<usize, Vec<Parameter>>> {
+fn scan_parameters(runs: &[Run]) -> Result<BTreeMap<usize, Vec<Parameter>>> {
     let files: Vec<(usize, String)> = runs
         .iter()
         .enumerate()
@@ -92,7 +95,10 @@ fn scan_parameters(runs: &[Run]) -> anyhow::Result<BTreeMap<usize, Vec<Parameter
         .collect::<PolarsResult<Vec<_>>>();
     let df = scans
         .and_then(|lfs| concat(lfs, UnionArgs::default())?.collect())
-        .map_err(|e| anyhow::anyhow!("reading the runs' parameters tables: {e}"))?;
+        .map_err(|source| Error::Polars {
+            what: "reading the runs' parameters tables".into(),
+            source,
+        })?;
     let (run, name, unit) = (
         df.column("run")?.i64()?,
         df.column("name")?.str()?,
@@ -173,7 +179,7 @@ impl Columns {
 }
 
 /// Builds both tables from runs found by [`crate::runs::discover`].
-pub fn summarize(runs: &[Run]) -> anyhow::Result<Summary> {
+pub fn summarize(runs: &[Run]) -> Result<Summary> {
     let parameters = scan_parameters(runs)?;
     let hive_keys: Vec<String> = {
         let mut seen = Vec::new();
@@ -209,8 +215,11 @@ pub fn summarize(runs: &[Run]) -> anyhow::Result<Summary> {
             None => BTreeMap::new(),
         };
         let adequacy: Vec<Adequacy> = match param_keys.get("robotid.estimate.adequacy") {
-            Some(text) => serde_json::from_str(text)
-                .with_context(|| format!("{}: robotid.estimate.adequacy", run.dir.display()))?,
+            Some(text) => serde_json::from_str(text).map_err(|source| Error::Json {
+                path: run.dir.clone(),
+                what: "robotid.estimate.adequacy",
+                source,
+            })?,
             None => Vec::new(),
         };
         let mut run_time: Option<f64> = None;
@@ -351,7 +360,7 @@ pub fn to_record_batch(
     df: &DataFrame,
     units: &BTreeMap<String, String>,
     meta: BTreeMap<String, String>,
-) -> anyhow::Result<RecordBatch> {
+) -> Result<RecordBatch> {
     let mut fields = Vec::new();
     let mut arrays: Vec<ArrayRef> = Vec::new();
     for c in df.columns() {
@@ -369,7 +378,11 @@ pub fn to_record_batch(
                 arrow::datatypes::DataType::Int64,
                 Arc::new(Int64Array::from_iter(c.i64()?.iter())),
             ),
-            other => anyhow::bail!("column `{name}`: type {other} has no Arrow mapping here"),
+            other => {
+                return Err(Error::Setting(format!(
+                    "column `{name}`: type {other} has no Arrow mapping here"
+                )))
+            }
         };
         let mut md = std::collections::HashMap::new();
         if let Some(u) = units.get(name) {
