@@ -5,6 +5,9 @@
 //! crate's.
 
 pub mod error;
+// The fuzz targets' entry points (fuzz/, pipeline/tests/fuzz_regressions.rs):
+// public for them, not part of the library's API.
+#[doc(hidden)]
 pub mod fuzz;
 pub mod identify;
 pub mod output;

@@ -24,6 +24,16 @@ fn visible(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         .collect()
 }
 
+/// The hidden entries of a folder: what a commit may leave beside `--out`.
+fn hidden_in(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect()
+}
+
 #[test]
 fn the_output_folder_is_guarded_and_recovered() {
     let ws = workspace(&["kuka_axis3"]);
@@ -175,12 +185,7 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
         );
         drop(prepare(&out, None, std::slice::from_ref(&log)).unwrap());
         let after = bytes_of(&out);
-        let parent: Vec<String> = std::fs::read_dir(ws.path())
-            .unwrap()
-            .flatten()
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .filter(|n| n.contains(".robotid-next-"))
-            .collect();
+        let parent = hidden_in(ws.path());
         assert!(
             parent.is_empty(),
             "trial {k}: a killed commit's folder stayed: {parent:?}"
@@ -292,12 +297,7 @@ fn the_commit_keeps_what_is_not_the_runs() {
     assert_eq!(std::fs::read(real.join("notes/lab.txt")).unwrap(), b"arm 3, cold start");
     assert_eq!(std::fs::metadata(real.join("README")).unwrap().ino(), ino);
     assert!(real.join("run.json").exists() && real.join("kuka_axis3/regressor.parquet").exists());
-    let beside: Vec<String> = std::fs::read_dir(ws.path())
-        .unwrap()
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.starts_with('.'))
-        .collect();
+    let beside = hidden_in(ws.path());
     assert!(beside.is_empty(), "{beside:?}");
     let hidden: Vec<String> = bytes_of(&real).into_keys().filter(|k| k.starts_with('.')).collect();
     assert!(hidden.is_empty(), "{hidden:?}");

@@ -425,17 +425,17 @@ impl Reducer {
         };
         let essential = matches!(self.cfg.method, Estimator::Ols | Estimator::Wls)
             .then(|| essential_parameters(&summary, ESSENTIAL_MAX_RELATIVE_STD));
-        let unidentified = match (&self.model, &first.config) {
-            (Some(model), Some(rc)) => {
-                let base = rc.base_regressor(model)?;
-                match (base.kind, base.map()) {
-                    (ModelKind::Chain, Some(map)) if base.names() == est.names => {
-                        let names = parameter_names(&base.model, base.terms);
-                        let prior = standard_parameters(&base.model, base.terms);
-                        unidentified(&est, map, &names, &prior)
-                    }
-                    _ => Vec::new(),
-                }
+        // The base regressor of the recordings' configuration, built once
+        // for the identifiability flags and the physical fit.
+        let base = match (&self.model, &first.config) {
+            (Some(model), Some(rc)) => Some(rc.base_regressor(model)?),
+            _ => None,
+        };
+        let unidentified = match base.as_ref().map(|b| (b, b.kind, b.map())) {
+            Some((base, ModelKind::Chain, Some(map))) if base.names() == est.names => {
+                let names = parameter_names(&base.model, base.terms);
+                let prior = standard_parameters(&base.model, base.terms);
+                unidentified(&est, map, &names, &prior)
             }
             _ => Vec::new(),
         };
@@ -474,15 +474,13 @@ impl Reducer {
         let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
         let mut physical = None;
         if self.cfg.physical {
-            let model = self
-                .model
+            if self.model.is_none() {
+                return Err(Error::missing("the robot", "physical = true needs it: set `robot`"));
+            }
+            let base = base
                 .as_ref()
-                .ok_or_else(|| Error::missing("the robot", "physical = true needs it: set `robot`"))?;
-            let rc = first
-                .config
-                .clone()
                 .ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
-            let (fit, covariance, note) = physical_fit(&rc.base_regressor(model)?, &est, self.cfg.prior_weight)?;
+            let (fit, covariance, note) = physical_fit(base, &est, self.cfg.prior_weight)?;
             est.values = fit.base.clone();
             est.covariance = covariance;
             est.covariance_from = Covariance::Bootstrap;
