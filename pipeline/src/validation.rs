@@ -19,6 +19,8 @@ pub struct JointResidue {
     pub excess_kurtosis: f64,
     /// Kolmogorov–Smirnov distance of the standardised residue to N(0, 1).
     pub ks: f64,
+    /// Correlation of the measured torque with the predicted one.
+    pub correlation: f64,
 }
 
 pub use robotid_stages::estimation::{Verdict, ADEQUATE_RATIO};
@@ -30,6 +32,12 @@ impl JointResidue {
             Some(f) if self.msr <= ADEQUATE_RATIO * f => Verdict::Adequate,
             Some(_) => Verdict::ModelErrorDominates,
         }
+    }
+
+    /// The measured torque runs against the prediction (correlation below
+    /// −0.5): no model error does that, a reversed or swapped channel does.
+    pub fn reversed(&self) -> bool {
+        self.correlation < -0.5
     }
 }
 
@@ -59,6 +67,13 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
             })
             .fold(0.0, f64::max);
         let floor: Vec<f64> = rows.iter().map(|&i| sys.var[i]).filter(|v| v.is_finite()).collect();
+        let (mb, mp) = rows
+            .iter()
+            .fold((0.0, 0.0), |(b, p), &i| (b + sys.b[i] / n, p + predicted[i] / n));
+        let (sbp, sbb, spp) = rows.iter().fold((0.0, 0.0, 0.0), |(bp, bb, pp), &i| {
+            let (db, dp) = (sys.b[i] - mb, predicted[i] - mp);
+            (bp + db * dp, bb + db * db, pp + dp * dp)
+        });
         stats.push(JointResidue {
             joint: joint.clone(),
             rows: rows.len(),
@@ -69,6 +84,7 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
             skewness: m3,
             excess_kurtosis: m4 - 3.0,
             ks,
+            correlation: sbp / (sbb * spp).sqrt().max(f64::MIN_POSITIVE),
         });
     }
     stats

@@ -284,6 +284,41 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     assert_eq!(o.status.code(), Some(1), "{said}");
     assert!(said.contains("hold the same bytes"), "{said}");
     assert!(!out.exists(), "nothing written");
+    // A validation recording with the elbow's torque reversed validated
+    // with exit 0 (200 % relative error, "noise floor unknown"): the
+    // measured torque runs against the identified model, which no model
+    // error does. (Against the robot file it cannot be judged: the real
+    // LWR4+'s wrist runs against its URDF's prediction in file 3.)
+    let src = std::fs::read_to_string(dir.join("validation.csv")).unwrap();
+    let mut lines = src.lines();
+    let mut flipped = format!("{}\n", lines.next().unwrap());
+    for l in lines {
+        let mut v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        v[9] = -v[9];
+        flipped.push_str(&v.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(","));
+        flipped.push('\n');
+    }
+    let val = tmp.path().join("validation_flipped.csv");
+    std::fs::write(&val, flipped).unwrap();
+    let out = tmp.path().join("validation_flipped");
+    let o = robotid(&[
+        Path::new("identify"),
+        &dir.join("excitation.csv"),
+        Path::new("--robot"),
+        &urdf,
+        Path::new("--validate"),
+        &val,
+        Path::new("--out"),
+        &out,
+    ]);
+    let said = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{said}");
+    assert!(
+        said.contains("validation_flipped.csv")
+            && said.contains("runs against the identified model's prediction on elbow_joint"),
+        "{said}"
+    );
+    assert!(!out.exists(), "nothing written");
 }
 
 /// The UR5's CSV with motor currents instead of torques (`{joint}_current_A`,

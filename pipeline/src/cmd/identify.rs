@@ -323,6 +323,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             regressors: val_tables.to_vec(),
             plot: None,
             fail_on_inadequate: false,
+        })
+        .with_context(|| {
+            let files: Vec<String> = held.iter().map(|p| p.display().to_string()).collect();
+            format!("validating on {}", files.join(", "))
         })?;
         writeln!(script, "robotid validate -p parameters.parquet {}", joined(val_tables))?;
     }

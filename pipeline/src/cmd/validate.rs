@@ -52,6 +52,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     print!("{}", robotid::validation::table(&stats));
     print!("{}", robotid::validation::per_recording(&sys, &predicted));
+    // A channel reversed (or two swapped) in the validation recordings
+    // reads as model error; it is not one, and no verdict is given on it.
+    let reversed: Vec<String> = stats
+        .iter()
+        .filter(|s| s.reversed())
+        .map(|s| format!("{} (correlation {:.2})", s.joint, s.correlation))
+        .collect();
+    if !reversed.is_empty() {
+        bail!(
+            "{}: the measured torque runs against the identified model's prediction on {}: a reversed channel, or two joints' columns swapped, in the recording; fix the log",
+            sys.recordings.join(", "),
+            reversed.join(", ")
+        );
+    }
     let inadequate: Vec<&str> = stats
         .iter()
         .filter(|s| s.verdict() == robotid::validation::Verdict::ModelErrorDominates)
