@@ -184,6 +184,14 @@ fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> 
         return false;
     };
     let target = target.as_path();
+    // A process working inside the folder (a Python session, this one)
+    // would be left in the old one, removed: moved file by file instead.
+    if std::env::current_dir()
+        .and_then(std::fs::canonicalize)
+        .is_ok_and(|cwd| cwd.starts_with(target))
+    {
+        return false;
+    }
     let _ = std::fs::remove_dir_all(&next);
     let built = std::fs::create_dir(&next).is_ok()
         && link_tree(staged, &next, &mut |rel| {

@@ -302,3 +302,29 @@ fn the_commit_keeps_what_is_not_the_runs() {
     let hidden: Vec<String> = bytes_of(&real).into_keys().filter(|k| k.starts_with('.')).collect();
     assert!(hidden.is_empty(), "{hidden:?}");
 }
+
+/// A run from inside its own output folder (as a shell or a Python session
+/// may be): the folder is not exchanged under the process (it would be
+/// left working in the removed old one); the staged files are moved in one
+/// rename each, the commit's other way, and the outputs are those of a run
+/// from elsewhere, the second time over the first's.
+#[test]
+fn a_run_from_inside_its_output_folder_moves_the_files_in() {
+    let ws = workspace(&["kuka_axis3"]);
+    let pipeline = ws.path().join("pipelines/kuka_axis3.toml");
+    let reference = ws.path().join("reference");
+    let o = robotid(&["run", pipeline.to_str().unwrap(), "--out", reference.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = ws.path().join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    for _ in 0..2 {
+        let o = Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .current_dir(&out)
+            .args(["run", pipeline.to_str().unwrap(), "--out", "."])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(visible(&out), visible(&reference));
+        assert!(hidden_in(&out).is_empty(), "{:?}", hidden_in(&out));
+    }
+}
