@@ -163,10 +163,10 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
     }
 }
 
-/// A copy of the UR5 excitation CSV with `edit` applied to its rows
+/// A copy of one of the UR5's CSVs with `edit` applied to its rows
 /// (`time_s`, six positions, six torques).
-fn edited(dir: &Path, to: &Path, edit: impl Fn(&mut [f64])) -> PathBuf {
-    let src = std::fs::read_to_string(dir.join("excitation.csv")).unwrap();
+fn edited(from: &Path, to: &Path, edit: impl Fn(&mut [f64])) -> PathBuf {
+    let src = std::fs::read_to_string(from).unwrap();
     let mut lines = src.lines();
     let mut out = String::with_capacity(src.len());
     out.push_str(lines.next().unwrap());
@@ -231,7 +231,11 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     ];
     // identify on the CSV edited by `edit`: its output folder, exit and words.
     let identify_edited = |name: &str, edit: Edit, robot: &Path| {
-        let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
+        let csv = edited(
+            &dir.join("excitation.csv"),
+            &tmp.path().join(format!("{name}.csv")),
+            edit,
+        );
         let out = tmp.path().join(name);
         let o = robotid(&[
             Path::new("identify"),
@@ -289,17 +293,11 @@ fn lab_mistakes_on_foreign_data_are_refused() {
     // measured torque runs against the identified model, which no model
     // error does. (Against the robot file it cannot be judged: the real
     // LWR4+'s wrist runs against its URDF's prediction in file 3.)
-    let src = std::fs::read_to_string(dir.join("validation.csv")).unwrap();
-    let mut lines = src.lines();
-    let mut flipped = format!("{}\n", lines.next().unwrap());
-    for l in lines {
-        let mut v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-        v[9] = -v[9];
-        flipped.push_str(&v.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(","));
-        flipped.push('\n');
-    }
-    let val = tmp.path().join("validation_flipped.csv");
-    std::fs::write(&val, flipped).unwrap();
+    let val = edited(
+        &dir.join("validation.csv"),
+        &tmp.path().join("validation_flipped.csv"),
+        |v| v[9] = -v[9],
+    );
     let out = tmp.path().join("validation_flipped");
     let o = robotid(&[
         Path::new("identify"),
@@ -417,7 +415,11 @@ fn lab_mistakes_under_run_are_named() {
         ),
     ];
     for (name, edit, ok, said) in cases {
-        let csv = edited(&dir, &tmp.path().join(format!("{name}.csv")), edit);
+        let csv = edited(
+            &dir.join("excitation.csv"),
+            &tmp.path().join(format!("{name}.csv")),
+            edit,
+        );
         let pipeline = tmp.path().join(format!("{name}.toml"));
         std::fs::write(
             &pipeline,
