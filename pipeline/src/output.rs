@@ -12,11 +12,11 @@
 //! staging folder. A run killed before the exchange leaves a staging
 //! folder (and perhaps a next folder) that the next run removes.
 //!
-//! Where the exchange cannot be made (the parent folder not writable,
-//! `--out` a mount point, a file system without it) the commit moves the
-//! staged files in one rename each after a `COMMIT` marker, and a run
-//! killed during those moves is finished by the next run. One run at a time holds the
-//! folder (an OS lock on `.robotid.lock`, released even by kill -9); a
+//! Where the exchange cannot or should not be made (the parent folder not
+//! writable, `--out` a mount point, a file system without it, the process
+//! working inside `--out`) the commit moves the staged files in one rename
+//! each after a `COMMIT` marker, and a run killed during those moves is
+//! finished by the next run. One run at a time holds the folder (an OS lock on `.robotid.lock`, released even by kill -9); a
 //! second is refused with the first's process id. `--out` where the inputs
 //! are is refused.
 
@@ -179,11 +179,15 @@ fn finish(dir: &Path, out: &Path) -> Result<()> {
 /// changed, when that cannot be done here (then the caller moves the files
 /// one by one). `staged` is left as it was either way.
 fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> bool {
-    let Some(next) = next_folder(target) else { return false };
-    let Some(target) = std::fs::canonicalize(target).ok() else {
+    // The folder a symbolic link names (the link keeps naming it).
+    let Ok(target) = std::fs::canonicalize(target) else {
         return false;
     };
     let target = target.as_path();
+    let Some((parent, prefix)) = next_prefix(target) else {
+        return false;
+    };
+    let next = parent.join(format!("{prefix}{}", std::process::id()));
     // A process working inside the folder (a Python session, this one)
     // would be left in the old one, removed: moved file by file instead.
     if std::env::current_dir()
@@ -210,12 +214,11 @@ fn exchange(staged: &Path, target: &Path, drop: &[String], control: &[&str]) -> 
     built
 }
 
-/// `.<name>.robotid-next-<pid>` beside `target` (the folder a symbolic
-/// link names, which keeps naming it).
-fn next_folder(target: &Path) -> Option<PathBuf> {
-    let target = std::fs::canonicalize(target).ok()?;
-    let name = target.file_name()?.to_string_lossy().into_owned();
-    Some(target.with_file_name(format!(".{name}{NEXT}{}", std::process::id())))
+/// Where a commit builds the next state of the canonical folder `target`:
+/// its parent, and the name `.<name>.robotid-next-` its process id ends.
+fn next_prefix(target: &Path) -> Option<(PathBuf, String)> {
+    let name = target.file_name()?.to_string_lossy();
+    Some((target.parent()?.to_path_buf(), format!(".{name}{NEXT}")))
 }
 
 /// Hard-links the files under `from` into `to` where `to` has nothing yet
@@ -466,16 +469,13 @@ fn recover(out: &Path) -> Result<()> {
     }
     clean_leftovers(out);
     // Next folders of killed commits, beside `out`.
-    if let Some(next) = next_folder(out) {
-        let name = next.file_name().unwrap_or_default().to_string_lossy().into_owned();
-        let prefix = name.trim_end_matches(|c: char| c.is_ascii_digit());
-        if let Some(parent) = next.parent().and_then(|p| std::fs::read_dir(p).ok()) {
-            for e in parent.flatten() {
-                let n = e.file_name().to_string_lossy().into_owned();
-                let pid = n.strip_prefix(prefix).and_then(|p| p.parse::<u32>().ok());
-                if pid.is_some_and(|p| !alive(p)) {
-                    let _ = std::fs::remove_dir_all(e.path());
-                }
+    let beside = std::fs::canonicalize(out).ok().and_then(|t| next_prefix(&t));
+    if let Some((parent, prefix)) = beside {
+        for e in std::fs::read_dir(&parent).into_iter().flatten().flatten() {
+            let n = e.file_name().to_string_lossy().into_owned();
+            let pid = n.strip_prefix(&prefix).and_then(|p| p.parse::<u32>().ok());
+            if pid.is_some_and(|p| !alive(p)) {
+                let _ = std::fs::remove_dir_all(e.path());
             }
         }
     }
