@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 runs=${1:-5}
 venv=$(bash scripts/venv.sh)
 target="${CARGO_TARGET_DIR:-$PWD/target}"
-cargo build --release --locked -q -p robotid
+cargo build --release --locked -q -p robotid-cli
 robotid="$target/release/robotid"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-cargo build --locked -p robotid
+cargo build --locked -p robotid-cli
 bin="${CARGO_TARGET_DIR:-$PWD/target}/debug/robotid"
 for sim in fixtures/sims/*.toml; do
   name=$(basename "$sim" .toml)

@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 command -v perf > /dev/null || { echo "perf is not installed (apt-get install linux-perf)" >&2; exit 1; }
 target="${CARGO_TARGET_DIR:-$PWD/target}-profile"
-CARGO_PROFILE_RELEASE_DEBUG=line-tables-only CARGO_TARGET_DIR="$target" cargo build --release --locked -q -p robotid
+CARGO_PROFILE_RELEASE_DEBUG=line-tables-only CARGO_TARGET_DIR="$target" cargo build --release --locked -q -p robotid-cli
 robotid="$target/release/robotid"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

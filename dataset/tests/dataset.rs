@@ -20,7 +20,6 @@ fn run(file: &Path, out: &Path, threads: usize) {
         .run(&RunOptions {
             out: out.to_path_buf(),
             threads: Some(threads),
-            progress: false,
             plot: None,
         })
         .unwrap();

@@ -44,11 +44,10 @@ fn whole(c: &mut Criterion) {
     let opts = RunOptions {
         out: out.clone(),
         threads: None,
-        progress: false,
         plot: None,
     };
     // The result tables the floor writes: the pipeline's own, once.
-    let results = built.run_recordings(&opts);
+    let results = built.run_recordings(&opts, &robotid::Quiet);
     assert!(results[0].outcome.is_ok(), "{:?}", results[0].outcome);
     let tables: Vec<_> = ["period_mean", "noise", "kinematics"]
         .iter()
@@ -104,7 +103,6 @@ fn identify(c: &mut Criterion) {
     let opts = RunOptions {
         out: out.clone(),
         threads: None,
-        progress: false,
         plot: None,
     };
     let report = built.run(&opts).unwrap();

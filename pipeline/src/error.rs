@@ -120,6 +120,22 @@ pub enum Error {
         #[source]
         source: Box<Error>,
     },
+    /// A table a run wrote does not read as the kind it should be.
+    #[error("{}: {source}", path.display())]
+    Table {
+        path: PathBuf,
+        #[source]
+        source: robotid_stages::Error,
+    },
+    /// A parameters table identified for another robot (or another
+    /// regressor configuration) than the one given with it.
+    #[error("robot `{robot}` with the regressor configuration of {} has base parameters {}, not the table's {}: is it the robot they were identified for?", parameters.display(), expected.join(", "), found.join(", "))]
+    NotTheRobot {
+        robot: String,
+        parameters: PathBuf,
+        expected: Vec<String>,
+        found: Vec<String>,
+    },
     /// Pictures or a report could not be made.
     #[error("{what}: {msg}")]
     Output { what: String, msg: String },

@@ -1,8 +1,11 @@
-//! The pipeline runner behind the `robotid` command: pipeline files
-//! (`plan`), the library entry point (`pipeline`: [`Pipeline`] → [`Built`]
-//! → [`RunReport`]), and the execution over many recordings (`run`). Runs
-//! read as a dataset (summaries, comparisons) are the `robotid-dataset`
-//! crate's.
+//! The robotid library, what the command line, Python and engines share:
+//! pipeline files (`plan`), the entry point (`pipeline`: [`Pipeline`] →
+//! [`Built`] → [`RunReport`]), the execution over many recordings (`run`,
+//! told to an [`Observer`]), the one commit of a run's outputs (`output`),
+//! `identify`'s design of pipelines from recordings, merged summaries and
+//! validation statistics. Pictures, reports and exports are the
+//! `robotid-report` crate's, the command line `robotid-cli`'s, runs read as
+//! a dataset `robotid-dataset`'s.
 
 pub mod error;
 // The fuzz targets' entry points (fuzz/, pipeline/tests/fuzz_regressions.rs):
@@ -13,15 +16,14 @@ pub mod identify;
 pub mod output;
 pub mod pipeline;
 pub mod plan;
-pub mod plot;
-pub mod report;
 pub mod run;
 pub mod summaries;
+pub mod tables;
 pub mod validation;
 
 pub use error::{Error, Problems, Result};
 pub use pipeline::{Built, Pipeline, RunReport};
-pub use run::{RecordingResult, RunOptions};
+pub use run::{Observer, Quiet, RecordingResult, RunOptions};
 
 // The pipeline-file documentation, whose Rust example is compiled and run
 // as a doc test.

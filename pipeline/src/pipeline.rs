@@ -29,7 +29,7 @@ use robotid_stages::stage::{Chain, Context, PeriodsUse, Product, Stage};
 
 use crate::error::{Error, Result};
 use crate::plan::{lint, parse, Plan, Resolved, StageConfig};
-use crate::run::{run_recordings, tables_of, RecordingResult, RunOptions};
+use crate::run::{run_recordings, tables_of, Observer, Quiet, RecordingResult, RunOptions};
 
 /// A parsed pipeline file.
 #[derive(Debug, Clone)]
@@ -280,18 +280,19 @@ impl Built {
         Ok(chain)
     }
 
-    /// Every recording, then the estimate when the pipeline has one, and
-    /// with `opts.plot` the pictures and the run's report. Tables go under
-    /// `opts.out`, one folder per recording, all at once when everything
-    /// succeeded; when a recording fails nothing is written (the report
-    /// says which and why). The one run flow: the command line prints it.
+    /// Every recording, then the estimate when the pipeline has one. Tables
+    /// go under `opts.out`, one folder per recording, all at once when
+    /// everything succeeded; when a recording fails nothing is written (the
+    /// report says which and why). Nothing shown, no pictures: see
+    /// [`Built::run_with`].
     pub fn run(&self, opts: &RunOptions) -> Result<RunReport> {
-        self.run_observed(opts, |_| {})
+        self.run_with(opts, &Quiet)
     }
 
-    /// [`Built::run`], with `recorded` shown every recording's result as
-    /// soon as all are through (before the estimate, which may fail).
-    pub fn run_observed(&self, opts: &RunOptions, recorded: impl FnOnce(&[RecordingResult])) -> Result<RunReport> {
+    /// The one run flow: [`Built::run`], `observer` told of each step and
+    /// shown every recording's result as soon as all are through; with
+    /// `opts.plot` it draws each recording's pictures and the run's report.
+    pub fn run_with(&self, opts: &RunOptions, observer: &dyn Observer) -> Result<RunReport> {
         let started = Instant::now();
         let staging = crate::output::prepare(&opts.out, opts.plot.as_deref(), &self.logs)?;
         let staged = RunOptions {
@@ -299,8 +300,8 @@ impl Built {
             plot: staging.staged_plot(),
             ..opts.clone()
         };
-        let mut recordings = self.run_recordings(&staged);
-        recorded(&recordings);
+        let mut recordings = run_recordings(self, &staged, observer);
+        observer.recorded(&recordings);
         if recordings.iter().any(|r| r.outcome.is_err()) {
             // Nothing is written: the staging folder goes with `staging`.
             return Ok(RunReport {
@@ -316,8 +317,8 @@ impl Built {
         let placed = |p: &Path| crate::output::placed(p, &staging, opts);
         let (mut report, mut warnings) = (None, Vec::new());
         if let (Some((_, path)), Some(dir)) = (&estimate, staging.staged_plot()) {
-            match crate::report::write_run_report(path, &recordings, &dir) {
-                Ok(r) => report = Some(placed(&r)),
+            match observer.report(path, &recordings, &dir) {
+                Ok(r) => report = r.map(|r| placed(&r)),
                 Err(e) => warnings.push(format!("no report: {e}")),
             }
         }
@@ -391,8 +392,8 @@ impl Built {
     }
 
     /// Every recording, in parallel; each writes its tables when it succeeds.
-    pub fn run_recordings(&self, opts: &RunOptions) -> Vec<RecordingResult> {
-        run_recordings(self, opts)
+    pub fn run_recordings(&self, opts: &RunOptions, observer: &dyn Observer) -> Vec<RecordingResult> {
+        run_recordings(self, opts, observer)
     }
 
     /// The `estimate` stage's reduce over finished recordings, its table

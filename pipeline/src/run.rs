@@ -1,5 +1,5 @@
-//! Executes a built pipeline over its recordings, in parallel (rayon), one
-//! progress bar each. A recording's tables are written, atomically, only
+//! Executes a built pipeline over its recordings, in parallel (rayon),
+//! telling an [`Observer`] how each goes. A recording's tables are written, atomically, only
 //! after its whole chain succeeded; a failing recording leaves no file.
 //! Every recording is processed on its own, so the output bytes do not
 //! depend on the number of threads.
@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use arrow::array::RecordBatch;
-use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, PeriodMean, TableKind};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::Part;
 use robotid_stages::stage::read::read;
 use robotid_stages::stage::regressor::{r_factor_table, RegressorRows};
@@ -25,10 +25,51 @@ pub struct RunOptions {
     pub out: PathBuf,
     /// Worker threads (default: one per core).
     pub threads: Option<usize>,
-    pub progress: bool,
-    /// Write pictures and a report per recording into this folder.
+    /// Keep each recording's chain whole for the observer's pictures, and
+    /// put them (and the run's report) into this folder.
     pub plot: Option<PathBuf>,
 }
+
+/// What a run shows as it goes and the pictures it leaves: the command
+/// line's progress bars and plots (the `robotid-report` crate draws
+/// them); [`Quiet`] for none. Called from the workers: `Sync`.
+pub trait Observer: Sync {
+    /// A recording starts: `steps` steps (the read, its stages, the write).
+    fn started(&self, _name: &str, _steps: usize) {}
+    /// A step of a recording begins.
+    fn step(&self, _name: &str, _step: &'static str) {}
+    /// A recording is through, or failed.
+    fn finished(&self, _name: &str, _ok: bool) {}
+    /// Every recording's result, as soon as all are through (before the
+    /// estimate, which may fail).
+    fn recorded(&self, _recordings: &[RecordingResult]) {}
+    /// With [`RunOptions::plot`]: a finished recording's pictures (and its
+    /// page) into `dir`, from its whole chain; `harmonics` the excited lines.
+    fn pictures(
+        &self,
+        _dir: &Path,
+        _chain: &Chain,
+        _harmonics: &[u32],
+        _spectra: &Spectra,
+    ) -> crate::Result<Vec<PathBuf>> {
+        Ok(Vec::new())
+    }
+    /// With [`RunOptions::plot`] and an estimate: the run's report into
+    /// `dir`, from the parameters table and every recording's rows.
+    fn report(
+        &self,
+        _parameters: &Path,
+        _recordings: &[RecordingResult],
+        _dir: &Path,
+    ) -> crate::Result<Option<PathBuf>> {
+        Ok(None)
+    }
+}
+
+/// An observer that shows nothing and draws nothing.
+pub struct Quiet;
+
+impl Observer for Quiet {}
 
 /// What one recording gave.
 #[derive(Debug, Clone, Default)]
@@ -73,24 +114,17 @@ pub fn recording_names(logs: &[PathBuf]) -> Vec<String> {
 }
 
 /// Every recording of `built`, in parallel.
-pub fn run_recordings(built: &Built, opts: &RunOptions) -> Vec<RecordingResult> {
+pub fn run_recordings(built: &Built, opts: &RunOptions, observer: &dyn Observer) -> Vec<RecordingResult> {
     let names = recording_names(&built.logs);
-    let bars = MultiProgress::new();
-    if !opts.progress {
-        bars.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    let style = ProgressStyle::with_template("{prefix:>24} [{bar:24}] {pos}/{len} {msg}").expect("valid template");
     let work = || {
         built
             .logs
             .par_iter()
             .zip(names.par_iter())
             .map(|(log, name)| {
-                let bar = bars.add(ProgressBar::new(built.stages.len() as u64 + 2));
-                bar.set_style(style.clone());
-                bar.set_prefix(name.clone());
-                let outcome = run_one(built, log, name, opts, &bar);
-                bar.finish_with_message(if outcome.is_ok() { "done" } else { "failed" });
+                observer.started(name, built.stages.len() + 2);
+                let outcome = run_one(built, log, name, opts, observer);
+                observer.finished(name, outcome.is_ok());
                 RecordingResult {
                     source: log.clone(),
                     name: name.clone(),
@@ -166,11 +200,14 @@ fn release_free_memory() {
     }
 }
 
-fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &ProgressBar) -> crate::Result<Outcome> {
-    let progress = |stage| {
-        bar.set_message(stage);
-        bar.inc(1);
-    };
+fn run_one(
+    built: &Built,
+    log: &Path,
+    name: &str,
+    opts: &RunOptions,
+    observer: &dyn Observer,
+) -> crate::Result<Outcome> {
+    let progress = |stage| observer.step(name, stage);
     // Only the pictures read the aligned periods past their stages: without
     // them, they are freed as soon as no stage reads them (an hour at 1 kHz:
     // 350 MB).
@@ -181,7 +218,7 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
     release_free_memory();
     // Sinks: only now, with every stage done.
     let t = Instant::now();
-    bar.set_message("write");
+    observer.step(name, "write");
     let dir = opts.out.join(name);
     let mut outcome = Outcome::default();
     // The regressor rows move into their table unless the report keeps them.
@@ -191,7 +228,6 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
     };
     outcome.files = write_tables(&chain, regressor, &built.plan.tables, &built.provenance(), &dir)?;
     chain.report.timings.push(("write".into(), t.elapsed().as_secs_f64()));
-    bar.inc(1);
     if let Some(plot_dir) = &opts.plot {
         let t = Instant::now();
         let dir = plot_dir.join(name);
@@ -201,19 +237,9 @@ fn run_one(built: &Built, log: &Path, name: &str, opts: &RunOptions, bar: &Progr
             _ => None,
         });
         let h = chain.harmonics(from_stage.as_ref()).unwrap_or_default();
-        let inputs = crate::plot::Inputs {
-            name,
-            periods: chain.periods.as_ref(),
-            mean: chain.mean.as_ref(),
-            noise: chain.noise.as_ref(),
-            kinematics: chain.kinematics.as_ref(),
-            harmonics: &h,
-            spectra: &built.context.spectra,
-        };
-        let pictures = crate::plot::plot_recording(&dir, &inputs)?;
-        let report = crate::plot::write_report(&dir, name, &chain.report, &pictures)?;
-        outcome.files.extend(pictures);
-        outcome.files.push(report);
+        outcome
+            .files
+            .extend(observer.pictures(&dir, &chain, &h, &built.context.spectra)?);
         chain.report.timings.push(("plot".into(), t.elapsed().as_secs_f64()));
         outcome.regressor = chain.regressor.take();
     }

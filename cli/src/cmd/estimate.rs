@@ -1,9 +1,9 @@
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::bail;
-use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
-use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part, Reducer};
+use robotid::tables::{parts, reduce, Marks};
+use robotid_stages::estimation::{Covariance, Estimate, Estimator};
+use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Reducer};
 use robotid_stages::stage::Context;
 
 #[derive(clap::Args)]
@@ -61,15 +61,12 @@ pub fn print_outcome(args: &Args, out: &Outcome) {
     println!("parameters in {}", args.out.display());
 }
 
-/// Metadata to add to an estimate's table, made from its outcome.
-pub type Marks<'a> = &'a dyn Fn(&Outcome) -> Vec<(String, String)>;
-
 /// The estimate of `args`, its table written to `args.out` with
 /// `marks` added to the table's metadata.
 pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
     let reducer = reducer(args)?;
     let parts = parts(&reducer, &args.regressors)?;
-    reduce(&reducer, &parts, &args.out, marks)
+    Ok(reduce(&reducer, &parts, &args.out, marks)?)
 }
 
 /// The reduce step that `args` ask for.
@@ -110,52 +107,6 @@ pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
         model,
         ..Default::default()
     })?)
-}
-
-/// The map step of a pipeline's `estimate` stage over tables: each folded
-/// into its summary. Parts do not depend on the covariance or the physical
-/// fit: one read serves an estimate and its physical fit.
-pub fn parts(reducer: &Reducer, regressors: &[PathBuf]) -> anyhow::Result<Vec<Part>> {
-    if let Some((first, again)) = super::same_bytes(regressors)? {
-        bail!(
-            "{} and {} are the same table: given twice, its rows would count twice and the intervals shrink by √2",
-            first.display(),
-            again.display()
-        );
-    }
-    regressors
-        .iter()
-        .map(|p| {
-            let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
-            Ok(reducer.part_of(sys)?)
-        })
-        .collect()
-}
-
-/// The summaries merged and solved; the table written to `out` with
-/// `marks` added to its metadata.
-pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks>) -> anyhow::Result<Outcome> {
-    let outcome = reducer.reduce(parts, &Default::default())?;
-    let table = match marks.map(|m| m(&outcome)).filter(|m| !m.is_empty()) {
-        None => outcome.table.clone(),
-        Some(m) => {
-            let mut md = outcome.table.schema().metadata().clone();
-            md.extend(m);
-            let schema = std::sync::Arc::new(outcome.table.schema().as_ref().clone().with_metadata(md));
-            outcome.table.clone().with_schema(schema)?
-        }
-    };
-    write_parquet(out, &table)?;
-    Ok(outcome)
-}
-
-/// Stacks regressor tables named on the command line.
-pub fn load_system(paths: &[PathBuf]) -> anyhow::Result<System> {
-    let mut tables = Vec::new();
-    for p in paths {
-        tables.push((p.display().to_string(), read_parquet(p)?));
-    }
-    Ok(System::from_tables(&tables)?)
 }
 
 /// What the reduce found beside the estimate: parameters not identified

@@ -5,7 +5,7 @@ use robotid_schemas::metadata;
 use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
 
-use super::estimate::load_system;
+use robotid::tables::load_system;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -50,8 +50,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or("?"),
         sys.recordings.join(", ")
     );
-    print!("{}", robotid::validation::table(&stats));
-    print!("{}", robotid::validation::per_recording(&sys, &predicted));
+    print!("{}", robotid_report::validation::table(&stats));
+    print!("{}", robotid_report::validation::per_recording(&sys, &predicted));
     // A channel reversed (or two swapped) in the validation recordings
     // reads as model error; it is not one, and no verdict is given on it.
     let reversed: Vec<String> = stats
@@ -72,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|s| s.joint.as_str())
         .collect();
     if let Some(dir) = &args.plot {
-        let files = robotid::plot::plot_validation(dir, &sys, &predicted, &stats).map_err(anyhow::Error::msg)?;
+        let files = robotid_report::plot::plot_validation(dir, &sys, &predicted, &stats).map_err(anyhow::Error::msg)?;
         println!(
             "pictures and report: {}",
             files

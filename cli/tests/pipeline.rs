@@ -80,12 +80,14 @@ fn rendered_in_a_browser(html: &Path) {
 /// recordings, then its `estimate` stage if it has one and all succeeded.
 fn run_pipeline(file: &Path, out: &Path, threads: Option<usize>) -> Vec<RecordingResult> {
     let built = Pipeline::from_path(file).unwrap().build().unwrap();
-    let results = built.run_recordings(&RunOptions {
-        out: out.to_path_buf(),
-        threads,
-        progress: false,
-        plot: None,
-    });
+    let results = built.run_recordings(
+        &RunOptions {
+            out: out.to_path_buf(),
+            threads,
+            plot: None,
+        },
+        &robotid::Quiet,
+    );
     if results.iter().all(|r| r.outcome.is_ok()) {
         built.estimate_all(&results, out).unwrap();
     }
@@ -219,10 +221,9 @@ fn plots_and_report_are_written() {
     let opts = RunOptions {
         out: ws.path().join("out"),
         threads: None,
-        progress: false,
         plot: Some(plots.clone()),
     };
-    let r = built.run_recordings(&opts);
+    let r = built.run_recordings(&opts, &robotid_report::Plots);
     assert!(r[0].outcome.is_ok(), "{:?}", r[0].outcome);
     for (f, needle) in [
         ("signals.svg", "a3 torque"),
@@ -690,10 +691,13 @@ tables = ["kinematics"]
     std::fs::write(&f, text).unwrap();
     let built = Pipeline::from_path(&f).unwrap().build().unwrap();
     let out = ws.path().join("out");
-    let results = built.run_recordings(&RunOptions {
-        out: out.clone(),
-        ..Default::default()
-    });
+    let results = built.run_recordings(
+        &RunOptions {
+            out: out.clone(),
+            ..Default::default()
+        },
+        &robotid::Quiet,
+    );
     assert!(results[0].outcome.is_ok(), "{:?}", results[0].outcome);
     let err = built.estimate_all(&results, &out).unwrap_err().to_string();
     assert!(
@@ -710,10 +714,13 @@ tables = ["kinematics"]
     .unwrap();
     let built = Pipeline::from_path(&f).unwrap().build().unwrap();
     let out = ws.path().join("out2");
-    let results = built.run_recordings(&RunOptions {
-        out: out.clone(),
-        ..Default::default()
-    });
+    let results = built.run_recordings(
+        &RunOptions {
+            out: out.clone(),
+            ..Default::default()
+        },
+        &robotid::Quiet,
+    );
     built.estimate_all(&results, &out).unwrap();
 }
 

@@ -39,25 +39,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     });
     // Everything appears at the end, or not at all (robotid::output); the
     // recordings are shown as soon as all are through.
-    let mut failed = 0;
-    let run = built.run_observed(
+    let failed = std::sync::atomic::AtomicUsize::new(0);
+    let observer = crate::progress::Bars::new(args.plot.is_some(), |recordings| {
+        let n = print_recordings(recordings, args.timings);
+        failed.store(n, std::sync::atomic::Ordering::Relaxed);
+        println!(
+            "{} of {} recording(s) done in {:.2} s; output folder {}",
+            recordings.len() - n,
+            recordings.len(),
+            started.elapsed().as_secs_f64(),
+            out.display()
+        );
+    });
+    let run = built.run_with(
         &RunOptions {
             out: out.clone(),
             threads: args.threads,
-            progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
             plot: args.plot.clone(),
         },
-        |recordings| {
-            failed = print_recordings(recordings, args.timings);
-            println!(
-                "{} of {} recording(s) done in {:.2} s; output folder {}",
-                recordings.len() - failed,
-                recordings.len(),
-                started.elapsed().as_secs_f64(),
-                out.display()
-            );
-        },
+        &observer,
     )?;
+    let failed = failed.load(std::sync::atomic::Ordering::Relaxed);
     if failed > 0 {
         bail!("{failed} recording(s) failed (see above); nothing was written (a run's outputs appear together or not at all)");
     }

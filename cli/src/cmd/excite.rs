@@ -98,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     doc.insert("result".into(), toml::Value::Table(result));
     let toml_path = args.out.join("excitation.toml");
-    robotid::plot::write_text(
+    robotid_report::plot::write_text(
         &toml_path,
         &format!(
             "# Optimised excitation (robotid excite {}). Use it as a simulation's\n# [trajectory] or as align's reference_trajectory.\n{}",
@@ -188,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ee.push(end_effector_position(&model, &mut data, &q));
     }
     write_parquet(&args.out.join("trajectory.parquet"), &kin.to_record_batch()?).map_err(anyhow::Error::msg)?;
-    let pictures = robotid::plot::plot_excitation(&args.out, &kin, &ee).map_err(anyhow::Error::msg)?;
+    let pictures = robotid_report::plot::plot_excitation(&args.out, &kin, &ee).map_err(anyhow::Error::msg)?;
     println!(
         "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
         toml_path.display(),

@@ -23,7 +23,7 @@ pub struct Args {
 /// τ = Φ_base(q, q̇, q̈)·θ̂, the base regressor rebuilt from the robot and
 /// the regressor configuration the parameters carry.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (params, model, base) = super::identified(&args.robot, &args.parameters)?;
+    let (params, model, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
     let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
     let mut kin =
         Kinematics::from_record_batch(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.kinematics.display()))?;

@@ -158,7 +158,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // The same data under two names would count twice: the intervals
     // shrink by √2, and a validation on its own excitation proves nothing.
-    if let Some((first, again)) = super::same_bytes(&all)? {
+    if let Some((first, again)) = robotid::tables::same_bytes(&all)? {
         bail!(
             "{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2, or it would validate itself)",
             first.display(),
@@ -283,8 +283,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // same parts.
     let ols_args = estimate_args(id_tables, Some(&robot), false, &parameters);
     let reducer = super::estimate::reducer(&ols_args)?;
-    let parts = super::estimate::parts(&reducer, id_tables)?;
-    let ols = super::estimate::reduce(&reducer, &parts, &parameters, Some(&mark))?;
+    let parts = robotid::tables::parts(&reducer, id_tables)?;
+    let ols = robotid::tables::reduce(&reducer, &parts, &parameters, Some(&mark))?;
     let inadequate = verdict(&ols.estimate);
     if let Some(v) = inadequate.as_ref().filter(|_| !reliable) {
         eprintln!(
@@ -393,7 +393,7 @@ fn physical_fit(
     let mut residual_cov = false;
     let fit = |args: super::estimate::Args| -> anyhow::Result<()> {
         let reducer = super::estimate::reducer(&args)?;
-        let outcome = super::estimate::reduce(&reducer, parts, &physical, None)?;
+        let outcome = robotid::tables::reduce(&reducer, parts, &physical, None)?;
         super::estimate::print_outcome(&args, &outcome);
         Ok(())
     };

@@ -4,13 +4,14 @@
 //! predicted torques, residue densities and the noise densities (the
 //! periods' deviations from their mean), all as inline SVG.
 
-use crate::error::{Error, Result};
 use nalgebra::DVector;
+use robotid::{Error, Result};
 use robotid_schemas::metadata;
 use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, residues_by_joint, torques_svg};
-use crate::validation::{residues, table};
+use crate::validation::table;
+use robotid::validation::residues;
 
 /// Escapes text for HTML.
 fn esc(s: &str) -> String {
@@ -277,7 +278,7 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
 /// the regressor tables of its own recordings, as `<dir>/report.html`.
 pub fn write_run_report(
     parameters: &std::path::Path,
-    results: &[crate::run::RecordingResult],
+    results: &[robotid::RecordingResult],
     dir: &std::path::Path,
 ) -> Result<std::path::PathBuf> {
     use arrow::array::{Array, StringArray};

@@ -1,11 +1,11 @@
 use std::path::PathBuf;
 
 use arrow::array::{Array, StringArray};
-use robotid::report::{html, DataSet};
+use robotid_report::report::{html, DataSet};
 use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
 
-use super::estimate::load_system;
+use robotid::tables::load_system;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -52,7 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let page =
         html(&params, &expressions, &args.parameters.display().to_string(), &sets).map_err(anyhow::Error::msg)?;
-    robotid::plot::write_text(&args.out, &page).map_err(anyhow::Error::msg)?;
+    robotid_report::plot::write_text(&args.out, &page).map_err(anyhow::Error::msg)?;
     println!("report in {}", args.out.display());
     Ok(())
 }

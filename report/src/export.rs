@@ -1,7 +1,11 @@
+//! Exports for simulators: physically consistent standard parameters
+//! closest to the a-priori model that reproduce the identified base
+//! parameters, written as URDF, MJCF and a sidecar with everything neither
+//! can hold. Everything is made before anything is written.
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{bail, Context as _};
 use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
@@ -12,7 +16,8 @@ use robotid_stages::estimation::physically_consistent;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::formats::{sha256_hex, write_atomic};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+/// What to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
     /// `<stem>.urdf`: inertials and `<dynamics damping friction>`.
     Urdf,
@@ -25,49 +30,80 @@ pub enum Format {
     Sidecar,
 }
 
-#[derive(clap::Args)]
-pub struct Args {
+/// An export asked for.
+#[derive(Clone, Debug)]
+pub struct Export {
     /// The robot file the parameters were identified for: its inertials
     /// are the a-priori model the exported standard parameters stay close to.
-    #[arg(long)]
     pub robot: PathBuf,
-    /// Identified parameters (`parameters.parquet`, chain model, from an
-    /// estimate with `physical = true`).
-    #[arg(long, short)]
+    /// The identified parameters (physically consistent).
     pub parameters: PathBuf,
-    /// What to write (comma-separated or repeated).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "urdf")]
-    pub format: Vec<Format>,
-    /// Output path without extension: `identified` gives identified.urdf,
-    /// identified.xml, identified.sidecar.json and identified.sidecar.parquet.
-    /// The extension of the one format written is accepted (`-o model.urdf`).
-    #[arg(long, short, default_value = "identified")]
+    pub formats: Vec<Format>,
+    /// Output path without extension (or with the one format's).
     pub out: PathBuf,
-    /// Weight of the pull of the inertial parameters towards the a-priori
-    /// model, relative to the data (χ² units per squared deviation of one
-    /// a-priori scale); by default the estimate's own.
-    #[arg(long)]
+    /// The pull towards the a-priori inertials; by default the estimate's.
     pub prior_weight: Option<f64>,
 }
+
+/// What an export did.
+#[derive(Debug)]
+pub struct Exported {
+    /// Where the consistent standard parameters came from.
+    pub how: String,
+    /// Bodies far from the robot file's (written all the same).
+    pub warnings: Vec<String>,
+    pub files: Vec<PathBuf>,
+}
+
+/// Why nothing was exported.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error("--prior-weight: the prior weight must be a positive number, not {0}")]
+    PriorWeight(f64),
+    #[error("export needs the chain model's base parameters (the decoupled model has no standard parameters)")]
+    Decoupled,
+    #[error("{} is not a physically consistent estimate: a least-squares estimate can hold links with negative mass or inertia, which no simulator accepts. Estimate with `physical = true` in the pipeline's `estimate` stage, or `robotid estimate REGRESSOR… --robot {} --physical`, and export that", parameters.display(), robot.display())]
+    NotPhysical { parameters: PathBuf, robot: PathBuf },
+    #[error("the link of `{joint}` has mass {mass} in the consistent fit: no simulator moves a massless body; give the robot file a mass for it")]
+    Massless { joint: String, mass: f64 },
+    #[error("{}: the identified bodies are not physical: {problem}; no model is written", parameters.display())]
+    Impossible { parameters: PathBuf, problem: String },
+    #[error("{}: the parameters table has no column `{column}`", parameters.display())]
+    Column { parameters: PathBuf, column: String },
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Library(#[from] robotid::Error),
+    #[error(transparent)]
+    Stage(#[from] robotid_stages::Error),
+    #[error("the sidecar: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error("the sidecar table: {0}")]
+    Arrow(#[from] arrow::error::ArrowError),
+}
+
+type Result<T, E = ExportError> = std::result::Result<T, E>;
 
 /// Physically consistent standard parameters closest to the a-priori model
 /// that reproduce the identified base parameters, written as URDF, MJCF
 /// and a sidecar with everything neither can hold.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn export(args: &Export) -> Result<Exported> {
     if let Some(w) = args.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
-        bail!("--prior-weight: the prior weight must be a positive number, not {w}");
+        return Err(ExportError::PriorWeight(w));
     }
-    let (params, _, base) = super::identified(&args.robot, &args.parameters)?;
+    let (params, _, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
     let Some(map) = base.map() else {
-        bail!("export needs the chain model's base parameters (the decoupled model has no standard parameters)");
+        return Err(ExportError::Decoupled);
     };
     if !params.metadata.contains_key(metadata::PHYSICAL) {
-        bail!(
-            "{} is not a physically consistent estimate: a least-squares estimate can hold links with negative mass or inertia, which no simulator accepts. \
-             Estimate with `physical = true` in the pipeline's `estimate` stage, or `robotid estimate REGRESSOR… --robot {} --physical`, and export that",
-            args.parameters.display(),
-            args.robot.display()
-        );
+        return Err(ExportError::NotPhysical {
+            parameters: args.parameters.clone(),
+            robot: args.robot.clone(),
+        });
     }
     let names = parameter_names(&base.model, base.terms);
     let stored: Option<Vec<f64>> = params
@@ -78,16 +114,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The estimate's own consistent model, unless another prior weight is
     // asked for (or the table predates it being stored): then fitted again.
     let fit = match (stored, args.prior_weight) {
-        (Some(standard), None) => {
-            println!(
+        (Some(standard), None) => Consistent {
+            standard,
+            how: params.metadata[metadata::PHYSICAL].clone(),
+            said: format!(
                 "the estimate's physically consistent standard parameters ({})",
                 metadata::PHYSICAL_STANDARD
-            );
-            Consistent {
-                standard,
-                how: params.metadata[metadata::PHYSICAL].clone(),
-            }
-        }
+            ),
+        },
         (_, weight) => {
             let prior = standard_parameters(&base.model, base.terms);
             let weight = weight.or_else(|| {
@@ -96,8 +130,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     .get(metadata::PHYSICAL_PRIOR_WEIGHT)
                     .and_then(|w| w.parse::<f64>().ok())
             });
-            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, weight)
-                .map_err(anyhow::Error::msg)?;
+            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, weight)?;
             let how = format!(
                 "fitted again: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, smallest pseudo-inertia eigenvalues {:?}",
                 fit.chi2,
@@ -106,9 +139,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 if fit.chosen { " (chosen by C_p)" } else { "" },
                 fit.min_eigen
             );
-            println!("physically consistent standard parameters {how}");
             Consistent {
                 standard: fit.standard,
+                said: format!("physically consistent standard parameters {how}"),
                 how,
             }
         }
@@ -120,43 +153,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .zip(&identified.joints)
         .find(|(l, _)| !(l.mass > 0.0))
     {
-        bail!(
-            "the link of `{}` has mass {} in the consistent fit: no simulator moves a massless body; give the robot file a mass for it",
-            j.name,
-            l.mass
-        );
+        return Err(ExportError::Massless {
+            joint: j.name.clone(),
+            mass: l.mass,
+        });
     }
     // Bodies a simulator takes: finite, of a robot's size, inertias that
     // satisfy the triangle inequality (a table holding ixx = 1e30 wrote a
     // URDF that broke it).
     if let Err(p) = identified.validate() {
-        bail!(
-            "{}: the identified bodies are not physical: {p}; no model is written",
-            args.parameters.display()
-        );
+        return Err(ExportError::Impossible {
+            parameters: args.parameters.clone(),
+            problem: p.to_string(),
+        });
     }
     let warnings = far_from_the_robot_file(&base.model, &identified, &params.metadata);
-    for w in &warnings {
-        eprintln!("warning: {w}");
-    }
     let note = format!(
         "identified by robotid {} from {} (a-priori model {}); physically consistent",
         env!("CARGO_PKG_VERSION"),
         args.parameters.display(),
         args.robot.display(),
     );
-    let stem = stem(&args.out, &args.format);
+    let stem = stem(&args.out, &args.formats);
     // Everything is made before anything is written.
     let mut files: Vec<(PathBuf, Output)> = Vec::new();
-    for f in dedup(&args.format) {
+    for f in dedup(&args.formats) {
         match f {
             Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(to_urdf(&identified, &note)))),
             Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
             Format::Sidecar => {
                 let batch = read_parquet(&args.parameters)?;
-                let table = Table::of(&batch, &params.names)?;
+                let table = Table::of(&batch, &params.names).map_err(|column| ExportError::Column {
+                    parameters: args.parameters.clone(),
+                    column,
+                })?;
                 let side = Sidecar {
-                    args: &args,
+                    args,
                     params: &params,
                     table: &table,
                     fit: &fit,
@@ -180,15 +212,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })?,
             Output::Table(batch) => write_parquet(path, batch)?,
         }
-        println!("{}", path.display());
     }
-    Ok(())
+    Ok(Exported {
+        how: fit.said,
+        warnings,
+        files: files.into_iter().map(|(p, _)| p).collect(),
+    })
 }
 
 /// Physically consistent standard parameters and how they were obtained.
 struct Consistent {
     standard: Vec<f64>,
     how: String,
+    /// What the export says of it.
+    said: String,
 }
 
 /// Links whose exported mass is over 3× from the robot file's (either
@@ -265,12 +302,13 @@ struct Table {
 }
 
 impl Table {
-    fn of(batch: &RecordBatch, names: &[String]) -> anyhow::Result<Table> {
-        let f = |c: &str| -> anyhow::Result<Vec<f64>> {
+    /// The table's columns; the name of the first missing one, if any.
+    fn of(batch: &RecordBatch, names: &[String]) -> Result<Table, String> {
+        let f = |c: &str| -> Result<Vec<f64>, String> {
             let a = batch
                 .column_by_name(c)
                 .and_then(|a| a.as_any().downcast_ref::<Float64Array>())
-                .with_context(|| format!("the parameters table has no column `{c}`"))?;
+                .ok_or_else(|| c.to_string())?;
             Ok(a.values().to_vec())
         };
         let expressions = match batch
@@ -289,7 +327,7 @@ impl Table {
 }
 
 struct Sidecar<'a> {
-    args: &'a Args,
+    args: &'a Export,
     params: &'a robotid_stages::estimation::Parameters,
     table: &'a Table,
     fit: &'a Consistent,
@@ -326,8 +364,13 @@ impl Sidecar<'_> {
             .fold((true, true), |(u, m), (a, b)| (u && a, m && b))
     }
 
-    fn provenance(&self) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
-        let bytes = |p: &Path| std::fs::read(p).with_context(|| p.display().to_string());
+    fn provenance(&self) -> Result<serde_json::Map<String, serde_json::Value>> {
+        let bytes = |p: &Path| {
+            std::fs::read(p).map_err(|source| ExportError::Io {
+                path: p.to_path_buf(),
+                source,
+            })
+        };
         let mut m = serde_json::Map::new();
         m.insert("robotid_version".into(), env!("CARGO_PKG_VERSION").into());
         m.insert(
@@ -350,7 +393,7 @@ impl Sidecar<'_> {
         Ok(m)
     }
 
-    fn json(&self) -> anyhow::Result<String> {
+    fn json(&self) -> Result<String> {
         use serde_json::json;
         let p = self.params;
         let base: Vec<_> = (0..p.names.len())
@@ -428,7 +471,7 @@ impl Sidecar<'_> {
     /// One row per value: the base parameters (with standard deviation,
     /// interval and covariance columns), then the standard ones (the
     /// deviation and interval where a standard parameter is a base one).
-    fn parquet(&self) -> anyhow::Result<RecordBatch> {
+    fn parquet(&self) -> Result<RecordBatch> {
         let p = self.params;
         let nb = p.names.len();
         let rows = nb + self.names.len();

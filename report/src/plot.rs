@@ -8,7 +8,7 @@
 //!
 //! and `report.md`, a short summary with links to them.
 
-use crate::error::{Error, Result};
+use robotid::{Error, Result};
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
@@ -472,7 +472,7 @@ pub fn plot_validation(
     dir: &Path,
     sys: &robotid_stages::estimation::System,
     predicted: &nalgebra::DVector<f64>,
-    stats: &[crate::validation::JointResidue],
+    stats: &[robotid::validation::JointResidue],
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
         path: dir.to_path_buf(),

@@ -1,0 +1,72 @@
+use std::path::PathBuf;
+
+use robotid_report::export::{export, Export};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// `<stem>.urdf`: inertials and `<dynamics damping friction>`.
+    Urdf,
+    /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
+    /// damping, frictionloss.
+    Mjcf,
+    /// `<stem>.sidecar.json` and `<stem>.sidecar.parquet`: every value with
+    /// unit, standard deviation and interval, the covariance, what the
+    /// formats cannot hold, the provenance.
+    Sidecar,
+}
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The robot file the parameters were identified for: its inertials
+    /// are the a-priori model the exported standard parameters stay close to.
+    #[arg(long)]
+    pub robot: PathBuf,
+    /// Identified parameters (`parameters.parquet`, chain model, from an
+    /// estimate with `physical = true`).
+    #[arg(long, short)]
+    pub parameters: PathBuf,
+    /// What to write (comma-separated or repeated).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "urdf")]
+    pub format: Vec<Format>,
+    /// Output path without extension: `identified` gives identified.urdf,
+    /// identified.xml, identified.sidecar.json and identified.sidecar.parquet.
+    /// The extension of the one format written is accepted (`-o model.urdf`).
+    #[arg(long, short, default_value = "identified")]
+    pub out: PathBuf,
+    /// Weight of the pull of the inertial parameters towards the a-priori
+    /// model, relative to the data (χ² units per squared deviation of one
+    /// a-priori scale); by default the estimate's own.
+    #[arg(long)]
+    pub prior_weight: Option<f64>,
+}
+
+impl From<Format> for robotid_report::export::Format {
+    fn from(f: Format) -> Self {
+        match f {
+            Format::Urdf => Self::Urdf,
+            Format::Mjcf => Self::Mjcf,
+            Format::Sidecar => Self::Sidecar,
+        }
+    }
+}
+
+/// Physically consistent standard parameters closest to the a-priori model
+/// that reproduce the identified base parameters, written as URDF, MJCF
+/// and a sidecar with everything neither can hold.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let done = export(&Export {
+        robot: args.robot,
+        parameters: args.parameters,
+        formats: args.format.into_iter().map(Into::into).collect(),
+        out: args.out,
+        prior_weight: args.prior_weight,
+    })?;
+    println!("{}", done.how);
+    for w in &done.warnings {
+        eprintln!("warning: {w}");
+    }
+    for f in &done.files {
+        println!("{}", f.display());
+    }
+    Ok(())
+}

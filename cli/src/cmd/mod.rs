@@ -1,0 +1,14 @@
+pub mod dataset;
+pub mod estimate;
+pub mod excite;
+pub mod export;
+pub mod identify;
+pub mod lint;
+pub mod model;
+pub mod predict;
+pub mod report;
+pub mod run;
+pub mod schema;
+pub mod simulate;
+pub mod sweeps;
+pub mod validate;

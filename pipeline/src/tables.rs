@@ -1,0 +1,106 @@
+//! Estimates from the tables runs wrote: regressor tables folded into the
+//! estimate's parts and reduced, stacked for validation, a parameters table
+//! matched with its robot. What `robotid estimate`, `validate`, `report`,
+//! `predict`, `export` and `identify` share.
+
+use std::path::{Path, PathBuf};
+
+use robotid_stages::dynamics::{load_robot, BaseRegressor, Model};
+use robotid_stages::estimation::{parameters_from_table, Parameters, System};
+use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_stages::stage::estimate::{Outcome, Part, Reducer};
+use robotid_stages::stage::regressor::RegressorConfig;
+
+use crate::error::{Error, Result};
+
+/// The first two of `paths` that hold the same bytes (by the SHA-256 the
+/// reader records, streamed; a ROS 2 bag folder by its files), if any:
+/// one file given twice under two names.
+pub fn same_bytes(paths: &[PathBuf]) -> Result<Option<(&Path, &Path)>> {
+    let mut seen: Vec<(String, &Path)> = Vec::new();
+    for p in paths {
+        let hash = robotid_stages::stage::read::hash_recording(p)?;
+        if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
+            return Ok(Some((first, p)));
+        }
+        seen.push((hash, p));
+    }
+    Ok(None)
+}
+
+/// The map step of a pipeline's `estimate` stage over regressor tables:
+/// each folded into its summary. Parts do not depend on the covariance or
+/// the physical fit: one read serves an estimate and its physical fit. A
+/// table given twice is refused (its rows would count twice).
+pub fn parts(reducer: &Reducer, regressors: &[PathBuf]) -> Result<Vec<Part>> {
+    if let Some((first, again)) = same_bytes(regressors)? {
+        return Err(Error::SameRecording {
+            first: first.to_path_buf(),
+            again: again.to_path_buf(),
+        });
+    }
+    regressors
+        .iter()
+        .map(|p| {
+            let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
+            Ok(reducer.part_of(sys)?)
+        })
+        .collect()
+}
+
+/// Metadata to add to an estimate's table, made from its outcome.
+pub type Marks<'a> = &'a dyn Fn(&Outcome) -> Vec<(String, String)>;
+
+/// The parts merged and solved; the table written to `out` with `marks`
+/// added to its metadata.
+pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks>) -> Result<Outcome> {
+    let outcome = reducer.reduce(parts, &Default::default())?;
+    let table = match marks.map(|m| m(&outcome)).filter(|m| !m.is_empty()) {
+        None => outcome.table.clone(),
+        Some(m) => {
+            let mut md = outcome.table.schema().metadata().clone();
+            md.extend(m);
+            let schema = std::sync::Arc::new(outcome.table.schema().as_ref().clone().with_metadata(md));
+            outcome
+                .table
+                .clone()
+                .with_schema(schema)
+                .map_err(robotid_schemas::SchemaError::from)
+                .map_err(robotid_stages::Error::from)?
+        }
+    };
+    write_parquet(out, &table)?;
+    Ok(outcome)
+}
+
+/// Regressor tables stacked into one system, each named by its path.
+pub fn load_system(paths: &[PathBuf]) -> Result<System> {
+    let mut tables = Vec::new();
+    for p in paths {
+        tables.push((p.display().to_string(), read_parquet(p)?));
+    }
+    Ok(System::from_tables(&tables)?)
+}
+
+/// A parameters table with the robot it was identified for and the base
+/// regressor rebuilt from the regressor configuration it carries; refused
+/// when the robot does not give the table's base parameters.
+pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model, BaseRegressor)> {
+    let in_table = |source| Error::Table {
+        path: parameters.to_path_buf(),
+        source,
+    };
+    let params = parameters_from_table(&read_parquet(parameters)?).map_err(in_table)?;
+    let cfg = RegressorConfig::of_metadata(&params.metadata).map_err(in_table)?;
+    let model = load_robot(robot)?;
+    let base = cfg.base_regressor(&model)?;
+    if base.names() != params.names {
+        return Err(Error::NotTheRobot {
+            robot: model.name.clone(),
+            parameters: parameters.to_path_buf(),
+            expected: base.names(),
+            found: params.names.clone(),
+        });
+    }
+    Ok((params, model, base))
+}
