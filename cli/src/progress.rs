@@ -92,3 +92,17 @@ impl<F: Fn(&[RecordingResult]) + Sync> Observer for Bars<F> {
         }
     }
 }
+
+/// Runs `work` with a spinner saying `what` on a terminal (nothing
+/// elsewhere): for the steps that take seconds with nothing to count.
+pub fn spinning<T>(what: &str, work: impl FnOnce() -> T) -> T {
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        return work();
+    }
+    let spinner = ProgressBar::new_spinner();
+    spinner.set_message(what.to_string());
+    spinner.enable_steady_tick(std::time::Duration::from_millis(120));
+    let out = work();
+    spinner.finish_and_clear();
+    out
+}

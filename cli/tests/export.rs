@@ -264,3 +264,62 @@ fn an_impossible_body_is_not_exported() {
         .collect();
     assert!(written.is_empty(), "{written:?}");
 }
+
+/// Bodies outside their bounds are refused, naming the link and the
+/// numbers, unless --force (then the sidecar says so): the UR5's physical
+/// estimate exported against a robot file whose shoulder link weighs a
+/// tenth of the one it was identified with (3.7 → 0.37 kg, so the
+/// identified ~3.7 kg is 10× over it), and the bounds the export used
+/// are in the sidecar.
+#[test]
+fn a_body_outside_its_bounds_is_refused_unless_forced() {
+    let ws = workspace(&["ur5"]);
+    let out = ur5_identified(ws.path(), true);
+    let robots = ws.path().join("robots");
+    let urdf = std::fs::read_to_string(robots.join("ur5.urdf")).unwrap();
+    let light = urdf.replacen(r#"<mass value="3.7"/>"#, r#"<mass value="0.37"/>"#, 1);
+    assert_ne!(light, urdf);
+    std::fs::write(robots.join("ur5_light.urdf"), light).unwrap();
+    let toml = std::fs::read_to_string(robots.join("ur5.toml")).unwrap();
+    std::fs::write(
+        robots.join("ur5_light.toml"),
+        toml.replace("\"ur5.urdf\"", "\"ur5_light.urdf\""),
+    )
+    .unwrap();
+    let stem = out.join("identified");
+    let args = |force: bool| {
+        let mut a = vec![
+            "export".to_string(),
+            "--robot".into(),
+            robots.join("ur5_light.toml").display().to_string(),
+            "-p".into(),
+            out.join("parameters.parquet").display().to_string(),
+            "--format".into(),
+            "urdf,sidecar".into(),
+            "-o".into(),
+            stem.display().to_string(),
+        ];
+        if force {
+            a.push("--force".into());
+        }
+        a
+    };
+    let refused = robotid(&args(false).iter().map(String::as_str).collect::<Vec<_>>());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "exit 0: {err}");
+    assert!(
+        err.contains("shoulder_pan_joint") && err.contains("0.0740–1.8500 kg") && err.contains("--force"),
+        "{err}"
+    );
+    assert!(!out.join("identified.urdf").exists());
+    let text = ok(&args(true).iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.join("identified.urdf").is_file(), "{text}");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("identified.sidecar.json")).unwrap()).unwrap();
+    let warnings = side["warnings"].to_string();
+    assert!(warnings.contains("written with --force"), "{warnings}");
+    let b = &side["bounds"][0];
+    assert_eq!(b["link_of"], "shoulder_pan_joint");
+    assert!((b["mass_max_kg"].as_f64().unwrap() - 1.85).abs() < 1e-12, "{b}");
+    assert!(b["ellipsoid"].is_null(), "the fixture's URDF has no shapes: {b}");
+}

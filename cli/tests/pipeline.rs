@@ -636,11 +636,21 @@ fn estimate_stage_ml_and_physical_options() {
             );
         }
         if label == "physical" {
-            assert!(
-                p.metadata["robotid.physical"].contains("χ² = 0.0000"),
-                "{}",
-                p.metadata["robotid.physical"]
-            );
+            // Held-out periods find nothing to gain from the data against
+            // the robot file (the curve is flat to 1e-2): a large prior
+            // weight, which moves the estimate by a fraction of a standard
+            // deviation (χ² ≪ 1).
+            let note = &p.metadata["robotid.physical"];
+            let chi2: f64 = note
+                .split("χ² = ")
+                .nth(1)
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap();
+            assert!(chi2 < 0.01 && note.contains("chosen by held-out periods"), "{note}");
         } else {
             assert_eq!(p.metadata["robotid.estimate.method"], "ml");
         }
@@ -779,7 +789,8 @@ fn excite_writes_a_trajectory_the_simulator_reads() {
 /// Held-out relative error √(Σ MSR / Σ rms τ²) over the 7 joints, measured:
 /// OLS 2.24 % (file 2) and 12.1 % (file 3, where the small wrist joints are
 /// poorly predicted by a 64-parameter model from one period of data); the
-/// physically consistent estimate 2.54 % and 6.25 %: it gives up a little
+/// physically consistent estimate 2.54 % and 6.06 % (6.25 % before its links
+/// were bounded by mass and shape): it gives up a little
 /// on the trajectory it was fitted to and halves the error on another.
 #[test]
 fn real_kuka_lwr4_identified_on_one_file_and_validated_on_the_others() {
@@ -800,8 +811,9 @@ fn real_kuka_lwr4_identified_on_one_file_and_validated_on_the_others() {
         }
         let params = parameters_from_table(&read_parquet(&id.join("parameters.parquet")).unwrap()).unwrap();
         if pipeline == "kuka_lwr4_physical" {
-            // Its consistent model loads in MuJoCo and Pinocchio, but the
-            // C_p prior weight leaves the second link near a tonne: said.
+            // Its consistent model loads in MuJoCo and Pinocchio; links the
+            // data push past 5× the robot file's mass are held at that
+            // bound, and said.
             let urdf = robotid_tests::realdata("kuka_lwr4").unwrap().join("kuka_lwr4.urdf");
             let o = Command::new(env!("CARGO_BIN_EXE_robotid"))
                 .args(["export", "--format", "mjcf,sidecar", "--robot"])
@@ -815,7 +827,7 @@ fn real_kuka_lwr4_identified_on_one_file_and_validated_on_the_others() {
             let err = String::from_utf8_lossy(&o.stderr);
             assert!(o.status.success(), "{err}");
             assert!(
-                err.contains("warning: the link of `lwr_2_joint` weighs") && err.contains("prior_weight"),
+                err.contains("warning: the link of") && err.contains("held at its bound"),
                 "{err}"
             );
             let agree = robotid_tests::export_checked_in_simulators(

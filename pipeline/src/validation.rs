@@ -21,6 +21,8 @@ pub struct JointResidue {
     pub ks: f64,
     /// Correlation of the measured torque with the predicted one.
     pub correlation: f64,
+    /// The floor is the excitation's, not this data's ([`borrow_floor`]).
+    pub floor_borrowed: bool,
 }
 
 pub use robotid_stages::estimation::{Verdict, ADEQUATE_RATIO};
@@ -85,7 +87,38 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
             excess_kurtosis: m4 - 3.0,
             ks,
             correlation: sbp / (sbb * spp).sqrt().max(f64::MIN_POSITIVE),
+            floor_borrowed: false,
         });
     }
     stats
+}
+
+/// Joints without a noise floor of their own (a validation record that
+/// does not repeat has no periods to take it from) take the excitation's,
+/// from the parameters table: the noise variance of its averaged torque
+/// times the number of periods averaged, the variance of one sample.
+/// Returns whether any did; the verdicts then judge against it.
+pub fn borrow_floor(stats: &mut [JointResidue], parameters: &std::collections::BTreeMap<String, String>) -> bool {
+    use robotid_schemas::metadata;
+    let periods: Option<f64> = parameters
+        .get(metadata::PERIODS)
+        .and_then(|p| p.parse().ok())
+        .filter(|p: &f64| *p >= 2.0);
+    let floors: Vec<serde_json::Value> = parameters
+        .get(metadata::ADEQUACY)
+        .and_then(|a| serde_json::from_str(a).ok())
+        .unwrap_or_default();
+    let mut any = false;
+    for s in stats.iter_mut().filter(|s| s.noise_floor.is_none()) {
+        let floor = floors
+            .iter()
+            .find(|a| a.get("joint").and_then(|j| j.as_str()) == Some(&s.joint))
+            .and_then(|a| a.get("noise_floor")?.as_f64());
+        if let (Some(f), Some(p)) = (floor, periods) {
+            s.noise_floor = Some(f * p);
+            s.floor_borrowed = true;
+            any = true;
+        }
+    }
+    any
 }

@@ -12,7 +12,7 @@ use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
     parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
 };
-use robotid_stages::estimation::physically_consistent;
+use robotid_stages::estimation::{physically_consistent, LinkBound};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::formats::{sha256_hex, write_atomic};
 
@@ -43,6 +43,8 @@ pub struct Export {
     pub out: PathBuf,
     /// The pull towards the a-priori inertials; by default the estimate's.
     pub prior_weight: Option<f64>,
+    /// Write bodies outside their bounds all the same (said in the sidecar).
+    pub force: bool,
 }
 
 /// What an export did.
@@ -68,6 +70,8 @@ pub enum ExportError {
     Massless { joint: String, mass: f64 },
     #[error("{}: the identified bodies are not physical: {problem}; no model is written", parameters.display())]
     Impossible { parameters: PathBuf, problem: String },
+    #[error("{}: bodies no robot has, so no model is written: {}. These parameters were fitted without the bounds (an older robotid, or another tool), or the robot file is not theirs; estimate again with `physical = true`, or give --force to write them anyway", parameters.display(), links.join("; "))]
+    OutOfBounds { parameters: PathBuf, links: Vec<String> },
     #[error("{}: the parameters table has no column `{column}`", parameters.display())]
     Column { parameters: PathBuf, column: String },
     #[error("{}: {source}", path.display())]
@@ -130,13 +134,14 @@ pub fn export(args: &Export) -> Result<Exported> {
                     .get(metadata::PHYSICAL_PRIOR_WEIGHT)
                     .and_then(|w| w.parse::<f64>().ok())
             });
-            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, weight)?;
+            let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
+            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, &bounds, weight)?;
             let how = format!(
                 "fitted again: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, smallest pseudo-inertia eigenvalues {:?}",
                 fit.chi2,
                 params.names.len(),
                 fit.prior_weight,
-                if fit.chosen { " (chosen by C_p)" } else { "" },
+                fit.chosen.as_ref().map(|c| format!(" ({c})")).unwrap_or_default(),
                 fit.min_eigen
             );
             Consistent {
@@ -167,7 +172,17 @@ pub fn export(args: &Export) -> Result<Exported> {
             problem: p.to_string(),
         });
     }
-    let warnings = far_from_the_robot_file(&base.model, &identified, &params.metadata);
+    let prior = standard_parameters(&base.model, base.terms);
+    let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
+    let outside = outside_bounds(&identified, &fit.standard, &bounds);
+    if !outside.is_empty() && !args.force {
+        return Err(ExportError::OutOfBounds {
+            parameters: args.parameters.clone(),
+            links: outside,
+        });
+    }
+    let mut warnings = far_from_the_robot_file(&base.model, &identified, &bounds, &params.metadata);
+    warnings.extend(outside.iter().map(|o| format!("written with --force: {o}")));
     let note = format!(
         "identified by robotid {} from {} (a-priori model {}); physically consistent",
         env!("CARGO_PKG_VERSION"),
@@ -197,6 +212,7 @@ pub fn export(args: &Export) -> Result<Exported> {
                     terms: base.terms,
                     map,
                     warnings: &warnings,
+                    bounds: &bounds,
                 };
                 files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
                 files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
@@ -228,14 +244,50 @@ struct Consistent {
     said: String,
 }
 
+/// Links whose exported mass or centre of mass is outside its bounds
+/// (beyond the solver's tolerance), with the numbers.
+fn outside_bounds(exported: &Model, standard: &[f64], bounds: &[LinkBound]) -> Vec<String> {
+    exported
+        .links
+        .iter()
+        .zip(&exported.joints)
+        .zip(bounds)
+        .enumerate()
+        .filter_map(|(l, ((link, j), b))| {
+            let tol = 1e-6;
+            let m = link.mass;
+            if !(m >= b.mass.0 * (1.0 - tol) && m <= b.mass.1 * (1.0 + tol)) {
+                return Some(format!(
+                    "the link of `{}` weighs {m:.4} kg, outside {:.4}–{:.4} kg ({}× either way of the robot file's)",
+                    j.name,
+                    b.mass.0,
+                    b.mass.1,
+                    robotid_stages::estimation::MASS_FACTOR
+                ));
+            }
+            let e = b.ellipsoid?;
+            let t = &standard[10 * l..10 * l + 10];
+            let c = link.com;
+            let d = (c - e.centre).component_div(&e.semi_axes).norm();
+            (!e.holds_com(t) && d > 1.0 + tol).then(|| {
+                format!(
+                    "the link of `{}` has its centre of mass at ({:.3}, {:.3}, {:.3}) m, {d:.2}× the way out of the ellipsoid of its shapes (centre ({:.3}, {:.3}, {:.3}) m, semi-axes ({:.3}, {:.3}, {:.3}) m)",
+                    j.name, c.x, c.y, c.z, e.centre.x, e.centre.y, e.centre.z, e.semi_axes.x, e.semi_axes.y, e.semi_axes.z
+                )
+            })
+        })
+        .collect()
+}
+
 /// Links whose exported mass is over 3× from the robot file's (either
-/// way): a base parameter groups it with others, the data cannot tell them
-/// apart, and the fit's prior weight left it free. The joint torques along
-/// motions like the recorded ones stay right; a simulation's masses, and so
-/// its contacts and Cartesian forces, do not.
+/// way): a base parameter groups it with others and the data cannot tell
+/// them apart, or they push it to its bound. The joint torques along
+/// motions like the recorded ones stay right; a simulation's masses, and
+/// so its contacts and Cartesian forces, may not.
 fn far_from_the_robot_file(
     prior: &Model,
     exported: &Model,
+    bounds: &[LinkBound],
     md: &std::collections::BTreeMap<String, String>,
 ) -> Vec<String> {
     let weight = md.get(metadata::PHYSICAL_PRIOR_WEIGHT).map_or("?", String::as_str);
@@ -244,12 +296,21 @@ fn far_from_the_robot_file(
         .iter()
         .zip(&exported.links)
         .zip(&prior.joints)
-        .filter(|((a, b), _)| a.mass > 0.0 && !(b.mass / a.mass <= 3.0 && b.mass / a.mass >= 1.0 / 3.0))
-        .map(|((a, b), j)| {
-            format!(
-                "the link of `{}` weighs {:.4} kg in the export against {:.4} kg in the robot file: the data do not tell its mass from the parameters it is grouped with, and the fit's prior weight ({weight}) left it free. Torques along motions like the recorded ones are right; the body is not. Estimate with a larger `prior_weight` (or `robotid export --prior-weight`) to keep it near the robot file",
-                j.name, b.mass, a.mass
-            )
+        .zip(bounds)
+        .filter(|(((a, b), _), _)| a.mass > 0.0 && !(b.mass / a.mass <= 3.0 && b.mass / a.mass >= 1.0 / 3.0))
+        .map(|(((a, b), j), bound)| {
+            let at_bound = (b.mass - bound.mass.0).abs() <= 1e-6 * bound.mass.0 || (b.mass - bound.mass.1).abs() <= 1e-6 * bound.mass.1;
+            if at_bound {
+                format!(
+                    "the link of `{}` weighs {:.4} kg in the export against {:.4} kg in the robot file: held at its bound ({}× either way), the data would move it further (fit prior weight {weight}). Torques along motions like the recorded ones are right; check the robot file's mass for this link, or the model (a payload, a cable, friction that is not viscous + Coulomb)",
+                    j.name, b.mass, a.mass, robotid_stages::estimation::MASS_FACTOR
+                )
+            } else {
+                format!(
+                    "the link of `{}` weighs {:.4} kg in the export against {:.4} kg in the robot file: the data do not tell its mass from the parameters it is grouped with, and the fit's prior weight ({weight}) left it free. Torques along motions like the recorded ones are right; the body may not be. Estimate with a larger `prior_weight` (or `robotid export --prior-weight`) to keep it near the robot file",
+                    j.name, b.mass, a.mass
+                )
+            }
         })
         .collect()
 }
@@ -338,6 +399,7 @@ struct Sidecar<'a> {
     /// θ_base = map·θ_standard.
     map: &'a nalgebra::DMatrix<f64>,
     warnings: &'a [String],
+    bounds: &'a [LinkBound],
 }
 
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
@@ -463,6 +525,16 @@ impl Sidecar<'_> {
             "base_covariance": {"names": p.names, "unit": "the product of the two parameters' units", "matrix": cov},
             "standard_parameters": standard,
             "joints": joints,
+            "bounds": self.bounds.iter().zip(&self.model.joints).map(|(b, j)| json!({
+                "link_of": j.name,
+                "mass_min_kg": b.mass.0,
+                "mass_max_kg": if b.mass.1.is_finite() { json!(b.mass.1) } else { json!(null) },
+                "ellipsoid": b.ellipsoid.map(|e| json!({
+                    "centre_m": [e.centre.x, e.centre.y, e.centre.z],
+                    "semi_axes_m": [e.semi_axes.x, e.semi_axes.y, e.semi_axes.z],
+                })),
+                "how": b.said,
+            })).collect::<Vec<_>>(),
             "warnings": self.warnings,
         });
         Ok(serde_json::to_string_pretty(&doc)? + "\n")

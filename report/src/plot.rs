@@ -56,7 +56,43 @@ fn range(series: &[Series]) -> (f64, f64, f64, f64) {
     (r.0, r.1, r.2 - pad, r.3 + pad)
 }
 
-/// One chart of line series (and optional red markers) in `area`.
+/// A tick label with the decimals its spacing needs (`250`, `0.5`,
+/// `-0.02`; never `-0.000`, `250.000` or `0.00e0`), in scientific
+/// notation (`2.5e-4`) where plain numbers would run long or round away.
+pub(crate) fn tick(v: f64, lo: f64, hi: f64) -> String {
+    let span = (hi - lo).abs().max(1e-300);
+    // plotters puts at most ten ticks on an axis, at the smallest step of
+    // 1, 2 or 5 × 10^k that keeps to that; its decimals are 10^k's.
+    let k = (span / 10.0).log10().floor() as i32;
+    let k = if [1.0, 2.0, 5.0].iter().any(|m| m * 10f64.powi(k) >= span / 10.0) {
+        k
+    } else {
+        k + 1
+    };
+    let big = lo.abs().max(hi.abs()).max(1e-300);
+    let e = big.log10().floor() as i32;
+    let s = if (-3..5).contains(&e) {
+        format!("{v:.*}", (-k).max(0) as usize)
+    } else {
+        let m = v / 10f64.powi(e);
+        format!("{m:.*}e{e}", (e - k).max(0) as usize)
+    };
+    // A value that rounds to zero is 0, without a sign or an exponent.
+    if s.trim_start_matches('-')
+        .chars()
+        .take_while(|c| *c != 'e')
+        .all(|c| c == '0' || c == '.')
+    {
+        "0".into()
+    } else {
+        s
+    }
+}
+
+/// One chart of line series (and optional red markers) in `area`. A grey
+/// series is the measurement: drawn wide, under the others, so that it
+/// shows where they lie on it. The legend sits right of the plot, off the
+/// curves.
 pub(crate) fn chart(
     area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
     title: &str,
@@ -67,48 +103,53 @@ pub(crate) fn chart(
 ) -> Result<()> {
     let (x0, x1, y0, y1) = range(series);
     let e = |e: &dyn std::fmt::Display| picture(e);
+    let labelled = !markers.is_empty() || series.iter().any(|s| !s.2.is_empty());
     let mut c = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 16))
         .margin(8)
+        .margin_right(if labelled { 150 } else { 8 })
         .x_label_area_size(32)
         .y_label_area_size(64)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(|x| e(&x))?;
-    // Scientific labels where plain ones would round to 0.0 or run long.
-    let big = y0.abs().max(y1.abs());
-    let sci = !(1e-2..1e5).contains(&big);
-    let fmt = move |v: &f64| if sci { format!("{v:.2e}") } else { format!("{v:.3}") };
+    let fx = move |v: &f64| tick(*v, x0, x1);
+    let fy = move |v: &f64| tick(*v, y0, y1);
     c.configure_mesh()
         .x_desc(x_desc)
         .y_desc(y_desc)
-        .y_label_formatter(&fmt)
+        .x_label_formatter(&fx)
+        .y_label_formatter(&fy)
         .draw()
         .map_err(|x| e(&x))?;
-    let mut labelled = false;
-    for (pts, color, label) in series {
-        let s = c
-            .draw_series(LineSeries::new(pts.iter().copied(), color))
+    for (pts, color, _) in series {
+        let width = if *color == GREY { 3 } else { 1 };
+        c.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(width)))
             .map_err(|x| e(&x))?;
-        if !label.is_empty() {
-            let col = *color;
-            s.label(*label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], col));
-            labelled = true;
-        }
     }
     if !markers.is_empty() {
         c.draw_series(markers.iter().map(|&(x, y)| Circle::new((x, y), 3, RED.filled())))
-            .map_err(|x| e(&x))?
-            .label("excited harmonics")
-            .legend(|(x, y)| Circle::new((x + 8, y), 3, RED.filled()));
-        labelled = true;
-    }
-    if labelled {
-        c.configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
             .map_err(|x| e(&x))?;
+    }
+    // The legend in the right margin, drawn on the whole area (plotters
+    // keeps its own legend inside the plot, over the curves).
+    if labelled {
+        let (w, _) = area.dim_in_pixel();
+        let x = w as i32 - 140;
+        let mut y = 40;
+        for (_, color, label) in series.iter().filter(|s| !s.2.is_empty()) {
+            let width = if *color == GREY { 3 } else { 1 };
+            area.draw(&PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(width)))
+                .map_err(|x| e(&x))?;
+            area.draw(&Text::new(label.to_string(), (x + 24, y - 6), ("sans-serif", 12)))
+                .map_err(|x| e(&x))?;
+            y += 18;
+        }
+        if !markers.is_empty() {
+            area.draw(&Circle::new((x + 9, y), 3, RED.filled()))
+                .map_err(|x| e(&x))?;
+            area.draw(&Text::new("excited harmonics", (x + 24, y - 6), ("sans-serif", 12)))
+                .map_err(|x| e(&x))?;
+        }
     }
     Ok(())
 }
@@ -132,7 +173,7 @@ pub(crate) fn figure_svg(
 ) -> Result<String> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (520 * cols as u32, 260 * rows as u32)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (720 * cols as u32, 260 * rows as u32)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| picture(&e))?;
         let areas = root.split_evenly((rows, cols));
         draw(&areas)?;
@@ -361,7 +402,9 @@ pub fn write_report(dir: &Path, name: &str, o: &Report, pictures: &[PathBuf]) ->
     Ok(path)
 }
 
-/// Measured (grey) and predicted (blue) torque per joint, row by row.
+/// Measured (grey, wide, underneath) and predicted (blue) torque per
+/// joint, and below each its residue on an axis of its own (on the
+/// torque's axis it is a flat line).
 pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebra::DVector<f64>) -> Result<String> {
     let nj = sys.joints.len();
     // Recordings one after another on the time axis.
@@ -379,21 +422,25 @@ pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebr
     }
     let rows_of = |j: usize| (0..sys.rows()).filter(move |&i| sys.joint[i] == j);
     let at = |i: usize| offset[sys.recording[i]] + sys.time[i];
-    figure_svg(nj, 1, |areas| {
+    figure_svg(2 * nj, 1, |areas| {
         for j in 0..nj {
             let measured: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), sys.b[i])).collect();
             let pred: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), predicted[i])).collect();
             let residue: Vec<(f64, f64)> = rows_of(j).map(|i| (at(i), sys.b[i] - predicted[i])).collect();
             chart(
-                &areas[j],
+                &areas[2 * j],
                 &format!("{}: measured and predicted torque", sys.joints[j]),
                 "time, s",
                 "N·m",
-                &[
-                    (measured, GREY, "measured"),
-                    (pred, BLUE_, "predicted"),
-                    (residue, ORANGE, "residue"),
-                ],
+                &[(measured, GREY, "measured"), (pred, BLUE_, "predicted")],
+                &[],
+            )?;
+            chart(
+                &areas[2 * j + 1],
+                &format!("{}: residue, measured − predicted", sys.joints[j]),
+                "time, s",
+                "N·m",
+                &[(residue, ORANGE, "residue")],
                 &[],
             )?;
         }

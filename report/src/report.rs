@@ -10,12 +10,115 @@ use robotid_schemas::metadata;
 use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, residues_by_joint, torques_svg};
-use crate::validation::table;
-use robotid::validation::residues;
+use crate::validation::{per_recording, table};
+use robotid::validation::{borrow_floor, residues};
 
 /// Escapes text for HTML.
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// One link of the physically consistent estimate against the robot
+/// file: what a simulator will be given.
+pub struct Body {
+    pub link: String,
+    pub mass: f64,
+    pub mass_file: f64,
+    pub com: nalgebra::Vector3<f64>,
+    pub com_file: nalgebra::Vector3<f64>,
+    /// Whether the centre of mass lies inside the link's bound (None: the
+    /// link has no shapes to bound it).
+    pub inside: Option<bool>,
+    pub bound: String,
+}
+
+/// The bodies of a physically consistent parameters table (its
+/// `robotid.physical.standard`) identified for `robot`.
+pub fn bodies(robot: &std::path::Path, physical: &std::path::Path) -> Result<Vec<Body>> {
+    use robotid_stages::dynamics::{standard_parameters, with_standard_parameters};
+    let (params, _, base) = robotid::tables::identified(robot, physical)?;
+    let standard: Vec<f64> = params
+        .metadata
+        .get(metadata::PHYSICAL_STANDARD)
+        .and_then(|s| serde_json::from_str(s).ok())
+        .ok_or_else(|| Error::Output {
+            what: "the report's bodies".into(),
+            msg: format!(
+                "{} holds no physically consistent standard parameters",
+                physical.display()
+            ),
+        })?;
+    let prior = standard_parameters(&base.model, base.terms);
+    let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
+    let identified = with_standard_parameters(&base.model, base.terms, &standard);
+    Ok((0..identified.links.len())
+        .map(|l| Body {
+            link: identified.joints[l].name.clone(),
+            mass: identified.links[l].mass,
+            mass_file: base.model.links[l].mass,
+            com: identified.links[l].com,
+            com_file: base.model.links[l].com,
+            inside: bounds[l].ellipsoid.map(|e| e.holds_com(&standard[10 * l..10 * l + 10])),
+            bound: bounds[l].said.clone(),
+        })
+        .collect())
+}
+
+/// The bodies as a table with bars: mass identified (blue) over the robot
+/// file's (grey), on one scale for every link.
+fn bodies_html(bodies: &[Body]) -> String {
+    let top = bodies
+        .iter()
+        .map(|b| b.mass.max(b.mass_file))
+        .fold(0.0, f64::max)
+        .max(1e-12);
+    let bar = |m: f64, class: &str| format!("<div class=\"{class}\" style=\"width:{:.1}px\"></div>", 240.0 * m / top);
+    // Millimetres to a tenth: what a CAD model gives, and no 1e-16 noise.
+    let mm = |v: f64| {
+        let s = format!("{:.1}", 1e3 * v);
+        if s == "-0.0" {
+            "0.0".to_string()
+        } else {
+            s
+        }
+    };
+    let xyz = |c: &nalgebra::Vector3<f64>| format!("({}, {}, {})", mm(c.x), mm(c.y), mm(c.z));
+    let mut h = String::from(
+        "<h2>Bodies for simulators</h2>\n<p class=\"note\">The physically consistent estimate's links (what the exports hold) against the robot file's: mass (bars on one scale: identified blue, robot file grey) and centre of mass in the link's frame, mm.</p>\n<table>\n<tr><th>link of</th><th>mass, kg</th><th>robot file, kg</th><th>ratio</th><th></th><th>centre of mass</th><th>robot file</th><th>inside its shapes</th></tr>\n",
+    );
+    for b in bodies {
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}×</td><td class=\"l\" title=\"{}\">{}{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
+            esc(&b.link),
+            sig(b.mass),
+            sig(b.mass_file),
+            if b.mass_file > 0.0 { format!("{:.2}", b.mass / b.mass_file) } else { "-".into() },
+            esc(&b.bound),
+            bar(b.mass, "mi"),
+            bar(b.mass_file, "mf"),
+            xyz(&b.com),
+            xyz(&b.com_file),
+            match b.inside {
+                Some(true) => badge("yes"),
+                Some(false) => badge("no"),
+                None => badge("no shapes"),
+            }
+        ));
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// Three significant digits (the validation table's).
+fn sig(x: f64) -> String {
+    crate::validation::sig(x)
+}
+
+/// The physically consistent estimate beside the one reported: its
+/// relative error on each data set and its bodies.
+pub struct Physical<'a> {
+    pub params: &'a Parameters,
+    pub bodies: Vec<Body>,
 }
 
 /// One data set shown in the report.
@@ -71,8 +174,8 @@ type VerdictCell = (String, Option<f64>, String);
 /// A verdict as a coloured badge.
 fn badge(verdict: &str) -> String {
     let class = match verdict {
-        "adequate" => "ok",
-        "model error dominates" => "bad",
+        "adequate" | "yes" => "ok",
+        "model error dominates" | "no" => "bad",
         _ => "unk",
     };
     format!("<span class=\"{class}\">{}</span>", esc(verdict))
@@ -97,13 +200,19 @@ fn readable(json: &str) -> String {
 
 /// The report's HTML. `expressions` are the parameters' regrouping
 /// expressions (the table's `expression` column).
-pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[DataSet]) -> Result<String> {
+pub fn html(
+    params: &Parameters,
+    expressions: &[String],
+    source: &str,
+    sets: &[DataSet],
+    physical: Option<&Physical>,
+) -> Result<String> {
     let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
     let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
     let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
     let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
     let mut h = String::new();
-    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}</style></head><body>\n");
+    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}.mi,.mf{height:7px;margin:1px 0}.mi{background:#1f77b4}.mf{background:#aaa}</style></head><body>\n");
     h.push_str(&format!(
         "<h1>Identification of <code>{}</code></h1>\n",
         esc(md(metadata::ROBOT))
@@ -141,7 +250,8 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
             )));
         }
         let predicted: DVector<f64> = &sys.a * &params.values;
-        let stats = residues(sys, &predicted);
+        let mut stats = residues(sys, &predicted);
+        borrow_floor(&mut stats, &params.metadata);
         columns.push((
             set.title.to_string(),
             stats
@@ -157,6 +267,12 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
         ));
         set_stats.push((predicted, stats));
     }
+    // One number per data set: √(Σ residue² / Σ torque²) over all rows.
+    let relative: Vec<f64> = sets
+        .iter()
+        .zip(&set_stats)
+        .map(|(set, (p, _))| 100.0 * ((&set.sys.b - p).norm_squared() / set.sys.b.norm_squared()).sqrt())
+        .collect();
     let mut joints: Vec<String> = Vec::new();
     for (_, cells) in &columns {
         for (j, _, _) in cells {
@@ -176,7 +292,7 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
             match cells.iter().find(|c| &c.0 == j) {
                 Some((_, ratio, verdict)) => h.push_str(&format!(
                     "<td>{} {}</td>",
-                    ratio.map_or("".into(), |r| format!("{r:.2}×")),
+                    ratio.map_or("".into(), |r| format!("{}×", sig(r))),
                     badge(verdict)
                 )),
                 None => h.push_str("<td></td>"),
@@ -184,7 +300,28 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
         }
         h.push_str("</tr>\n");
     }
-    h.push_str("</table>\n");
+    // The fit's own column has no rows to pool here.
+    let fit_column = usize::from(columns.len() > sets.len());
+    h.push_str("<tr><th>relative error</th>");
+    h.push_str(&"<td></td>".repeat(fit_column));
+    for r in &relative {
+        h.push_str(&format!("<td><b>{} %</b></td>", sig(*r)));
+    }
+    h.push_str("</tr>\n");
+    if let Some(ph) = physical.filter(|ph| ph.params.names == params.names) {
+        h.push_str("<tr><th>physically consistent</th>");
+        h.push_str(&"<td></td>".repeat(fit_column));
+        for set in sets {
+            let p = &set.sys.a * &ph.params.values;
+            let r = 100.0 * ((&set.sys.b - p).norm_squared() / set.sys.b.norm_squared()).sqrt();
+            h.push_str(&format!("<td><b>{} %</b></td>", sig(r)));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A starred floor is the excitation's (the data does not repeat).</p>\n");
+    if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
+        h.push_str(&bodies_html(&ph.bodies));
+    }
     for (key, what) in [
         (metadata::WIDENED, "Intervals widened"),
         (metadata::IMPOSSIBLE, "Physically impossible values"),
@@ -225,14 +362,13 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
             "condition number (column-scaled)",
             md(metadata::CONDITION_NUMBER)
                 .parse::<f64>()
-                .map_or_else(|_| md(metadata::CONDITION_NUMBER).to_string(), |c| format!("{c:.4}")),
+                .map_or_else(|_| md(metadata::CONDITION_NUMBER).to_string(), sig),
         ),
         (
             "residual variance, (N·m)²",
-            md(metadata::ESTIMATE_RESIDUAL_VARIANCE).parse::<f64>().map_or_else(
-                |_| md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(),
-                |v| format!("{v:.4e}"),
-            ),
+            md(metadata::ESTIMATE_RESIDUAL_VARIANCE)
+                .parse::<f64>()
+                .map_or_else(|_| md(metadata::ESTIMATE_RESIDUAL_VARIANCE).to_string(), sig),
         ),
         ("recordings", md(metadata::RECORDINGS).replace(',', ", ")),
         ("model", md(metadata::MODEL).to_string()),
@@ -254,7 +390,7 @@ pub fn html(params: &Parameters, expressions: &[String], source: &str, sets: &[D
             set.title.to_lowercase().replace(' ', "-"),
             esc(set.title),
             esc(&sys.recordings.join(", ")),
-            esc(&table(stats))
+            esc(&(table(stats) + &per_recording(sys, predicted)))
         ));
         h.push_str("<h3>Measured and predicted torque</h3>\n");
         h.push_str(&torques_svg(sys, predicted)?);
@@ -308,6 +444,7 @@ pub fn write_run_report(
             title: "Excitation data",
             sys: &sys,
         }],
+        None,
     )?;
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
         path: dir.to_path_buf(),

@@ -5,27 +5,49 @@ use nalgebra::DVector;
 use robotid::validation::JointResidue;
 use robotid_stages::estimation::System;
 
-/// The residue table as text.
+/// Three significant digits, plain where that reads well (`174.7`,
+/// `0.446`, `0`), else scientific (`6.07e-4`).
+pub fn sig(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return if x == 0.0 { "0".into() } else { format!("{x}") };
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..5).contains(&e) {
+        format!("{x:.*}", (2 - e).max(0) as usize)
+    } else {
+        format!("{x:.2e}")
+    }
+}
+
+/// The residue table as text, three significant digits; a floor taken
+/// from the excitation is starred and said below.
 pub fn table(stats: &[JointResidue]) -> String {
     let mut s = format!(
-        "{:<10} {:>7} {:>12} {:>14} {:>10} {:>12} {:>14} {:>9} {:>9} {:>7}  verdict\n",
+        "{:<20} {:>7} {:>10} {:>10} {:>7} {:>10} {:>11} {:>6} {:>6} {:>6}  verdict\n",
         "joint", "rows", "rms τ N·m", "MSR (N·m)²", "rel. %", "mean N·m", "noise floor", "skew", "kurt-3", "KS"
     );
     for r in stats {
         s.push_str(&format!(
-            "{:<10} {:>7} {:>12.4} {:>14.4e} {:>10.3} {:>12.3e} {:>14} {:>9.3} {:>9.3} {:>7.4}  {}\n",
+            "{:<20} {:>7} {:>10} {:>10} {:>7} {:>10} {:>11} {:>6.2} {:>6.2} {:>6.3}  {}\n",
             r.joint,
             r.rows,
-            r.measured_rms,
-            r.msr,
-            100.0 * r.msr.sqrt() / r.measured_rms,
-            r.mean,
-            r.noise_floor.map_or("-".into(), |f| format!("{f:.4e}")),
+            sig(r.measured_rms),
+            sig(r.msr),
+            sig(100.0 * r.msr.sqrt() / r.measured_rms),
+            sig(r.mean),
+            r.noise_floor.map_or("-".into(), |f| format!(
+                "{}{}",
+                sig(f),
+                if r.floor_borrowed { "*" } else { "" }
+            )),
             r.skewness,
             r.excess_kurtosis,
             r.ks,
             r.verdict().name()
         ));
+    }
+    if stats.iter().any(|r| r.floor_borrowed) {
+        s.push_str("* the excitation's noise floor (its averaged torque's noise variance times the periods averaged): this data does not repeat, so it has none of its own\n");
     }
     // Pooled over every row: what one number says about the data.
     let sum = |f: &dyn Fn(&JointResidue) -> f64| stats.iter().map(|r| r.rows as f64 * f(r)).sum::<f64>();

@@ -80,13 +80,13 @@ fn physical(c: &mut Criterion) {
     let mut g = c.benchmark_group("physical_ur5");
     g.sample_size(10);
     g.bench_function("sdp_fixed_weight", |b| {
-        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, Some(1e-3)).unwrap())
+        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, &[], Some(1e-3)).unwrap())
     });
     g.bench_function("sdp_weight_by_cp", |b| {
-        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, None).unwrap())
+        b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, &[], None).unwrap())
     });
     g.bench_function("bootstrap_200", |b| {
-        b.iter(|| bootstrap_covariance(&names, &prior, &map, &est, &cov, 1e-3).unwrap())
+        b.iter(|| bootstrap_covariance(&names, &prior, &map, &est, &cov, &[], 1e-3).unwrap())
     });
     g.finish();
 }

@@ -307,3 +307,57 @@ fn impossible_bodies_are_refused_by_name() {
     let e = load("ur5.urdf", &format!("{}nan{}", &urdf[..at], &urdf[at + x..]));
     assert!(e.contains("joint 1 (`shoulder_pan_joint`): origin = NaN"), "{e}");
 }
+
+/// A link's extent from its URDF shapes, in its frame: a box placed and
+/// turned by its origin, a sphere on a link lumped in by a fixed joint, a
+/// binary STL mesh found by `package://`; a link whose mesh is missing has
+/// none. Corners worked out by hand.
+#[test]
+fn link_extents_come_from_the_urdf_shapes() {
+    let dir = tempfile::tempdir().unwrap();
+    // One triangle spanning (0,0,0)–(0.1,0.2,0.3).
+    let mut stl = vec![0u8; 80];
+    stl.extend(1u32.to_le_bytes());
+    stl.extend([0u8; 12]);
+    for v in [[0.0f32, 0.0, 0.0], [0.1, 0.2, 0.0], [0.0, 0.0, 0.3]] {
+        for x in v {
+            stl.extend(x.to_le_bytes());
+        }
+    }
+    stl.extend([0u8; 2]);
+    std::fs::create_dir_all(dir.path().join("meshes")).unwrap();
+    std::fs::write(dir.path().join("meshes/l2.stl"), &stl).unwrap();
+    let inertial =
+        r#"<inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>"#;
+    let urdf = format!(
+        r#"<robot name="r">
+  <link name="base"/>
+  <link name="l1">{inertial}
+    <collision><origin xyz="0 0 0.5" rpy="0 0 1.5707963267948966"/><geometry><box size="0.2 0.4 1.0"/></geometry></collision>
+    <visual><geometry><sphere radius="9"/></geometry></visual>
+  </link>
+  <link name="tool">{inertial}<collision><origin xyz="0 0 1.2"/><geometry><sphere radius="0.1"/></geometry></collision></link>
+  <link name="l2">{inertial}<visual><origin xyz="1 0 0"/><geometry><mesh filename="package://desc/meshes/l2.stl" scale="2 2 2"/></geometry></visual></link>
+  <link name="l3">{inertial}<collision><geometry><mesh filename="package://desc/meshes/missing.stl"/></geometry></collision></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="fix" type="fixed"><parent link="l1"/><child link="tool"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0 0 1"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="j3" type="revolute"><parent link="l2"/><child link="l3"/><origin xyz="1 0 0"/><axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>"#
+    );
+    let path = dir.path().join("r.urdf");
+    std::fs::write(&path, &urdf).unwrap();
+    let m = dynamics::load_urdf(&path).unwrap();
+    let close = |a: nalgebra::Vector3<f64>, b: [f64; 3]| (a - nalgebra::Vector3::from(b)).amax() < 1e-6;
+    // l1: the box turned 90° about z (0.4 along x, 0.2 along y), z 0..1;
+    // the tool's sphere at z = 1.2 (radius 0.1) lumped in; not the visual.
+    let e = m.extent(0).unwrap();
+    assert!(
+        close(e.min, [-0.2, -0.1, 0.0]) && close(e.max, [0.2, 0.1, 1.3]),
+        "{e:?}"
+    );
+    // l2: the mesh scaled 2×, 1 m along x.
+    let e = m.extent(1).unwrap();
+    assert!(close(e.min, [1.0, 0.0, 0.0]) && close(e.max, [1.2, 0.4, 0.6]), "{e:?}");
+    assert_eq!(m.extent(2), None);
+}

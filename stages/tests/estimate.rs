@@ -292,7 +292,7 @@ fn physically_consistent_standard_parameters() {
             .enumerate()
             .map(|(i, v)| if i % 10 == 9 { *v } else { v * 1.2 })
             .collect();
-        let fit = physically_consistent(&names, &off, map, &truth, &cov, Some(1e-3)).unwrap();
+        let fit = physically_consistent(&names, &off, map, &truth, &cov, &[], Some(1e-3)).unwrap();
         println!(
             "{robot}: χ² {:.2e}, iterations {}, min eigenvalues {:?}",
             fit.chi2, fit.iterations, fit.min_eigen
@@ -314,7 +314,7 @@ fn physically_consistent_standard_parameters() {
         let fv = base.names().iter().position(|n| n.starts_with("Fv")).unwrap();
         let mut bad = truth.clone();
         bad[fv] = -1.0;
-        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, &[], Some(1e-3)).unwrap();
         assert!(
             fit.base[fv] >= 0.0 && fit.base[fv] < 1e-3,
             "{robot}: Fv {}",
@@ -330,7 +330,7 @@ fn physically_consistent_standard_parameters() {
         // Inconsistent: the first base inertia negative.
         let mut bad = truth.clone();
         bad[0] = -0.5 * truth[0].abs();
-        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, &[], Some(1e-3)).unwrap();
         println!(
             "{robot}: negative inertia → {:.4} (χ² {:.1}), {} iterations",
             fit.base[0], fit.chi2, fit.iterations
@@ -346,7 +346,7 @@ fn physically_consistent_standard_parameters() {
         // fit minimises χ² over the feasible set, so no feasible point
         // nearby (random steps, and the segment to the a-priori model) has
         // a lower χ². The set is convex, so local is global.
-        let fit = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-9)).unwrap();
+        let fit = physically_consistent(&names, &prior, map, &bad, &cov, &[], Some(1e-9)).unwrap();
         let l_inv = cov.map(|v| if v > 0.0 { 1.0 / v } else { 0.0 });
         let chi2 = |t: &[f64]| {
             let d = map * DVector::from_column_slice(t) - &bad;
@@ -515,13 +515,13 @@ fn physical_fit_refuses_nan_and_bad_weights() {
     let cov = DMatrix::identity(truth.len(), truth.len()) * 1e-4;
     let mut bad = truth.clone();
     bad[1] = f64::NAN;
-    let e = physically_consistent(&names, &prior, map, &bad, &cov, Some(1e-3)).unwrap_err();
+    let e = physically_consistent(&names, &prior, map, &bad, &cov, &[], Some(1e-3)).unwrap_err();
     assert!(matches!(e, Error::NotFinite { .. }), "{e}");
     for w in [-1.0, f64::NAN, 0.0] {
-        let e = physically_consistent(&names, &prior, map, &truth, &cov, Some(w)).unwrap_err();
+        let e = physically_consistent(&names, &prior, map, &truth, &cov, &[], Some(w)).unwrap_err();
         assert!(matches!(e, Error::Setting { .. }), "{e}");
     }
-    assert!(physically_consistent(&names, &prior, map, &truth, &cov, Some(1e-3)).is_ok());
+    assert!(physically_consistent(&names, &prior, map, &truth, &cov, &[], Some(1e-3)).is_ok());
 }
 
 /// One bad recording among several (its torque 30 % too large: a wrong

@@ -46,7 +46,11 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let out = estimate(&args, None)?;
+    let out = if args.physical {
+        crate::progress::spinning("physical fit: semidefinite programs", || estimate(&args, None))?
+    } else {
+        estimate(&args, None)?
+    };
     print_outcome(&args, &out);
     Ok(())
 }

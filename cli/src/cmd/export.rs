@@ -38,6 +38,11 @@ pub struct Args {
     /// a-priori scale); by default the estimate's own.
     #[arg(long)]
     pub prior_weight: Option<f64>,
+    /// Write bodies outside their bounds (a mass over 5× from the robot
+    /// file's either way, a centre of mass outside its link's shapes) all
+    /// the same; the sidecar says which.
+    #[arg(long)]
+    pub force: bool,
 }
 
 impl From<Format> for robotid_report::export::Format {
@@ -60,6 +65,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         formats: args.format.into_iter().map(Into::into).collect(),
         out: args.out,
         prior_weight: args.prior_weight,
+        force: args.force,
     })?;
     println!("{}", done.how);
     for w in &done.warnings {

@@ -334,6 +334,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         parameters: parameters.clone(),
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
+        physical: None,
+        robot: None,
         out: out.join("report.html"),
     })?;
     writeln!(
@@ -393,8 +395,18 @@ fn physical_fit(
     let mut residual_cov = false;
     let fit = |args: super::estimate::Args| -> anyhow::Result<()> {
         let reducer = super::estimate::reducer(&args)?;
-        let outcome = robotid::tables::reduce(&reducer, parts, &physical, None)?;
+        let outcome = crate::progress::spinning(
+            "physical fit: the prior weight on held-out periods, then the bootstrap's semidefinite programs",
+            || robotid::tables::reduce(&reducer, parts, &physical, None),
+        )?;
         super::estimate::print_outcome(&args, &outcome);
+        if let Some(fit) = &outcome.physical {
+            println!(
+                "physically consistent: prior weight {:e}{}",
+                fit.prior_weight,
+                fit.chosen.as_ref().map(|c| format!(" {c}")).unwrap_or_default()
+            );
+        }
         Ok(())
     };
     let fitted = fit(estimate_args(id_tables, Some(robot), true, &physical)).or_else(|e| {
@@ -419,7 +431,7 @@ fn physical_fit(
             }
             super::export::run(super::export::Args {
                 robot: robot.to_path_buf(),
-                parameters: physical,
+                parameters: physical.clone(),
                 format: vec![
                     super::export::Format::Urdf,
                     super::export::Format::Mjcf,
@@ -427,6 +439,16 @@ fn physical_fit(
                 ],
                 out: out.join("identified"),
                 prior_weight: None,
+                force: false,
+            })?;
+            // The report again, with the physical estimate and its bodies.
+            super::report::run(super::report::Args {
+                parameters: out.join("parameters.parquet"),
+                excitation: id_tables.to_vec(),
+                validation: val_tables.to_vec(),
+                physical: Some(physical),
+                robot: Some(robot.to_path_buf()),
+                out: out.join("report.html"),
             })?;
             writeln!(
                 script,
@@ -445,6 +467,17 @@ fn physical_fit(
             writeln!(
                 script,
                 "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar -o identified",
+                robot.display()
+            )?;
+            writeln!(
+                script,
+                "robotid report -p parameters.parquet --excitation {}{} --physical parameters_physical.parquet --robot {} -o report.html",
+                joined(id_tables),
+                if val_tables.is_empty() {
+                    String::new()
+                } else {
+                    format!(" --validation {}", joined(val_tables))
+                },
                 robot.display()
             )?;
         }

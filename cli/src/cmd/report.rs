@@ -18,6 +18,14 @@ pub struct Args {
     /// Regressor tables of validation recordings.
     #[arg(long, num_args = 1..)]
     pub validation: Vec<PathBuf>,
+    /// A physically consistent estimate of the same parameters
+    /// (`estimate --physical`): its relative errors beside the reported
+    /// one's, and, with `--robot`, its bodies against the robot file's.
+    #[arg(long)]
+    pub physical: Option<PathBuf>,
+    /// The robot file the parameters were identified for.
+    #[arg(long, requires = "physical")]
+    pub robot: Option<PathBuf>,
     /// Output HTML page (self-contained: pictures inline).
     #[arg(long, short, default_value = "report.html")]
     pub out: PathBuf,
@@ -50,8 +58,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             sys: s,
         });
     }
-    let page =
-        html(&params, &expressions, &args.parameters.display().to_string(), &sets).map_err(anyhow::Error::msg)?;
+    let physical_params = match &args.physical {
+        Some(p) => Some(
+            parameters_from_table(&read_parquet(p).map_err(anyhow::Error::msg)?)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
+        ),
+        None => None,
+    };
+    let physical = match (&physical_params, &args.physical) {
+        (Some(params), Some(path)) => Some(robotid_report::report::Physical {
+            params,
+            bodies: match &args.robot {
+                Some(r) => robotid_report::report::bodies(r, path)?,
+                None => Vec::new(),
+            },
+        }),
+        _ => None,
+    };
+    let page = html(
+        &params,
+        &expressions,
+        &args.parameters.display().to_string(),
+        &sets,
+        physical.as_ref(),
+    )
+    .map_err(anyhow::Error::msg)?;
     robotid_report::plot::write_text(&args.out, &page).map_err(anyhow::Error::msg)?;
     println!("report in {}", args.out.display());
     Ok(())

@@ -71,7 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "physically consistent: χ² = {:.4} from the unconstrained estimate, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalue per link {:?}",
                 fit.chi2,
                 fit.prior_weight,
-                if fit.chosen { " (chosen by Mallows' C_p)" } else { "" },
+                fit.chosen.as_ref().map(|c| format!(" ({c})")).unwrap_or_default(),
                 fit.dof,
                 fit.min_eigen.iter().map(|e| format!("{e:.2e}")).collect::<Vec<_>>()
             );

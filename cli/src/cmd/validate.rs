@@ -39,7 +39,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let predicted = &sys.a * &params.values;
-    let stats = robotid::validation::residues(&sys, &predicted);
+    let mut stats = robotid::validation::residues(&sys, &predicted);
+    robotid::validation::borrow_floor(&mut stats, &params.metadata);
     println!(
         "validation of {} ({} method) on {}",
         args.parameters.display(),

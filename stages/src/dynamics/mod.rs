@@ -17,6 +17,7 @@ pub mod model;
 mod r_factor;
 mod rnea;
 mod robot_file;
+mod stl;
 mod torque_regressor;
 mod urdf;
 mod urdf_export;
@@ -30,7 +31,7 @@ pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offs
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
-pub use model::{Drive, Friction, Inertial, Joint, Limits, Model};
+pub use model::{Drive, Extent, Friction, Inertial, Joint, Limits, Model};
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};

@@ -203,6 +203,51 @@ pub struct Model {
     /// constant, encoder, rotor inertia): without that, rotor inertia is
     /// not part of the default identification model.
     pub drives_declared: bool,
+    /// Per link, the box its shapes fill in its frame (URDF collision
+    /// shapes, else visual ones), when the description has them: where
+    /// its mass can be (the physical fit's bounds).
+    pub extents: Vec<Option<Extent>>,
+}
+
+/// An axis-aligned box in a link's frame, m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extent {
+    pub min: Vector3<f64>,
+    pub max: Vector3<f64>,
+}
+
+impl Extent {
+    /// The smallest box holding `points` (None for none).
+    pub fn of_points(points: impl IntoIterator<Item = Vector3<f64>>) -> Option<Extent> {
+        points.into_iter().fold(None, |e: Option<Extent>, p| {
+            Some(match e {
+                None => Extent { min: p, max: p },
+                Some(e) => Extent {
+                    min: e.min.inf(&p),
+                    max: e.max.sup(&p),
+                },
+            })
+        })
+    }
+
+    /// The box holding both.
+    pub fn union(&self, other: &Extent) -> Extent {
+        Extent {
+            min: self.min.inf(&other.min),
+            max: self.max.sup(&other.max),
+        }
+    }
+
+    /// Its eight corners.
+    pub fn corners(&self) -> impl Iterator<Item = Vector3<f64>> + '_ {
+        (0..8).map(move |k| {
+            Vector3::new(
+                if k & 1 == 0 { self.min.x } else { self.max.x },
+                if k & 2 == 0 { self.min.y } else { self.max.y },
+                if k & 4 == 0 { self.min.z } else { self.max.z },
+            )
+        })
+    }
 }
 
 /// The largest values a body of a robot arm may have in a description:
@@ -291,7 +336,13 @@ impl Model {
             warnings: Vec::new(),
             locked: Vec::new(),
             drives_declared: false,
+            extents: Vec::new(),
         }
+    }
+
+    /// Link `l`'s extent, when its description has shapes.
+    pub fn extent(&self, l: usize) -> Option<Extent> {
+        self.extents.get(l).copied().flatten()
     }
 
     /// Number of joints (degrees of freedom).

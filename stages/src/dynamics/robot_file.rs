@@ -58,6 +58,31 @@ struct JointEntry {
     offset: Option<f64>,
     coulomb_transition: Option<f64>,
     limits: Option<LimitsEntry>,
+    /// The box the link's body fills in its frame, m: where the physical
+    /// fit may put its mass (a URDF's shapes give it otherwise).
+    extent: Option<ExtentEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ExtentEntry {
+    min: [f64; 3],
+    max: [f64; 3],
+}
+
+/// A joint entry's `extent`, checked.
+fn extent_of(e: &JointEntry) -> Result<Option<super::model::Extent>, String> {
+    let Some(x) = &e.extent else { return Ok(None) };
+    if (0..3).any(|k| !(x.min[k].is_finite() && x.max[k].is_finite() && x.min[k] < x.max[k])) {
+        return Err(format!(
+            "`extent`: min {:?} must lie below max {:?} on every axis (finite, m)",
+            x.min, x.max
+        ));
+    }
+    Ok(Some(super::model::Extent {
+        min: Vector3::from(x.min),
+        max: Vector3::from(x.max),
+    }))
 }
 
 #[derive(Debug, Deserialize)]
@@ -166,6 +191,10 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
                 }
                 apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i])
                     .map_err(|p| err(format!("joint `{}`: {p}", entry.name)))?;
+                if let Some(e) = extent_of(entry).map_err(|p| err(format!("joint `{}`: {p}", entry.name)))? {
+                    m.extents.resize(m.links.len(), None);
+                    m.extents[i] = Some(e);
+                }
             }
             m.name = file.name.clone();
             m
@@ -224,6 +253,7 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
                     axis: Unit::new_normalize(axis),
                 });
                 m.links.push(Inertial { mass, com, inertia_com });
+                m.extents.push(extent_of(entry).map_err(ctx)?);
                 let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
                 apply_actuation(entry, &mut d, &mut f, &mut l).map_err(|p| ctx(p.to_string()))?;
                 m.drives.push(d);

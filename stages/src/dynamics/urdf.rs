@@ -15,7 +15,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Unit, Vector3};
 use urdf_rs::JointType;
 
-use super::model::{rpy_rotation, Drive, Friction, Inertial, Joint, Limits, Model};
+use super::model::{rpy_rotation, Drive, Extent, Friction, Inertial, Joint, Limits, Model};
 use crate::{Error, Result};
 
 /// A rigid transform (rotation, translation).
@@ -222,8 +222,15 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
                 .any(|j| moves(j) || moving_below(&j.child.link, children, moves))
         })
     }
+    // The shapes of the URDF links merged into the current moving link,
+    // as a box in its frame (meshes: their STL's vertices, when found).
+    let extent = std::cell::RefCell::new(None::<Extent>);
     let inertial_of = |name: &str, frame: &Frame| -> Inertial {
         let l = links[name];
+        if let Some(e) = shapes_extent(l, frame, path) {
+            let mut x = extent.borrow_mut();
+            *x = Some(x.map_or(e, |x| x.union(&e)));
+        }
         let (r, p) = compose(frame, &pose(&l.inertial.origin));
         let i = &l.inertial.inertia;
         let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
@@ -279,6 +286,9 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
                 if !(axis.norm() > 0.0) {
                     return Err(err(format!("joint `{}`: zero axis", j.name)));
                 }
+                if !model.links.is_empty() {
+                    model.extents.push(extent.borrow_mut().take());
+                }
                 model.joints.push(Joint {
                     name: j.name.clone(),
                     origin_rot: origin.0,
@@ -312,6 +322,9 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
         }
         link = &j.child.link;
     }
+    if !model.links.is_empty() {
+        model.extents.push(extent.borrow_mut().take());
+    }
     // The tool point: follow a single chain of fixed links past the last
     // moving joint (e.g. a flange or `ee_link`).
     while let Some([j]) = children.get(link).map(Vec::as_slice) {
@@ -325,6 +338,42 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
         return Err(err("no revolute joint found".into()));
     }
     Ok(model)
+}
+
+/// The box a URDF link's collision shapes (else its visual ones) fill,
+/// in the frame `frame` places the link in; None without shapes, or with
+/// a mesh whose file is not found or not an STL.
+fn shapes_extent(link: &urdf_rs::Link, frame: &Frame, urdf: &Path) -> Option<Extent> {
+    let shapes: Vec<(&urdf_rs::Pose, &urdf_rs::Geometry)> = if link.collision.is_empty() {
+        link.visual.iter().map(|v| (&v.origin, &v.geometry)).collect()
+    } else {
+        link.collision.iter().map(|c| (&c.origin, &c.geometry)).collect()
+    };
+    let mut out: Option<Extent> = None;
+    for (origin, geometry) in shapes {
+        let h = |x: f64, y: f64, z: f64| Extent {
+            min: Vector3::new(-x, -y, -z),
+            max: Vector3::new(x, y, z),
+        };
+        let local = match geometry {
+            urdf_rs::Geometry::Box { size } => h(0.5 * size[0], 0.5 * size[1], 0.5 * size[2]),
+            urdf_rs::Geometry::Cylinder { radius, length } => h(*radius, *radius, 0.5 * length),
+            urdf_rs::Geometry::Capsule { radius, length } => h(*radius, *radius, 0.5 * length + radius),
+            urdf_rs::Geometry::Sphere { radius } => h(*radius, *radius, *radius),
+            urdf_rs::Geometry::Mesh { filename, scale } => {
+                let s = scale.map_or(Vector3::new(1.0, 1.0, 1.0), |s| Vector3::new(s[0], s[1], s[2]));
+                let e = super::stl::extent(&super::stl::resolve(filename, urdf)?).ok()?;
+                Extent::of_points([e.min.component_mul(&s), e.max.component_mul(&s)])?
+            }
+        };
+        let placed = compose(frame, &pose(origin));
+        let e = Extent::of_points(local.corners().map(|c| placed.0 * c + placed.1))?;
+        if !(e.min.iter().chain(e.max.iter()).all(|v| v.is_finite())) {
+            return None;
+        }
+        out = Some(out.map_or(e, |o| o.union(&e)));
+    }
+    out
 }
 
 fn lump_fixed<'a>(

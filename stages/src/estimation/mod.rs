@@ -32,10 +32,10 @@ pub use identifiability::{essential_parameters, unidentified, Essential, Unident
 pub use least_squares::{least_squares, solve_least_squares, stacked_least_squares, weighted_least_squares};
 pub use ml::{input_noise, maximum_likelihood, InputNoise, MlOptions};
 pub use physical::{
-    bootstrap_covariance, is_inertial, physically_consistent, prior_scales, pseudo_inertia, PhysicalFit,
-    BOOTSTRAP_DRAWS,
+    bootstrap_covariance, held_out_prior_weight, is_inertial, link_bounds, physically_consistent, prior_scales,
+    pseudo_inertia, Ellipsoid, LinkBound, PhysicalFit, BOOTSTRAP_DRAWS, MASS_FACTOR,
 };
-pub use summary::{KnownPart, Summary, MAX_CONDITION};
+pub use summary::{Halves, KnownPart, Summary, MAX_CONDITION};
 pub use system::{
     block_rows, columns_of, row_weights, Known, RowBlocks, System, BLOCK_SAMPLES, PARAMETER_COLUMN, PERIOD_TORQUE,
 };

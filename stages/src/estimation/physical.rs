@@ -47,11 +47,108 @@ pub struct PhysicalFit {
     pub min_eigen: Vec<f64>,
     /// Interior-point iterations of the solve that was kept.
     pub iterations: usize,
-    /// The prior weight λ used, and whether it was chosen by C_p.
+    /// The prior weight λ used, and how it was chosen (None: given).
     pub prior_weight: f64,
-    pub chosen: bool,
+    pub chosen: Option<String>,
     /// Effective degrees of freedom of the fit (≤ base parameters).
     pub dof: f64,
+    /// The links' bounds the fit kept to.
+    pub bounds: Vec<LinkBound>,
+}
+
+/// Where a link's body may be: its mass within `mass` (kg), and, when its
+/// shapes are known, inside the ellipsoid of its frame with `centre` and
+/// `semi_axes` (m, along the frame's axes). Both are linear in the link's
+/// ten parameters (Wensing, Kim & Slotine 2017: ∫(1 − (x−c)ᵀQ⁻¹(x−c)) dm ≥ 0
+/// holds for any mass inside the ellipsoid), rows of the same program.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkBound {
+    pub mass: (f64, f64),
+    pub ellipsoid: Option<Ellipsoid>,
+    /// How the bound was made, for the report and the sidecar.
+    pub said: String,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ellipsoid {
+    pub centre: nalgebra::Vector3<f64>,
+    pub semi_axes: nalgebra::Vector3<f64>,
+}
+
+impl Ellipsoid {
+    /// The coefficients g of g·θ = ∫(1 − (x−c)ᵀQ⁻¹(x−c)) dm over a link's
+    /// [XX XY XZ YY YZ ZZ MX MY MZ M] (second moments Σ = ½tr(I)·1 − I).
+    pub fn coefficients(&self) -> [f64; 10] {
+        let q = self.semi_axes.map(|a| 1.0 / (a * a));
+        let c = self.centre;
+        [
+            0.5 * (q.x - q.y - q.z),
+            0.0,
+            0.0,
+            0.5 * (-q.x + q.y - q.z),
+            0.0,
+            0.5 * (-q.x - q.y + q.z),
+            2.0 * c.x * q.x,
+            2.0 * c.y * q.y,
+            2.0 * c.z * q.z,
+            1.0 - (c.x * c.x * q.x + c.y * c.y * q.y + c.z * c.z * q.z),
+        ]
+    }
+
+    /// Whether a link's parameters put its centre of mass inside.
+    pub fn holds_com(&self, t: &[f64]) -> bool {
+        t[9] > 0.0 && {
+            let d = nalgebra::Vector3::new(t[6], t[7], t[8]) / t[9] - self.centre;
+            d.component_div(&self.semi_axes).norm_squared() <= 1.0 + 1e-9
+        }
+    }
+}
+
+/// The factor a link's mass may differ from the robot file's, either way.
+pub const MASS_FACTOR: f64 = 5.0;
+
+/// Each link's bounds from the robot file: its mass within [m/5, 5·m]
+/// (any mass ≥ 0 where the file gives none), inside the ellipsoid through
+/// the corners of its shapes' box (semi-axes √3 times the box's half
+/// sizes, at least 2 cm), widened where the file's own body is not inside.
+pub fn link_bounds(model: &crate::dynamics::Model, prior: &[f64]) -> Vec<LinkBound> {
+    (0..model.links.len())
+        .map(|l| {
+            let t = &prior[10 * l..10 * l + 10];
+            let m = t[9];
+            let mass = if m > 0.0 { (m / MASS_FACTOR, m * MASS_FACTOR) } else { (0.0, f64::INFINITY) };
+            let mut said = if m > 0.0 {
+                format!("mass {:.3}–{:.3} kg ({MASS_FACTOR}× either way of the robot file's {m:.3} kg)", mass.0, mass.1)
+            } else {
+                "mass ≥ 0 (the robot file gives none)".to_string()
+            };
+            let ellipsoid = model.extent(l).map(|e| {
+                let half = ((e.max - e.min) * 0.5).map(|h| h.max(0.01));
+                let mut el = Ellipsoid {
+                    centre: (e.max + e.min) * 0.5,
+                    semi_axes: half * 3f64.sqrt(),
+                };
+                // ∫(x−c)ᵀQ⁻¹(x−c) dm of the file's body: scaling Q by s²
+                // brings it inside when s² ≥ that / m.
+                let g = el.coefficients();
+                let inside: f64 = (0..10).map(|k| g[k] * t[k]).sum();
+                if m > 0.0 && inside < 0.0 {
+                    let s = ((m - inside) / m).sqrt() * 1.05;
+                    el.semi_axes *= s;
+                    said.push_str(&format!("; the robot file's body is not inside its shapes' ellipsoid: widened {s:.2}×"));
+                }
+                el
+            });
+            match &ellipsoid {
+                Some(e) => said.push_str(&format!(
+                    "; inside the ellipsoid at ({:.3}, {:.3}, {:.3}) m with semi-axes ({:.3}, {:.3}, {:.3}) m (its shapes' box)",
+                    e.centre.x, e.centre.y, e.centre.z, e.semi_axes.x, e.semi_axes.y, e.semi_axes.z
+                )),
+                None => said.push_str("; no shapes in the robot file: its mass distribution is not bounded"),
+            }
+            LinkBound { mass, ellipsoid, said }
+        })
+        .collect()
 }
 
 /// What each standard parameter is, by name prefix.
@@ -100,15 +197,21 @@ const MAX_PARAMETERS: usize = 2000;
 /// λ tried when none is given: C_p picks among them.
 const PRIOR_WEIGHTS: [f64; 8] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0];
 
+/// λ tried by held-out periods: up to where the robot file's inertials
+/// all but fix the fit (a prior the data do not contradict is kept).
+const HELD_OUT_WEIGHTS: [f64; 11] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e2, 1e3, 1e4];
+
 /// Fits physically consistent standard parameters (names in regressor
-/// order, the first 10·links inertial) to a base estimate. `prior_weight`:
-/// λ, or None to choose it by C_p.
+/// order, the first 10·links inertial) to a base estimate, each link within
+/// its `bounds` (none past their end). `prior_weight`: λ, or None to choose
+/// it by C_p.
 pub fn physically_consistent(
     names: &[String],
     prior: &[f64],
     map: &DMatrix<f64>,
     base_estimate: &DVector<f64>,
     base_covariance: &DMatrix<f64>,
+    bounds: &[LinkBound],
     prior_weight: Option<f64>,
 ) -> Result<PhysicalFit> {
     let ns = names.len();
@@ -147,7 +250,7 @@ pub fn physically_consistent(
             format!("{} × {} map, {} prior values", map.nrows(), map.ncols(), prior.len()),
         ));
     }
-    let problem = Problem::new(names, prior, map, base_estimate, base_covariance)?;
+    let problem = Problem::new(names, prior, map, base_estimate, base_covariance, bounds)?;
     let fits: Vec<(f64, Solved)> = match prior_weight {
         Some(w) => vec![(w, problem.solve(w, Fit::Central)?)],
         None => PRIOR_WEIGHTS
@@ -196,9 +299,49 @@ pub fn physically_consistent(
         chi2: best.chi2,
         iterations: best.iterations,
         prior_weight: weight,
-        chosen: prior_weight.is_none(),
+        chosen: prior_weight.is_none().then(|| "chosen by Mallows' C_p".to_string()),
         dof: best.dof,
+        bounds: problem.bounds.clone(),
     })
+}
+
+/// λ chosen by held-out periods: the fit made on each half of the
+/// periods (its estimate, covariance 2Σ: half the data) at each λ of the
+/// grid, scored by the torque error on the other half's mean. Returns λ
+/// and the curve (λ, error relative to the unconstrained estimate's own
+/// held-out error: < 1 where the robot file's prior helps prediction).
+pub fn held_out_prior_weight(
+    names: &[String],
+    prior: &[f64],
+    map: &DMatrix<f64>,
+    base_covariance: &DMatrix<f64>,
+    bounds: &[LinkBound],
+    halves: &super::Halves,
+) -> Result<(f64, Vec<(f64, f64)>)> {
+    let half_cov = base_covariance * 2.0;
+    let problem = Problem::new(names, prior, map, &halves.even, &half_cov, bounds)?;
+    let problems = [problem.clone(), problem.with_estimate(&halves.odd)];
+    let fitted: Vec<DVector<f64>> = HELD_OUT_WEIGHTS
+        .par_iter()
+        .flat_map(|&w| [(w, 0), (w, 1)])
+        .map(|(w, h)| {
+            let solved = problems[h].solve(w, Fit::Draw)?;
+            let standard = DVector::from_fn(names.len(), |i, _| solved.x[i] * problem.scale[i]);
+            Ok(map * standard)
+        })
+        .collect::<Result<_>>()?;
+    let unconstrained = halves.score(&halves.even, &halves.odd).max(f64::MIN_POSITIVE);
+    let curve: Vec<(f64, f64)> = HELD_OUT_WEIGHTS
+        .iter()
+        .enumerate()
+        .map(|(k, &w)| (w, halves.score(&fitted[2 * k], &fitted[2 * k + 1]) / unconstrained))
+        .collect();
+    let best = curve
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("a grid of weights")
+        .0;
+    Ok((best, curve))
 }
 
 /// Draws of the base estimate for [`bootstrap_covariance`]: 200 put the
@@ -218,11 +361,12 @@ pub fn bootstrap_covariance(
     map: &DMatrix<f64>,
     base_estimate: &DVector<f64>,
     base_covariance: &DMatrix<f64>,
+    bounds: &[LinkBound],
     prior_weight: f64,
 ) -> Result<DMatrix<f64>> {
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
-    let problem = Problem::new(names, prior, map, base_estimate, base_covariance)?;
+    let problem = Problem::new(names, prior, map, base_estimate, base_covariance, bounds)?;
     let nb = base_estimate.len();
     let chol = base_covariance
         .clone()
@@ -267,12 +411,11 @@ struct Problem {
     g: DVector<f64>,
     y: DVector<f64>,
     x: DMatrix<f64>,
+    bounds: Vec<LinkBound>,
 }
 
 /// What a solve is for. A bootstrap draw needs its values to well within
-/// the bootstrap's own ±5 %: it skips the solver's iterative refinement
-/// (a third of its time; on the UR5 bench recording the covariance moved
-/// by 6e-6 of a standard deviation) and the degrees of freedom.
+/// the bootstrap's own ±5 %: it skips the degrees of freedom.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Fit {
     Central,
@@ -293,6 +436,7 @@ impl Problem {
         map: &DMatrix<f64>,
         base_estimate: &DVector<f64>,
         base_covariance: &DMatrix<f64>,
+        bounds: &[LinkBound],
     ) -> Result<Problem> {
         let ns = names.len();
         let nb = base_estimate.len();
@@ -351,6 +495,7 @@ impl Problem {
             g,
             y,
             x,
+            bounds: bounds.iter().take(links).cloned().collect(),
         })
     }
 
@@ -434,12 +579,46 @@ impl Problem {
             aj.push(i);
             av.push(-1.0);
         }
+        let first_bound = row;
         row += nonneg.len();
-        if !nonneg.is_empty() {
-            cones.push(NonnegativeConeT(nonneg.len()));
+        // The links' bounds, s = c − A·x ≥ 0: M − m_lo, m_hi − M, and the
+        // ellipsoid's g·θ (θ = S·x).
+        let mut constant = Vec::new();
+        for (l, b) in self.bounds.iter().enumerate() {
+            let m = 10 * l + 9;
+            if b.mass.0 > 0.0 {
+                ai.push(row);
+                aj.push(m);
+                av.push(-self.scale[m]);
+                constant.push((row, -b.mass.0));
+                row += 1;
+            }
+            if b.mass.1.is_finite() {
+                ai.push(row);
+                aj.push(m);
+                av.push(self.scale[m]);
+                constant.push((row, b.mass.1));
+                row += 1;
+            }
+            if let Some(e) = &b.ellipsoid {
+                for (k, g) in e.coefficients().iter().enumerate() {
+                    if *g != 0.0 {
+                        ai.push(row);
+                        aj.push(10 * l + k);
+                        av.push(-g * self.scale[10 * l + k]);
+                    }
+                }
+                row += 1;
+            }
         }
-        // s = b − A·δ = −A·(x_u + δ): b = −A·x_u.
+        if row > first_bound {
+            cones.push(NonnegativeConeT(row - first_bound));
+        }
+        // s = c − A·δ − A·x_u (x = x_u + δ): b = c − A·x_u.
         let mut b = vec![0.0; row];
+        for (r, c) in constant {
+            b[r] += c;
+        }
         for k in 0..ai.len() {
             b[ai[k]] -= av[k] * x_u[aj[k]];
         }
@@ -447,13 +626,30 @@ impl Problem {
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .max_iter(500)
+            // The step's start x_u can lie far outside the bounds (a 100 kg
+            // estimate of a 2 kg link): at the default 1e-8 the solver took
+            // that distance for infeasibility, though the robot file's own
+            // body is always feasible.
+            .tol_infeas_abs(1e-14)
+            .tol_infeas_rel(1e-14)
+            .reduced_tol_infeas_abs(1e-14)
+            .reduced_tol_infeas_rel(1e-14)
             .time_limit(30.0)
-            .iterative_refinement_enable(fit == Fit::Central)
+            // Draws too: without it, draws against the links' bounds ended
+            // in NaN iterates (the real LWR4+, 1 in ~50).
+            .iterative_refinement_enable(true)
             .build()
             .map_err(|e| Error::numerical("physical fit", format!("solver settings: {e:?}")))?;
         let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
             .map_err(|e| Error::numerical("physical fit", format!("the problem as clarabel sees it: {e:?}")))?;
-        solver.solve();
+        // A panic inside the solver (its dense eigen-decompositions `expect`)
+        // is this fit's failure, not the program's.
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| solver.solve())).map_err(|_| {
+            Error::numerical(
+                "physical fit",
+                format!("the semidefinite solver failed inside (λ = {weight})"),
+            )
+        })?;
         let status = solver.solution.status;
         if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
             return Err(Error::numerical(
@@ -498,12 +694,90 @@ mod tests {
         let map = DMatrix::identity(10, 10);
         let cov = DMatrix::identity(10, 10) * 1e-4;
         let est = DVector::from_column_slice(&prior);
-        let fit = physically_consistent(&names, &prior, &map, &est, &cov, Some(1e-6)).unwrap();
+        let fit = physically_consistent(&names, &prior, &map, &est, &cov, &[], Some(1e-6)).unwrap();
         assert!((&fit.base - &est).amax() < 1e-6, "{}", fit.base);
         let mut bad = est.clone();
         bad[0] = -0.05;
-        let fit = physically_consistent(&names, &prior, &map, &bad, &cov, Some(1e-6)).unwrap();
+        let fit = physically_consistent(&names, &prior, &map, &bad, &cov, &[], Some(1e-6)).unwrap();
         assert!(fit.min_eigen[0] > -1e-8, "{:?}", fit.min_eigen);
         assert!((fit.base[9] - 2.0).abs() < 0.1, "{}", fit.base);
+    }
+
+    /// A point mass m at x has J = m·[x; 1][x; 1]ᵀ: the ellipsoid's row
+    /// gives m·(1 − (x−c)ᵀQ⁻¹(x−c)), ≥ 0 exactly when x is inside.
+    #[test]
+    fn the_ellipsoid_row_is_the_mass_inside() {
+        let e = Ellipsoid {
+            centre: nalgebra::Vector3::new(0.1, -0.2, 0.3),
+            semi_axes: nalgebra::Vector3::new(0.5, 0.25, 1.0),
+        };
+        let g = e.coefficients();
+        for (x, m) in [([0.1, -0.2, 0.3], 2.0), ([0.5, -0.2, 0.3], 1.5), ([0.1, 0.1, 1.0], 3.0)] {
+            let x = nalgebra::Vector3::from(x);
+            // I about the origin of a point mass: m(|x|²·1 − x·xᵀ).
+            let i: nalgebra::Matrix3<f64> = (nalgebra::Matrix3::identity() * x.norm_squared() - x * x.transpose()) * m;
+            let t = [
+                i[(0, 0)],
+                i[(0, 1)],
+                i[(0, 2)],
+                i[(1, 1)],
+                i[(1, 2)],
+                i[(2, 2)],
+                m * x.x,
+                m * x.y,
+                m * x.z,
+                m,
+            ];
+            let row: f64 = (0..10).map(|k| g[k] * t[k]).sum();
+            let inside = m * (1.0 - (x - e.centre).component_div(&e.semi_axes).norm_squared());
+            assert!((row - inside).abs() < 1e-12, "{row} against {inside}");
+            assert_eq!(e.holds_com(&t), inside >= 0.0);
+        }
+    }
+
+    /// The rod of `one_link_observed_directly`, its estimate pushed to a
+    /// 100 kg mass with the centre of mass at 3 m: unbounded, the fit
+    /// keeps both; bounded by [0.4, 10] kg and an ellipsoid of semi-axes
+    /// (0.3, 0.15, 0.15) m about the rod's middle (the rod inside it:
+    /// ∫(x−c)ᵀQ⁻¹(x−c) dm = 0.89 < 2 kg), the mass stops at 10 kg and the
+    /// centre of mass inside.
+    #[test]
+    fn bounds_hold_a_body_the_data_push_away() {
+        let names: Vec<String> = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"]
+            .iter()
+            .map(|n| format!("{n}_l"))
+            .collect();
+        let prior = [0.01, 0.0, 0.0, 0.17, 0.0, 0.17, 0.5, 0.0, 0.0, 2.0];
+        let map = DMatrix::identity(10, 10);
+        let cov = DMatrix::identity(10, 10) * 1e-4;
+        // 100 kg at 3 m: I_yy = I_zz = 900, first moment 300.
+        let pushed = DVector::from_column_slice(&[0.01, 0.0, 0.0, 900.0, 0.0, 900.0, 300.0, 0.0, 0.0, 100.0]);
+        let free = physically_consistent(&names, &prior, &map, &pushed, &cov, &[], Some(1e-6)).unwrap();
+        assert!((free.base[9] - 100.0).abs() < 1.0, "{}", free.base);
+        let bound = LinkBound {
+            mass: (0.4, 10.0),
+            ellipsoid: Some(Ellipsoid {
+                centre: nalgebra::Vector3::new(0.25, 0.0, 0.0),
+                semi_axes: nalgebra::Vector3::new(0.3, 0.15, 0.15),
+            }),
+            said: String::new(),
+        };
+        let fit = physically_consistent(
+            &names,
+            &prior,
+            &map,
+            &pushed,
+            &cov,
+            std::slice::from_ref(&bound),
+            Some(1e-6),
+        )
+        .unwrap();
+        let m = fit.standard[9];
+        assert!((9.9..=10.0 * (1.0 + 1e-6)).contains(&m), "{m}");
+        assert!(bound.ellipsoid.unwrap().holds_com(&fit.standard), "{:?}", fit.standard);
+        assert!(fit.min_eigen[0] > -1e-8, "{:?}", fit.min_eigen);
+        // The bootstrap keeps to them too: its draws' spread is finite.
+        let cov_b = bootstrap_covariance(&names, &prior, &map, &pushed, &cov, &[bound], 1e-6).unwrap();
+        assert!(cov_b.iter().all(|v| v.is_finite()));
     }
 }

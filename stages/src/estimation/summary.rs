@@ -64,6 +64,27 @@ pub struct KnownPart {
     pub covariance: DMatrix<f64>,
 }
 
+/// Estimates from two halves of the periods and the normal matrix: the
+/// torque error of a model θ on the other half's mean, up to a constant,
+/// is (θ − θ̂_other)ᵀ·N·(θ − θ̂_other).
+#[derive(Debug, Clone)]
+pub struct Halves {
+    pub normal: DMatrix<f64>,
+    pub even: DVector<f64>,
+    pub odd: DVector<f64>,
+}
+
+impl Halves {
+    /// The held-out error of a model fitted on each half, scored on the other.
+    pub fn score(&self, fitted_even: &DVector<f64>, fitted_odd: &DVector<f64>) -> f64 {
+        let d = |a: &DVector<f64>, b: &DVector<f64>| {
+            let e = a - b;
+            (e.transpose() * &self.normal * &e)[(0, 0)]
+        };
+        0.5 * (d(fitted_even, &self.odd) + d(fitted_odd, &self.even))
+    }
+}
+
 /// Sufficient statistics of one or more recordings' least squares.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Summary {
@@ -260,6 +281,36 @@ impl Summary {
             &inverse_normal,
             self.factor.rows as f64 / self.equations.max(1) as f64,
         ))
+    }
+
+    /// The least-squares estimates from the even and from the odd periods
+    /// of every recording, with the normal matrix AᵀWA: a held-out split
+    /// without the rows (b_k = b̄ + d_k, so θ̂_S = θ̂ + (AᵀWA)⁻¹·mean over
+    /// S of Aᵀ·W·d_k). None unless every recording has two periods or more.
+    pub fn halves(&self, theta: &DVector<f64>) -> Option<Halves> {
+        let moments: Vec<&DMatrix<f64>> = self.period_moments.iter().map(Option::as_ref).collect::<Option<_>>()?;
+        if moments.is_empty() || moments.iter().any(|m| m.ncols() < 2) {
+            return None;
+        }
+        let p = self.parameters();
+        let half = |parity: usize| {
+            let mut v = DVector::zeros(p);
+            for m in &moments {
+                let cols: Vec<usize> = (parity..m.ncols()).step_by(2).collect();
+                for &k in &cols {
+                    v += m.column(k) / cols.len() as f64;
+                }
+            }
+            // (RᵀR)⁻¹·v by two triangular solves.
+            let r = &self.factor.r;
+            let y = r.tr_solve_upper_triangular(&v)?;
+            Some(theta + r.solve_upper_triangular(&y)?)
+        };
+        Some(Halves {
+            normal: self.factor.r.transpose() * &self.factor.r,
+            even: half(0)?,
+            odd: half(1)?,
+        })
     }
 
     /// The estimate: column-scaled R, rank judged on its singular values,

@@ -17,9 +17,10 @@ use super::differentiate::Differentiation;
 use super::{Chain, Component, Context, LintContext, PeriodsUse, Problem, Product, Stage};
 use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
 use crate::estimation::{
-    bootstrap_covariance, essential_parameters, input_noise, maximum_likelihood, parameters_from_table,
-    parameters_table, physically_consistent, row_weights, unidentified, Covariance, Essential, Estimate, Estimator,
-    InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Unidentified, Weights, BOOTSTRAP_DRAWS,
+    bootstrap_covariance, essential_parameters, held_out_prior_weight, input_noise, link_bounds, maximum_likelihood,
+    parameters_from_table, parameters_table, physically_consistent, row_weights, unidentified, Covariance, Essential,
+    Estimate, Estimator, Halves, InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Unidentified,
+    Weights, BOOTSTRAP_DRAWS,
 };
 use crate::formats::parquet::read_parquet;
 use crate::stage::regressor::RegressorConfig;
@@ -480,7 +481,12 @@ impl Reducer {
             let base = base
                 .as_ref()
                 .ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
-            let (fit, covariance, note) = physical_fit(base, &est, self.cfg.prior_weight)?;
+            // Held-out periods choose λ; the halves are least squares'.
+            let halves = match self.cfg.method {
+                Estimator::Ml => None,
+                _ => summary.halves(&est.values),
+            };
+            let (fit, covariance, note) = physical_fit(base, &est, halves.as_ref(), self.cfg.prior_weight)?;
             est.values = fit.base.clone();
             est.covariance = covariance;
             est.covariance_from = Covariance::Bootstrap;
@@ -612,6 +618,7 @@ impl Reducer {
 fn physical_fit(
     base: &BaseRegressor,
     est: &Estimate,
+    halves: Option<&Halves>,
     prior_weight: Option<f64>,
 ) -> Result<(PhysicalFit, nalgebra::DMatrix<f64>, String)> {
     let map = match (base.kind, base.map()) {
@@ -653,16 +660,50 @@ fn physical_fit(
     }
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
-    let fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, prior_weight)?;
+    let bounds = link_bounds(&base.model, &prior);
+    // λ by held-out periods where there are two or more; else C_p.
+    let (weight, chosen) = match (prior_weight, halves) {
+        (Some(w), _) => (Some(w), None),
+        (None, Some(h)) => {
+            let (w, curve) = held_out_prior_weight(&names, &prior, map, &est.covariance, &bounds, h)?;
+            let curve: Vec<String> = curve.iter().map(|(w, e)| format!("{w:e}: {e:.3}")).collect();
+            (
+                Some(w),
+                Some(format!(
+                    "chosen by held-out periods (fitted on the even periods, scored on the odd ones and the reverse; torque error over least squares' own, per λ: {})",
+                    curve.join(", ")
+                )),
+            )
+        }
+        (None, None) => (None, None),
+    };
+    let mut fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, &bounds, weight)?;
+    if chosen.is_some() {
+        fit.chosen = chosen;
+    }
+    let bounded: Vec<String> = bounds
+        .iter()
+        .zip(&base.model.joints)
+        .map(|(b, j)| format!("{}: {}", j.name, b.said))
+        .collect();
     let note = format!(
-        "physically consistent estimate (semidefinite program): χ² = {:.4} against the covariance, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalues {:?}",
+        "physically consistent estimate (semidefinite program): χ² = {:.4} against the covariance, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalues {}; the links' bounds: {}",
         fit.chi2,
         fit.prior_weight,
-        if fit.chosen { " chosen by C_p" } else { "" },
+        fit.chosen.as_ref().map(|c| format!(" {c}")).unwrap_or_default(),
         fit.dof,
-        fit.min_eigen
+        fit.min_eigen.iter().map(|e| format!("{e:.2e}")).collect::<Vec<_>>().join(", "),
+        bounded.join("; ")
     );
-    let covariance = bootstrap_covariance(&names, &prior, map, &est.values, &est.covariance, fit.prior_weight)?;
+    let covariance = bootstrap_covariance(
+        &names,
+        &prior,
+        map,
+        &est.values,
+        &est.covariance,
+        &bounds,
+        fit.prior_weight,
+    )?;
     Ok((
         fit,
         covariance,
