@@ -46,9 +46,12 @@ fi
   --physical -o out/kuka_axis3/parameters_physical.parquet
 "$bin" export --robot fixtures/robots/kuka_axis3.toml -p out/kuka_axis3/parameters_physical.parquet \
   --format urdf,mjcf,sidecar -o out/kuka_axis3/identified
-# One page with everything: parameters, intervals, torques, residues, noise.
+# One page with everything: verdicts, parameters, intervals, the physical
+# estimate's bodies, torques, residues, noise.
 "$bin" report -p out/kuka_axis3/parameters.parquet --excitation out/kuka_axis3/kuka_axis3/regressor.parquet \
-  --validation out/validation/kuka_axis3_validation/regressor.parquet -o out/kuka_axis3/report.html
+  --validation out/validation/kuka_axis3_validation/regressor.parquet \
+  --physical out/kuka_axis3/parameters_physical.parquet --robot fixtures/robots/kuka_axis3.toml \
+  -o out/kuka_axis3/report.html
 # The same in one command, everything inferred from the recordings
 # (docs/your-recordings.md): the KUKA axis, and the real LWR4+ arm.
 rm -rf out/identify

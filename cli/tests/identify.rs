@@ -231,7 +231,8 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let wrist = text.lines().find(|l| l.starts_with("lwr_6_joint ")).unwrap_or_default();
     assert!(wrist.ends_with("model error dominates"), "{text}");
     // Each held-out file's relative error, least squares then the physical
-    // fit: file 3 at 9.40 % and 5.92 % (5.92 % before the floor changed).
+    // fit: file 3 at 9.40 % and 5.66 % (5.92 % before its links were
+    // bounded).
     let rel: Vec<f64> = text
         .lines()
         .filter(|l| l.contains("measurements_3/regressor.parquet: relative error"))
@@ -252,6 +253,21 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     assert!((p - 4.0 * std::f64::consts::PI).abs() < 2e-3, "{p}\n{text}");
     for k in ["report.html", "identified.urdf", "identified.xml", "identify.sh"] {
         assert!(out.join(k).is_file(), "{k} missing:\n{text}");
+    }
+    // Bodies a robot could have: every exported link within [0.2×, 5×] of
+    // the URDF's mass (the fit's bound; unbounded, one weighed 3714 kg and
+    // another 0.0 kg), and inside its shapes (export refuses otherwise).
+    let file = robotid_stages::dynamics::load_urdf(&robot).unwrap();
+    let exported = robotid_stages::dynamics::load_urdf(&out.join("identified.urdf")).unwrap();
+    for ((a, b), j) in file.links.iter().zip(&exported.links).zip(&file.joints) {
+        let r = b.mass / a.mass;
+        assert!(
+            (0.2 * (1.0 - 1e-6)..=5.0 * (1.0 + 1e-6)).contains(&r),
+            "{}: {} kg against {} kg",
+            j.name,
+            b.mass,
+            a.mass
+        );
     }
     let held = |root: &Path, sub: &str| -> Vec<PathBuf> {
         [2, 3]

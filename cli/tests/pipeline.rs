@@ -60,6 +60,10 @@ fn rendered_in_a_browser(html: &Path) {
         dom.contains("Verdicts") && dom.contains("class=\"ok\""),
         "verdicts not rendered"
     );
+    // A validation run that does not repeat is judged on the excitation's
+    // floor, not left "noise floor unknown".
+    assert!(!dom.contains("noise floor unknown"), "a verdict missing");
+    assert!(dom.contains("Bodies for simulators"), "the bodies not rendered");
     assert_eq!(dom.matches("<svg").count(), 5, "figures in the rendered page");
     browser(&[&format!("--screenshot={}", png.display())]);
     let bytes = std::fs::read(&png).unwrap();
@@ -474,30 +478,6 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     let rows = &sys.a * &params.values;
     let worst = (0..tau.len()).map(|i| (tau[i] - rows[i]).abs()).fold(0.0, f64::max);
     assert!(worst < 1e-9 * rows.amax(), "predict differs by {worst}");
-    // `robotid report`: one self-contained page.
-    let html = out.join("report.html");
-    run_cli(&[
-        "report",
-        "-p",
-        &params_path.display().to_string(),
-        "--excitation",
-        &out.join("ex/kuka_axis3/regressor.parquet").display().to_string(),
-        "--validation",
-        &reg.display().to_string(),
-        "-o",
-        &html.display().to_string(),
-    ]);
-    let page = std::fs::read_to_string(&html).unwrap();
-    for name in &params.names {
-        assert!(page.contains(name.as_str()), "{name} missing from the report");
-    }
-    // Excitation: torques, residues, noise; validation: torques, residues.
-    assert_eq!(page.matches("<svg").count(), 5);
-    assert!(page.contains("95.0 % interval") && page.contains("ZZ_a3 + Ia_a3"));
-    // The verdicts lead, and no raw JSON is shown.
-    assert!(page.find("Verdicts").unwrap() < page.find("Parameters").unwrap());
-    assert!(!page.contains("{\""), "raw JSON in the report");
-    rendered_in_a_browser(&html);
     // `robotid export`: the least-squares estimate is refused; the
     // physically consistent one (`robotid estimate --physical`) goes to
     // URDF, MJCF and sidecar, and MuJoCo and Pinocchio give robotid's
@@ -528,6 +508,37 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
         mujoco < 1e-9 && pinocchio < 1e-9,
         "MuJoCo {mujoco:e}, Pinocchio {pinocchio:e}"
     );
+    // `robotid report`: one self-contained page, the physical estimate
+    // beside the least-squares one.
+    let html = out.join("report.html");
+    run_cli(&[
+        "report",
+        "-p",
+        &params_path.display().to_string(),
+        "--excitation",
+        &out.join("ex/kuka_axis3/regressor.parquet").display().to_string(),
+        "--validation",
+        &reg.display().to_string(),
+        "--physical",
+        &physical.display().to_string(),
+        "--robot",
+        &p("robots/kuka_axis3.toml"),
+        "-o",
+        &html.display().to_string(),
+    ]);
+    let page = std::fs::read_to_string(&html).unwrap();
+    for name in &params.names {
+        assert!(page.contains(name.as_str()), "{name} missing from the report");
+    }
+    // Excitation: torques, residues, noise; validation: torques, residues.
+    assert_eq!(page.matches("<svg").count(), 5);
+    assert!(page.contains("95.0 % interval") && page.contains("ZZ_a3 + Ia_a3"));
+    // The verdicts lead, and no raw JSON is shown.
+    assert!(page.find("Verdicts").unwrap() < page.find("Parameters").unwrap());
+    assert!(!page.contains("{\""), "raw JSON in the report");
+    // The physical estimate beside it: its errors, its body.
+    assert!(page.contains("Bodies for simulators") && page.contains("physically consistent</th>"));
+    rendered_in_a_browser(&html);
     // The robot file's URDF-less terms: the exported URDF, read back, has
     // the same inertials, and its base parameters are the estimate's.
     let exported = load_robot(&out.join("identified.urdf")).unwrap();

@@ -32,6 +32,7 @@ impl JointResidue {
         match self.noise_floor {
             None => Verdict::NoiseFloorUnknown,
             Some(f) if self.msr <= ADEQUATE_RATIO * f => Verdict::Adequate,
+            Some(_) if self.floor_borrowed => Verdict::OverBorrowedFloor,
             Some(_) => Verdict::ModelErrorDominates,
         }
     }
@@ -96,9 +97,15 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
 /// Joints without a noise floor of their own (a validation record that
 /// does not repeat has no periods to take it from) take the excitation's,
 /// from the parameters table: the noise variance of its averaged torque
-/// times the number of periods averaged, the variance of one sample.
+/// times the number of periods averaged (the variance of one sample),
+/// times the share its chain's low-pass lets through (`data`'s
+/// `robotid.torque_noise_gain`; a chain that does not say is not judged).
 /// Returns whether any did; the verdicts then judge against it.
-pub fn borrow_floor(stats: &mut [JointResidue], parameters: &std::collections::BTreeMap<String, String>) -> bool {
+pub fn borrow_floor(
+    stats: &mut [JointResidue],
+    parameters: &std::collections::BTreeMap<String, String>,
+    data: &std::collections::BTreeMap<String, String>,
+) -> bool {
     use robotid_schemas::metadata;
     let periods: Option<f64> = parameters
         .get(metadata::PERIODS)
@@ -108,6 +115,13 @@ pub fn borrow_floor(stats: &mut [JointResidue], parameters: &std::collections::B
         .get(metadata::ADEQUACY)
         .and_then(|a| serde_json::from_str(a).ok())
         .unwrap_or_default();
+    let Some(gain) = data
+        .get(metadata::TORQUE_NOISE_GAIN)
+        .and_then(|g| g.parse::<f64>().ok())
+        .filter(|g| *g > 0.0)
+    else {
+        return false;
+    };
     let mut any = false;
     for s in stats.iter_mut().filter(|s| s.noise_floor.is_none()) {
         let floor = floors
@@ -115,7 +129,7 @@ pub fn borrow_floor(stats: &mut [JointResidue], parameters: &std::collections::B
             .find(|a| a.get("joint").and_then(|j| j.as_str()) == Some(&s.joint))
             .and_then(|a| a.get("noise_floor")?.as_f64());
         if let (Some(f), Some(p)) = (floor, periods) {
-            s.noise_floor = Some(f * p);
+            s.noise_floor = Some(f * p * gain);
             s.floor_borrowed = true;
             any = true;
         }

@@ -176,6 +176,7 @@ fn badge(verdict: &str) -> String {
     let class = match verdict {
         "adequate" | "yes" => "ok",
         "model error dominates" | "no" => "bad",
+        "over the excitation's floor" => "mid",
         _ => "unk",
     };
     format!("<span class=\"{class}\">{}</span>", esc(verdict))
@@ -212,7 +213,7 @@ pub fn html(
     let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
     let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
     let mut h = String::new();
-    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}.mi,.mf{height:7px;margin:1px 0}.mi{background:#1f77b4}.mf{background:#aaa}</style></head><body>\n");
+    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk,.mid{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.mid{background:#ef6c00}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}.mi,.mf{height:7px;margin:1px 0}.mi{background:#1f77b4}.mf{background:#aaa}</style></head><body>\n");
     h.push_str(&format!(
         "<h1>Identification of <code>{}</code></h1>\n",
         esc(md(metadata::ROBOT))
@@ -251,7 +252,7 @@ pub fn html(
         }
         let predicted: DVector<f64> = &sys.a * &params.values;
         let mut stats = residues(sys, &predicted);
-        borrow_floor(&mut stats, &params.metadata);
+        borrow_floor(&mut stats, &params.metadata, &sys.metadata);
         columns.push((
             set.title.to_string(),
             stats
@@ -318,7 +319,7 @@ pub fn html(
         }
         h.push_str("</tr>\n");
     }
-    h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A starred floor is the excitation's (the data does not repeat).</p>\n");
+    h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A data set that does not repeat is judged against the excitation's floor (per sample, through its chain's low-pass): \"over the excitation's floor\" is model error or the chain's own, which that floor cannot tell apart.</p>\n");
     if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
         h.push_str(&bodies_html(&ph.bodies));
     }

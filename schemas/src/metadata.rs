@@ -62,6 +62,10 @@ pub const NOISE_PREFIX: &str = "robotid.noise";
 pub const NOISE_PER_SAMPLE: &str = "robotid.noise.per_sample";
 /// How the kinematics were differentiated: `fourier_fit`, `dft`, `filtered`.
 pub const DIFFERENTIATION: &str = "robotid.differentiation";
+/// The share of white torque noise's variance a `filtered` chain's
+/// low-pass lets through (the mean of |H|⁴ up to Nyquist): a record that
+/// does not repeat is judged against the excitation's floor times it.
+pub const TORQUE_NOISE_GAIN: &str = "robotid.torque_noise_gain";
 /// Defaults a stage chose where the pipeline file is silent, with why.
 pub const DEFAULTS: &str = "robotid.defaults";
 /// Prefix of what `robotid identify` inferred from the data (`[inferred]`

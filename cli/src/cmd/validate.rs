@@ -40,7 +40,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let predicted = &sys.a * &params.values;
     let mut stats = robotid::validation::residues(&sys, &predicted);
-    robotid::validation::borrow_floor(&mut stats, &params.metadata);
+    robotid::validation::borrow_floor(&mut stats, &params.metadata, &sys.metadata);
     println!(
         "validation of {} ({} method) on {}",
         args.parameters.display(),
@@ -81,6 +81,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .map(|f| f.display().to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
+        );
+    }
+    let over: Vec<String> = stats
+        .iter()
+        .filter(|s| s.verdict() == robotid::validation::Verdict::OverBorrowedFloor)
+        .map(|s| format!("{} ({:.1}×)", s.joint, s.msr / s.noise_floor.unwrap_or(f64::NAN)))
+        .collect();
+    if !over.is_empty() {
+        println!(
+            "verdict: the residue is over the excitation's noise floor on {}: model error, or this chain's own (a record that does not repeat is low-pass filtered, and its Coulomb steps at reversals with it), which a borrowed floor cannot tell apart; validate on a periodic recording to judge the model alone",
+            over.join(", ")
         );
     }
     if !inadequate.is_empty() {

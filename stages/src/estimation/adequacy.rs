@@ -26,6 +26,10 @@ pub enum Verdict {
     /// No noise floor to compare with (neither the periods' spread nor a
     /// `noise` stage).
     NoiseFloorUnknown,
+    /// Over a floor taken from the excitation (the data does not repeat):
+    /// model error, or the chain's own (a filtered record's Coulomb steps
+    /// at reversals), which that floor cannot tell apart.
+    OverBorrowedFloor,
 }
 
 impl Verdict {
@@ -34,6 +38,7 @@ impl Verdict {
             Verdict::Adequate => "adequate",
             Verdict::ModelErrorDominates => "model error dominates",
             Verdict::NoiseFloorUnknown => "noise floor unknown",
+            Verdict::OverBorrowedFloor => "over the excitation's floor",
         }
     }
 }
