@@ -37,7 +37,7 @@ pub struct Args {
     #[arg(long)]
     pub robot: Option<PathBuf>,
     /// With `--physical`: the weight of the pull towards the robot file's
-    /// inertials (chosen by Mallows' C_p when not given).
+    /// inertials (chosen by held-out periods when not given; by Mallows' C_p from a single period).
     #[arg(long, requires = "physical")]
     pub prior_weight: Option<f64>,
     /// Output parameters table.

@@ -57,7 +57,7 @@ pub struct EstimateConfig {
     pub physical: bool,
     /// With `physical`: the weight of the pull of the inertial parameters
     /// towards the robot file (χ² units per squared a-priori scale).
-    /// Chosen by Mallows' C_p when not given.
+    /// Chosen by held-out periods when not given (Mallows' C_p from a single period).
     #[serde(default)]
     pub prior_weight: Option<f64>,
 }
