@@ -923,7 +923,7 @@ fn choose_model(
     let moving_name = moving.map(|m| kin.joints[m].as_str());
     let friction_ok = |names: &[String], s: &Score| {
         names.iter().zip(s.theta.iter()).all(|(n, x)| {
-            let friction = n.starts_with("Fv") || n.starts_with("Fc");
+            let friction = robotid_stages::dynamics::ParameterKind::of(n).is_friction();
             let scored = moving_name.is_none_or(|m| n.ends_with(m));
             !(friction && scored) || *x >= 0.0
         })

@@ -407,10 +407,12 @@ struct Sidecar<'a> {
 /// `damping`); asymmetric coefficients only as their means; offsets,
 /// springs and the URDF's rotor inertia nowhere.
 fn representable(name: &str) -> (bool, bool) {
-    match name.split('_').next().unwrap_or("") {
-        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "MX" | "MY" | "MZ" | "M" | "Fv" | "Fc" => (true, true),
-        "Ia" => (false, true),
-        _ => (false, false),
+    use robotid_stages::dynamics::ParameterKind as K;
+    match K::of(name) {
+        K::Inertia | K::FirstMoment | K::Mass => (true, true),
+        K::Viscous { one_sided } | K::Coulomb { one_sided } => (!one_sided, !one_sided),
+        K::RotorInertia => (false, true),
+        K::JointInertia | K::Gravity | K::Offset | K::Spring | K::Unknown => (false, false),
     }
 }
 

@@ -377,3 +377,43 @@ fn least_squares(batch: &arrow::array::RecordBatch) -> nalgebra::DVector<f64> {
     let a = DMatrix::from_fn(b.len(), p, |i, j| col(6 + j)[i]);
     a.svd(true, true).solve(&b, 1e-12).unwrap()
 }
+
+/// Every parameter name robotid makes reads back as its kind: ten
+/// inertial ones per link, then per joint the rotor inertia, the four
+/// one-sided friction coefficients and the offset; the decoupled model's
+/// inertia and gravity; a foreign name is Unknown. Units follow the kind.
+#[test]
+fn parameter_names_read_back_as_their_kind() {
+    use dynamics::ParameterKind as K;
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let terms = RegressorTerms {
+        rotor: true,
+        friction: FrictionTerms::Asymmetric,
+        offset: true,
+        spring: None,
+    };
+    let names = dynamics::parameter_names(&model, terms);
+    let kinds: Vec<K> = names.iter().map(|n| K::of(n)).collect();
+    let links = model.links.len();
+    assert!(kinds[..10 * links].iter().all(|k| k.is_inertial()));
+    let per_joint = [
+        K::RotorInertia,
+        K::Viscous { one_sided: true },
+        K::Viscous { one_sided: true },
+        K::Coulomb { one_sided: true },
+        K::Coulomb { one_sided: true },
+        K::Offset,
+    ];
+    for (j, chunk) in kinds[10 * links..].chunks(per_joint.len()).enumerate() {
+        assert_eq!(chunk, per_joint, "joint {j}: {:?}", &names[10 * links + 6 * j..]);
+    }
+    assert_eq!(K::of("Fv_j1"), K::Viscous { one_sided: false });
+    assert_eq!(K::of("Mi_j1"), K::JointInertia);
+    assert_eq!(K::of("Gc_j1"), K::Gravity);
+    assert_eq!(K::of("SpA2_j1"), K::Spring);
+    assert_eq!(K::of("whatever"), K::Unknown);
+    assert_eq!(K::of("M_j1").unit(), "kg");
+    assert_eq!(K::of("MY_j1").unit(), "kg*m");
+    assert_eq!(K::of("Fv-_j1").unit(), "N*m*s/rad");
+    assert!(K::of("Ia_j1").non_negative() && !K::of("Off_j1").non_negative());
+}

@@ -96,10 +96,7 @@ pub fn prior_scales(names: &[String], prior: &[f64]) -> Vec<f64> {
 
 /// Whether a standard parameter is one of a link's 10 inertial ones.
 pub fn is_inertial(name: &str) -> bool {
-    matches!(
-        name.split('_').next().unwrap_or(""),
-        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "MX" | "MY" | "MZ" | "M"
-    )
+    super::ParameterKind::of(name).is_inertial()
 }
 
 /// Below this fraction of the largest torque a parameter of its a-priori

@@ -37,7 +37,7 @@ pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};
 pub use torque_regressor::{
     friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
-    with_standard_parameters, FrictionTerms, RegressorTerms, Spring,
+    with_standard_parameters, FrictionTerms, ParameterKind, RegressorTerms, Spring,
 };
 pub use urdf::{load_urdf, load_urdf_with, parse_urdf, parse_urdf_with, Locks};
 pub use urdf_export::to_urdf;

@@ -121,15 +121,98 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
     names
 }
 
-/// The unit of a parameter, from its name's prefix.
-pub fn parameter_unit(name: &str) -> &'static str {
-    match name.split('_').next().unwrap_or("") {
-        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "Ia" | "Mi" => "kg*m^2",
-        "MX" | "MY" | "MZ" => "kg*m",
-        "M" => "kg",
-        "Fv" | "Fv+" | "Fv-" => "N*m*s/rad",
-        _ => "N*m", // Fc, Off, spring coefficients
+/// What a standard parameter is: [`parameter_names`] writes the kind as
+/// the name's prefix (`ZZ_<joint>`), and this is the one place that reads
+/// it back (tables carry names only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParameterKind {
+    /// A link's second moment about its origin (XX … ZZ), kg·m².
+    Inertia,
+    /// A link's first moment (MX, MY, MZ), kg·m.
+    FirstMoment,
+    /// A link's mass, kg.
+    Mass,
+    /// A drive's rotor inertia seen at the joint, kg·m².
+    RotorInertia,
+    /// The decoupled model's inertia about a joint (`Mi`), kg·m².
+    JointInertia,
+    /// The decoupled model's gravity coefficients (`Gs`, `Gc`), N·m.
+    Gravity,
+    /// Viscous friction, N·m·s/rad: both directions, or one (Bona's
+    /// asymmetric friction, `Fv+`/`Fv-`).
+    Viscous { one_sided: bool },
+    /// Coulomb friction, N·m: both directions, or one (`Fc+`/`Fc-`).
+    Coulomb { one_sided: bool },
+    /// A constant torque offset, N·m.
+    Offset,
+    /// A spring's Fourier coefficient, N·m.
+    Spring,
+    /// A name robotid does not make (a table from elsewhere).
+    Unknown,
+}
+
+impl ParameterKind {
+    /// The kind of a standard parameter named by [`parameter_names`].
+    pub fn of(name: &str) -> ParameterKind {
+        match name.split('_').next().unwrap_or("") {
+            "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" => ParameterKind::Inertia,
+            "MX" | "MY" | "MZ" => ParameterKind::FirstMoment,
+            "M" => ParameterKind::Mass,
+            "Ia" => ParameterKind::RotorInertia,
+            "Mi" => ParameterKind::JointInertia,
+            "Gs" | "Gc" => ParameterKind::Gravity,
+            "Fv" => ParameterKind::Viscous { one_sided: false },
+            "Fv+" | "Fv-" => ParameterKind::Viscous { one_sided: true },
+            "Fc" => ParameterKind::Coulomb { one_sided: false },
+            "Fc+" | "Fc-" => ParameterKind::Coulomb { one_sided: true },
+            "Off" => ParameterKind::Offset,
+            p if p.starts_with("SpA") || p.starts_with("SpB") => ParameterKind::Spring,
+            _ => ParameterKind::Unknown,
+        }
     }
+
+    /// One of a link's ten inertial parameters.
+    pub fn is_inertial(self) -> bool {
+        matches!(
+            self,
+            ParameterKind::Inertia | ParameterKind::FirstMoment | ParameterKind::Mass
+        )
+    }
+
+    /// Friction, either kind.
+    pub fn is_friction(self) -> bool {
+        matches!(self, ParameterKind::Viscous { .. } | ParameterKind::Coulomb { .. })
+    }
+
+    /// A magnitude no physical drive has below zero.
+    pub fn non_negative(self) -> bool {
+        matches!(
+            self,
+            ParameterKind::RotorInertia
+                | ParameterKind::JointInertia
+                | ParameterKind::Viscous { .. }
+                | ParameterKind::Coulomb { .. }
+        )
+    }
+
+    pub fn unit(self) -> &'static str {
+        match self {
+            ParameterKind::Inertia | ParameterKind::RotorInertia | ParameterKind::JointInertia => "kg*m^2",
+            ParameterKind::FirstMoment => "kg*m",
+            ParameterKind::Mass => "kg",
+            ParameterKind::Viscous { .. } => "N*m*s/rad",
+            ParameterKind::Coulomb { .. }
+            | ParameterKind::Gravity
+            | ParameterKind::Offset
+            | ParameterKind::Spring
+            | ParameterKind::Unknown => "N*m",
+        }
+    }
+}
+
+/// The unit of a parameter.
+pub fn parameter_unit(name: &str) -> &'static str {
+    ParameterKind::of(name).unit()
 }
 
 /// A link's 10 standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M] from its

@@ -184,7 +184,7 @@ impl Estimate {
             .filter(|&i| {
                 let n = &self.names[i];
                 let alone = expressions.get(i).is_none_or(|e| e == n);
-                alone && ["Ia_", "Fv", "Fc", "Mi_"].iter().any(|p| n.starts_with(p)) && self.values[i] < 0.0
+                alone && crate::dynamics::ParameterKind::of(n).non_negative() && self.values[i] < 0.0
             })
             .map(|i| {
                 (

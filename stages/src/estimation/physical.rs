@@ -163,10 +163,13 @@ enum Kind {
 }
 
 fn kind(name: &str) -> Kind {
-    match name.split('_').next().unwrap_or("") {
-        "XX" | "XY" | "XZ" | "YY" | "YZ" | "ZZ" | "MX" | "MY" | "MZ" | "M" => Kind::Inertial,
-        "Ia" | "Fv" | "Fv+" | "Fv-" | "Fc" | "Fc+" | "Fc-" => Kind::NonNegative,
-        _ => Kind::Free,
+    let k = crate::dynamics::ParameterKind::of(name);
+    if k.is_inertial() {
+        Kind::Inertial
+    } else if k.non_negative() {
+        Kind::NonNegative
+    } else {
+        Kind::Free
     }
 }
 
