@@ -684,18 +684,28 @@ impl Problem {
 mod tests {
     use super::*;
 
+    /// One link observed directly (K = 1, Σ = 1e-4·1) whose robot file
+    /// holds a 2 kg rod along x, 0.5 m long, centre of mass at 0.25 m: its
+    /// names, prior, map and covariance.
+    fn rod() -> (Vec<String>, [f64; 10], DMatrix<f64>, DMatrix<f64>) {
+        let names = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"]
+            .iter()
+            .map(|n| format!("{n}_l"))
+            .collect();
+        let prior = [0.01, 0.0, 0.0, 0.17, 0.0, 0.17, 0.5, 0.0, 0.0, 2.0];
+        (
+            names,
+            prior,
+            DMatrix::identity(10, 10),
+            DMatrix::identity(10, 10) * 1e-4,
+        )
+    }
+
     /// One link observed directly (K = 1, Σ = 1): a consistent estimate
     /// comes back unchanged, an inconsistent one moves onto the boundary.
     #[test]
     fn one_link_observed_directly() {
-        let names: Vec<String> = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"]
-            .iter()
-            .map(|n| format!("{n}_l"))
-            .collect();
-        // A 2 kg rod along x, 0.5 m long, centre of mass at 0.25 m.
-        let prior = [0.01, 0.0, 0.0, 0.17, 0.0, 0.17, 0.5, 0.0, 0.0, 2.0];
-        let map = DMatrix::identity(10, 10);
-        let cov = DMatrix::identity(10, 10) * 1e-4;
+        let (names, prior, map, cov) = rod();
         let est = DVector::from_column_slice(&prior);
         let fit = physically_consistent(&names, &prior, &map, &est, &cov, &[], Some(1e-6)).unwrap();
         assert!((&fit.base - &est).amax() < 1e-6, "{}", fit.base);
@@ -719,18 +729,7 @@ mod tests {
             let x = nalgebra::Vector3::from(x);
             // I about the origin of a point mass: m(|x|²·1 − x·xᵀ).
             let i: nalgebra::Matrix3<f64> = (nalgebra::Matrix3::identity() * x.norm_squared() - x * x.transpose()) * m;
-            let t = [
-                i[(0, 0)],
-                i[(0, 1)],
-                i[(0, 2)],
-                i[(1, 1)],
-                i[(1, 2)],
-                i[(2, 2)],
-                m * x.x,
-                m * x.y,
-                m * x.z,
-                m,
-            ];
+            let t = crate::dynamics::inertial_parameters(&i, &(x * m), m);
             let row: f64 = (0..10).map(|k| g[k] * t[k]).sum();
             let inside = m * (1.0 - (x - e.centre).component_div(&e.semi_axes).norm_squared());
             assert!((row - inside).abs() < 1e-12, "{row} against {inside}");
@@ -746,13 +745,7 @@ mod tests {
     /// centre of mass inside.
     #[test]
     fn bounds_hold_a_body_the_data_push_away() {
-        let names: Vec<String> = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"]
-            .iter()
-            .map(|n| format!("{n}_l"))
-            .collect();
-        let prior = [0.01, 0.0, 0.0, 0.17, 0.0, 0.17, 0.5, 0.0, 0.0, 2.0];
-        let map = DMatrix::identity(10, 10);
-        let cov = DMatrix::identity(10, 10) * 1e-4;
+        let (names, prior, map, cov) = rod();
         // 100 kg at 3 m: I_yy = I_zz = 900, first moment 300.
         let pushed = DVector::from_column_slice(&[0.01, 0.0, 0.0, 900.0, 0.0, 900.0, 300.0, 0.0, 0.0, 100.0]);
         let free = physically_consistent(&names, &prior, &map, &pushed, &cov, &[], Some(1e-6)).unwrap();
