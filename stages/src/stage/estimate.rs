@@ -144,9 +144,9 @@ pub fn adequacy_json(found: &[crate::estimation::JointAdequacy]) -> String {
 /// A `parameters` table's values and covariance, to be taken as known.
 pub fn load_known(path: &std::path::Path) -> Result<Known> {
     let batch = read_parquet(path)?;
-    let p = parameters_from_table(&batch).map_err(|e| Error::Format {
+    let p = parameters_from_table(&batch).map_err(|e| Error::Decode {
         path: path.to_path_buf(),
-        msg: e.to_string(),
+        source: Box::new(e),
     })?;
     Ok(Known {
         names: p.names,
@@ -666,12 +666,20 @@ fn physical_fit(
         (Some(w), _) => (Some(w), None),
         (None, Some(h)) => {
             let (w, curve) = held_out_prior_weight(&names, &prior, map, &est.covariance, &bounds, h)?;
+            // At the grid's top the robot file's inertials hold all but
+            // what the data contradict: said, as the edge of a search.
+            let edge = curve.last().is_some_and(|(top, _)| *top == w);
             let curve: Vec<String> = curve.iter().map(|(w, e)| format!("{w:e}: {e:.3}")).collect();
             (
                 Some(w),
                 Some(format!(
-                    "chosen by held-out periods (fitted on the even periods, scored on the odd ones and the reverse; torque error over least squares' own, per λ: {})",
-                    curve.join(", ")
+                    "chosen by held-out periods (fitted on the even periods, scored on the odd ones and the reverse; torque error over least squares' own, per λ: {}){}",
+                    curve.join(", "),
+                    if edge {
+                        "; the largest tried: held-out periods prefer the robot file's inertials wherever the data leave them free"
+                    } else {
+                        ""
+                    }
                 )),
             )
         }
