@@ -445,9 +445,9 @@ pub fn source_kind(path: &Path) -> robotid_stages::Result<(Product, Option<bool>
     }
     let file = std::fs::File::open(path).map_err(|e| robotid_stages::Error::io(path, e))?;
     let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| {
-        robotid_stages::Error::Format {
+        robotid_stages::Error::Decode {
             path: path.to_path_buf(),
-            msg: e.to_string(),
+            source: Box::new(e),
         }
     })?;
     let schema = builder.schema();

@@ -150,9 +150,9 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
         let bytes = std::fs::read(log).map_err(|e| robotid_stages::Error::io(log, e))?;
         chain.report.source_sha256 = Some(robotid_stages::formats::sha256_hex(&bytes));
     }
-    let placed = |e: robotid_schemas::SchemaError| robotid_stages::Error::Format {
+    let placed = |e: robotid_schemas::SchemaError| robotid_stages::Error::Decode {
         path: log.to_path_buf(),
-        msg: e.to_string(),
+        source: Box::new(e),
     };
     match built.start {
         Product::Raw => {

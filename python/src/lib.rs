@@ -50,7 +50,11 @@ fn place_of_stage_error(e: &robotid_stages::Error, place: &mut Place) {
             place.channel = Some(channel.clone());
             place.sample = *sample;
         }
-        E::Robot { path, .. } | E::Config { path, .. } | E::Io { path, .. } | E::Format { path, .. } => {
+        E::Robot { path, .. }
+        | E::Config { path, .. }
+        | E::Io { path, .. }
+        | E::Format { path, .. }
+        | E::Decode { path, .. } => {
             place.file = Some(path.display().to_string());
         }
         _ => {}

@@ -19,6 +19,14 @@ pub enum Error {
     },
     #[error("{}: {msg}", path.display())]
     Format { path: PathBuf, msg: String },
+    /// A file a library could not decode (Parquet, MCAP, JSON, TOML): its
+    /// error kept as the source.
+    #[error("{}: {source}", path.display())]
+    Decode {
+        path: PathBuf,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// Bad data in a recording: the source, channel and sample at fault.
     #[error("{source_name}: channel `{channel}`{}: {msg}", sample.map(|k| format!(", sample {k}")).unwrap_or_default())]
     Data {

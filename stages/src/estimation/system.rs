@@ -156,9 +156,9 @@ impl System {
         let mut at = 0;
         for (r, (label, t)) in tables.iter().enumerate() {
             let s = t.schema();
-            TableKind::Regressor.validate(&s).map_err(|e| Error::Format {
+            TableKind::Regressor.validate(&s).map_err(|e| Error::Decode {
                 path: label.into(),
-                msg: e.to_string(),
+                source: Box::new(e),
             })?;
             let theirs: Vec<&String> = columns_of(&s, PARAMETER_COLUMN)
                 .into_iter()

@@ -31,9 +31,9 @@ const CURRENT_SCHEMA: &str =
 /// drive's ROS interface reports it.
 pub fn write_recording_mcap(path: &Path, raw: &RawSamples, torque_per_amp: &[f64]) -> Result<()> {
     raw.check_shape()?;
-    let err = |e: mcap::McapError| Error::Format {
+    let err = |e: mcap::McapError| Error::Decode {
         path: path.to_path_buf(),
-        msg: e.to_string(),
+        source: Box::new(e),
     };
     write_atomic(path, |w| {
         let mut out = WriteOptions::new()

@@ -179,9 +179,9 @@ pub fn write_parquet_groups(
         }
     }
     let props = props.build();
-    let fmt = |e: parquet::errors::ParquetError| Error::Format {
+    let fmt = |e: parquet::errors::ParquetError| Error::Decode {
         path: path.to_path_buf(),
-        msg: e.to_string(),
+        source: Box::new(e),
     };
     // A CRC left from the table this one was read from is not this one's.
     let mut md = schema.metadata().clone();

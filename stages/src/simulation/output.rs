@@ -73,9 +73,9 @@ pub fn write_simulation(
     write_parquet(&truth_pq, &sim.truth.to_record_batch(&sim.raw.metadata)?)?;
     out.files.push(truth_pq);
     let truth_toml = dir.join(format!("{name}.truth.toml"));
-    let text = toml::to_string(&sim.ground_truth).map_err(|e| Error::Format {
+    let text = toml::to_string(&sim.ground_truth).map_err(|e| Error::Decode {
         path: "truth.toml".into(),
-        msg: e.to_string(),
+        source: Box::new(e),
     })?;
     write_atomic(&truth_toml, |w| {
         use std::io::Write;
