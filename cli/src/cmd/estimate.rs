@@ -55,13 +55,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// What `run` prints of an estimate: the known, the table, the findings.
+/// What `run` prints of an estimate: the known, the table, the findings,
+/// and of a physical fit its prior weight (how it was chosen) and the
+/// links it held at a bound.
 pub fn print_outcome(args: &Args, out: &Outcome) {
     if let Some(k) = &args.known {
         println!("known ({}): {}", k.display(), out.known.join(", "));
     }
     print!("{}", summary(&out.estimate, args.confidence));
     print!("{}", findings(out));
+    if let Some(fit) = &out.physical {
+        println!(
+            "physically consistent: prior weight {:e}{}",
+            fit.prior_weight,
+            fit.chosen.as_ref().map(|c| format!(" {c}")).unwrap_or_default()
+        );
+        for (l, b) in fit.bounds.iter().enumerate() {
+            let m = fit.standard[10 * l + 9];
+            if (m - b.mass.0).abs() <= 1e-6 * b.mass.0 || (m - b.mass.1).abs() <= 1e-6 * b.mass.1 {
+                println!(
+                    "  link {} (from the base): {m:.4} kg, held at its mass bound {:.4}–{:.4} kg (5× either way of the robot file's); the data would move it further",
+                    l + 1,
+                    b.mass.0,
+                    b.mass.1
+                );
+            }
+        }
+    }
     println!("parameters in {}", args.out.display());
 }
 

@@ -400,13 +400,6 @@ fn physical_fit(
             || robotid::tables::reduce(&reducer, parts, &physical, None),
         )?;
         super::estimate::print_outcome(&args, &outcome);
-        if let Some(fit) = &outcome.physical {
-            println!(
-                "physically consistent: prior weight {:e}{}",
-                fit.prior_weight,
-                fit.chosen.as_ref().map(|c| format!(" {c}")).unwrap_or_default()
-            );
-        }
         Ok(())
     };
     let fitted = fit(estimate_args(id_tables, Some(robot), true, &physical)).or_else(|e| {
