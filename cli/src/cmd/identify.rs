@@ -330,25 +330,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })?;
         writeln!(script, "robotid validate -p parameters.parquet {}", joined(val_tables))?;
     }
-    super::report::run(super::report::Args {
-        parameters: parameters.clone(),
-        excitation: id_tables.to_vec(),
-        validation: val_tables.to_vec(),
-        physical: None,
-        robot: None,
-        out: out.join("report.html"),
-    })?;
-    writeln!(
-        script,
-        "robotid report -p parameters.parquet --excitation {}{} -o report.html",
-        joined(id_tables),
-        if val_tables.is_empty() {
+    // The report, once: with the physical estimate and its bodies when
+    // there is one.
+    let report = |script: &mut String, physical: bool| -> anyhow::Result<()> {
+        let validation = if val_tables.is_empty() {
             String::new()
         } else {
             format!(" --validation {}", joined(val_tables))
-        }
-    )?;
+        };
+        super::report::run(super::report::Args {
+            parameters: parameters.clone(),
+            excitation: id_tables.to_vec(),
+            validation: val_tables.to_vec(),
+            physical: physical.then(|| out.join("parameters_physical.parquet")),
+            robot: physical.then(|| robot.clone()),
+            out: out.join("report.html"),
+        })?;
+        let with_physical = if physical {
+            format!(" --physical parameters_physical.parquet --robot {}", robot.display())
+        } else {
+            String::new()
+        };
+        writeln!(
+            script,
+            "robotid report -p parameters.parquet --excitation {}{validation}{with_physical} -o report.html",
+            joined(id_tables)
+        )?;
+        Ok(())
+    };
     if let Some(why) = inadequate.filter(|_| !args.accept_inadequate) {
+        report(&mut script, false)?;
         let sh = out.join("identify.sh");
         std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
         std::fs::write(out.join("INADEQUATE.txt"), format!("{why}\n")).with_context(|| out.display().to_string())?;
@@ -362,11 +373,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // The model for simulators needs every link a real body; the decoupled
     // model of joint-wise records has none to fit.
-    if designs.iter().any(|d| d.joint_wise.is_some()) {
+    let physical = if designs.iter().any(|d| d.joint_wise.is_some()) {
         println!("no physical fit and no export for simulators: joint-wise records give the decoupled model (each joint's inertia, gravity and friction), not the links' bodies");
+        false
     } else {
-        physical_fit(&parts, id_tables, val_tables, &robot, &out, &mut script, &joined)?;
-    }
+        physical_fit(&parts, id_tables, val_tables, &robot, &out, &mut script, &joined)?
+    };
+    report(&mut script, physical)?;
     let sh = out.join("identify.sh");
     std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
     cleanup.1 = true;
@@ -379,7 +392,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The physically consistent estimate, validated, and the exports.
+/// The physically consistent estimate, validated, and the exports; whether
+/// it was made.
 fn physical_fit(
     parts: &[robotid_stages::stage::estimate::Part],
     id_tables: &[PathBuf],
@@ -388,7 +402,7 @@ fn physical_fit(
     out: &Path,
     script: &mut String,
     joined: &dyn Fn(&[PathBuf]) -> String,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<bool> {
     let physical = out.join("parameters_physical.parquet");
     // The spread across few periods can leave the covariance singular
     // (arm3, 4 periods, 25 parameters): then the residual's is used.
@@ -424,7 +438,7 @@ fn physical_fit(
             }
             super::export::run(super::export::Args {
                 robot: robot.to_path_buf(),
-                parameters: physical.clone(),
+                parameters: physical,
                 format: vec![
                     super::export::Format::Urdf,
                     super::export::Format::Mjcf,
@@ -433,15 +447,6 @@ fn physical_fit(
                 out: out.join("identified"),
                 prior_weight: None,
                 force: false,
-            })?;
-            // The report again, with the physical estimate and its bodies.
-            super::report::run(super::report::Args {
-                parameters: out.join("parameters.parquet"),
-                excitation: id_tables.to_vec(),
-                validation: val_tables.to_vec(),
-                physical: Some(physical),
-                robot: Some(robot.to_path_buf()),
-                out: out.join("report.html"),
             })?;
             writeln!(
                 script,
@@ -462,21 +467,13 @@ fn physical_fit(
                 "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar -o identified",
                 robot.display()
             )?;
-            writeln!(
-                script,
-                "robotid report -p parameters.parquet --excitation {}{} --physical parameters_physical.parquet --robot {} -o report.html",
-                joined(id_tables),
-                if val_tables.is_empty() {
-                    String::new()
-                } else {
-                    format!(" --validation {}", joined(val_tables))
-                },
-                robot.display()
-            )?;
+            Ok(true)
         }
-        Err(e) => eprintln!("warning: no export for simulators: the physically consistent estimate failed: {e:#}"),
+        Err(e) => {
+            eprintln!("warning: no export for simulators: the physically consistent estimate failed: {e:#}");
+            Ok(false)
+        }
     }
-    Ok(())
 }
 
 /// The estimate's arguments; the robot file always (its a-priori sizes

@@ -327,11 +327,7 @@ pub fn held_out_prior_weight(
     let fitted: Vec<DVector<f64>> = HELD_OUT_WEIGHTS
         .par_iter()
         .flat_map(|&w| [(w, 0), (w, 1)])
-        .map(|(w, h)| {
-            let solved = problems[h].solve(w, Fit::Draw)?;
-            let standard = DVector::from_fn(names.len(), |i, _| solved.x[i] * problem.scale[i]);
-            Ok(map * standard)
-        })
+        .map(|(w, h)| Ok(problem.base_values(map, &problems[h].solve(w, Fit::Draw)?)))
         .collect::<Result<_>>()?;
     let unconstrained = halves.score(&halves.even, &halves.odd).max(f64::MIN_POSITIVE);
     let curve: Vec<(f64, f64)> = HELD_OUT_WEIGHTS
@@ -383,9 +379,7 @@ pub fn bootstrap_covariance(
             let z = DVector::from_fn(nb, |_, _| StandardNormal.sample(&mut rng));
             let drawn = base_estimate + &l * z;
             let p = problem.with_estimate(&drawn);
-            let solved = p.solve(prior_weight, Fit::Draw)?;
-            let standard = DVector::from_fn(names.len(), |i, _| solved.x[i] * problem.scale[i]);
-            Ok(map * standard)
+            Ok(problem.base_values(map, &p.solve(prior_weight, Fit::Draw)?))
         })
         .collect::<Result<_>>()?;
     let mean = draws.iter().fold(DVector::zeros(nb), |a, d| a + d) / draws.len() as f64;
@@ -500,6 +494,11 @@ impl Problem {
             x,
             bounds: bounds.iter().take(links).cloned().collect(),
         })
+    }
+
+    /// A solution's base values K·θ (θ = S·x).
+    fn base_values(&self, map: &DMatrix<f64>, solved: &Solved) -> DVector<f64> {
+        map * DVector::from_fn(self.scale.len(), |i, _| solved.x[i] * self.scale[i])
     }
 
     /// The same problem for another base estimate.
@@ -701,7 +700,7 @@ mod tests {
         )
     }
 
-    /// One link observed directly (K = 1, Σ = 1): a consistent estimate
+    /// The rod observed directly: a consistent estimate
     /// comes back unchanged, an inconsistent one moves onto the boundary.
     #[test]
     fn one_link_observed_directly() {
