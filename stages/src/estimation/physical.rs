@@ -528,6 +528,26 @@ impl Problem {
             Error::numerical("physical fit", "the regularised normal matrix is not positive definite")
         })?;
         let x_u = chol.solve(&(&self.g + DVector::from_fn(ns, |i, _| d[i] * self.x_prior[i])));
+        // Inside every constraint the unconstrained optimum is the
+        // solution (δ = 0): no program to solve. Most bootstrap draws and
+        // the strongly held λ are there.
+        if self.holds(&x_u) {
+            return Ok(self.solved(x_u.as_slice().to_vec(), &chol, fit, 0));
+        }
+        self.program(weight, fit, &normal, &chol, &x_u)
+    }
+
+    /// The semidefinite program for the step from the unconstrained
+    /// optimum `x_u` (of `normal`, factored by `chol`).
+    fn program(
+        &self,
+        weight: f64,
+        fit: Fit,
+        normal: &DMatrix<f64>,
+        chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+        x_u: &DVector<f64>,
+    ) -> Result<Solved> {
+        let ns = self.kinds.len();
         // Objective scaled to a unit largest diagonal (the solver's
         // tolerances and regularisation are absolute).
         let unit = 1.0 / (0..ns).map(|i| normal[(i, i)]).fold(0.0, f64::max).max(1e-300);
@@ -663,19 +683,46 @@ impl Problem {
             ));
         }
         let x: Vec<f64> = (0..ns).map(|i| x_u[i] + solver.solution.x[i]).collect();
-        let xv = DVector::from_column_slice(&x);
-        let chi2 = (&self.x * &xv - &self.y).norm_squared();
+        Ok(self.solved(x, chol, fit, solver.solution.iterations as usize))
+    }
+
+    fn solved(
+        &self,
+        x: Vec<f64>,
+        chol: &nalgebra::Cholesky<f64, nalgebra::Dyn>,
+        fit: Fit,
+        iterations: usize,
+    ) -> Solved {
+        let chi2 = (&self.x * DVector::from_column_slice(&x) - &self.y).norm_squared();
         // df = tr((XᵀX + D)⁻¹ XᵀX), the unconstrained hat's trace.
         let dof = match fit {
             Fit::Central => chol.solve(&self.h).trace(),
             Fit::Draw => f64::NAN,
         };
-        Ok(Solved {
+        Solved {
             x,
             chi2,
             dof,
-            iterations: solver.solution.iterations as usize,
-        })
+            iterations,
+        }
+    }
+
+    /// Whether x keeps strictly to every constraint of the program: each
+    /// link's pseudo-inertia positive definite, inside its mass range and
+    /// ellipsoid; rotor inertias and friction ≥ 0.
+    fn holds(&self, x: &DVector<f64>) -> bool {
+        let theta: Vec<f64> = (0..x.len()).map(|i| x[i] * self.scale[i]).collect();
+        let links_hold = (0..self.links).all(|l| {
+            let t = &theta[10 * l..10 * l + 10];
+            let inside = self.bounds.get(l).is_none_or(|b| {
+                t[9] > b.mass.0
+                    && t[9] < b.mass.1
+                    && b.ellipsoid
+                        .is_none_or(|e| e.coefficients().iter().zip(t).map(|(g, v)| g * v).sum::<f64>() > 0.0)
+            });
+            inside && pseudo_inertia(t).cholesky().is_some()
+        });
+        links_hold && (0..x.len()).all(|i| self.kinds[i] != Kind::NonNegative || x[i] >= 0.0)
     }
 }
 
@@ -713,6 +760,53 @@ mod tests {
         let fit = physically_consistent(&names, &prior, &map, &bad, &cov, &[], Some(1e-6)).unwrap();
         assert!(fit.min_eigen[0] > -1e-8, "{:?}", fit.min_eigen);
         assert!((fit.base[9] - 2.0).abs() < 0.1, "{}", fit.base);
+    }
+
+    /// Inside every bound, the unconstrained optimum is returned as it is,
+    /// and it is the program's own solution (to the solver's tolerance).
+    #[test]
+    fn an_optimum_inside_the_bounds_needs_no_program() {
+        let (names, prior, map, cov) = rod();
+        let mut est = DVector::from_column_slice(&prior);
+        est[9] = 2.2;
+        est[6] = 0.52;
+        let bound = LinkBound {
+            mass: (0.4, 10.0),
+            ellipsoid: Some(Ellipsoid {
+                centre: nalgebra::Vector3::new(0.25, 0.0, 0.0),
+                semi_axes: nalgebra::Vector3::new(0.3, 0.15, 0.15),
+            }),
+            said: String::new(),
+        };
+        let problem = Problem::new(&names, &prior, &map, &est, &cov, &[bound]).unwrap();
+        let shortcut = problem.solve(1e-3, Fit::Central).unwrap();
+        assert_eq!(shortcut.iterations, 0, "inside the bounds: no program");
+        let d = problem.regularisation(1e-3);
+        let normal = &problem.h + DMatrix::from_diagonal(&DVector::from_vec(d.clone()));
+        let chol = normal.clone().cholesky().unwrap();
+        let x_u = chol.solve(&(&problem.g + DVector::from_fn(10, |i, _| d[i] * problem.x_prior[i])));
+        let solved = problem.program(1e-3, Fit::Central, &normal, &chol, &x_u).unwrap();
+        assert!(solved.iterations > 0);
+        for i in 0..10 {
+            let (a, b) = (shortcut.x[i] * problem.scale[i], solved.x[i] * problem.scale[i]);
+            assert!(
+                (a - b).abs() < 1e-6 * prior[i].abs().max(1e-2),
+                "{}: {a} against {b}",
+                names[i]
+            );
+        }
+        assert!((shortcut.dof - solved.dof).abs() < 1e-12);
+        // Pushed outside (100 kg), the program runs.
+        let mut out = est.clone();
+        out[9] = 100.0;
+        assert!(
+            problem
+                .with_estimate(&out)
+                .solve(1e-3, Fit::Central)
+                .unwrap()
+                .iterations
+                > 0
+        );
     }
 
     /// A point mass m at x has J = m·[x; 1][x; 1]ᵀ: the ellipsoid's row
