@@ -9,6 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
+
 use robotid_schemas::{metadata, RawSamples, TableKind};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::dynamics::{FrictionTerms, ModelKind};
@@ -845,10 +847,11 @@ fn choose_model(
         Some(m) => (0..kin.joints.len()).map(|j| j == m).collect(),
         None => Vec::new(),
     };
-    // The columns' lines with sign(q̇); another transition changes only
-    // the Coulomb columns, whose lines are made again and put in place.
-    let mut first: Option<(Vec<_>, Vec<String>)> = None;
-    let mut system = |friction: FrictionTerms, v: f64| -> Result<(Option<LineSystem>, Vec<String>)> {
+    // The columns' lines with sign(q̇). Another friction model changes
+    // only the friction columns (the others are the same columns of the
+    // same regressor, by name): only they are made again.
+    type Lines = (Vec<robotid_stages::signal::Complex64>, Vec<String>);
+    let system = |friction: FrictionTerms, v: f64, reuse: Option<&Lines>| -> Result<(Option<LineSystem>, Lines)> {
         let cfg = RegressorConfig {
             friction,
             coulomb_transition_rad_s: Some(v),
@@ -858,31 +861,43 @@ fn choose_model(
         };
         let base = cfg.base_regressor(model)?;
         let (cols, names) = (base.parameters(), base.names());
-        let coulomb: Vec<usize> = (0..cols).filter(|&c| base.is_coulomb(c)).collect();
-        let spec = match &first {
-            Some((lines0, names0)) if *names0 == names => {
-                let mut spec = lines0.clone();
-                let fresh = column_spectra_of(&base, kin, lines - 1, &spectra, Some(&coulomb));
-                for j in 0..kin.joints.len() {
-                    for &c in &coulomb {
-                        let at = (j * cols + c) * lines;
-                        spec[at..at + lines].copy_from_slice(&fresh[at..at + lines]);
+        let spec = match reuse {
+            Some((lines0, names0)) => {
+                let before = |c: usize| {
+                    let name = &names[c];
+                    (base.friction_term(c).is_none())
+                        .then(|| names0.iter().position(|n| n == name))
+                        .flatten()
+                };
+                let fresh: Vec<usize> = (0..cols).filter(|&c| before(c).is_none()).collect();
+                let mut spec = column_spectra_of(&base, kin, lines - 1, &spectra, Some(&fresh));
+                for c in 0..cols {
+                    if let Some(c0) = before(c) {
+                        for j in 0..kin.joints.len() {
+                            let (at, at0) = ((j * cols + c) * lines, (j * names0.len() + c0) * lines);
+                            spec[at..at + lines].copy_from_slice(&lines0[at0..at0 + lines]);
+                        }
                     }
                 }
                 spec
             }
-            _ => {
-                let spec = column_spectra_of(&base, kin, lines - 1, &spectra, None);
-                first = Some((spec.clone(), names.clone()));
-                spec
-            }
+            None => column_spectra_of(&base, kin, lines - 1, &spectra, None),
         };
         Ok((
-            LineSystem::new(spec, lines, cols, &p.torque, samples, p.period_s, &used, &spectra),
-            names,
+            LineSystem::new(
+                spec.clone(),
+                lines,
+                cols,
+                &p.torque,
+                samples,
+                p.period_s,
+                &used,
+                &spectra,
+            ),
+            (spec, names),
         ))
     };
-    let (Some(sign), _) = system(template.friction, 0.0)? else {
+    let (Some(sign), first) = system(template.friction, 0.0, None)? else {
         return Ok(ModelChoice {
             filter: None,
             filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
@@ -932,14 +947,20 @@ fn choose_model(
     // At the noise floor nothing can do better by more than the score's
     // spread: a smooth turn-over is tried only above it.
     let at_floor = sign_fit.1.ratio < 1.0 + margin;
-    for &v in TRANSITIONS[1..].iter().filter(|_| !at_floor) {
-        let (Some(sys), names) = system(template.friction, v)? else {
-            continue;
-        };
-        let fit = score_with(&sys);
-        let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
-        scored.push((v, fit, ok));
-    }
+    // Each turn-over on its own thread: independent, kept in order.
+    let smooth: Vec<_> = TRANSITIONS[1..]
+        .par_iter()
+        .filter(|_| !at_floor)
+        .map(|&v| -> Result<_> {
+            let (sys, (_, names)) = system(template.friction, v, Some(&first))?;
+            Ok(sys.map(|sys| {
+                let fit = score_with(&sys);
+                let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
+                (v, fit, ok)
+            }))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    scored.extend(smooth.into_iter().flatten());
     let ratio = |f: &Option<(Option<FilterSpec>, Score)>| f.as_ref().map_or(f64::INFINITY, |x| x.1.ratio);
     let best = scored
         .iter()
@@ -959,8 +980,8 @@ fn choose_model(
     // periods prefer it by the score's spread.
     let symmetric = template.friction == FrictionTerms::Symmetric && !at_floor;
     let asymmetric = match symmetric {
-        true => match system(FrictionTerms::Asymmetric, pick.0)? {
-            (Some(sys), names) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
+        true => match system(FrictionTerms::Asymmetric, pick.0, Some(&first))? {
+            (Some(sys), (_, names)) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
             (None, _) => None,
         },
         false => None,

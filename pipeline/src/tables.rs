@@ -85,7 +85,7 @@ pub fn load_system(paths: &[PathBuf]) -> Result<System> {
 /// A parameters table with the robot it was identified for and the base
 /// regressor rebuilt from the regressor configuration it carries; refused
 /// when the robot does not give the table's base parameters.
-pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model, BaseRegressor)> {
+pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model, std::sync::Arc<BaseRegressor>)> {
     let in_table = |source| Error::Table {
         path: parameters.to_path_buf(),
         source,

@@ -63,7 +63,7 @@ fn stage(c: &mut Criterion) {
     });
     // Band-limited to 20 Hz: the columns on a 16× finer grid first (no
     // aliasing of sign(q̇)); the price of that, against the plain rows.
-    let base = std::sync::Arc::new(cfg.base_regressor(&model).unwrap());
+    let base = cfg.base_regressor(&model).unwrap();
     let spectra = robotid_stages::signal::Spectra::new();
     g.bench_function("rows", |b| {
         b.iter(|| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "bench", false).unwrap())
@@ -101,7 +101,7 @@ fn stage(c: &mut Criterion) {
         ..Default::default()
     };
     let built = cfg.build(&ctx).unwrap();
-    let base = std::sync::Arc::new(cfg.base_regressor(&model).unwrap());
+    let base = cfg.base_regressor(&model).unwrap();
     let mut g = c.benchmark_group("regressor_stage_lwr4_21k");
     g.sample_size(10);
     g.throughput(Throughput::Elements(n as u64));

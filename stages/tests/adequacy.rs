@@ -76,7 +76,7 @@ fn recording_of(
     }
 }
 
-fn setup() -> (BaseRegressor, DVector<f64>) {
+fn setup() -> (std::sync::Arc<BaseRegressor>, DVector<f64>) {
     let model = load_robot(&fixture("robots/arm3.toml")).unwrap();
     let base = RegressorConfig::default().base_regressor(&model).unwrap();
     let theta = base.base_values(&model).unwrap();

@@ -29,7 +29,7 @@ fn config() -> RegressorConfig {
 }
 
 /// One period of the KUKA excitation trajectory at 150 Hz, exactly.
-fn kuka() -> (Model, BaseRegressor, Kinematics, DVector<f64>) {
+fn kuka() -> (Model, std::sync::Arc<BaseRegressor>, Kinematics, DVector<f64>) {
     let (cfg, _) = SimConfig::load(&fixture("sims/kuka_axis3.toml")).unwrap();
     let mut model = dynamics::load_robot(&cfg.robot).unwrap();
     model.friction[0].transition = 0.01;

@@ -4,8 +4,6 @@
 //! run would hold (on a 130 s recording, larger than its samples). Counted
 //! by a global allocator, so this file holds this one test.
 
-use std::sync::Arc;
-
 use robotid_stages::estimation::Summary;
 use robotid_stages::formats::parquet::{read_parquet, write_parquet_groups};
 use robotid_stages::signal::Spectra;
@@ -20,7 +18,6 @@ fn rows_made_on_demand_are_never_whole() {
     // 8000 UR5 samples: A is 48 000 rows × the base parameters, ~20 MB,
     // sixteen blocks of 512 samples.
     let (base, cfg, kin) = robotid_tests::regressor_case("robots/ur5.urdf", 8000);
-    let base = Arc::new(base);
     let spectra = Spectra::new();
     let a_bytes = 8000 * 6 * base.parameters() * 8;
     let rows = |on_demand| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "r", on_demand).unwrap();

@@ -3,8 +3,6 @@
 //! arm: the same rows bit for bit from any range of samples, and so the
 //! same condition number, torque check, estimate summary and table.
 
-use std::sync::Arc;
-
 use nalgebra::DVector;
 use robotid_stages::estimation::Summary;
 use robotid_stages::formats::parquet::content_crc32;
@@ -36,7 +34,6 @@ fn an_estimate_and_table_from_rows_made_on_demand_equal_those_from_a_whole() {
     for robot in ["robots/ur5.urdf", "robots/arm3.toml"] {
         // Over four blocks of rows, the last one short.
         let (base, cfg, kin) = regressor_case(robot, 1700);
-        let base = Arc::new(base);
         let spectra = Spectra::new();
         let rows = |on_demand| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "r", on_demand).unwrap();
         let (whole, made) = (rows(false), rows(true));
@@ -76,7 +73,6 @@ fn the_torque_check_sees_the_same_from_blocks() {
     for series in kin.torque.as_mut().unwrap() {
         series.iter_mut().for_each(|t| *t *= 4.0);
     }
-    let base = Arc::new(base);
     let spectra = Spectra::new();
     let rows = |on_demand| regressor_rows(&kin, None, None, &base, &cfg, None, &spectra, "r", on_demand).unwrap();
     let (whole, made) = (rows(false), rows(true));

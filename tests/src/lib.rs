@@ -171,7 +171,7 @@ pub fn regressor_case(
     robot: &str,
     samples: usize,
 ) -> (
-    robotid_stages::dynamics::BaseRegressor,
+    std::sync::Arc<robotid_stages::dynamics::BaseRegressor>,
     robotid_stages::stage::regressor::RegressorConfig,
     robotid_schemas::Kinematics,
 ) {

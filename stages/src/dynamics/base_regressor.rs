@@ -5,6 +5,8 @@
 //! evaluated at any number of states (tables, predictions, ML Jacobians,
 //! excitation design).
 
+use std::sync::{Arc, Mutex};
+
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use robotid_schemas::Kinematics;
@@ -134,7 +136,43 @@ pub struct Workspace {
     phi: DMatrix<f64>,
 }
 
+/// How many built base regressors [`BaseRegressor::shared`] keeps: an
+/// identification asks for a handful (one per Coulomb candidate).
+const SHARED_KEPT: usize = 16;
+
+type Built = (Model, RegressorModel, Arc<BaseRegressor>);
+
+static SHARED: Mutex<Vec<Built>> = Mutex::new(Vec::new());
+
 impl BaseRegressor {
+    /// The base regressor of `model` under `spec`, built once and shared:
+    /// a build is a QR of the regressor at random states (its outcome is
+    /// the same every time: seeded), and planning, linting, the regressor
+    /// stage, the estimate and identify's candidates ask for the same one
+    /// many times. The last [`SHARED_KEPT`] are kept.
+    pub fn shared(model: &Model, spec: &RegressorModel) -> Result<Arc<BaseRegressor>> {
+        let found = |kept: &Vec<Built>| {
+            kept.iter()
+                .find(|(m, s, _)| m == model && s == spec)
+                .map(|(_, _, b)| b.clone())
+        };
+        if let Some(b) = found(&SHARED.lock().unwrap_or_else(|e| e.into_inner())) {
+            return Ok(b);
+        }
+        // Built outside the lock: two threads may both build the same one
+        // (the same result), but none waits on another's build.
+        let built = Arc::new(BaseRegressor::new(model, spec)?);
+        let mut kept = SHARED.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(b) = found(&kept) {
+            return Ok(b);
+        }
+        if kept.len() == SHARED_KEPT {
+            kept.remove(0);
+        }
+        kept.push((model.clone(), spec.clone(), built.clone()));
+        Ok(built)
+    }
+
     /// Regroups the standard parameters of `model` under `spec` (a
     /// restricted-pivot QR on sampled states, `base_parameters.rs`).
     pub fn new(model: &Model, spec: &RegressorModel) -> Result<BaseRegressor> {
@@ -247,7 +285,13 @@ impl BaseRegressor {
     /// The value of friction term `(joint, index)` at joint velocity `qd`,
     /// as the regressor makes it.
     pub fn friction_value(&self, (joint, index): (usize, usize), qd: f64) -> f64 {
-        super::torque_regressor::friction_values(self.terms.friction, &self.model.friction[joint], qd).0[index]
+        self.friction_values(joint, qd)[index]
+    }
+
+    /// Every friction term of `joint` at joint velocity `qd` (indexed as
+    /// [`BaseRegressor::friction_term`]'s second number): one tanh for all.
+    pub fn friction_values(&self, joint: usize, qd: f64) -> [f64; 4] {
+        super::torque_regressor::friction_values(self.terms.friction, &self.model.friction[joint], qd).0
     }
 
     pub fn workspace(&self) -> Workspace {
@@ -424,6 +468,31 @@ mod tests {
     /// The whole-table matrix (batched, four samples per pass, straight into
     /// columns) equals the per-sample rows, on a length that fills neither a
     /// pass nor a chunk, for the chain and the decoupled model.
+    /// The shared build is the one `new` makes, handed out again for the
+    /// same robot and settings, and another for other settings.
+    #[test]
+    fn shared_builds_are_the_same_build() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+        let model = crate::dynamics::load_robot(&path).unwrap();
+        let spec = RegressorModel::default();
+        let a = BaseRegressor::shared(&model, &spec).unwrap();
+        let b = BaseRegressor::shared(&model, &spec).unwrap();
+        assert!(Arc::ptr_eq(&a, &b));
+        let fresh = BaseRegressor::new(&model, &spec).unwrap();
+        assert_eq!(a.names(), fresh.names());
+        assert_eq!(a.map(), fresh.map());
+        let other = RegressorModel {
+            coulomb_transition_rad_s: Some(0.02),
+            ..spec.clone()
+        };
+        let c = BaseRegressor::shared(&model, &other).unwrap();
+        assert!(!Arc::ptr_eq(&a, &c));
+        assert_eq!(c.model.friction[0].transition, 0.02);
+        let mut heavier = model.clone();
+        heavier.links[1].mass *= 2.0;
+        assert!(!Arc::ptr_eq(&a, &BaseRegressor::shared(&heavier, &spec).unwrap()));
+    }
+
     #[test]
     fn matrix_equals_the_rows_of_each_sample() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");

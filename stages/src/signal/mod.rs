@@ -7,6 +7,7 @@ pub mod spectral_filter;
 pub mod spectrum;
 
 pub use analog_filter::{AnalogFilter, FilterFamily, FilterSpec};
+pub use rustfft::num_complex::Complex64;
 pub use spectral_filter::{apply_spectral, apply_table, derivative_gain, extended_len, gain_table};
 pub use spectrum::{naive_dft, Spectra};
 

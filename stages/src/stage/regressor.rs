@@ -11,7 +11,9 @@ use std::sync::Arc;
 use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema, SchemaRef};
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, NoiseTable, TableKind};
+use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
 use super::{Chain, Component, Context, LintContext, Periods, PeriodsUse, Problem, Product, Stage};
@@ -93,8 +95,8 @@ impl RegressorConfig {
     }
 
     /// The base regressor of `model` under these settings.
-    pub fn base_regressor(&self, model: &Model) -> Result<BaseRegressor> {
-        BaseRegressor::new(model, &self.regressor_model())
+    pub fn base_regressor(&self, model: &Model) -> Result<Arc<BaseRegressor>> {
+        BaseRegressor::shared(model, &self.regressor_model())
     }
 
     /// The settings a `regressor` table (or a parameters table) was made with.
@@ -192,7 +194,7 @@ impl Component for RegressorConfig {
             ));
         }
         Ok(Box::new(Regressor {
-            base: Arc::new(base),
+            base,
             cfg,
             defaults,
             spectra: ctx.spectra.clone(),
@@ -252,7 +254,7 @@ impl Stage for Regressor {
             chain.lean,
         )?;
         chain.report.notes.push(format!(
-            "regressor: {} rows, {} base parameters, condition number {} (column-normalised)",
+            "regressor: {} rows, {} base parameters, condition number {:.3e} (column-normalised)",
             rows.system.rows(),
             rows.system.parameters(),
             rows.condition
@@ -613,7 +615,7 @@ pub fn regressor_table(
     cfg: &RegressorConfig,
     recording: &str,
 ) -> Result<RecordBatch> {
-    let base = Arc::new(cfg.base_regressor(model)?);
+    let base = cfg.base_regressor(model)?;
     let spectra = Spectra::new();
     let band = match cfg.band_limit_hz {
         Some(b) => Some((
@@ -821,29 +823,60 @@ pub const OVERSAMPLING: usize = 16;
 /// sample grid (the kinematics, band-limited themselves, shifted exactly
 /// in the frequency domain): each copy is an ordinary regressor of
 /// `samples` rows, so memory stays that of the result.
-fn band_limited_matrix(
+pub fn band_limited_matrix(
     base: &BaseRegressor,
     kin: &Kinematics,
     period: f64,
     band: f64,
     spectra: &Spectra,
 ) -> DMatrix<f64> {
-    use rustfft::num_complex::Complex64;
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
     // Lines kept: at most `band`, below the samples' Nyquist line (which a
     // real series cannot shift).
-    let keep = ((band * period).floor() as usize).min(samples.saturating_sub(1) / 2);
-    let lines = column_spectra(base, kin, keep, spectra);
-    let mut a = DMatrix::zeros(samples * n, cols);
+    let nyquist = samples.saturating_sub(1) / 2;
+    let keep = ((band * period).floor() as usize).min(nyquist);
+    // The smooth columns at the samples (the kinematics without a Nyquist
+    // line, as every shifted copy is), each checked on its lines: one
+    // within the band to rounding is already band-limited and stays as it
+    // is (the common case: products of a few harmonics), one beyond is
+    // cut at the band, one whose upper half of lines is not empty (a
+    // motion sampled coarsely) goes on the fine grid. By column, in
+    // parallel: each column's work is its own.
+    let mut still = kin.clone();
+    still.torque = None;
+    for series in still.q.iter_mut().chain(&mut still.qd).chain(&mut still.qdd) {
+        let mut y = spectra.forward(series);
+        y.iter_mut()
+            .skip(nyquist + 1)
+            .for_each(|v| *v = Complex64::new(0.0, 0.0));
+        *series = spectra.inverse(&y, samples);
+    }
+    let mut a = base.matrix(&still);
+    let non_smooth = |c: usize| {
+        base.friction_term(c)
+            .is_some_and(|(_, k)| !base.terms.friction.is_smooth(k))
+    };
+    let rows = samples * n;
+    let smooth_fails: Vec<bool> = a
+        .as_mut_slice()
+        .par_chunks_mut(rows.max(1))
+        .enumerate()
+        .map(|(c, column)| !non_smooth(c) && band_limit_smooth(column, n, samples, keep, spectra))
+        .collect();
+    let fine: Vec<usize> = (0..cols).filter(|&c| non_smooth(c) || smooth_fails[c]).collect();
+    if fine.is_empty() {
+        return a;
+    }
+    let lines = column_spectra_on(base, kin, keep, spectra, Some(&fine), |c| fine.contains(&c));
     let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
-    for j in 0..n {
-        for c in 0..cols {
+    for &c in &fine {
+        for j in 0..n {
             let own = &lines[(j * cols + c) * (keep + 1)..][..keep + 1];
-            // A chain's column is zero on the rows of joints before its
-            // link, and a friction column off its joint: zeros stay zeros.
+            // A friction column off its joint is zero: zeros stay zeros.
             if own.iter().all(|v| v.re == 0.0 && v.im == 0.0) {
+                (0..samples).for_each(|k| a[(k * n + j, c)] = 0.0);
                 continue;
             }
             spec[..=keep].copy_from_slice(own);
@@ -854,6 +887,76 @@ fn band_limited_matrix(
         }
     }
     a
+}
+
+/// [`band_limited_matrix`] the slow way, every column on the fine grid:
+/// the reference it is tested against (to 1e-12 of each column).
+pub fn band_limited_on_fine_grid(
+    base: &BaseRegressor,
+    kin: &Kinematics,
+    period: f64,
+    band: f64,
+    spectra: &Spectra,
+) -> DMatrix<f64> {
+    let samples = kin.time.len();
+    let n = base.model.dof();
+    let cols = base.parameters();
+    let keep = ((band * period).floor() as usize).min(samples.saturating_sub(1) / 2);
+    let lines = column_spectra_on(base, kin, keep, spectra, None, |_| true);
+    let mut a = DMatrix::zeros(samples * n, cols);
+    let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
+    for j in 0..n {
+        for c in 0..cols {
+            spec[..=keep].copy_from_slice(&lines[(j * cols + c) * (keep + 1)..][..keep + 1]);
+            let back = spectra.inverse(&spec, samples);
+            for k in 0..samples {
+                a[(k * n + j, c)] = back[k];
+            }
+        }
+    }
+    a
+}
+
+/// One smooth column of A (rows sample-major, `n` joints) band-limited in
+/// place to lines 0..=`keep`; true, untouched, when its upper half of lines
+/// holds more than rounding (it needs the fine grid).
+fn band_limit_smooth(column: &mut [f64], n: usize, samples: usize, keep: usize, spectra: &Spectra) -> bool {
+    let nyquist = samples.saturating_sub(1) / 2;
+    let mut series = vec![0.0; samples];
+    let mut lines: Vec<Option<Vec<Complex64>>> = Vec::with_capacity(n);
+    let (mut tail, mut total) = (0.0, 0.0);
+    for j in 0..n {
+        for (k, s) in series.iter_mut().enumerate() {
+            *s = column[k * n + j];
+        }
+        // Zero on this joint's rows (a link beyond it): nothing to do.
+        if series.iter().all(|v| *v == 0.0) {
+            lines.push(None);
+            continue;
+        }
+        let y = spectra.forward(&series);
+        total += y[..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
+        tail += y[nyquist / 2..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
+        lines.push(Some(y));
+    }
+    if tail > SMOOTH_TAIL * total {
+        return true;
+    }
+    for (j, y) in lines.into_iter().enumerate() {
+        let Some(mut y) = y else { continue };
+        let own = y[..=nyquist].iter().map(|v| v.norm_sqr()).sum::<f64>();
+        let beyond = y[keep + 1..].iter().map(|v| v.norm_sqr()).sum::<f64>();
+        // Within the band to rounding (an amplitude of 1e-12): as it is.
+        if beyond <= SMOOTH_TAIL * own {
+            continue;
+        }
+        y[keep + 1..].iter_mut().for_each(|v| *v = Complex64::new(0.0, 0.0));
+        let back = spectra.inverse(&y, samples);
+        for (k, v) in back.into_iter().enumerate() {
+            column[k * n + j] = v;
+        }
+    }
+    false
 }
 
 /// The lines 0..=`keep` of every regressor column over one period of
@@ -913,8 +1016,7 @@ fn column_spectra_on(
     spectra: &Spectra,
     only: Option<&[usize]>,
     fine: impl Fn(usize) -> bool,
-) -> Vec<rustfft::num_complex::Complex64> {
-    use rustfft::num_complex::Complex64;
+) -> Vec<Complex64> {
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
@@ -948,13 +1050,11 @@ fn column_spectra_on(
         let s: Vec<Complex64> = spec.iter().zip(turns).map(|(v, t)| v * t).collect();
         spectra.inverse(&s, samples)
     };
-    let copy = |shifted: &mut Kinematics, turns: &[Complex64], whole: bool| {
+    let copy = |shifted: &mut Kinematics, turns: &[Complex64]| {
         for j in 0..n {
             shifted.qd[j] = shift(&sqd[j], turns);
-            if whole {
-                shifted.q[j] = shift(&sq[j], turns);
-                shifted.qdd[j] = shift(&sqdd[j], turns);
-            }
+            shifted.q[j] = shift(&sq[j], turns);
+            shifted.qdd[j] = shift(&sqdd[j], turns);
         }
     };
     let add = |acc: &mut [Complex64], j: usize, c: usize, y: &[Complex64], turns: &[Complex64]| {
@@ -967,7 +1067,7 @@ fn column_spectra_on(
     let (mut on_fine, at_samples): (Vec<usize>, Vec<usize>) = wanted.into_iter().partition(|&c| fine(c));
     if !at_samples.is_empty() {
         let still = turns(0);
-        copy(&mut shifted, &still, true);
+        copy(&mut shifted, &still);
         let a = base.matrix(&shifted);
         for &c in &at_samples {
             let (mut tail, mut total) = (0.0, 0.0);
@@ -996,30 +1096,55 @@ fn column_spectra_on(
         }
     }
     // A fine column that is one joint's friction term is made from that
-    // joint's velocity alone; any other needs the whole regressor per copy.
-    let terms: Vec<(usize, Option<(usize, usize)>)> = on_fine.iter().map(|&c| (c, base.friction_term(c))).collect();
-    let whole = terms.iter().any(|(_, t)| t.is_none());
-    for r in (0..OVERSAMPLING).filter(|_| !on_fine.is_empty()) {
-        let turns = turns(r);
-        copy(&mut shifted, &turns, whole);
-        let a = whole.then(|| base.matrix(&shifted));
-        for &(c, term) in &terms {
-            match (term, &a) {
-                (Some((j, k)), _) => {
-                    for (x, &v) in series.iter_mut().zip(&shifted.qd[j]) {
-                        *x = base.friction_value((j, k), v);
+    // joint's velocity alone (all of a joint's terms from one evaluation
+    // per sample): joints in parallel, each summing its copies in order.
+    // Any other needs the whole regressor per copy.
+    let mut friction: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n];
+    let mut others = Vec::new();
+    for &c in &on_fine {
+        match base.friction_term(c) {
+            Some((j, k)) => friction[j].push((c, k)),
+            None => others.push(c),
+        }
+    }
+    let all_turns: Vec<Vec<Complex64>> = (0..OVERSAMPLING).map(turns).collect();
+    let per_joint: Vec<Vec<Vec<Complex64>>> = friction
+        .par_iter()
+        .enumerate()
+        .map(|(j, terms)| {
+            let mut own = vec![vec![Complex64::new(0.0, 0.0); keep + 1]; terms.len()];
+            let mut values = vec![vec![0.0; samples]; terms.len()];
+            for turns in all_turns.iter().filter(|_| !terms.is_empty()) {
+                for (i, &v) in shift(&sqd[j], turns).iter().enumerate() {
+                    let all = base.friction_values(j, v);
+                    for (m, &(_, k)) in terms.iter().enumerate() {
+                        values[m][i] = all[k];
                     }
-                    add(&mut acc, j, c, &spectra.forward(&series), &turns);
                 }
-                (None, Some(a)) => {
-                    for j in 0..n {
-                        for k in 0..samples {
-                            series[k] = a[(k * n + j, c)];
-                        }
-                        add(&mut acc, j, c, &spectra.forward(&series), &turns);
+                for (m, out) in own.iter_mut().enumerate() {
+                    let y = spectra.forward(&values[m]);
+                    for (l, o) in out.iter_mut().enumerate() {
+                        *o += y[l] * turns[l].conj();
                     }
                 }
-                (None, None) => unreachable!("the whole regressor is made for such columns"),
+            }
+            own
+        })
+        .collect();
+    for (j, (terms, own)) in friction.iter().zip(per_joint).enumerate() {
+        for (&(c, _), lines) in terms.iter().zip(own) {
+            acc[(j * cols + c) * (keep + 1)..][..keep + 1].copy_from_slice(&lines);
+        }
+    }
+    for turns in all_turns.iter().filter(|_| !others.is_empty()) {
+        copy(&mut shifted, turns);
+        let a = base.matrix(&shifted);
+        for &c in &others {
+            for j in 0..n {
+                for k in 0..samples {
+                    series[k] = a[(k * n + j, c)];
+                }
+                add(&mut acc, j, c, &spectra.forward(&series), turns);
             }
         }
     }
