@@ -70,8 +70,44 @@ fn parquet(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(rows as u64));
     g.bench_function("write_with_crc", |b| b.iter(|| write_parquet(&path, &batch).unwrap()));
+    g.bench_function("plain_arrow_writer", |b| b.iter(|| plain_write(&path, &batch)));
     g.bench_function("crc_alone", |b| b.iter(|| content_crc32(&batch)));
     g.finish();
+
+    // A regressor table's shape: 30 000 rows (6 joints × 5000 samples of
+    // one period), 60 parameter columns and the torque.
+    let rows = 30_000;
+    let columns: Vec<(String, ArrayRef)> = (0..61)
+        .map(|c| {
+            let v = Float64Array::from_iter_values(
+                (0..rows).map(|i| ((i * (c + 3)) as f64 * 1e-3).sin() * (1.0 + c as f64)),
+            );
+            (format!("c{c}"), Arc::new(v) as ArrayRef)
+        })
+        .collect();
+    let batch = RecordBatch::try_from_iter(columns).unwrap();
+    let mut g = c.benchmark_group("parquet_30k_x61");
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(rows as u64));
+    g.bench_function("write_with_crc", |b| b.iter(|| write_parquet(&path, &batch).unwrap()));
+    g.bench_function("plain_arrow_writer", |b| b.iter(|| plain_write(&path, &batch)));
+    g.finish();
+}
+
+/// The comparison: the same table through arrow-rs's `ArrowWriter` as it
+/// comes (one thread, the Arrow schema in the file), with robotid's
+/// compression (zstd level 1, no dictionaries for numbers), no checksum,
+/// not atomic.
+fn plain_write(path: &std::path::Path, batch: &arrow::array::RecordBatch) {
+    use parquet::basic::{Compression, ZstdLevel};
+    let props = parquet::file::properties::WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(1).unwrap()))
+        .set_dictionary_enabled(false)
+        .build();
+    let file = std::fs::File::create(path).unwrap();
+    let mut w = parquet::arrow::ArrowWriter::try_new(file, batch.schema(), Some(props)).unwrap();
+    w.write(batch).unwrap();
+    w.close().unwrap();
 }
 
 criterion_group!(benches, stages, parquet);
