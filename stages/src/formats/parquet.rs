@@ -7,7 +7,6 @@ use parquet::arrow::ArrowWriter;
 use parquet::basic::{Compression, ZstdLevel};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::WriterProperties;
-use rayon::prelude::*;
 
 use robotid_schemas::metadata::CONTENT_CRC32;
 
@@ -215,29 +214,15 @@ pub fn write_parquet_groups(
             crc.update(&batch);
             let mut row_group = file.next_row_group().map_err(fmt)?;
             let mut writers = columns.create_column_writers(group).map_err(fmt)?.into_iter();
-            let mut leaves = Vec::new();
             for (field, column) in schema.fields().iter().zip(batch.columns()) {
-                leaves.extend(compute_leaves(field, column).map_err(fmt)?);
-            }
-            // Encoded and compressed a few columns at a time in parallel,
-            // appended in order: the same bytes at any thread count, and
-            // memory for that many column chunks.
-            let window = rayon::current_num_threads().max(1);
-            for part in leaves.chunks(window) {
-                let work: Vec<_> = part
-                    .iter()
-                    .map(|leaf| (writers.next().expect("a writer per leaf column"), leaf))
-                    .collect();
-                let chunks = work
-                    .into_par_iter()
-                    .map(|(mut writer, leaf)| {
-                        writer.write(leaf)?;
-                        writer.close()
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-                    .map_err(fmt)?;
-                for chunk in chunks {
-                    chunk.append_to_row_group(&mut row_group).map_err(fmt)?;
+                for leaf in compute_leaves(field, column).map_err(fmt)? {
+                    let mut writer = writers.next().expect("a writer per leaf column");
+                    writer.write(&leaf).map_err(fmt)?;
+                    writer
+                        .close()
+                        .map_err(fmt)?
+                        .append_to_row_group(&mut row_group)
+                        .map_err(fmt)?;
                 }
             }
             row_group.close().map_err(fmt)?;
@@ -474,11 +459,9 @@ mod tests {
         assert_eq!(super::open(&path).unwrap().metadata().row_groups().len(), 4);
     }
 
-    /// A long table is cut into row groups of ROW_GROUP_ROWS, and reads back
-    /// whole; an empty one has none. (What the writer holds meanwhile:
-    /// tests/write_memory.rs.)
+    /// A table's file is the same bytes whatever pool writes it.
     #[test]
-    fn columns_encoded_in_parallel_give_the_same_bytes_at_any_thread_count() {
+    fn the_same_bytes_at_any_thread_count() {
         let rows = 5000;
         let mut fields = vec![Field::new("joint", DataType::Utf8, false)];
         let mut columns: Vec<arrow::array::ArrayRef> = vec![Arc::new(arrow::array::StringArray::from_iter_values(
@@ -507,6 +490,9 @@ mod tests {
         assert_eq!(back.columns(), batch.columns());
     }
 
+    /// A long table is cut into row groups of ROW_GROUP_ROWS, and reads back
+    /// whole; an empty one has none. (What the writer holds meanwhile:
+    /// tests/write_memory.rs.)
     #[test]
     fn long_tables_are_written_in_row_groups() {
         let rows = super::ROW_GROUP_ROWS * 2 + 7;
