@@ -528,12 +528,15 @@ fn spectrum_moments(
                 scale * sum / count as f64
             })
             .collect();
+        // Line-major (each line's columns side by side): the sums below
+        // run along memory.
         for c in 0..p {
             for i in 0..samples {
                 series[i] = a[(i * n + j, c)];
             }
-            let s = spectra.forward(&series);
-            columns[c * lines..][..lines].copy_from_slice(&s[..lines]);
+            for (l, v) in spectra.forward(&series).iter().take(lines).enumerate() {
+                columns[l * p + c] = *v;
+            }
         }
         for l in 0..lines {
             let m = if l == 0 || 2 * l == samples { 1.0 } else { 2.0 };
@@ -541,10 +544,9 @@ fn spectrum_moments(
             if f == 0.0 {
                 continue;
             }
-            for c in 0..p {
-                let ac = columns[c * lines + l];
-                for d in c..p {
-                    let ad = columns[d * lines + l];
+            let line = &columns[l * p..][..p];
+            for (c, ac) in line.iter().enumerate() {
+                for (d, ad) in line.iter().enumerate().skip(c) {
                     out[(c, d)] += f * (ac.re * ad.re + ac.im * ad.im);
                 }
             }
