@@ -762,6 +762,19 @@ mod tests {
         assert!((fit.base[9] - 2.0).abs() < 0.1, "{}", fit.base);
     }
 
+    /// The rod's bounds: [0.4, 10] kg, an ellipsoid of semi-axes (0.3, 0.15,
+    /// 0.15) m about its middle (the rod inside it).
+    fn rod_bound() -> LinkBound {
+        LinkBound {
+            mass: (0.4, 10.0),
+            ellipsoid: Some(Ellipsoid {
+                centre: nalgebra::Vector3::new(0.25, 0.0, 0.0),
+                semi_axes: nalgebra::Vector3::new(0.3, 0.15, 0.15),
+            }),
+            said: String::new(),
+        }
+    }
+
     /// Inside every bound, the unconstrained optimum is returned as it is,
     /// and it is the program's own solution (to the solver's tolerance).
     #[test]
@@ -770,14 +783,7 @@ mod tests {
         let mut est = DVector::from_column_slice(&prior);
         est[9] = 2.2;
         est[6] = 0.52;
-        let bound = LinkBound {
-            mass: (0.4, 10.0),
-            ellipsoid: Some(Ellipsoid {
-                centre: nalgebra::Vector3::new(0.25, 0.0, 0.0),
-                semi_axes: nalgebra::Vector3::new(0.3, 0.15, 0.15),
-            }),
-            said: String::new(),
-        };
+        let bound = rod_bound();
         let problem = Problem::new(&names, &prior, &map, &est, &cov, &[bound]).unwrap();
         let shortcut = problem.solve(1e-3, Fit::Central).unwrap();
         assert_eq!(shortcut.iterations, 0, "inside the bounds: no program");
@@ -843,14 +849,7 @@ mod tests {
         let pushed = DVector::from_column_slice(&[0.01, 0.0, 0.0, 900.0, 0.0, 900.0, 300.0, 0.0, 0.0, 100.0]);
         let free = physically_consistent(&names, &prior, &map, &pushed, &cov, &[], Some(1e-6)).unwrap();
         assert!((free.base[9] - 100.0).abs() < 1.0, "{}", free.base);
-        let bound = LinkBound {
-            mass: (0.4, 10.0),
-            ellipsoid: Some(Ellipsoid {
-                centre: nalgebra::Vector3::new(0.25, 0.0, 0.0),
-                semi_axes: nalgebra::Vector3::new(0.3, 0.15, 0.15),
-            }),
-            said: String::new(),
-        };
+        let bound = rod_bound();
         let fit = physically_consistent(
             &names,
             &prior,

@@ -833,10 +833,8 @@ pub fn band_limited_matrix(
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
-    // Lines kept: at most `band`, below the samples' Nyquist line (which a
-    // real series cannot shift).
     let nyquist = samples.saturating_sub(1) / 2;
-    let keep = ((band * period).floor() as usize).min(nyquist);
+    let keep = kept_lines(band, period, samples);
     // The smooth columns at the samples (the kinematics without a Nyquist
     // line, as every shifted copy is), each checked on its lines: one
     // within the band to rounding is already band-limited and stays as it
@@ -870,8 +868,22 @@ pub fn band_limited_matrix(
         return a;
     }
     let lines = column_spectra_on(base, kin, keep, spectra, Some(&fine), |c| fine.contains(&c));
+    lines_into(&mut a, &lines, &fine, n, keep, spectra);
+    a
+}
+
+/// The lines kept below `band`: at most the band, below the samples'
+/// Nyquist line (which a real series cannot shift).
+fn kept_lines(band: f64, period: f64, samples: usize) -> usize {
+    ((band * period).floor() as usize).min(samples.saturating_sub(1) / 2)
+}
+
+/// Columns `cols_of` of A (rows sample-major, `n` joints) from their
+/// lines 0..=`keep` (laid out as [`column_spectra`]'s).
+fn lines_into(a: &mut DMatrix<f64>, lines: &[Complex64], cols_of: &[usize], n: usize, keep: usize, spectra: &Spectra) {
+    let (samples, cols) = (a.nrows() / n.max(1), a.ncols());
     let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
-    for &c in &fine {
+    for &c in cols_of {
         for j in 0..n {
             let own = &lines[(j * cols + c) * (keep + 1)..][..keep + 1];
             // A friction column off its joint is zero: zeros stay zeros.
@@ -886,7 +898,6 @@ pub fn band_limited_matrix(
             }
         }
     }
-    a
 }
 
 /// [`band_limited_matrix`] the slow way, every column on the fine grid:
@@ -901,19 +912,10 @@ pub fn band_limited_on_fine_grid(
     let samples = kin.time.len();
     let n = base.model.dof();
     let cols = base.parameters();
-    let keep = ((band * period).floor() as usize).min(samples.saturating_sub(1) / 2);
+    let keep = kept_lines(band, period, samples);
     let lines = column_spectra_on(base, kin, keep, spectra, None, |_| true);
     let mut a = DMatrix::zeros(samples * n, cols);
-    let mut spec = vec![Complex64::new(0.0, 0.0); samples / 2 + 1];
-    for j in 0..n {
-        for c in 0..cols {
-            spec[..=keep].copy_from_slice(&lines[(j * cols + c) * (keep + 1)..][..keep + 1]);
-            let back = spectra.inverse(&spec, samples);
-            for k in 0..samples {
-                a[(k * n + j, c)] = back[k];
-            }
-        }
-    }
+    lines_into(&mut a, &lines, &(0..cols).collect::<Vec<_>>(), n, keep, spectra);
     a
 }
 
