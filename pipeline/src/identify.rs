@@ -850,8 +850,8 @@ fn choose_model(
     // The columns' lines with sign(q̇). Another friction model changes
     // only the friction columns (the others are the same columns of the
     // same regressor, by name): only they are made again.
-    type Lines = (Vec<robotid_stages::signal::Complex64>, Vec<String>);
-    let system = |friction: FrictionTerms, v: f64, reuse: Option<&Lines>| -> Result<(Option<LineSystem>, Lines)> {
+    type Lines<'a> = (&'a [robotid_stages::signal::Complex64], &'a [String]);
+    let system = |friction: FrictionTerms, v: f64, reuse: Option<Lines>| -> Result<(Option<LineSystem>, Vec<String>)> {
         let cfg = RegressorConfig {
             friction,
             coulomb_transition_rad_s: Some(v),
@@ -884,20 +884,11 @@ fn choose_model(
             None => column_spectra_of(&base, kin, lines - 1, &spectra, None),
         };
         Ok((
-            LineSystem::new(
-                spec.clone(),
-                lines,
-                cols,
-                &p.torque,
-                samples,
-                p.period_s,
-                &used,
-                &spectra,
-            ),
-            (spec, names),
+            LineSystem::new(spec, lines, cols, &p.torque, samples, p.period_s, &used, &spectra),
+            names,
         ))
     };
-    let (Some(sign), first) = system(template.friction, 0.0, None)? else {
+    let (Some(sign), sign_names) = system(template.friction, 0.0, None)? else {
         return Ok(ModelChoice {
             filter: None,
             filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
@@ -910,6 +901,8 @@ fn choose_model(
             margin,
         });
     };
+    // What the other friction models reuse: the sign(q̇) system's lines.
+    let first: Lines = (sign.columns(), &sign_names);
     // With sign(q̇): the declared filter, or the search over all shapes.
     let search = match declared {
         Some(_) => None,
@@ -952,7 +945,7 @@ fn choose_model(
         .par_iter()
         .filter(|_| !at_floor)
         .map(|&v| -> Result<_> {
-            let (sys, (_, names)) = system(template.friction, v, Some(&first))?;
+            let (sys, names) = system(template.friction, v, Some(first))?;
             Ok(sys.map(|sys| {
                 let fit = score_with(&sys);
                 let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
@@ -980,8 +973,8 @@ fn choose_model(
     // periods prefer it by the score's spread.
     let symmetric = template.friction == FrictionTerms::Symmetric && !at_floor;
     let asymmetric = match symmetric {
-        true => match system(FrictionTerms::Asymmetric, pick.0, Some(&first))? {
-            (Some(sys), (_, names)) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
+        true => match system(FrictionTerms::Asymmetric, pick.0, Some(first))? {
+            (Some(sys), names) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
             (None, _) => None,
         },
         false => None,

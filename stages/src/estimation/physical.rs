@@ -45,7 +45,8 @@ pub struct PhysicalFit {
     /// model and in the fit (≥ 0 when the a-priori model is consistent).
     pub min_eigen_prior: Vec<f64>,
     pub min_eigen: Vec<f64>,
-    /// Interior-point iterations of the solve that was kept.
+    /// Interior-point iterations of the solve that was kept (0: the
+    /// unconstrained optimum kept to every constraint, no program ran).
     pub iterations: usize,
     /// The prior weight λ used, and how it was chosen (None: given).
     pub prior_weight: f64,
@@ -517,17 +518,7 @@ impl Problem {
     }
 
     fn solve(&self, weight: f64, fit: Fit) -> Result<Solved> {
-        let ns = self.kinds.len();
-        let d = self.regularisation(weight);
-        // The unconstrained optimum x_u = (XᵀX + D)⁻¹(Xᵀy + D·x_prior); the
-        // solver works on the step δ = x − x_u, whose objective δᵀ(XᵀX + D)δ
-        // is the χ² the constraints cost: no large constant to lose
-        // precision against (‖y‖² is often 1e10).
-        let normal = &self.h + DMatrix::from_diagonal(&DVector::from_vec(d.clone()));
-        let chol = normal.clone().cholesky().ok_or_else(|| {
-            Error::numerical("physical fit", "the regularised normal matrix is not positive definite")
-        })?;
-        let x_u = chol.solve(&(&self.g + DVector::from_fn(ns, |i, _| d[i] * self.x_prior[i])));
+        let (normal, chol, x_u) = self.unconstrained(weight)?;
         // Inside every constraint the unconstrained optimum is the
         // solution (δ = 0): no program to solve. Most bootstrap draws and
         // the strongly held λ are there.
@@ -535,6 +526,24 @@ impl Problem {
             return Ok(self.solved(x_u.as_slice().to_vec(), &chol, fit, 0));
         }
         self.program(weight, fit, &normal, &chol, &x_u)
+    }
+
+    /// The unconstrained optimum x_u = (XᵀX + D)⁻¹(Xᵀy + D·x_prior), with
+    /// XᵀX + D and its factor. The program works on the step δ = x − x_u,
+    /// whose objective δᵀ(XᵀX + D)δ is the χ² the constraints cost: no
+    /// large constant to lose precision against (‖y‖² is often 1e10).
+    #[allow(clippy::type_complexity)]
+    fn unconstrained(
+        &self,
+        weight: f64,
+    ) -> Result<(DMatrix<f64>, nalgebra::Cholesky<f64, nalgebra::Dyn>, DVector<f64>)> {
+        let d = self.regularisation(weight);
+        let normal = &self.h + DMatrix::from_diagonal(&DVector::from_vec(d.clone()));
+        let chol = normal.clone().cholesky().ok_or_else(|| {
+            Error::numerical("physical fit", "the regularised normal matrix is not positive definite")
+        })?;
+        let x_u = chol.solve(&(&self.g + DVector::from_fn(d.len(), |i, _| d[i] * self.x_prior[i])));
+        Ok((normal, chol, x_u))
     }
 
     /// The semidefinite program for the step from the unconstrained
@@ -787,10 +796,7 @@ mod tests {
         let problem = Problem::new(&names, &prior, &map, &est, &cov, &[bound]).unwrap();
         let shortcut = problem.solve(1e-3, Fit::Central).unwrap();
         assert_eq!(shortcut.iterations, 0, "inside the bounds: no program");
-        let d = problem.regularisation(1e-3);
-        let normal = &problem.h + DMatrix::from_diagonal(&DVector::from_vec(d.clone()));
-        let chol = normal.clone().cholesky().unwrap();
-        let x_u = chol.solve(&(&problem.g + DVector::from_fn(10, |i, _| d[i] * problem.x_prior[i])));
+        let (normal, chol, x_u) = problem.unconstrained(1e-3).unwrap();
         let solved = problem.program(1e-3, Fit::Central, &normal, &chol, &x_u).unwrap();
         assert!(solved.iterations > 0);
         for i in 0..10 {

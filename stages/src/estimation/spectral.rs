@@ -217,6 +217,11 @@ impl LineSystem {
         })
     }
 
+    /// The columns' lines it was made from, `[(joint · cols + col) · lines + line]`.
+    pub fn columns(&self) -> &[Complex64] {
+        &self.columns
+    }
+
     /// The frequency of every line, Hz.
     pub fn frequencies(&self) -> Vec<f64> {
         (0..self.lines).map(|l| l as f64 / self.period_s).collect()
