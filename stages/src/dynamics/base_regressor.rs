@@ -282,14 +282,9 @@ impl BaseRegressor {
             .is_some_and(|(_, k)| self.terms.friction.is_coulomb(k))
     }
 
-    /// The value of friction term `(joint, index)` at joint velocity `qd`,
-    /// as the regressor makes it.
-    pub fn friction_value(&self, (joint, index): (usize, usize), qd: f64) -> f64 {
-        self.friction_values(joint, qd)[index]
-    }
-
-    /// Every friction term of `joint` at joint velocity `qd` (indexed as
-    /// [`BaseRegressor::friction_term`]'s second number): one tanh for all.
+    /// Every friction term of `joint` at joint velocity `qd`, as the
+    /// regressor makes them (indexed as [`BaseRegressor::friction_term`]'s
+    /// second number): one tanh for all.
     pub fn friction_values(&self, joint: usize, qd: f64) -> [f64; 4] {
         super::torque_regressor::friction_values(self.terms.friction, &self.model.friction[joint], qd).0
     }

@@ -818,11 +818,12 @@ pub const OVERSAMPLING: usize = 16;
 /// to `band` Hz as the torque is. The columns are nonlinear in the motion
 /// (Coulomb's sign above all), so their spectrum reaches past the sample
 /// rate; computed at the samples and band-limited afterwards, that part
-/// folds into the band. Here the spectrum is that of the columns on a grid
-/// [`OVERSAMPLING`] times finer, taken as that many shifted copies of the
-/// sample grid (the kinematics, band-limited themselves, shifted exactly
-/// in the frequency domain): each copy is an ordinary regressor of
-/// `samples` rows, so memory stays that of the result.
+/// folds into the band. Here the columns that reach that far (Coulomb's,
+/// one-sided viscous, any whose upper lines are not empty) are made on a
+/// grid [`OVERSAMPLING`] times finer ([`column_spectra_of`]); the smooth
+/// ones are band-limited at the samples, where their lines are the fine
+/// grid's to rounding ([`band_limited_on_fine_grid`] does every column the
+/// slow way, for the tests).
 pub fn band_limited_matrix(
     base: &BaseRegressor,
     kin: &Kinematics,
