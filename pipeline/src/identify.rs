@@ -297,6 +297,13 @@ fn sample_rate(raw: &RawSamples) -> (f64, String) {
     }
 }
 
+/// A period as said to the user: ten significant digits (the pipeline
+/// file holds it in full).
+fn ten_digits(x: f64) -> String {
+    let decimals = (9.0 - x.abs().log10().floor()).clamp(0.0, 17.0) as usize;
+    format!("{x:.decimals$}")
+}
+
 fn list(h: &[u32]) -> String {
     format!("[{}]", h.iter().map(u32::to_string).collect::<Vec<_>>().join(", "))
 }
@@ -362,14 +369,14 @@ pub fn design_with(
         Some((f, band)) if inherited => findings.push((
             "inverse_filter".into(),
             format!(
-                "{}, the identification recording's (this one declares none), undone up to {band} Hz",
+                "{}, the identification recording's (this one declares none), undone up to {band:.2} Hz",
                 describe(f)
             ),
         )),
         Some((f, band)) => findings.push((
             "inverse_filter".into(),
             format!(
-                "{} order {} at {} Hz (the recording's {}), undone up to {band} Hz",
+                "{} order {} at {} Hz (the recording's {}), undone up to {band:.2} Hz",
                 toml::Value::try_from(f.family)?,
                 f.order,
                 f.cutoff_hz,
@@ -393,7 +400,7 @@ pub fn design_with(
                     let w = format!(
                         "the recording declares {} = {p} s, but its positions repeat with {} ± {:.1e} s",
                         metadata::PERIOD_S,
-                        e.period_s,
+                        ten_digits(e.period_s),
                         e.std_s
                     );
                     eprintln!("warning: {}: {w}", log.display());
@@ -407,7 +414,9 @@ pub fn design_with(
                 e.period_s,
                 format!(
                     "{} ± {:.1e} s (the positions repeat with it; {:.1} periods in the record)",
-                    e.period_s, e.std_s, e.cycles
+                    ten_digits(e.period_s),
+                    e.std_s,
+                    e.cycles
                 ),
             )
         }),
