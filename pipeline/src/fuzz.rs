@@ -1,14 +1,15 @@
 //! Entry points for the fuzz targets (fuzz/, scripts/fuzz.sh) and for
 //! replaying their seeds and every crash they found
 //! (pipeline/tests/fuzz_regressions.rs): each takes arbitrary bytes and
-//! must return, never panic, abort or hang. The readers take paths, so the
-//! bytes go to a scratch file (in RAM where /dev/shm exists).
+//! must return, never panic, abort or hang. The log readers take the bytes
+//! as they are; the robot and simulation files are read from a scratch
+//! file (in RAM where /dev/shm exists).
 
 use std::path::PathBuf;
 
 use robotid_stages::dynamics::{load_robot, mass_matrix, rnea, Data};
 use robotid_stages::simulation::SimConfig;
-use robotid_stages::stage::read::{read, ReadConfig};
+use robotid_stages::stage::read::{read_log, Log, ReadConfig};
 
 /// A fuzz entry point.
 pub type Target = fn(&[u8]);
@@ -47,22 +48,37 @@ fn config() -> ReadConfig {
     }
 }
 
+/// The read stage on `data` as a log of `format`.
+fn read_as(data: &[u8], format: &str) -> bytes::Bytes {
+    let bytes = bytes::Bytes::copy_from_slice(data);
+    let name = std::path::PathBuf::from(format!("log.{format}"));
+    let _ = read_log(
+        Log::Bytes {
+            name: &name,
+            format,
+            bytes: &bytes,
+        },
+        &config(),
+        None,
+    );
+    bytes
+}
+
 /// The read stage on a delimited text log.
 pub fn read_text(data: &[u8]) {
-    let _ = read(&as_file(data, "log.csv"), &config(), None);
+    read_as(data, "csv");
 }
 
 /// The read stage on an MCAP file.
 pub fn read_mcap(data: &[u8]) {
-    let _ = read(&as_file(data, "log.mcap"), &config(), None);
+    read_as(data, "mcap");
 }
 
-/// The read stage on a Parquet file (robotid's own tables use the same
-/// reader).
+/// The read stage on a Parquet file, and the table reader robotid's own
+/// tables go through.
 pub fn read_parquet(data: &[u8]) {
-    let path = as_file(data, "log.parquet");
-    let _ = read(&path, &config(), None);
-    let _ = robotid_stages::formats::parquet::read_parquet(&path);
+    let bytes = read_as(data, "parquet");
+    let _ = robotid_stages::formats::parquet::read_parquet_bytes(std::path::Path::new("log.parquet"), bytes);
 }
 
 /// A pipeline file's text, parsed and linted (the files it names do not

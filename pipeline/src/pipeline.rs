@@ -25,6 +25,7 @@ use robotid_stages::dynamics::Model;
 use robotid_stages::formats::parquet::write_parquet;
 use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::{Outcome as Estimated, Part, Reducer};
+use robotid_stages::stage::read::Log;
 use robotid_stages::stage::{Chain, Context, PeriodsUse, Product, Stage};
 
 use crate::error::{Error, Result};
@@ -229,25 +230,30 @@ impl Built {
 
     /// One recording read and run through every stage, nothing written;
     /// `progress` is told "read", then each stage's name.
-    pub fn run_log(&self, log: &Path, name: &str, progress: impl FnMut(&'static str)) -> robotid_stages::Result<Chain> {
-        self.log_on(log, name, false, progress)
+    pub fn run_log<'a>(
+        &self,
+        log: impl Into<Log<'a>>,
+        name: &str,
+        progress: impl FnMut(&'static str),
+    ) -> robotid_stages::Result<Chain> {
+        self.log_on(log.into(), name, false, progress)
     }
 
     /// The same, holding only what the tables and the estimate need: the
     /// aligned periods' samples are freed after the last stage that reads
     /// them (they are as large as the recording, and the regressor too).
-    pub fn run_log_for_tables(
+    pub fn run_log_for_tables<'a>(
         &self,
-        log: &Path,
+        log: impl Into<Log<'a>>,
         name: &str,
         progress: impl FnMut(&'static str),
     ) -> robotid_stages::Result<Chain> {
-        self.log_on(log, name, true, progress)
+        self.log_on(log.into(), name, true, progress)
     }
 
     fn log_on(
         &self,
-        log: &Path,
+        log: Log,
         name: &str,
         lean: bool,
         mut progress: impl FnMut(&'static str),

@@ -14,7 +14,7 @@ use robotid_schemas::{metadata, Kinematics, PeriodMean, TableKind};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::Part;
-use robotid_stages::stage::read::read;
+use robotid_stages::stage::read::{read_log, Log};
 use robotid_stages::stage::regressor::{r_factor_table, RegressorRows};
 use robotid_stages::stage::{Chain, Product, Report};
 
@@ -143,20 +143,17 @@ pub fn run_recordings(built: &Built, opts: &RunOptions, observer: &dyn Observer)
 }
 
 /// The chain a log starts: raw samples, or a table of an earlier run.
-pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Result<Chain> {
-    let source = log.display().to_string();
+pub fn start_chain(built: &Built, log: Log, name: &str) -> robotid_stages::Result<Chain> {
+    let path = log.path();
+    let source = path.display().to_string();
     let mut chain = Chain::new(&source, name);
-    if built.start != Product::Raw {
-        let bytes = std::fs::read(log).map_err(|e| robotid_stages::Error::io(log, e))?;
-        chain.report.source_sha256 = Some(robotid_stages::formats::sha256_hex(&bytes));
-    }
     let placed = |e: robotid_schemas::SchemaError| robotid_stages::Error::Decode {
-        path: log.to_path_buf(),
+        path: path.to_path_buf(),
         source: Box::new(e),
     };
     match built.start {
         Product::Raw => {
-            let mut raw = read(log, &built.plan.read, built.model.as_deref())?;
+            let mut raw = read_log(log, &built.plan.read, built.model.as_deref())?;
             if let Some(n) = raw.metadata.remove(metadata::READ_NOTES) {
                 chain.report.notes.push(n);
             }
@@ -165,12 +162,14 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
             chain.raw = Some(raw);
         }
         Product::PeriodMean => {
-            let m = PeriodMean::from_record_batch(&read_parquet(log)?).map_err(placed)?;
+            chain.report.source_sha256 = Some(log.sha256()?);
+            let m = PeriodMean::from_record_batch(&chain_table(log)?).map_err(placed)?;
             chain.facts.period_s = m.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse().ok());
             chain.mean = Some(m);
         }
         Product::Kinematics => {
-            let k = Kinematics::from_record_batch(&read_parquet(log)?).map_err(placed)?;
+            chain.report.source_sha256 = Some(log.sha256()?);
+            let k = Kinematics::from_record_batch(&chain_table(log)?).map_err(placed)?;
             chain.facts.period_s = k
                 .metadata
                 .get(metadata::PERIOD_S)
@@ -180,12 +179,20 @@ pub fn start_chain(built: &Built, log: &Path, name: &str) -> robotid_stages::Res
         }
         other => {
             return Err(robotid_stages::Error::Format {
-                path: log.to_path_buf(),
+                path: path.to_path_buf(),
                 msg: format!("a pipeline cannot start from {other}"),
             })
         }
     }
     Ok(chain)
+}
+
+/// A table of an earlier run, from its file or its bytes.
+fn chain_table(log: Log) -> robotid_stages::Result<RecordBatch> {
+    match log {
+        Log::File(path) => read_parquet(path),
+        Log::Bytes { name, bytes, .. } => robotid_stages::formats::parquet::read_parquet_bytes(name, bytes.clone()),
+    }
 }
 
 /// Hands the allocator's free pages back to the system. glibc keeps freed

@@ -12,7 +12,6 @@
 //! it are for grouping and checking.
 
 use std::collections::HashMap;
-use std::path::Path;
 use std::sync::Arc;
 
 use arrow::array::{Array, ArrayRef, BinaryArray, ListArray, RecordBatch, StringArray, UInt64Array};
@@ -180,7 +179,11 @@ pub fn merge(batches: &[RecordBatch]) -> Result<RecordBatch> {
 impl Built {
     /// One recording through every stage to its row of sufficient
     /// statistics. Needs an `estimate` stage.
-    pub fn summarize(&self, log: &Path, name: &str) -> Result<RecordBatch> {
+    pub fn summarize<'a>(
+        &self,
+        log: impl Into<robotid_stages::stage::read::Log<'a>>,
+        name: &str,
+    ) -> Result<RecordBatch> {
         if self.reducer.is_none() {
             return Err(refused(
                 &self.plan.file.display().to_string(),

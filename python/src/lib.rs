@@ -11,6 +11,7 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 use robotid::{Built, Pipeline as Plan};
+use robotid_stages::stage::read::Log;
 
 pyo3::create_exception!(
     _robotid,
@@ -61,13 +62,8 @@ fn place_of_stage_error(e: &robotid_stages::Error, place: &mut Place) {
     }
 }
 
+/// `e` as a Python exception.
 fn py_error(e: robotid::Error) -> PyErr {
-    py_error_in(e, None)
-}
-
-/// `e` as a Python exception; a recording given as bytes is named by its
-/// name, not by its scratch file.
-fn py_error_in(e: robotid::Error, rec: Option<(&Recording, &str)>) -> PyErr {
     let mut place = Place::default();
     match &e {
         robotid::Error::Stage(s) => place_of_stage_error(s, &mut place),
@@ -75,16 +71,7 @@ fn py_error_in(e: robotid::Error, rec: Option<(&Recording, &str)>) -> PyErr {
         robotid::Error::Problems(p) => place.file = p.0.first().map(|x| x.file.display().to_string()),
         _ => {}
     }
-    let mut message = e.to_string();
-    if let Some((Recording::Bytes { path, .. }, name)) = rec {
-        let scratch = path.display().to_string();
-        let given = format!("<bytes {name}>");
-        message = message.replace(&scratch, &given);
-        if place.file.as_deref() == Some(scratch.as_str()) {
-            place.file = Some(given);
-        }
-    }
-    let err = RobotidError::new_err(message);
+    let err = RobotidError::new_err(e.to_string());
     Python::attach(|py| {
         let value = err.value(py);
         // Setting attributes on a fresh exception cannot fail.
@@ -96,15 +83,16 @@ fn py_error_in(e: robotid::Error, rec: Option<(&Recording, &str)>) -> PyErr {
     err
 }
 
-/// A recording given as a path, or as bytes (written to a scratch file
-/// named `name`, whose extension says the format; guessed from the bytes
-/// when `name` has none).
+/// A recording given as a path, or as bytes read where they are (named
+/// `<bytes NAME>` in errors; `name`'s extension says the format, guessed
+/// from the bytes when it has none).
 enum Recording {
     Path(PathBuf),
-    /// The scratch folder lives as long as the recording.
     Bytes {
-        _scratch: tempfile::TempDir,
-        path: PathBuf,
+        name: PathBuf,
+        stem: String,
+        format: String,
+        bytes: bytes::Bytes,
     },
 }
 
@@ -112,46 +100,55 @@ impl Recording {
     fn new(obj: &Bound<'_, PyAny>, name: Option<&str>) -> PyResult<Recording> {
         if let Ok(b) = obj.cast::<PyBytes>() {
             let data = b.as_bytes();
-            let ext = if data.starts_with(b"\x89MCAP") {
+            let guessed = if data.starts_with(b"\x89MCAP") {
                 "mcap"
             } else if data.starts_with(b"PAR1") {
                 "parquet"
             } else {
                 "csv"
             };
-            let file = match name {
-                Some(n) if Path::new(n).extension().is_some() => n.to_string(),
-                Some(n) => format!("{n}.{ext}"),
-                None => format!("recording.{ext}"),
-            };
-            let dir = tempfile::tempdir().map_err(|e| RobotidError::new_err(format!("scratch folder: {e}")))?;
-            let path = dir.path().join(Path::new(&file).file_name().unwrap_or_default());
-            std::fs::write(&path, data).map_err(|e| RobotidError::new_err(format!("{}: {e}", path.display())))?;
-            return Ok(Recording::Bytes { _scratch: dir, path });
+            let given = name.map(Path::new);
+            let format = given
+                .and_then(|n| n.extension())
+                .map_or(guessed.to_string(), |e| e.to_string_lossy().into_owned());
+            let stem = given
+                .and_then(|n| n.file_stem())
+                .map_or("recording".to_string(), |s| s.to_string_lossy().into_owned());
+            return Ok(Recording::Bytes {
+                name: PathBuf::from(format!("<bytes {stem}>")),
+                stem,
+                format,
+                bytes: bytes::Bytes::copy_from_slice(data),
+            });
         }
         let path: PathBuf = obj.extract()?;
         Ok(Recording::Path(path))
     }
 
-    fn path(&self) -> &Path {
+    fn log(&self) -> Log<'_> {
         match self {
-            Recording::Path(p) | Recording::Bytes { path: p, .. } => p,
+            Recording::Path(p) => Log::File(p),
+            Recording::Bytes {
+                name, format, bytes, ..
+            } => Log::Bytes { name, format, bytes },
         }
     }
 
     fn name(&self, given: Option<&str>) -> String {
-        given
-            .map(|n| {
-                Path::new(n)
-                    .file_stem()
-                    .map_or(n.to_string(), |s| s.to_string_lossy().into_owned())
-            })
-            .unwrap_or_else(|| {
-                self.path()
-                    .file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_default()
-            })
+        match self {
+            Recording::Bytes { stem, .. } => stem.clone(),
+            Recording::Path(p) => given
+                .map(|n| {
+                    Path::new(n)
+                        .file_stem()
+                        .map_or(n.to_string(), |s| s.to_string_lossy().into_owned())
+                })
+                .unwrap_or_else(|| {
+                    p.file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_default()
+                }),
+        }
     }
 }
 
@@ -239,10 +236,10 @@ impl Pipeline {
         let name = rec.name(name);
         let tables = py
             .detach(|| {
-                let mut chain = self.built.run_log_for_tables(rec.path(), &name, |_| {})?;
+                let mut chain = self.built.run_log_for_tables(rec.log(), &name, |_| {})?;
                 self.built.take_tables(&mut chain)
             })
-            .map_err(|e| py_error_in(robotid::Error::Stage(e), Some((&rec, &name))))?;
+            .map_err(|e| py_error(robotid::Error::Stage(e)))?;
         let out = PyDict::new(py);
         for (kind, batch) in tables {
             out.set_item(kind.name(), table(py, batch)?)?;
@@ -261,9 +258,7 @@ impl Pipeline {
     ) -> PyResult<Bound<'py, PyAny>> {
         let rec = Recording::new(recording, name)?;
         let name = rec.name(name);
-        let batch = py
-            .detach(|| self.built.summarize(rec.path(), &name))
-            .map_err(|e| py_error_in(e, Some((&rec, &name))))?;
+        let batch = py.detach(|| self.built.summarize(rec.log(), &name)).map_err(py_error)?;
         batch.to_pyarrow(py)
     }
 

@@ -9,7 +9,7 @@ use std::path::Path;
 use robotid_stages::dynamics::{self, Model};
 use robotid_stages::simulation::{simulate, write_simulation, SimConfig, Simulation};
 use robotid_stages::stage::align::{align, AlignConfig};
-use robotid_stages::stage::read::{read, Channel, ReadConfig};
+use robotid_stages::stage::read::{read, read_log, Channel, Log, ReadConfig};
 
 fn recording(dir: &Path) -> (Model, Simulation) {
     let (cfg, _) = SimConfig::load(&fixture("sims/arm3.toml")).unwrap();
@@ -50,6 +50,50 @@ fn three_formats_read_the_same_samples() {
     assert_eq!(pq.metadata["robotid.period_s"], "10");
     assert_eq!(mc.metadata["robotid.harmonics"], "1,2,3,4,5");
     assert_eq!(mc.metadata["robotid.source_file"], "rec.mcap");
+}
+
+/// A log's bytes in memory (Python's `bytes`, the fuzzers) read as its
+/// file: the same samples, metadata and hash; errors name the log by the
+/// name given.
+#[test]
+fn bytes_in_memory_read_as_their_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    for format in ["csv", "parquet", "mcap"] {
+        let file = dir.path().join(format!("rec.{format}"));
+        let bytes = bytes::Bytes::from(std::fs::read(&file).unwrap());
+        let name = Path::new("rec");
+        let from_bytes = read_log(
+            Log::Bytes {
+                name,
+                format,
+                bytes: &bytes,
+            },
+            &cfg,
+            Some(&model),
+        )
+        .unwrap();
+        let mut from_file = read(&file, &cfg, Some(&model)).unwrap();
+        // Named as given.
+        assert_eq!(from_bytes.metadata["robotid.source_file"], "rec");
+        from_file.metadata.insert("robotid.source_file".into(), "rec".into());
+        assert_eq!(from_bytes, from_file, "{format}");
+        // Cut short: refused, named as given.
+        let cut = bytes.slice(..bytes.len() * 2 / 3);
+        let e = read_log(
+            Log::Bytes {
+                name: Path::new("<bytes rec>"),
+                format,
+                bytes: &cut,
+            },
+            &cfg,
+            Some(&model),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("<bytes rec>"), "{format}: {e}");
+    }
 }
 
 #[test]

@@ -287,27 +287,22 @@ pub(crate) fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T
 /// is refused when its content no longer matches its CRC-32; pages that
 /// carry a CRC (pyarrow's `write_page_checksum`) are checked by the reader.
 pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
-    guarded(path, || read_unguarded(path))
+    guarded(path, || read_unguarded(path, super::mapped(path)?))
 }
 
-/// A file's bytes, mapped rather than read through `File`: the parquet
-/// crate reads page headers a byte at a time, one system call each, so a
-/// corrupt header declaring millions of empty fields took 18 s to refuse
-/// from a 6 KB file; from memory it takes milliseconds.
-fn mapped(path: &Path) -> Result<bytes::Bytes> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    if file.metadata().map_err(|e| Error::io(path, e))?.len() == 0 {
-        return Ok(bytes::Bytes::new());
-    }
-    // SAFETY: the file is opened read-only and robotid never writes to its
-    // inputs; a concurrent writer would be a misuse we cannot prevent.
-    let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(path, e))?;
-    Ok(bytes::Bytes::from_owner(map))
+/// The same, of a file's bytes in memory; `path` names it in errors.
+pub fn read_parquet_bytes(path: &Path, bytes: bytes::Bytes) -> Result<RecordBatch> {
+    guarded(path, || read_unguarded(path, bytes))
 }
 
 /// A reader over a Parquet file whose footer and page headers have been
 /// walked within a budget first (see [`super::thrift`]).
 pub(crate) fn open(path: &Path) -> Result<ParquetRecordBatchReaderBuilder<bytes::Bytes>> {
+    open_bytes(path, super::mapped(path)?)
+}
+
+/// The same over a file's bytes, `path` naming it in errors.
+pub(crate) fn open_bytes(path: &Path, file: bytes::Bytes) -> Result<ParquetRecordBatchReaderBuilder<bytes::Bytes>> {
     use super::thrift::{Refusal, Walk};
     let fmt = |msg: String| Error::Format {
         path: path.to_path_buf(),
@@ -321,7 +316,6 @@ pub(crate) fn open(path: &Path) -> Result<ParquetRecordBatchReaderBuilder<bytes:
             }
         })
     };
-    let file = mapped(path)?;
     // Valid headers take about one step per byte; four leaves room.
     let mut budget = 4 * file.len() as u64 + 1024;
     let n = file.len();
@@ -360,12 +354,12 @@ pub(crate) fn open(path: &Path) -> Result<ParquetRecordBatchReaderBuilder<bytes:
     Ok(builder)
 }
 
-fn read_unguarded(path: &Path) -> Result<RecordBatch> {
+fn read_unguarded(path: &Path, bytes: bytes::Bytes) -> Result<RecordBatch> {
     let fmt = |msg: String| Error::Format {
         path: path.to_path_buf(),
         msg,
     };
-    let builder = open(path)?;
+    let builder = open_bytes(path, bytes)?;
     // The builder's schema carries the stored Arrow metadata.
     let schema = builder.schema().clone();
     let reader = builder.with_batch_size(65536).build().map_err(|e| fmt(e.to_string()))?;

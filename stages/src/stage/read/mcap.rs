@@ -9,7 +9,7 @@ use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::{Channel, Columns, ReadConfig};
+use super::{Channel, Columns, Log, ReadConfig};
 use crate::formats::cdr::{
     decode_controller_state, decode_dynamic_joint_state, decode_joint_state_into, JointStateField,
     CONTROLLER_STATE_NAME, DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
@@ -506,16 +506,16 @@ fn for_each_message<'m>(
 const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
-pub(crate) fn read_mcap(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let path = log.path();
     let source = path.display().to_string();
-    let mut maps = Vec::new();
-    for f in bag_files(path)? {
-        let file = std::fs::File::open(&f).map_err(|e| Error::io(&f, e))?;
-        // SAFETY: the file is opened read-only and robotid never writes to
-        // its inputs; a concurrent writer would be a misuse we cannot prevent.
-        let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| Error::io(&f, e))?;
-        maps.push((f, map));
-    }
+    let maps: Vec<(std::path::PathBuf, bytes::Bytes)> = match log {
+        Log::File(path) => bag_files(path)?
+            .into_iter()
+            .map(|f| crate::formats::mapped(&f).map(|m| (f, m)))
+            .collect::<Result<_>>()?,
+        Log::Bytes { name, bytes, .. } => vec![(name.to_path_buf(), bytes.clone())],
+    };
     let fmt_at = |f: &Path, msg: String| Error::Format {
         path: f.to_path_buf(),
         msg,

@@ -299,8 +299,6 @@ pub(crate) struct Columns {
     pub metadata: std::collections::BTreeMap<String, String>,
 }
 
-/// Reads `path` into `raw_samples`. `model` supplies joint names and drive
-/// constants when given.
 /// The column names of a text or Parquet log; None for a text log without
 /// a header line and for MCAP (topics, not columns).
 pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
@@ -333,8 +331,72 @@ pub fn log_width(path: &Path) -> Result<Option<usize>> {
     }
 }
 
+/// A log's content: a file (for MCAP also a rosbag2 folder), or its bytes
+/// in memory (Python's `bytes`, the fuzzers), with the name errors give
+/// it and its format as a file extension (`csv`, `parquet`, `mcap`, …).
+#[derive(Debug, Clone, Copy)]
+pub enum Log<'a> {
+    File(&'a Path),
+    Bytes {
+        name: &'a Path,
+        format: &'a str,
+        bytes: &'a bytes::Bytes,
+    },
+}
+
+impl<'a> From<&'a Path> for Log<'a> {
+    fn from(path: &'a Path) -> Log<'a> {
+        Log::File(path)
+    }
+}
+
+impl<'a> From<&'a std::path::PathBuf> for Log<'a> {
+    fn from(path: &'a std::path::PathBuf) -> Log<'a> {
+        Log::File(path)
+    }
+}
+
+impl Log<'_> {
+    /// The path its errors name.
+    pub fn path(&self) -> &Path {
+        match self {
+            Log::File(p) => p,
+            Log::Bytes { name, .. } => name,
+        }
+    }
+
+    /// Its format as a lower-case extension; a rosbag2 folder's is `mcap`.
+    fn format(&self) -> String {
+        match self {
+            Log::File(p) if p.is_dir() => "mcap".into(),
+            Log::File(p) => p
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default(),
+            Log::Bytes { format, .. } => format.to_ascii_lowercase(),
+        }
+    }
+
+    /// SHA-256 of its content ([`hash_recording`] for a file).
+    pub fn sha256(&self) -> Result<String> {
+        match self {
+            Log::File(p) => hash_recording(p),
+            Log::Bytes { bytes, .. } => Ok(crate::formats::sha256_hex(bytes)),
+        }
+    }
+}
+
+/// Reads `path` into `raw_samples`. `model` supplies joint names and drive
+/// constants when given.
 pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
-    let source = path.display().to_string();
+    read_log(Log::File(path), cfg, model)
+}
+
+/// Reads a log, a file or bytes in memory, into `raw_samples`: its
+/// channels in SI units, checked (finite, increasing stamps, within the
+/// robot's limits), isolated spikes refused or repaired.
+pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
+    let path = log.path();
     let joints: Vec<String> = cfg
         .joints
         .clone()
@@ -343,53 +405,127 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             path: path.to_path_buf(),
             msg: "no joint names: give `joints` in the source or a robot file".into(),
         })?;
-    // A rosbag2 folder (metadata.yaml beside its .mcap files) is one recording.
-    let ext = if path.is_dir() {
-        "mcap".to_string()
-    } else {
-        path.extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default()
+    let ext = log.format();
+    let (cols, bytes_hash) = columns_of(log, &ext, cfg, &joints)?;
+    let source = path.display().to_string();
+    let units = Units {
+        cfg,
+        model,
+        joints: &joints,
+        source: &source,
     };
-    let text = TEXT_EXTENSIONS.contains(&ext.as_str());
-    // The recording's hash on a thread of its own while its channels are
-    // read (a tenth of an MCAP read, a quarter of a Parquet one).
-    let beside = |read: &dyn Fn() -> Result<Columns>| {
-        std::thread::scope(|scope| {
-            let hash = scope.spawn(|| hash_recording(path));
-            let cols = read()?;
-            Ok::<_, Error>((cols, hash.join().expect("hashing does not panic")?))
-        })
-    };
-    let (cols, bytes_hash) = match ext.as_str() {
-        e if TEXT_EXTENSIONS.contains(&e) => beside(&|| text::read_text(path, cfg, &joints))?,
-        "parquet" => beside(&|| parquet::read_parquet_log(path, cfg, &joints))?,
-        "mcap" => beside(&|| mcap::read_mcap(path, cfg, &joints))?,
-        other => {
-            return Err(Error::Format {
-                path: path.to_path_buf(),
-                msg: format!(
-                    "unknown log format `.{other}` ({}, parquet, mcap)",
-                    TEXT_EXTENSIONS.join(", ")
-                ),
-            })
-        }
-    };
+    let Columns {
+        mut time,
+        mut position,
+        mut effort,
+        mut reference,
+        names,
+        metadata: mut md,
+    } = cols;
     let unit = |ch: &Option<Channel>, default: &str| {
         ch.as_ref()
             .and_then(|c| c.unit.clone())
             .unwrap_or_else(|| default.to_string())
     };
-    let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
-        source_name: source.clone(),
-        channel: channel.to_string(),
-        sample,
-        msg,
+    let time_unit = unit(&cfg.time, if ext == "mcap" { "ns" } else { "s" });
+    units.convert("time", &time_unit, std::slice::from_mut(&mut time))?;
+    units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
+    let effort_unit = units.effort_unit(&mut md, &names[1])?;
+    units.convert("effort", &effort_unit, &mut effort)?;
+    if let Some(r) = &mut reference {
+        units.convert("reference", &unit(&cfg.reference, "rad"), r)?;
+    }
+    // Text logs stamp absolute times: keep the origin, work relative to it.
+    // (MCAP's are subtracted in integer nanoseconds.)
+    if let Some(&t0) = time.first().filter(|_| TEXT_EXTENSIONS.contains(&ext.as_str())) {
+        md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
+        if t0 != 0.0 {
+            time.iter_mut().for_each(|v| *v -= t0);
+        }
+    }
+    let channels = [(&position, &names[0]), (&effort, &names[1])];
+    check_channels(&units, &time, &channels, reference.as_ref().map(|r| (r, &names[2])))?;
+    repair_spikes(
+        &source,
+        cfg.spikes,
+        [(&mut position, &names[0]), (&mut effort, &names[1])],
+        &mut md,
+    )?;
+    md.insert(
+        metadata::SOURCE_FILE.into(),
+        path.file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+    );
+    md.insert(metadata::SOURCE_SHA256.into(), bytes_hash);
+    let raw = RawSamples {
+        joints,
+        time,
+        q: position,
+        effort_kind: TorqueChannel::Torque,
+        effort,
+        reference,
+        counts: None,
+        metadata: md,
     };
-    let per_joint_const = |given: &Option<Vec<f64>>, from_model: &dyn Fn(&Model, usize) -> f64, what: &str| {
+    raw.check_shape()?;
+    Ok(raw)
+}
+
+/// The mapped channels of a log in format `ext`, and its hash.
+fn columns_of(log: Log, ext: &str, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
+    // The recording's hash on a thread of its own while its channels are
+    // read (a tenth of an MCAP read, a quarter of a Parquet one).
+    let beside = |read: &dyn Fn() -> Result<Columns>| {
+        std::thread::scope(|scope| {
+            let hash = scope.spawn(|| log.sha256());
+            let cols = read()?;
+            Ok::<_, Error>((cols, hash.join().expect("hashing does not panic")?))
+        })
+    };
+    match ext {
+        e if TEXT_EXTENSIONS.contains(&e) => beside(&|| text::read_text(log, cfg, joints)),
+        "parquet" => beside(&|| parquet::read_parquet_log(log, cfg, joints)),
+        "mcap" => beside(&|| mcap::read_mcap(log, cfg, joints)),
+        other => Err(Error::Format {
+            path: log.path().to_path_buf(),
+            msg: format!(
+                "unknown log format `.{other}` ({}, parquet, mcap)",
+                TEXT_EXTENSIONS.join(", ")
+            ),
+        }),
+    }
+}
+
+/// What converting a log's channels to SI units needs: the `[read]` table,
+/// the robot's drives, the joints, the log's name for errors.
+struct Units<'a> {
+    cfg: &'a ReadConfig,
+    model: Option<&'a Model>,
+    joints: &'a [String],
+    source: &'a str,
+}
+
+impl Units<'_> {
+    fn data_err(&self, channel: &str, sample: Option<usize>, msg: String) -> Error {
+        Error::Data {
+            source_name: self.source.to_string(),
+            channel: channel.to_string(),
+            sample,
+            msg,
+        }
+    }
+
+    /// A constant per joint: given in `[read]`, else the robot's.
+    fn per_joint(
+        &self,
+        given: &Option<Vec<f64>>,
+        from_model: &dyn Fn(&Model, usize) -> f64,
+        what: &str,
+    ) -> std::result::Result<Vec<f64>, String> {
         let vals: Option<Vec<f64>> = given.clone().or_else(|| {
-            model.map(|m| {
-                joints
+            self.model.map(|m| {
+                self.joints
                     .iter()
                     .map(|j| {
                         m.joint_names()
@@ -401,138 +537,140 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
             })
         });
         match vals {
-            Some(v) if v.len() == joints.len() && v.iter().all(|x| x.is_finite() && *x > 0.0) => Ok(v),
-            Some(v) if v.len() != joints.len() => {
-                Err(format!("`{what}` lists {} values for {} joints", v.len(), joints.len()))
-            }
+            Some(v) if v.len() == self.joints.len() && v.iter().all(|x| x.is_finite() && *x > 0.0) => Ok(v),
+            Some(v) if v.len() != self.joints.len() => Err(format!(
+                "`{what}` lists {} values for {} joints",
+                v.len(),
+                self.joints.len()
+            )),
             _ => Err(format!(
                 "converting needs `{what}` per joint: give a robot file whose joints match, or `{what}` in the source"
             )),
         }
-    };
-    let convert = |kind: &str, unit: &str, values: &mut [Vec<f64>]| -> Result<()> {
-        let scale = unit_scale(kind, unit).map_err(|e| data_err(kind, None, e.to_string()))?;
-        match scale {
-            Scale::Factor(f) => values.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v *= f)),
-            Scale::Counts => {
-                let k = per_joint_const(
-                    &cfg.radians_per_count,
+    }
+
+    /// `values` (per joint) from `unit` to SI: a factor, encoder counts by
+    /// each joint's radians per count, motor currents by its torque per ampere.
+    fn convert(&self, kind: &str, unit: &str, values: &mut [Vec<f64>]) -> Result<()> {
+        let scale = unit_scale(kind, unit).map_err(|e| self.data_err(kind, None, e.to_string()))?;
+        let (k, f) = match scale {
+            Scale::Factor(f) => {
+                values.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v *= f));
+                return Ok(());
+            }
+            Scale::Counts => (
+                self.per_joint(
+                    &self.cfg.radians_per_count,
                     &|m, i| m.drives[i].radians_per_count(),
                     "radians_per_count",
-                )
-                .map_err(|e| data_err(kind, None, e))?;
-                for (c, f) in values.iter_mut().zip(k) {
-                    c.iter_mut().for_each(|v| *v *= f);
-                }
-            }
-            Scale::Current(f) => {
-                let k = per_joint_const(
-                    &cfg.torque_per_amp,
+                ),
+                1.0,
+            ),
+            Scale::Current(f) => (
+                self.per_joint(
+                    &self.cfg.torque_per_amp,
                     &|m, i| m.drives[i].joint_torque_per_amp(),
                     "torque_per_amp",
-                )
-                .map_err(|e| data_err(kind, None, e))?;
-                for (c, kj) in values.iter_mut().zip(k) {
-                    c.iter_mut().for_each(|v| *v *= f * kj);
-                }
-            }
+                ),
+                f,
+            ),
+        };
+        let k = k.map_err(|e| self.data_err(kind, None, e))?;
+        for (c, kj) in values.iter_mut().zip(k) {
+            c.iter_mut().for_each(|v| *v *= f * kj);
         }
         Ok(())
-    };
-    let Columns {
-        mut time,
-        mut position,
-        mut effort,
-        mut reference,
-        names,
-        metadata: mut md,
-    } = cols;
-    let time_unit = unit(&cfg.time, if ext == "mcap" { "ns" } else { "s" });
-    let mut t = [time];
-    convert("time", &time_unit, &mut t)?;
-    [time] = t;
-    convert("position", &unit(&cfg.position, "rad"), &mut position)?;
-    let explicit = cfg.effort.as_ref().is_some_and(|c| c.unit.is_some());
-    let effort_unit = match (md.remove(metadata::READ_EFFORT_UNIT), cfg.effort.as_ref()) {
-        (Some(u), _) => u,
-        (None, Some(Channel { unit: Some(u), .. })) => u.clone(),
-        (None, Some(c)) => effort_unit_of(c, &names[1]).ok_or_else(|| {
-            data_err(
+    }
+
+    /// The effort channels' unit: the reader's, the `[read]` table's, or
+    /// the one their name implies (said in a note when not stated).
+    fn effort_unit(&self, md: &mut std::collections::BTreeMap<String, String>, names: &[String]) -> Result<String> {
+        let cfg = self.cfg;
+        let first = names.first().map(String::as_str).unwrap_or("?");
+        let explicit = cfg.effort.as_ref().is_some_and(|c| c.unit.is_some());
+        let unit = match (md.remove(metadata::READ_EFFORT_UNIT), cfg.effort.as_ref()) {
+            (Some(u), _) => u,
+            (None, Some(Channel { unit: Some(u), .. })) => u.clone(),
+            (None, Some(c)) => effort_unit_of(c, names).ok_or_else(|| {
+                self.data_err(
+                    "effort",
+                    None,
+                    format!("no unit given and none implied by the channel ({first}): give `unit = \"A\"` (motor current) or `\"N*m\"` (joint torque)"),
+                )
+            })?,
+            (None, None) => "A".to_string(),
+        };
+        if !explicit {
+            add_note(md, format!("read: default effort unit {unit} (channels {first})"));
+        }
+        // Gains stated for torques would be dropped without a word: the user
+        // thinks the channels are currents.
+        if cfg.torque_per_amp.is_some() && matches!(unit_scale("effort", &unit), Ok(Scale::Factor(_))) {
+            return Err(self.data_err(
                 "effort",
                 None,
                 format!(
-                    "no unit given and none implied by the channel ({}): give `unit = \"A\"` (motor current) or `\"N*m\"` (joint torque)",
-                    names[1].first().map(String::as_str).unwrap_or("?")
+                    "`torque_per_amp` is given, but the effort channels ({first}) are in {unit}, a torque: the gains would not be used. Drop them, or say the channels are currents (`unit = \"A\"`)"
                 ),
-            )
-        })?,
-        (None, None) => "A".to_string(),
-    };
-    if !explicit {
-        let note = format!(
-            "read: default effort unit {effort_unit} (channels {})",
-            names[1].first().map(String::as_str).unwrap_or("?")
-        );
-        let all = match md.remove(metadata::READ_NOTES) {
-            Some(n) => format!("{n}; {note}"),
-            None => note,
-        };
-        md.insert(metadata::READ_NOTES.into(), all);
-    }
-    // Gains stated for torques would be dropped without a word: the user
-    // thinks the channels are currents.
-    if cfg.torque_per_amp.is_some() && matches!(unit_scale("effort", &effort_unit), Ok(Scale::Factor(_))) {
-        return Err(data_err(
-            "effort",
-            None,
-            format!(
-                "`torque_per_amp` is given, but the effort channels ({}) are in {effort_unit}, a torque: the gains would not be used. Drop them, or say the channels are currents (`unit = \"A\"`)",
-                names[1].first().map(String::as_str).unwrap_or("?")
-            ),
-        ));
-    }
-    convert("effort", &effort_unit, &mut effort)?;
-    if let Some(r) = &mut reference {
-        convert("reference", &unit(&cfg.reference, "rad"), r)?;
-    }
-    // MCAP and text logs stamp absolute times: keep the origin, work
-    // relative to it. (MCAP's are subtracted in integer nanoseconds.)
-    if let Some(&t0) = time.first().filter(|_| text) {
-        md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
-        if t0 != 0.0 {
-            time.iter_mut().for_each(|v| *v -= t0);
+            ));
         }
+        Ok(unit)
     }
-    check_finite(&source, std::slice::from_ref(&time), &[String::from("time")])?;
-    check_increasing(&source, &time)?;
-    check_rate(&source, &time)?;
-    check_finite(&source, &position, &names[0])?;
-    if let Some(m) = model {
-        check_limits(&source, &position, &names[0], &joints, m)?;
-        check_speeds(&source, &time, &position, &names[0])?;
+}
+
+/// `note` appended to the read's notes in `md`.
+fn add_note(md: &mut std::collections::BTreeMap<String, String>, note: String) {
+    let all = match md.remove(metadata::READ_NOTES) {
+        Some(n) => format!("{n}; {note}"),
+        None => note,
+    };
+    md.insert(metadata::READ_NOTES.into(), all);
+}
+
+/// Every value finite, the stamps increasing at a steady rate; with a
+/// robot, positions within its limits and speeds, torques within its.
+fn check_channels(
+    units: &Units,
+    time: &[f64],
+    [(position, q_names), (effort, tau_names)]: &[(&Vec<Vec<f64>>, &Vec<String>); 2],
+    reference: Option<(&Vec<Vec<f64>>, &Vec<String>)>,
+) -> Result<()> {
+    let source = units.source;
+    check_finite(source, &[time], &[String::from("time")])?;
+    check_increasing(source, time)?;
+    check_rate(source, time)?;
+    check_finite(source, position, q_names)?;
+    if let Some(m) = units.model {
+        check_limits(source, position, q_names, units.joints, m)?;
+        check_speeds(source, time, position, q_names)?;
     }
-    check_finite(&source, &effort, &names[1])?;
-    if let Some(r) = &reference {
-        check_finite(&source, r, &names[2])?;
+    check_finite(source, effort, tau_names)?;
+    if let Some((r, names)) = reference {
+        check_finite(source, r, names)?;
     }
-    if let Some(m) = model {
-        check_torques(
-            &source,
-            &effort,
-            &names[1],
-            &joints,
-            m,
-            cfg.max_torque_factor.unwrap_or(MAX_TORQUE_FACTOR),
-        )?;
+    if let Some(m) = units.model {
+        let factor = units.cfg.max_torque_factor.unwrap_or(MAX_TORQUE_FACTOR);
+        check_torques(source, effort, tau_names, units.joints, m, factor)?;
     }
+    Ok(())
+}
+
+/// Isolated spikes in `channels`: refused at the first, or replaced by
+/// their neighbours' mean with a note counting them.
+fn repair_spikes(
+    source: &str,
+    policy: Spikes,
+    channels: [(&mut Vec<Vec<f64>>, &Vec<String>); 2],
+    md: &mut std::collections::BTreeMap<String, String>,
+) -> Result<()> {
     let mut repaired = Vec::new();
-    for (cols, channel_names) in [(&mut position, &names[0]), (&mut effort, &names[1])] {
+    for (cols, channel_names) in channels {
         for (col, name) in cols.iter_mut().zip(channel_names) {
             let found = spikes(col);
             let Some(&k) = found.first() else { continue };
-            if cfg.spikes == Spikes::Refuse {
+            if policy == Spikes::Refuse {
                 return Err(Error::Data {
-                    source_name: source.clone(),
+                    source_name: source.to_string(),
                     channel: name.clone(),
                     sample: Some(k),
                     msg: format!(
@@ -555,35 +693,15 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
         }
     }
     if !repaired.is_empty() {
-        let note = format!(
-            "isolated spikes replaced by their neighbours' mean ({})",
-            repaired.join("; ")
+        add_note(
+            md,
+            format!(
+                "isolated spikes replaced by their neighbours' mean ({})",
+                repaired.join("; ")
+            ),
         );
-        let all = match md.remove(metadata::READ_NOTES) {
-            Some(n) => format!("{n}; {note}"),
-            None => note,
-        };
-        md.insert(metadata::READ_NOTES.into(), all);
     }
-    md.insert(
-        metadata::SOURCE_FILE.into(),
-        path.file_name()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-    );
-    md.insert(metadata::SOURCE_SHA256.into(), bytes_hash);
-    let raw = RawSamples {
-        joints,
-        time,
-        q: position,
-        effort_kind: TorqueChannel::Torque,
-        effort,
-        reference,
-        counts: None,
-        metadata: md,
-    };
-    raw.check_shape()?;
-    Ok(raw)
+    Ok(())
 }
 
 /// The unit an effort channel's name implies: a JointState `effort` field
@@ -781,8 +899,9 @@ fn check_rate(source: &str, time: &[f64]) -> Result<()> {
 }
 
 /// The first NaN or infinity, named by channel and sample.
-fn check_finite(source: &str, cols: &[Vec<f64>], names: &[String]) -> Result<()> {
+fn check_finite<C: AsRef<[f64]>>(source: &str, cols: &[C], names: &[String]) -> Result<()> {
     for (c, name) in cols.iter().zip(names) {
+        let c = c.as_ref();
         if let Some(k) = c.iter().position(|v| !v.is_finite()) {
             return Err(Error::Data {
                 source_name: source.to_string(),

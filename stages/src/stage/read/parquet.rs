@@ -4,27 +4,31 @@
 
 use robotid_schemas::metadata;
 use std::collections::BTreeMap;
-use std::path::Path;
 
 use arrow::array::{Array, Float64Array, Int64Array};
 use parquet::arrow::ProjectionMask;
 
 use super::text::{into_columns, resolve};
-use super::{Columns, ReadConfig};
+use super::{Columns, Log, ReadConfig};
 use crate::{Error, Result};
 
-pub(crate) fn read_parquet_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
-    crate::formats::parquet::guarded(path, || read_log(path, cfg, joints))
+pub(crate) fn read_parquet_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    crate::formats::parquet::guarded(log.path(), || read_log(log, cfg, joints))
 }
 
-fn read_log(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let path = log.path();
     let source = path.display().to_string();
     let fmt = |msg: String| Error::Format {
         path: path.to_path_buf(),
         msg,
     };
-    let builder = crate::formats::parquet::open(path)?;
-    let bytes = std::fs::metadata(path).map(|m| m.len() as usize).unwrap_or(0);
+    let data = match log {
+        Log::File(path) => crate::formats::mapped(path)?,
+        Log::Bytes { bytes, .. } => bytes.clone(),
+    };
+    let bytes = data.len();
+    let builder = crate::formats::parquet::open_bytes(path, data)?;
     let schema = builder.schema().clone();
     let header: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
     let mapping = resolve(&header, cfg, joints, &source)?;

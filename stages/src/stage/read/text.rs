@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::io::BufRead;
 use std::path::Path;
 
-use super::{column_name, Column, Columns, Decimal, OneColumn, ReadConfig, Separator};
+use super::{column_name, Column, Columns, Decimal, Log, OneColumn, ReadConfig, Separator};
 use crate::{Error, Result};
 
 /// Column names the mapping asks for, resolved against a header.
@@ -326,10 +326,15 @@ pub(crate) fn width_of(path: &Path) -> Result<Option<usize>> {
 /// without a header line, comment lines and a UTF-8 byte-order mark
 /// skipped, either decimal mark. Streamed line by line; only the mapped
 /// columns are kept.
-pub(crate) fn read_text(path: &Path, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+pub(crate) fn read_text(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let path = log.path();
     let source = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut reader = std::io::BufReader::new(file);
+    let mut reader: Box<dyn BufRead + '_> = match log {
+        Log::File(path) => Box::new(std::io::BufReader::new(
+            std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
+        )),
+        Log::Bytes { bytes, .. } => Box::new(&bytes[..]),
+    };
     let mut line = String::new();
     let mut line_no = 0usize;
     let fmt = |msg: String| Error::Format {
