@@ -24,6 +24,10 @@ import pyarrow as pa
 
 from ._robotid import Pipeline, RobotidError, __version__, merge
 
+# Pickled by this name (a Ray worker's error reaches the driver so), it
+# comes back as this very class, its file, channel, sample and stage kept.
+RobotidError.__module__ = "robotid"
+
 Summaries = Union[pa.RecordBatch, pa.Table, Sequence[pa.RecordBatch]]
 
 

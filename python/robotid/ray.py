@@ -63,6 +63,18 @@ def _summarize(batch: pa.Table, group_by: str) -> pa.Table:
     return pa.concat_tables(rows)
 
 
+def _robotid_error_in(e: BaseException) -> Optional[RobotidError]:
+    """The RobotidError in `e`'s chain of causes (Ray's task errors keep
+    theirs in `cause`), if any."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        if type(e) is RobotidError:
+            return e
+        e = getattr(e, "cause", None) or e.__cause__
+    return None
+
+
 def _merge_summaries():
     from ray.data.aggregate import AggregateFnV2
     from ray.data.block import BlockAccessor
@@ -137,16 +149,24 @@ def identify(
     # A dataset takes the context current when it is made.
     groups = len({it[group_by] for it in items})
     ctx = ray.data.DataContext.get_current()
-    strategy = ctx.shuffle_strategy
+    strategy, original = ctx.shuffle_strategy, ctx.raise_original_map_exception
     ctx.shuffle_strategy = ray.data.context.ShuffleStrategy.SORT_SHUFFLE_PULL_BASED
+    # A worker's RobotidError kept as the task error's cause (not wrapped
+    # in a UserCodeException, whose cause is lost on the way).
+    ctx.raise_original_map_exception = True
     try:
         ds = ray.data.from_items(items, override_num_blocks=-(-len(items) // summaries_per_task))
         summaries = ds.map_batches(
             _summarize, fn_kwargs={"group_by": group_by}, batch_format="pyarrow", batch_size=None
         )
         merged = summaries.groupby(group_by, num_partitions=groups).aggregate(_merge_summaries()).take_all()
+    except Exception as e:
+        # A worker's RobotidError (a missing or bad recording) reaches the
+        # driver wrapped in Ray's task errors: raised as itself, with its
+        # file, channel, sample and stage.
+        raise _robotid_error_in(e) or e
     finally:
-        ctx.shuffle_strategy = strategy
+        ctx.shuffle_strategy, ctx.raise_original_map_exception = strategy, original
     pipeline_of = {it[group_by]: it["pipeline"] for it in items}
     out = {}
     for row in merged:

@@ -1,6 +1,7 @@
 """The Python package against the command line: the same tables, the same
 parameters, the same places in errors."""
 
+import math
 import pathlib
 
 import polars as pl
@@ -136,6 +137,14 @@ def test_errors_carry_their_place(kuka, tmp_path):
     with pytest.raises(robotid.RobotidError) as e:
         arm3.run_recording(rec)
     assert e.value.file == str(rec) and e.value.sample is not None, str(e.value)
+    # An error in a stage names it: 3 s of a 10 s period, given as bytes.
+    short = header + "".join(
+        f"{0.01 * k}" + "".join(f",{0.3 * math.sin(0.01 * k * j)},0.1" for j in (1, 2, 3)) + "\n" for k in range(300)
+    )
+    with pytest.raises(robotid.RobotidError) as e:
+        arm3.run_recording(short.encode(), name="short.csv")
+    assert (e.value.file, e.value.stage, e.value.channel) == ("<bytes short>", "align", "time"), str(e.value)
+    assert "stage `align`" in str(e.value) and "less than one full period" in str(e.value)
     with pytest.raises(robotid.RobotidError) as e:
         robotid.Pipeline.from_toml("version = 1\n[[stage]]\nkind = 'nonsense'\n", tmp_path)
     assert e.value.file.endswith("pipeline.toml") and "missing field `source`" in str(e.value)

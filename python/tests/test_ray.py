@@ -44,3 +44,10 @@ def test_ray_identify_equals_the_command_line_for_two_robots(fleet, local_ray, t
 def test_a_recording_without_a_pipeline_is_refused(fleet):
     with pytest.raises(robotid.RobotidError, match="has no pipeline"):
         robotid.ray.identify(fleet["recordings"][:1], {"ur5": fleet["pipelines"]["ur5"]})
+
+
+def test_a_missing_recording_is_a_robotid_error(fleet, local_ray, tmp_path):
+    missing = str(tmp_path / "robot=ur5" / "gone.mcap")
+    with pytest.raises(robotid.RobotidError) as e:
+        robotid.ray.identify([missing], fleet["pipelines"])
+    assert type(e.value) is robotid.RobotidError and e.value.file == missing, repr(e.value)

@@ -72,7 +72,7 @@ pub enum Error {
     },
     /// A failure inside one stage of one recording. Its message holds the
     /// cause's (not an error `source`: a printed chain would say it twice).
-    #[error("{source_name}: stage `{stage}`: {cause}")]
+    #[error("{source_name}: stage `{stage}`: {}", unplaced(cause, source_name))]
     Stage {
         stage: &'static str,
         source_name: String,
@@ -136,14 +136,30 @@ impl Error {
     /// This error, placed in a stage of a recording.
     pub fn in_stage(self, stage: &'static str, source_name: &str) -> Error {
         match self {
-            // Already placed, or naming its own source.
-            e @ (Error::Stage { .. } | Error::Data { .. }) => e,
+            e @ Error::Stage { .. } => e,
             e => Error::Stage {
                 stage,
                 source_name: source_name.to_string(),
                 cause: Box::new(e),
             },
         }
+    }
+}
+
+/// A stage's cause as its message says it: without the source when it
+/// names the stage's own.
+fn unplaced(cause: &Error, source: &str) -> String {
+    match cause {
+        Error::Data {
+            source_name,
+            channel,
+            sample,
+            msg,
+        } if source_name == source => format!(
+            "channel `{channel}`{}: {msg}",
+            sample.map(|k| format!(", sample {k}")).unwrap_or_default()
+        ),
+        e => e.to_string(),
     }
 }
 
