@@ -260,14 +260,22 @@ pub fn align(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     Ok(p)
 }
 
-/// Aligns the whole of `raw`.
-fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Periods> {
-    let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
-        source_name: source.to_string(),
-        channel: channel.to_string(),
-        sample,
-        msg,
-    };
+/// A recording's data error in `channel` (at `sample`), as align reports it.
+type DataErr<'a> = dyn Fn(&str, Option<usize>, String) -> Error + 'a;
+
+/// The stamps' steps and the sample rate.
+struct Stamps {
+    min_step: f64,
+    max_step: f64,
+    median: f64,
+    fs: f64,
+    /// What a median step of hours or microseconds suggests (or empty).
+    unit_hint: String,
+}
+
+/// The stamps checked (increasing, no gap over `max_gap_steps`) and the
+/// sample rate: given, the recording's, or 1 / the median step.
+fn stamps(raw: &RawSamples, cfg: &AlignConfig, data_err: &DataErr) -> Result<Stamps> {
     if raw.effort_kind != TorqueChannel::Torque {
         return Err(data_err(
             "current_*",
@@ -338,11 +346,24 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             ));
         }
     }
+    Ok(Stamps {
+        min_step,
+        max_step,
+        median: med,
+        fs,
+        unit_hint,
+    })
+}
+
+/// The period (given, the recording's, or found in the record) and what
+/// the pipeline file left to the recording, said.
+fn period_and_defaults(raw: &RawSamples, cfg: &AlignConfig, fs: f64, data_err: &DataErr) -> Result<(f64, Vec<String>)> {
+    let md_f64 = |key: &str| raw.metadata.get(key).and_then(|v| v.parse::<f64>().ok());
     // Given, else the recording's, else found in the record itself.
     let (period, inferred) = match cfg.period_s.or_else(|| md_f64(metadata::PERIOD_S)) {
         Some(p) => (p, None),
         None => {
-            let e = crate::signal::period::infer_period(t, &raw.q).map_err(|e| {
+            let e = crate::signal::period::infer_period(&raw.time, &raw.q).map_err(|e| {
                 data_err(
                     "position",
                     None,
@@ -372,6 +393,107 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             e.std_s, e.cycles
         )),
     }
+    Ok((period, defaults))
+}
+
+/// Where the positions never repeat one period later within the tolerance:
+/// the best window (its start), its ratio and the last one's.
+struct Unsteady {
+    at: usize,
+    best: f64,
+    end: f64,
+    window: usize,
+}
+
+/// The steady stretch of `m` grid samples (`n` per period, `m > n`): the
+/// longest run of windows where the positions repeat one period later (the
+/// latest of equal runs), start-up and ramp-down both left out; its
+/// samples [from, to). r(i) is the RMS over a window of N/10 samples of
+/// q(i) − q(i+N), relative to the positions' RMS variation `scale`.
+fn steady_stretch(
+    q: &[&[f64]],
+    n: usize,
+    m: usize,
+    scale: f64,
+    tolerance: f64,
+) -> std::result::Result<(usize, usize), Unsteady> {
+    let nj = q.len();
+    let lags = m - n;
+    let d2: Vec<f64> = (0..lags)
+        .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
+        .collect();
+    let w = (n / 10).clamp(1, lags);
+    // One pass over the windows starting at 0..=lags − w, by a running
+    // sum: the runs of steady windows, the best and the last ratio.
+    let (mut best, mut run): (Option<(usize, usize)>, Option<usize>) = (None, None);
+    let (mut i_min, mut r_min, mut r_end) = (0, f64::INFINITY, f64::INFINITY);
+    let mut sum: f64 = d2[..w].iter().sum();
+    for i in 0..=lags - w + 1 {
+        let r = if i <= lags - w {
+            if i > 0 {
+                sum += d2[i + w - 1] - d2[i - 1];
+            }
+            (sum.max(0.0) / w as f64).sqrt() / scale
+        } else {
+            f64::INFINITY // closes a run that reaches the end
+        };
+        if i <= lags - w {
+            r_end = r;
+            if r < r_min {
+                (i_min, r_min) = (i, r);
+            }
+        }
+        match (r <= tolerance, run) {
+            (true, None) => run = Some(i),
+            (false, Some(a)) => {
+                if best.is_none_or(|(ba, bb)| i - 1 - a >= bb - ba) {
+                    best = Some((a, i - 1));
+                }
+                run = None;
+            }
+            _ => {}
+        }
+    }
+    match best {
+        // Where the stretch stops before the record's end, its last
+        // window straddles the first unsteady samples: end at the last
+        // sample that still repeats the one a period before it.
+        Some((a, b)) if b + w + n < m => {
+            let e = |k: usize| (0..nj).map(|j| (q[j][k] - q[j][k - n]).powi(2)).sum::<f64>().sqrt() / scale;
+            // The first that does not, from the window's start: from
+            // its end, a ramp's crossing of the period before could match.
+            let last = (b + n..b + w + n)
+                .find(|&k| e(k) > tolerance)
+                .map_or(b + w + n - 1, |k| k.saturating_sub(1).max(b + n));
+            Ok((a, last + 1))
+        }
+        Some((a, b)) => Ok((a, b + w + n)),
+        None => Err(Unsteady {
+            at: i_min,
+            best: r_min,
+            end: r_end,
+            window: w,
+        }),
+    }
+}
+
+/// Aligns the whole of `raw`.
+fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Periods> {
+    let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
+        source_name: source.to_string(),
+        channel: channel.to_string(),
+        sample,
+        msg,
+    };
+    let Stamps {
+        min_step,
+        max_step,
+        median: med,
+        fs,
+        unit_hint,
+    } = stamps(raw, cfg, &data_err)?;
+    let t = &raw.time;
+    let (period, defaults) = period_and_defaults(raw, cfg, fs, &data_err)?;
     let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
     if n < 4 {
         return Err(data_err(
@@ -464,76 +586,23 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         .sum::<f64>()
         .sqrt()
         .max(1e-300);
-    // The steady stretch: the longest run of windows where the positions
-    // repeat one period later (the latest of equal runs), start-up and
-    // ramp-down both left out. Its samples [steady_from, steady_to).
     let (steady_from, steady_to) = if m > n {
-        let lags = m - n;
-        let d2: Vec<f64> = (0..lags)
-            .map(|i| (0..nj).map(|j| (q[j][i] - q[j][i + n]).powi(2)).sum::<f64>())
-            .collect();
-        let w = (n / 10).clamp(1, lags);
-        // One pass over the windows starting at 0..=lags − w, by a running
-        // sum: the runs of steady windows, the best and the last ratio.
-        let (mut best, mut run): (Option<(usize, usize)>, Option<usize>) = (None, None);
-        let (mut i_min, mut r_min, mut r_end) = (0, f64::INFINITY, f64::INFINITY);
-        let mut sum: f64 = d2[..w].iter().sum();
-        for i in 0..=lags - w + 1 {
-            let r = if i <= lags - w {
-                if i > 0 {
-                    sum += d2[i + w - 1] - d2[i - 1];
-                }
-                (sum.max(0.0) / w as f64).sqrt() / scale
-            } else {
-                f64::INFINITY // closes a run that reaches the end
-            };
-            if i <= lags - w {
-                r_end = r;
-                if r < r_min {
-                    (i_min, r_min) = (i, r);
-                }
-            }
-            match (r <= cfg.steady_tolerance, run) {
-                (true, None) => run = Some(i),
-                (false, Some(a)) => {
-                    if best.is_none_or(|(ba, bb)| i - 1 - a >= bb - ba) {
-                        best = Some((a, i - 1));
-                    }
-                    run = None;
-                }
-                _ => {}
-            }
-        }
-        match best {
-            // Where the stretch stops before the record's end, its last
-            // window straddles the first unsteady samples: end at the last
-            // sample that still repeats the one a period before it.
-            Some((a, b)) if b + w + n < m => {
-                let e = |k: usize| (0..nj).map(|j| (q[j][k] - q[j][k - n]).powi(2)).sum::<f64>().sqrt() / scale;
-                // The first that does not, from the window's start: from
-                // its end, a ramp's crossing of the period before could match.
-                let last = (b + n..b + w + n)
-                    .find(|&k| e(k) > cfg.steady_tolerance)
-                    .map_or(b + w + n - 1, |k| k.saturating_sub(1).max(b + n));
-                (a, last + 1)
-            }
-            Some((a, b)) => (a, b + w + n),
-            None => {
-                let at = grid0 + i_min as f64 * dt - t[0];
-                return Err(data_err(
-                    "q_*",
-                    None,
-                    format!(
-                        "the positions do not repeat with period {period} s anywhere in the record: compared with themselves one period later (RMS over {w} samples, relative to their RMS variation), they differ by {:.2} % at best (at {at:.3} s) and by {:.2} % at the end; the tolerance is {:.2} %. Check the period; if only part of the record is periodic, give `window_s = [{:.3}, {:.3}]` around it",
-                        100.0 * r_min,
-                        100.0 * r_end,
-                        100.0 * cfg.steady_tolerance,
-                        at,
-                        (at + 2.0 * period).min(span),
-                    ),
-                ));
-            }
-        }
+        steady_stretch(&q, n, m, scale, cfg.steady_tolerance).map_err(|u| {
+            let at = grid0 + u.at as f64 * dt - t[0];
+            data_err(
+                "q_*",
+                None,
+                format!(
+                    "the positions do not repeat with period {period} s anywhere in the record: compared with themselves one period later (RMS over {} samples, relative to their RMS variation), they differ by {:.2} % at best (at {at:.3} s) and by {:.2} % at the end; the tolerance is {:.2} %. Check the period; if only part of the record is periodic, give `window_s = [{:.3}, {:.3}]` around it",
+                    u.window,
+                    100.0 * u.best,
+                    100.0 * u.end,
+                    100.0 * cfg.steady_tolerance,
+                    at,
+                    (at + 2.0 * period).min(span),
+                ),
+            )
+        })?
     } else {
         report
             .notes
