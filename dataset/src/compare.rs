@@ -449,6 +449,34 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
     Ok(t)
 }
 
+/// The verdict line's end: identical, within tolerance (the worst of
+/// `differing`), or how many cells and columns are over.
+fn verdict(report: &Report, differing: &[(&TableDiff, &ColumnDiff)]) -> String {
+    let over: usize = report.tables.iter().flat_map(|t| &t.columns).map(|c| c.over).sum();
+    let failing = report.failing().count();
+    if report.identical() {
+        "identical".to_string()
+    } else if report.passed() {
+        let (t, c) = differing[0];
+        format!(
+            "within tolerance (largest ratio {:.3e}: {} {})",
+            c.worst_ratio,
+            t.table.display(),
+            c.column
+        )
+    } else {
+        let structural = report.problems.len()
+            + report
+                .tables
+                .iter()
+                .map(|t| t.problems.len() + usize::from(t.only_a.0 + t.only_b.0 > 0))
+                .sum::<usize>();
+        format!(
+            "DIFFERENT: {over} cell(s) in {failing} column(s) over tolerance, {structural} structural difference(s)"
+        )
+    }
+}
+
 /// The report as text: every differing column, worst first (at most
 /// `worst` of them), rows and tables in one tree only, and a verdict line.
 pub fn render(report: &Report, a: &Path, b: &Path, tol: &Tolerances, worst: usize) -> String {
@@ -517,29 +545,7 @@ pub fn render(report: &Report, a: &Path, b: &Path, tol: &Tolerances, worst: usiz
     }
     let columns: usize = report.tables.iter().map(|t| t.columns.len()).sum();
     let cells: usize = report.tables.iter().map(TableDiff::cells).sum();
-    let over: usize = report.tables.iter().flat_map(|t| &t.columns).map(|c| c.over).sum();
-    let failing = report.failing().count();
-    let verdict = if report.identical() {
-        "identical".to_string()
-    } else if report.passed() {
-        let (t, c) = differing[0];
-        format!(
-            "within tolerance (largest ratio {:.3e}: {} {})",
-            c.worst_ratio,
-            t.table.display(),
-            c.column
-        )
-    } else {
-        let structural = report.problems.len()
-            + report
-                .tables
-                .iter()
-                .map(|t| t.problems.len() + usize::from(t.only_a.0 + t.only_b.0 > 0))
-                .sum::<usize>();
-        format!(
-            "DIFFERENT: {over} cell(s) in {failing} column(s) over tolerance, {structural} structural difference(s)"
-        )
-    };
+    let verdict = verdict(report, &differing);
     let _ = writeln!(
         out,
         "{} table(s), {columns} column(s), {cells} cell(s) compared: {verdict}",

@@ -198,11 +198,21 @@ fn read_settings(
         let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the guessed columns"))?;
         return Ok((cfg, raw, Layout::Named));
     }
+    headerless(log, joints, model, &with_gains, default_err)
+}
+
+/// A headerless log: each usual layout read (positions outside the joints'
+/// limits refuse it), the one whose positions are smoothest kept: encoder
+/// positions change little from sample to sample, a torque carries its
+/// noise on every one. None reading: `default_err`, with what was tried.
+fn headerless(
+    log: &Path,
+    joints: &[String],
+    model: &robotid_stages::dynamics::Model,
+    with_gains: &dyn Fn(ReadConfig) -> ReadConfig,
+    default_err: robotid_stages::Error,
+) -> Result<(ReadConfig, RawSamples, Layout)> {
     let layouts = log_width(log)?.map_or_else(Vec::new, |w| headerless_layouts(w, joints.len()));
-    // A headerless log: each usual layout read (positions outside the
-    // joints' limits refuse it), the one whose positions are smoothest
-    // kept: encoder positions change little from sample to sample, a
-    // torque carries its noise on every one.
     let mut tried = Vec::new();
     let mut best: Option<(f64, ReadConfig, RawSamples, String)> = None;
     for (cfg, said) in layouts {
@@ -352,75 +362,11 @@ pub fn design_with(
         Layout::Stated => findings.push(("read".into(), "as stated (--read)".into())),
     }
     let (fs, fs_said) = sample_rate(&raw);
-    // The anti-alias filter the effort went through, when the recording
-    // declares it: undone, and the regressor columns band-limited alike.
-    let filter: Option<FilterSpec> = raw
-        .metadata
-        .get(metadata::ANALOG_FILTER)
-        .map(|j| serde_json::from_str(j))
-        .transpose()
-        .map_err(|e| refuse(log, format!("its `{}`: {e}", metadata::ANALOG_FILTER)))?;
-    // Undone up to 0.8 of the cutoff (a 4th-order Butterworth is still
-    // within 0.7 dB there), below Nyquist.
-    let inverse = filter.map(|f| (f, (0.8 * f.cutoff_hz).min(0.4 * fs)));
-    let inherited = inverse.is_none() && first.is_some_and(|d| d.inverse.is_some());
-    let inverse = inverse.or_else(|| first.and_then(|d| d.inverse));
-    match &inverse {
-        Some((f, band)) if inherited => findings.push((
-            "inverse_filter".into(),
-            format!(
-                "{}, the identification recording's (this one declares none), undone up to {band:.2} Hz",
-                describe(f)
-            ),
-        )),
-        Some((f, band)) => findings.push((
-            "inverse_filter".into(),
-            format!(
-                "{} order {} at {} Hz (the recording's {}), undone up to {band:.2} Hz",
-                toml::Value::try_from(f.family)?,
-                f.order,
-                f.cutoff_hz,
-                metadata::ANALOG_FILTER
-            ),
-        )),
-        None => findings.push((
-            "inverse_filter".into(),
-            "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
-        )),
-    }
+    let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
     let regressor = regressor.unwrap_or_else(|| identify_regressor(inverse.map(|(_, b)| b)));
     findings.push(("sample_rate_hz".into(), fs_said));
 
-    let period = match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
-        Some(p) => {
-            // Declared values win; one the data contradicts is said.
-            if let Ok(e) = infer_period(&raw.time, &raw.q) {
-                let k = (p / e.period_s).round().max(1.0);
-                if (p - k * e.period_s).abs() > 4.0 * k * e.std_s + 1e-9 * p {
-                    let w = format!(
-                        "the recording declares {} = {p} s, but its positions repeat with {} ± {:.1e} s",
-                        metadata::PERIOD_S,
-                        ten_digits(e.period_s),
-                        e.std_s
-                    );
-                    eprintln!("warning: {}: {w}", log.display());
-                    findings.push(("conflict".into(), w));
-                }
-            }
-            Ok((p, format!("{p} s (the recording's {})", metadata::PERIOD_S)))
-        }
-        None => infer_period(&raw.time, &raw.q).map(|e| {
-            (
-                e.period_s,
-                format!(
-                    "{} ± {:.1e} s (the positions repeat with it; {:.1} periods in the record)",
-                    ten_digits(e.period_s),
-                    e.std_s,
-                    e.cycles
-                ),
-            )
-        }),
-    };
+    let period = period_of(log, &raw, &mut findings);
     let (period, period_said) = match period {
         Ok(p) => p,
         Err(why) => {
@@ -438,34 +384,7 @@ pub fn design_with(
         })
     };
 
-    // The steady periods: align with the default tolerance, then looser.
-    let mut last_err = None;
-    let mut found = None;
-    for tol in STEADY_LADDER {
-        let stages = vec![align(tol), StageConfig::Average(AverageConfig::default())];
-        match probe(&plan, stages, log, &raw) {
-            Ok(chain) => {
-                found = Some((tol, chain));
-                break;
-            }
-            Err(e) => last_err = Some(e),
-        }
-    }
-    let Some((tol, chain)) = found else {
-        let conflict = findings
-            .iter()
-            .find(|(k, _)| k == "conflict")
-            .map(|(_, w)| format!(" ({w})"))
-            .unwrap_or_default();
-        return Err(refuse(
-            log,
-            format!(
-                "periodic with {period} s{conflict}, but no stretch of steady periods within {} % of each other: {}",
-                100.0 * STEADY_LADDER[STEADY_LADDER.len() - 1],
-                last_err.map(|e| e.to_string()).unwrap_or_default()
-            ),
-        ));
-    };
+    let (tol, chain) = steady(log, &plan, &raw, period, &align, &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
     let steady_periods = p.periods;
@@ -480,52 +399,7 @@ pub fn design_with(
             100.0 * tol
         ),
     ));
-    // The excitation's lines: the reference's when the log has one (the
-    // commanded lines exactly), else the positions'.
-    let n = p.samples_per_period;
-    let reference_mean: Option<Vec<Vec<f64>>> = p.reference.as_ref().map(|r| {
-        r.iter()
-            .map(|c| {
-                (0..n)
-                    .map(|i| (0..p.periods).map(|k| c[k * n + i]).sum::<f64>() / p.periods as f64)
-                    .collect()
-            })
-            .collect()
-    });
-    let from_reference = reference_mean.is_some();
-    let excitation = reference_mean.as_ref().unwrap_or(&mean.q);
-    let mut union: Vec<u32> = Vec::new();
-    let mut per_joint = Vec::new();
-    let mut sets = Vec::new();
-    let lines: Vec<_> = excitation.iter().map(|c| excited_lines(c)).collect();
-    let peak = |l: &robotid_stages::signal::period::Lines| l.amplitude.iter().copied().fold(0.0, f64::max);
-    let widest = lines.iter().map(peak).fold(0.0, f64::max);
-    let mut held = Vec::new();
-    for (j, l) in lines.into_iter().enumerate() {
-        // A held joint sags under the moving ones' load and its encoder
-        // flickers, in lines of its own: far below the motion's, it is held.
-        let top = peak(&l);
-        let mut h = l.harmonics;
-        if !h.is_empty() && top < HELD_FRACTION * widest {
-            held.push(format!("{} ({top:.2e} rad)", joints[j]));
-            h.clear();
-        }
-        per_joint.push(format!("{} {}", joints[j], list(&h)));
-        union.extend(&h);
-        sets.push(h);
-    }
-    if !held.is_empty() {
-        findings.push((
-            "held".into(),
-            format!(
-                "{}: their strongest line is under {} % of the most moving joint's ({widest:.3} rad): a sag under load or an encoder's flicker, taken as held still",
-                held.join(", "),
-                100.0 * HELD_FRACTION
-            ),
-        ));
-    }
-    union.sort_unstable();
-    union.dedup();
+    let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
     let still: Vec<&str> = sets
         .iter()
         .zip(&joints)
@@ -572,15 +446,7 @@ pub fn design_with(
             ),
         ));
     }
-    findings.push((
-        "harmonics".into(),
-        format!(
-            "{} ({}: lines {LINE_MARGIN}× above the noise floor and above {LINE_RELATIVE:e} of the strongest; per joint: {})",
-            list(&union),
-            if from_reference { "the reference's" } else { "the positions'" },
-            per_joint.join(", ")
-        ),
-    ));
+    findings.push(("harmonics".into(), harmonics_said));
     // Lines beyond the excited ones. In the positions they belong to the
     // motion (the robot does not follow its excitation exactly): the
     // kinematics keep them, the DFT up to the highest. In the torques they
@@ -648,69 +514,23 @@ pub fn design_with(
     let mut wide_band = first.map(|d| d.wide_band);
     let mut differentiate = None;
     if own_regressor {
-        // The kinematics of each band and the periods' torques as
-        // measured; the band, the filter and the Coulomb model are chosen
-        // on them by held-out periods.
-        let mut tried = Vec::new();
-        for (wide, (stage, said, band)) in [(false, &positions_stage)]
-            .into_iter()
-            .chain(torques_stage.as_ref().map(|t| (true, t)))
-        {
-            // The Fourier fit at the noise floor leaves the wider band
-            // nothing to gain beyond the score's spread: not tried.
-            if tried
-                .first()
-                .is_some_and(|t: &(bool, String, ModelChoice)| t.2.score.is_some_and(|r| r < 1.0 + t.2.margin))
-            {
-                break;
-            }
-            let chain = probe(&plan, stages_after(None, stage), log, &raw)?;
-            if tried.is_empty() {
-                if let Some(why) = torque_check(chain.kinematics()?, &model) {
-                    return Err(refuse(log, why));
-                }
-            }
-            let lowest = (4.0 * band).max(fs / 50.0);
-            let choice = choose_model(
+        let (wide, said, choice) = best_band(
+            &Scoring {
                 log,
-                &chain,
-                &model,
-                &regressor,
+                plan: &plan,
+                raw: &raw,
+                model: &model,
+                regressor: &regressor,
                 moving,
-                inverse.as_ref().map(|(f, _)| *f),
+                declared: inverse.as_ref().map(|(f, _)| *f),
                 fs,
-                lowest,
-            )?;
-            tried.push((wide, said.clone(), choice));
-        }
-        // The Fourier fit or the positions' band unless the torques' band
-        // predicts held-out periods better by the score's spread; with
-        // fewer than two periods nothing can be scored, and the wider band
-        // keeps whatever motion the torques show.
-        let pick = match tried.iter().map(|t| t.2.score).collect::<Option<Vec<f64>>>() {
-            Some(scores) if scores.len() == 2 => usize::from(scores[1] < scores[0] * (1.0 - tried[1].2.margin)),
-            _ => tried.len() - 1,
-        };
-        let scores: String = tried
-            .iter()
-            .map(|t| match t.2.score {
-                Some(r) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
-                None => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
-            })
-            .collect::<Vec<_>>()
-            .join(", ");
-        let (wide, said, choice) = tried.swap_remove(pick);
-        wide_band = Some(wide);
-        findings.push((
-            "differentiate".into(),
-            if scores.contains(',') {
-                format!("{said} (held-out residue over the noise floor, each with its best filter and Coulomb model: {scores})")
-            } else if torques_stage.is_some() && choice.score.is_some() {
-                format!("{said} ({scores}, at the noise floor: the torques' band, up to their lines beyond the excited ones, not tried)")
-            } else {
-                said
+                stages_after: &stages_after,
             },
-        ));
+            &positions_stage,
+            torques_stage.as_ref(),
+        )?;
+        wide_band = Some(wide);
+        findings.push(("differentiate".into(), said));
         if inverse.is_none() {
             if let Some(spec) = choice.filter {
                 let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
@@ -772,6 +592,280 @@ pub fn design_with(
         period_s: Some(period),
         harmonics: sets,
         union,
+    })
+}
+
+/// Each joint's excited harmonics, from the reference's lines when the log
+/// has one (the commanded lines exactly), else the positions'; a held
+/// joint (its lines far below the most moving joint's: sag, flicker) has
+/// none, said in `findings`. With their union and what says them.
+fn excited(
+    p: &robotid_stages::stage::Periods,
+    mean_q: &[Vec<f64>],
+    joints: &[String],
+    findings: &mut Vec<(String, String)>,
+) -> (Vec<Vec<u32>>, Vec<u32>, String) {
+    // The excitation's lines: the reference's when the log has one (the
+    // commanded lines exactly), else the positions'.
+    let n = p.samples_per_period;
+    let reference_mean: Option<Vec<Vec<f64>>> = p.reference.as_ref().map(|r| {
+        r.iter()
+            .map(|c| {
+                (0..n)
+                    .map(|i| (0..p.periods).map(|k| c[k * n + i]).sum::<f64>() / p.periods as f64)
+                    .collect()
+            })
+            .collect()
+    });
+    let from_reference = reference_mean.is_some();
+    let excitation = reference_mean.as_deref().unwrap_or(mean_q);
+    let mut union: Vec<u32> = Vec::new();
+    let mut per_joint = Vec::new();
+    let mut sets = Vec::new();
+    let lines: Vec<_> = excitation.iter().map(|c| excited_lines(c)).collect();
+    let peak = |l: &robotid_stages::signal::period::Lines| l.amplitude.iter().copied().fold(0.0, f64::max);
+    let widest = lines.iter().map(peak).fold(0.0, f64::max);
+    let mut held = Vec::new();
+    for (j, l) in lines.into_iter().enumerate() {
+        // A held joint sags under the moving ones' load and its encoder
+        // flickers, in lines of its own: far below the motion's, it is held.
+        let top = peak(&l);
+        let mut h = l.harmonics;
+        if !h.is_empty() && top < HELD_FRACTION * widest {
+            held.push(format!("{} ({top:.2e} rad)", joints[j]));
+            h.clear();
+        }
+        per_joint.push(format!("{} {}", joints[j], list(&h)));
+        union.extend(&h);
+        sets.push(h);
+    }
+    if !held.is_empty() {
+        findings.push((
+            "held".into(),
+            format!(
+                "{}: their strongest line is under {} % of the most moving joint's ({widest:.3} rad): a sag under load or an encoder's flicker, taken as held still",
+                held.join(", "),
+                100.0 * HELD_FRACTION
+            ),
+        ));
+    }
+    union.sort_unstable();
+    union.dedup();
+    let said = format!(
+        "{} ({}: lines {LINE_MARGIN}× above the noise floor and above {LINE_RELATIVE:e} of the strongest; per joint: {})",
+        list(&union),
+        if from_reference { "the reference's" } else { "the positions'" },
+        per_joint.join(", ")
+    );
+    (sets, union, said)
+}
+
+/// A band's differentiate stage, what says it, and its width (Hz).
+type Band = (StageConfig, String, f64);
+
+/// The stages up to differentiation, with the filter undone (and its band).
+type StagesAfter<'a> = dyn Fn(Option<&(FilterSpec, f64)>, &StageConfig) -> Vec<StageConfig> + 'a;
+
+/// What the bands' candidates are scored with.
+struct Scoring<'a> {
+    log: &'a Path,
+    plan: &'a Plan,
+    raw: &'a RawSamples,
+    model: &'a robotid_stages::dynamics::Model,
+    regressor: &'a RegressorConfig,
+    moving: Option<usize>,
+    declared: Option<FilterSpec>,
+    fs: f64,
+    stages_after: &'a StagesAfter<'a>,
+}
+
+/// The positions' band or the torques', each with its best filter and
+/// Coulomb model (`choose_model`), chosen by held-out periods; whether the
+/// torques' won, what says so, and the model chosen.
+fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) -> Result<(bool, String, ModelChoice)> {
+    // The kinematics of each band and the periods' torques as
+    // measured; the band, the filter and the Coulomb model are chosen
+    // on them by held-out periods.
+    let mut tried = Vec::new();
+    for (wide, (stage, said, band)) in [(false, positions)].into_iter().chain(torques.map(|t| (true, t))) {
+        // The Fourier fit at the noise floor leaves the wider band
+        // nothing to gain beyond the score's spread: not tried.
+        if tried
+            .first()
+            .is_some_and(|t: &(bool, String, ModelChoice)| t.2.score.is_some_and(|r| r < 1.0 + t.2.margin))
+        {
+            break;
+        }
+        let chain = probe(sc.plan, (sc.stages_after)(None, stage), sc.log, sc.raw)?;
+        if tried.is_empty() {
+            if let Some(why) = torque_check(chain.kinematics()?, sc.model) {
+                return Err(refuse(sc.log, why));
+            }
+        }
+        let lowest = (4.0 * band).max(sc.fs / 50.0);
+        let choice = choose_model(
+            sc.log,
+            &chain,
+            sc.model,
+            sc.regressor,
+            sc.moving,
+            sc.declared,
+            sc.fs,
+            lowest,
+        )?;
+        tried.push((wide, said.clone(), choice));
+    }
+    // The Fourier fit or the positions' band unless the torques' band
+    // predicts held-out periods better by the score's spread; with
+    // fewer than two periods nothing can be scored, and the wider band
+    // keeps whatever motion the torques show.
+    let pick = match tried.iter().map(|t| t.2.score).collect::<Option<Vec<f64>>>() {
+        Some(scores) if scores.len() == 2 => usize::from(scores[1] < scores[0] * (1.0 - tried[1].2.margin)),
+        _ => tried.len() - 1,
+    };
+    let scores: String = tried
+        .iter()
+        .map(|t| match t.2.score {
+            Some(r) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
+            None => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    let (wide, said, choice) = tried.swap_remove(pick);
+    let said = if scores.contains(',') {
+        format!("{said} (held-out residue over the noise floor, each with its best filter and Coulomb model: {scores})")
+    } else if torques.is_some() && choice.score.is_some() {
+        format!("{said} ({scores}, at the noise floor: the torques' band, up to their lines beyond the excited ones, not tried)")
+    } else {
+        said
+    };
+    Ok((wide, said, choice))
+}
+
+/// The anti-alias filter the effort went through and the band it is undone
+/// to, when the recording declares it (or the first recording did):
+/// undone, and the regressor columns band-limited alike. Said in `findings`.
+fn declared_filter(
+    log: &Path,
+    raw: &RawSamples,
+    fs: f64,
+    first: Option<&Design>,
+    findings: &mut Vec<(String, String)>,
+) -> Result<Option<(FilterSpec, f64)>> {
+    let filter: Option<FilterSpec> = raw
+        .metadata
+        .get(metadata::ANALOG_FILTER)
+        .map(|j| serde_json::from_str(j))
+        .transpose()
+        .map_err(|e| refuse(log, format!("its `{}`: {e}", metadata::ANALOG_FILTER)))?;
+    // Undone up to 0.8 of the cutoff (a 4th-order Butterworth is still
+    // within 0.7 dB there), below Nyquist.
+    let inverse = filter.map(|f| (f, (0.8 * f.cutoff_hz).min(0.4 * fs)));
+    let inherited = inverse.is_none() && first.is_some_and(|d| d.inverse.is_some());
+    let inverse = inverse.or_else(|| first.and_then(|d| d.inverse));
+    match &inverse {
+        Some((f, band)) if inherited => findings.push((
+            "inverse_filter".into(),
+            format!(
+                "{}, the identification recording's (this one declares none), undone up to {band:.2} Hz",
+                describe(f)
+            ),
+        )),
+        Some((f, band)) => findings.push((
+            "inverse_filter".into(),
+            format!(
+                "{} order {} at {} Hz (the recording's {}), undone up to {band:.2} Hz",
+                toml::Value::try_from(f.family)?,
+                f.order,
+                f.cutoff_hz,
+                metadata::ANALOG_FILTER
+            ),
+        )),
+        None => findings.push((
+            "inverse_filter".into(),
+            "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
+        )),
+    }
+    Ok(inverse)
+}
+
+/// The period: the recording's (a contradiction by its data said in
+/// `findings`), else the one its positions repeat with, and how it was
+/// found; or why there is none.
+fn period_of(
+    log: &Path,
+    raw: &RawSamples,
+    findings: &mut Vec<(String, String)>,
+) -> std::result::Result<(f64, String), robotid_stages::signal::period::NoPeriod> {
+    match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
+        Some(p) => {
+            // Declared values win; one the data contradicts is said.
+            if let Ok(e) = infer_period(&raw.time, &raw.q) {
+                let k = (p / e.period_s).round().max(1.0);
+                if (p - k * e.period_s).abs() > 4.0 * k * e.std_s + 1e-9 * p {
+                    let w = format!(
+                        "the recording declares {} = {p} s, but its positions repeat with {} ± {:.1e} s",
+                        metadata::PERIOD_S,
+                        ten_digits(e.period_s),
+                        e.std_s
+                    );
+                    eprintln!("warning: {}: {w}", log.display());
+                    findings.push(("conflict".into(), w));
+                }
+            }
+            Ok((p, format!("{p} s (the recording's {})", metadata::PERIOD_S)))
+        }
+        None => infer_period(&raw.time, &raw.q).map(|e| {
+            (
+                e.period_s,
+                format!(
+                    "{} ± {:.1e} s (the positions repeat with it; {:.1} periods in the record)",
+                    ten_digits(e.period_s),
+                    e.std_s,
+                    e.cycles
+                ),
+            )
+        }),
+    }
+}
+
+/// The steady periods: aligned with the default tolerance, then looser
+/// (`STEADY_LADDER`); the tolerance that found them and their chain.
+fn steady(
+    log: &Path,
+    plan: &Plan,
+    raw: &RawSamples,
+    period: f64,
+    align: &dyn Fn(f64) -> StageConfig,
+    findings: &[(String, String)],
+) -> Result<(f64, Chain)> {
+    // The steady periods: align with the default tolerance, then looser.
+    let mut last_err = None;
+    let mut found = None;
+    for tol in STEADY_LADDER {
+        let stages = vec![align(tol), StageConfig::Average(AverageConfig::default())];
+        match probe(plan, stages, log, raw) {
+            Ok(chain) => {
+                found = Some((tol, chain));
+                break;
+            }
+            Err(e) => last_err = Some(e),
+        }
+    }
+    found.ok_or_else(|| {
+        let conflict = findings
+            .iter()
+            .find(|(k, _)| k == "conflict")
+            .map(|(_, w)| format!(" ({w})"))
+            .unwrap_or_default();
+        refuse(
+            log,
+            format!(
+                "periodic with {period} s{conflict}, but no stretch of steady periods within {} % of each other: {}",
+                100.0 * STEADY_LADDER[STEADY_LADDER.len() - 1],
+                last_err.map(|e| e.to_string()).unwrap_or_default()
+            ),
+        )
     })
 }
 

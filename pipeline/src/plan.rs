@@ -253,32 +253,17 @@ fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
 }
 
-/// Step 1, structure: the file parses, every stage and key is known, values
-/// are in range, the chain of stages fits together.
-pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
-    let at = |place: Place, message: String| Placed {
-        file: file.to_path_buf(),
-        place,
-        message,
-    };
-    let raw: PipelineFile = toml::from_str(text)
-        .map_err(|e| Problems(vec![at(Place::File, robotid_stages::error_message_of_toml(text, &e))]))?;
-    let mut problems = Vec::new();
-    if raw.version != FORMAT_VERSION {
-        problems.push(at(
-            Place::Key("version".into()),
-            format!(
-                "{} is not supported (this build reads version {FORMAT_VERSION})",
-                raw.version
-            ),
-        ));
-    }
-    for p in raw.read.problems() {
-        problems.push(at(Place::Read(p.key), p.message));
-    }
+/// Each `[[stage]]` table as its config, with the line it starts on; what
+/// is wrong with any into `problems`.
+fn parse_stages(
+    text: &str,
+    raw: &[toml::Spanned<toml::Table>],
+    at: &dyn Fn(Place, String) -> Placed,
+    problems: &mut Vec<Placed>,
+) -> (Vec<StageConfig>, Vec<usize>) {
     let mut stages = Vec::new();
     let mut lines = Vec::new();
-    for (i, spanned) in raw.stage.iter().enumerate() {
+    for (i, spanned) in raw.iter().enumerate() {
         let line = line_of(text, spanned.span().start);
         let table = spanned.get_ref();
         let kind = table.get("kind").and_then(|v| v.as_str()).unwrap_or("?").to_string();
@@ -309,6 +294,33 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
             )),
         }
     }
+    (stages, lines)
+}
+
+/// Step 1, structure: the file parses, every stage and key is known, values
+/// are in range, the chain of stages fits together.
+pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
+    let at = |place: Place, message: String| Placed {
+        file: file.to_path_buf(),
+        place,
+        message,
+    };
+    let raw: PipelineFile = toml::from_str(text)
+        .map_err(|e| Problems(vec![at(Place::File, robotid_stages::error_message_of_toml(text, &e))]))?;
+    let mut problems = Vec::new();
+    if raw.version != FORMAT_VERSION {
+        problems.push(at(
+            Place::Key("version".into()),
+            format!(
+                "{} is not supported (this build reads version {FORMAT_VERSION})",
+                raw.version
+            ),
+        ));
+    }
+    for p in raw.read.problems() {
+        problems.push(at(Place::Read(p.key), p.message));
+    }
+    let (stages, lines) = parse_stages(text, &raw.stage, &at, &mut problems);
     let mut tables = Vec::new();
     for t in &raw.output.tables {
         match t.parse::<TableKind>() {

@@ -455,6 +455,40 @@ impl Sidecar<'_> {
         Ok(m)
     }
 
+    /// A joint's friction and rotor inertia as the formats take them, and
+    /// what each cannot hold.
+    fn joint_json(&self, i: usize) -> serde_json::Value {
+        use serde_json::json;
+        let j = &self.model.joints[i];
+        let f = &self.model.friction[i];
+        let ia = self.model.drives[i].reflected_inertia();
+        let mut lost_both = Vec::new();
+        if f.viscous_pos != f.viscous_neg || f.coulomb_pos != f.coulomb_neg {
+            lost_both.push("asymmetric friction (the formats take the means of the two signs)");
+        }
+        if f.transition > 0.0 {
+            lost_both.push("the Coulomb transition tanh(q̇/v): URDF and MuJoCo switch at q̇ = 0");
+        }
+        if self.terms.offset {
+            lost_both.push("the torque offset");
+        }
+        let mut not_in_urdf = lost_both.clone();
+        if self.terms.rotor {
+            not_in_urdf.push("the rotor inertia (MJCF: armature)");
+        }
+        json!({
+            "name": j.name,
+            "viscous_pos": f.viscous_pos, "viscous_neg": f.viscous_neg,
+            "coulomb_pos": f.coulomb_pos, "coulomb_neg": f.coulomb_neg,
+            "coulomb_transition_rad_s": f.transition, "offset": f.offset,
+            "reflected_rotor_inertia": ia,
+            "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+            "mjcf": {"armature": ia, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+            "not_in_urdf": not_in_urdf,
+            "not_in_mjcf": lost_both,
+        })
+    }
+
     fn json(&self) -> Result<String> {
         use serde_json::json;
         let p = self.params;
@@ -477,41 +511,7 @@ impl Sidecar<'_> {
                 json!({"name": n, "unit": parameter_unit(n), "value": v, "in_urdf": urdf, "in_mjcf": mjcf})
             })
             .collect();
-        let joints: Vec<_> = self
-            .model
-            .joints
-            .iter()
-            .enumerate()
-            .map(|(i, j)| {
-                let f = &self.model.friction[i];
-                let ia = self.model.drives[i].reflected_inertia();
-                let mut lost_both = Vec::new();
-                if f.viscous_pos != f.viscous_neg || f.coulomb_pos != f.coulomb_neg {
-                    lost_both.push("asymmetric friction (the formats take the means of the two signs)");
-                }
-                if f.transition > 0.0 {
-                    lost_both.push("the Coulomb transition tanh(q̇/v): URDF and MuJoCo switch at q̇ = 0");
-                }
-                if self.terms.offset {
-                    lost_both.push("the torque offset");
-                }
-                let mut not_in_urdf = lost_both.clone();
-                if self.terms.rotor {
-                    not_in_urdf.push("the rotor inertia (MJCF: armature)");
-                }
-                json!({
-                    "name": j.name,
-                    "viscous_pos": f.viscous_pos, "viscous_neg": f.viscous_neg,
-                    "coulomb_pos": f.coulomb_pos, "coulomb_neg": f.coulomb_neg,
-                    "coulomb_transition_rad_s": f.transition, "offset": f.offset,
-                    "reflected_rotor_inertia": ia,
-                    "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
-                    "mjcf": {"armature": ia, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
-                    "not_in_urdf": not_in_urdf,
-                    "not_in_mjcf": lost_both,
-                })
-            })
-            .collect();
+        let joints: Vec<_> = (0..self.model.joints.len()).map(|i| self.joint_json(i)).collect();
         let cov: Vec<Vec<f64>> = (0..p.names.len())
             .map(|r| (0..p.names.len()).map(|c| p.covariance[(r, c)]).collect())
             .collect();
@@ -556,7 +556,7 @@ impl Sidecar<'_> {
         let (mut urdf, mut mjcf, mut base_row) = (Vec::new(), Vec::new(), Vec::new());
         for i in 0..nb {
             name.push(p.names[i].clone());
-            kind.push("base");
+            kind.push("base".to_string());
             unit.push(p.units[i].clone());
             value.push(p.values[i]);
             std.push(Some(p.std[i]));
@@ -570,7 +570,7 @@ impl Sidecar<'_> {
         for (n, v) in self.names.iter().zip(&self.fit.standard) {
             let b = base_of(n);
             name.push(n.clone());
-            kind.push("standard");
+            kind.push("standard".to_string());
             unit.push(parameter_unit(n).to_string());
             value.push(*v);
             std.push(b.map(|i| p.std[i]));
@@ -581,49 +581,7 @@ impl Sidecar<'_> {
             mjcf.push(m);
             base_row.push(None);
         }
-        let unit_field = |n: &str, u: &str| {
-            Field::new(n, DataType::Float64, true).with_metadata(std::collections::HashMap::from([(
-                metadata::UNIT.to_string(),
-                u.to_string(),
-            )]))
-        };
-        let mut fields = vec![
-            Field::new("name", DataType::Utf8, false),
-            Field::new("kind", DataType::Utf8, false),
-            Field::new("unit", DataType::Utf8, false),
-            Field::new("value", DataType::Float64, false).with_metadata(std::collections::HashMap::from([(
-                metadata::UNIT.to_string(),
-                "see `unit`".to_string(),
-            )])),
-            unit_field("std", "see `unit`"),
-            unit_field("ci_low", "see `unit`"),
-            unit_field("ci_high", "see `unit`"),
-            Field::new("in_urdf", DataType::Boolean, false),
-            Field::new("in_mjcf", DataType::Boolean, false),
-        ];
-        let mut columns: Vec<ArrayRef> = vec![
-            Arc::new(StringArray::from(name)),
-            Arc::new(StringArray::from(kind)),
-            Arc::new(StringArray::from(unit)),
-            Arc::new(Float64Array::from(value)),
-            Arc::new(Float64Array::from(std)),
-            Arc::new(Float64Array::from(lo)),
-            Arc::new(Float64Array::from(hi)),
-            Arc::new(BooleanArray::from(urdf)),
-            Arc::new(BooleanArray::from(mjcf)),
-        ];
-        for (c, cn) in p.names.iter().enumerate() {
-            fields.push(unit_field(
-                &format!("cov_{cn}"),
-                &format!("units of `unit` × {}", p.units[c]),
-            ));
-            columns.push(Arc::new(Float64Array::from(
-                base_row
-                    .iter()
-                    .map(|r| r.map(|r| p.covariance[(r, c)]))
-                    .collect::<Vec<_>>(),
-            )));
-        }
+        let (fields, columns) = sidecar_columns(p, [name, kind, unit], [value], [std, lo, hi], [urdf, mjcf], &base_row);
         let mut md: std::collections::HashMap<String, String> = self
             .provenance()?
             .into_iter()
@@ -633,4 +591,61 @@ impl Sidecar<'_> {
         let schema = Schema::new(fields).with_metadata(md);
         Ok(RecordBatch::try_new(Arc::new(schema), columns)?)
     }
+}
+
+/// The sidecar table's fields (units in their metadata) and columns: the
+/// strings (name, kind, unit), the value, its deviation and interval, where
+/// the formats hold it, and the base parameters' covariance by `base_row`.
+fn sidecar_columns(
+    p: &robotid_stages::estimation::Parameters,
+    [name, kind, unit]: [Vec<String>; 3],
+    [value]: [Vec<f64>; 1],
+    [std, lo, hi]: [Vec<Option<f64>>; 3],
+    [urdf, mjcf]: [Vec<bool>; 2],
+    base_row: &[Option<usize>],
+) -> (Vec<Field>, Vec<ArrayRef>) {
+    let unit_field = |n: &str, u: &str| {
+        Field::new(n, DataType::Float64, true).with_metadata(std::collections::HashMap::from([(
+            metadata::UNIT.to_string(),
+            u.to_string(),
+        )]))
+    };
+    let mut fields = vec![
+        Field::new("name", DataType::Utf8, false),
+        Field::new("kind", DataType::Utf8, false),
+        Field::new("unit", DataType::Utf8, false),
+        Field::new("value", DataType::Float64, false).with_metadata(std::collections::HashMap::from([(
+            metadata::UNIT.to_string(),
+            "see `unit`".to_string(),
+        )])),
+        unit_field("std", "see `unit`"),
+        unit_field("ci_low", "see `unit`"),
+        unit_field("ci_high", "see `unit`"),
+        Field::new("in_urdf", DataType::Boolean, false),
+        Field::new("in_mjcf", DataType::Boolean, false),
+    ];
+    let mut columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(name)),
+        Arc::new(StringArray::from(kind)),
+        Arc::new(StringArray::from(unit)),
+        Arc::new(Float64Array::from(value)),
+        Arc::new(Float64Array::from(std)),
+        Arc::new(Float64Array::from(lo)),
+        Arc::new(Float64Array::from(hi)),
+        Arc::new(BooleanArray::from(urdf)),
+        Arc::new(BooleanArray::from(mjcf)),
+    ];
+    for (c, cn) in p.names.iter().enumerate() {
+        fields.push(unit_field(
+            &format!("cov_{cn}"),
+            &format!("units of `unit` × {}", p.units[c]),
+        ));
+        columns.push(Arc::new(Float64Array::from(
+            base_row
+                .iter()
+                .map(|r| r.map(|r| p.covariance[(r, c)]))
+                .collect::<Vec<_>>(),
+        )));
+    }
+    (fields, columns)
 }
