@@ -103,6 +103,27 @@ pub fn is_inertial(name: &str) -> bool {
 /// size makes, its column counts as absent.
 pub const PHYSICAL_FLOOR: f64 = 1e-6;
 
+/// The singular values on either side of the rank `r`, of the columns of
+/// `w` scaled to unit norm, leaving out the unidentifiable ones (round-off
+/// only: scaling them to unit norm would make noise look independent): the
+/// cross-check of the rank.
+fn singular_gap(w: &DMatrix<f64>, norms: &[f64], unidentifiable: &[usize], r: usize) -> (f64, f64) {
+    let p = w.ncols();
+    let scaled = DMatrix::from_fn(w.nrows(), p, |i, j| {
+        if unidentifiable.contains(&j) {
+            0.0
+        } else {
+            w[(i, j)] / norms[j]
+        }
+    });
+    let mut sv: Vec<f64> = scaled.singular_values().iter().copied().collect();
+    sv.sort_by(|a, b| b.total_cmp(a));
+    (
+        sv.get(r.wrapping_sub(1)).copied().unwrap_or(0.0),
+        sv.get(r).copied().unwrap_or(0.0),
+    )
+}
+
 /// Base parameters of `model` with the regressor `terms`, from `samples`
 /// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
 /// accelerations in ±5 rad/s²).
@@ -171,23 +192,7 @@ pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, see
             map[(b, d)] = k[b];
         }
     }
-    // Cross-check the rank with the singular values of the scaled matrix,
-    // leaving out the unidentifiable columns (round-off only: scaling them
-    // to unit norm would make noise look independent).
-    let scaled = DMatrix::from_fn(w.nrows(), p, |i, j| {
-        if unidentifiable.contains(&j) {
-            0.0
-        } else {
-            w[(i, j)] / norms[j]
-        }
-    });
-    let mut sv: Vec<f64> = scaled.singular_values().iter().copied().collect();
-    sv.sort_by(|a, b| b.total_cmp(a));
-    let r = base.len();
-    let gap = (
-        sv.get(r.wrapping_sub(1)).copied().unwrap_or(0.0),
-        sv.get(r).copied().unwrap_or(0.0),
-    );
+    let gap = singular_gap(&w, &norms, &unidentifiable, base.len());
     BaseParameters {
         names,
         base,

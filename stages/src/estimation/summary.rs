@@ -157,24 +157,7 @@ impl Summary {
                     for (j, c) in a.column_iter().enumerate() {
                         column_max[j] = c.amax().max(column_max[j]);
                     }
-                    // Aᵀ·W·D of the periods' deviations from their mean,
-                    // over the rows of each recording in this block.
-                    for (r, (tp, out)) in sys.periods.iter().zip(&mut period_moments).enumerate() {
-                        let (Some(tp), Some(out)) = (tp, out) else { continue };
-                        let (lo, hi) = (
-                            start.max(sys.offsets[r]),
-                            (start + a.nrows()).min(sys.offsets[r] + tp.nrows()),
-                        );
-                        if lo >= hi {
-                            continue;
-                        }
-                        let (np, first) = (tp.ncols(), lo - sys.offsets[r]);
-                        let means: Vec<f64> = (first..first + hi - lo).map(|l| tp.row(l).sum() / np as f64).collect();
-                        let wd = DMatrix::from_fn(hi - lo, np, |i, k| {
-                            weights.map_or(1.0, |w| w[lo + i]) * (tp[(first + i, k)] - means[i])
-                        });
-                        out.gemm_tr(1.0, &a.rows(lo - start, hi - lo), &wd, 1.0);
-                    }
+                    fold_period_moments(&mut period_moments, sys, start, &a, weights);
                     if let (Some(cross), Some((ak, _))) = (&mut cross, &sys.known) {
                         let mut wak = ak.rows(start, a.nrows()).into_owned();
                         if let Some(w) = weights {
@@ -437,11 +420,81 @@ impl Summary {
     }
 }
 
+/// Aᵀ·W·D of the periods' deviations from their mean into each
+/// recording's `out`, over its rows in the block `a` of rows from `start`.
+fn fold_period_moments(
+    period_moments: &mut [Option<DMatrix<f64>>],
+    sys: &System,
+    start: usize,
+    a: &DMatrix<f64>,
+    weights: Option<&DVector<f64>>,
+) {
+    for (r, (tp, out)) in sys.periods.iter().zip(period_moments).enumerate() {
+        let (Some(tp), Some(out)) = (tp, out) else { continue };
+        let (lo, hi) = (
+            start.max(sys.offsets[r]),
+            (start + a.nrows()).min(sys.offsets[r] + tp.nrows()),
+        );
+        if lo >= hi {
+            continue;
+        }
+        let (np, first) = (tp.ncols(), lo - sys.offsets[r]);
+        let means: Vec<f64> = (first..first + hi - lo).map(|l| tp.row(l).sum() / np as f64).collect();
+        let wd = DMatrix::from_fn(hi - lo, np, |i, k| {
+            weights.map_or(1.0, |w| w[lo + i]) * (tp[(first + i, k)] - means[i])
+        });
+        out.gemm_tr(1.0, &a.rows(lo - start, hi - lo), &wd, 1.0);
+    }
+}
+
 /// Lines on either side of each whose periods' spread is pooled into its
 /// noise variance: 2·(P − 1) degrees of freedom per line become about
 /// 2·(P − 1)·(2·SMOOTH_LINES + 1), where the spread of a few periods alone
 /// leaves each standard deviation uncertain by ±30 % (six periods).
 pub const SMOOTH_LINES: usize = 8;
+
+/// Per line, the variance density of the mean of the periods from the
+/// periods' deviation power at it (`scale`: Σ_k |d̂_k|² estimates
+/// (P − 1)·N·σ², and the mean has σ²/P), pooled over ±[`SMOOTH_LINES`]
+/// lines; a line the band limit zeroed in every period stays 0.
+fn pooled_lines(power: &[f64], scale: f64) -> Vec<f64> {
+    // A window symmetric about each line, reflected at DC and at the
+    // last line (a real series' spectrum is even), so that a sloping
+    // spectrum averages to its value at the line.
+    let last = power.len() - 1;
+    let reflect = |m: isize| -> usize {
+        // Reflected at line 1, DC left out.
+        let m = if m < 1 {
+            (2 - m).unsigned_abs()
+        } else {
+            m.unsigned_abs()
+        };
+        if m > last {
+            (2 * last).saturating_sub(m)
+        } else {
+            m
+        }
+    };
+    (0..power.len())
+        .map(|l| {
+            if power[l] == 0.0 {
+                // A line the band limit zeroed in every period.
+                return 0.0;
+            }
+            if l == 0 {
+                // DC is no neighbour of the lines above it: offsets and
+                // drifts that differ by period live there alone.
+                return scale * power[0];
+            }
+            let w = SMOOTH_LINES as isize;
+            let (sum, count) = (-w..=w)
+                .map(|d| power[reflect(l as isize + d)])
+                .filter(|x| *x > 0.0)
+                .fold((0.0, 0usize), |(s, c), x| (s + x, c + 1));
+            scale * sum / count as f64
+        })
+        .collect()
+}
 
 /// Aᵀ·W·Ĉov(b̄)·W·A for recording `r`, whose rows are one averaged period
 /// of `n` joints (sample-major) and `tp` its periods' torques: per joint,
@@ -489,45 +542,7 @@ fn spectrum_moments(
                 power[l] += v.norm_sqr();
             }
         }
-        // Per line, the variance density of the mean of the periods:
-        // Σ_k |d̂_k|² estimates (P − 1)·N·σ², and the mean has σ²/P.
-        let scale = 1.0 / ((periods - 1) * samples * periods) as f64;
-        // A window symmetric about each line, reflected at DC and at the
-        // last line (a real series' spectrum is even), so that a sloping
-        // spectrum averages to its value at the line.
-        let last = lines - 1;
-        let reflect = |m: isize| -> usize {
-            // Reflected at line 1, DC left out.
-            let m = if m < 1 {
-                (2 - m).unsigned_abs()
-            } else {
-                m.unsigned_abs()
-            };
-            if m > last {
-                (2 * last).saturating_sub(m)
-            } else {
-                m
-            }
-        };
-        let pooled: Vec<f64> = (0..lines)
-            .map(|l| {
-                if power[l] == 0.0 {
-                    // A line the band limit zeroed in every period.
-                    return 0.0;
-                }
-                if l == 0 {
-                    // DC is no neighbour of the lines above it: offsets and
-                    // drifts that differ by period live there alone.
-                    return scale * power[0];
-                }
-                let w = SMOOTH_LINES as isize;
-                let (sum, count) = (-w..=w)
-                    .map(|d| power[reflect(l as isize + d)])
-                    .filter(|x| *x > 0.0)
-                    .fold((0.0, 0usize), |(s, c), x| (s + x, c + 1));
-                scale * sum / count as f64
-            })
-            .collect();
+        let pooled = pooled_lines(&power, 1.0 / ((periods - 1) * samples * periods) as f64);
         // Line-major (each line's columns side by side): the sums below
         // run along memory.
         for c in 0..p {

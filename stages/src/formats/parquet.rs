@@ -154,14 +154,8 @@ pub fn write_parquet(path: &Path, batch: &RecordBatch) -> Result<()> {
     write_parquet_groups(path, batch.schema(), groups)
 }
 
-/// The same for a table given a row group at a time, each batch made when
-/// the writer asks for it (a table never whole in memory). The metadata
-/// goes in at the end, with the content's CRC-32 then known.
-pub fn write_parquet_groups(
-    path: &Path,
-    schema: arrow::datatypes::SchemaRef,
-    groups: impl IntoIterator<Item = Result<RecordBatch>>,
-) -> Result<()> {
+/// zstd level 1; dictionaries only for text columns.
+fn writer_properties(schema: &arrow::datatypes::Schema) -> WriterProperties {
     // Dictionaries only for text (recording and joint names): measured
     // numbers are nearly all distinct, and the writer's dictionary hash
     // tables for them took more memory than the table (53 MB for a 130 s,
@@ -178,7 +172,18 @@ pub fn write_parquet_groups(
                 props.set_column_dictionary_enabled(parquet::schema::types::ColumnPath::from(f.name().as_str()), true);
         }
     }
-    let props = props.build();
+    props.build()
+}
+
+/// The same for a table given a row group at a time, each batch made when
+/// the writer asks for it (a table never whole in memory). The metadata
+/// goes in at the end, with the content's CRC-32 then known.
+pub fn write_parquet_groups(
+    path: &Path,
+    schema: arrow::datatypes::SchemaRef,
+    groups: impl IntoIterator<Item = Result<RecordBatch>>,
+) -> Result<()> {
+    let props = writer_properties(&schema);
     let fmt = |e: parquet::errors::ParquetError| Error::Decode {
         path: path.to_path_buf(),
         source: Box::new(e),

@@ -615,12 +615,10 @@ impl Reducer {
 /// The physically consistent estimate nearest `est` (robot file as the
 /// a-priori model), and a note saying what it cost.
 /// Its covariance by a parametric bootstrap.
-fn physical_fit(
-    base: &BaseRegressor,
-    est: &Estimate,
-    halves: Option<&Halves>,
-    prior_weight: Option<f64>,
-) -> Result<(PhysicalFit, nalgebra::DMatrix<f64>, String)> {
+/// The base-to-standard map a physical fit needs, or why it cannot be
+/// made: the chain model, every base parameter estimated, a covariance
+/// that is not singular.
+fn physical_fit_applies<'a>(base: &'a BaseRegressor, est: &Estimate) -> Result<&'a nalgebra::DMatrix<f64>> {
     let map = match (base.kind, base.map()) {
         (ModelKind::Chain, Some(map)) => map,
         _ => {
@@ -658,6 +656,16 @@ fn physical_fit(
             ),
         ));
     }
+    Ok(map)
+}
+
+fn physical_fit(
+    base: &BaseRegressor,
+    est: &Estimate,
+    halves: Option<&Halves>,
+    prior_weight: Option<f64>,
+) -> Result<(PhysicalFit, nalgebra::DMatrix<f64>, String)> {
+    let map = physical_fit_applies(base, est)?;
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
     let bounds = link_bounds(&base.model, &prior);

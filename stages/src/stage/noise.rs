@@ -15,12 +15,13 @@
 //!   Gaussian with their variance, with its asymptotic p-value.
 
 use robotid_schemas::{metadata, NoiseTable, PeriodMean};
+use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use super::ChannelNoise;
-use super::{Chain, Component, Context, LintContext, Periods, Problem, Product, Stage};
+use super::{Chain, Component, Context, LintContext, Periods, Problem, Product, Stage, Stretch};
 use crate::Result;
 
 use crate::signal::Spectra;
@@ -173,26 +174,34 @@ pub fn noise(
         }
         summary.push(stats);
     }
-    // Fewer than two periods but a longer steady stretch: the positions'
-    // noise is the residual of the least-squares Fourier fit at the excited
-    // harmonics over the stretch (what `fourier_fit` does with it); the
-    // torque's, whose many nonlinear harmonics fill the non-excited lines,
-    // is from the stretch and itself one period on (`repeat_variance`).
+    // Fewer than two periods but a longer steady stretch: from the stretch.
     let stretch = p.stretch.as_ref().filter(|_| np < 2 && !harmonics.is_empty());
     if let Some(s) = stretch {
-        let m = s.len();
-        let fs = p.sample_rate_hz();
-        let time: Vec<f64> = (0..m).map(|k| k as f64 / fs).collect();
-        let dof = m.saturating_sub(1 + 2 * harmonics.len()).max(1);
-        for j in 0..p.joints.len() {
-            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, &s.q[j], p.period_s, harmonics);
-            let v = s.q[j].iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64;
-            var_q[j] = vec![v; n];
-            var_t[j] = vec![repeat_variance(&s.torque[j], n); n];
-        }
+        (var_q, var_t) = stretch_variances(p, s, harmonics);
     }
-    let mut md = mean.metadata.clone();
-    for s in &summary {
+    let md = noise_metadata(&mean.metadata, &summary, np, stretch.map(|s| s.len() as f64 / n as f64));
+    (
+        NoiseTable {
+            joints: p.joints.clone(),
+            var_q,
+            var_torque: var_t,
+            metadata: md,
+        },
+        summary,
+    )
+}
+
+/// The noise table's metadata: the period mean's, each channel's
+/// statistics, and where the per-sample variances come from (`stretch`:
+/// the periods of a steady stretch they were taken from).
+fn noise_metadata(
+    mean_md: &BTreeMap<String, String>,
+    summary: &[ChannelNoise],
+    np: usize,
+    stretch: Option<f64>,
+) -> BTreeMap<String, String> {
+    let mut md = mean_md.clone();
+    for s in summary {
         let key = |stat: &str| format!("{}.{}.{}.{stat}", metadata::NOISE_PREFIX, s.joint, s.channel);
         md.insert(key("var_time"), s.var_time.to_string());
         md.insert(key("var_freq"), s.var_freq.to_string());
@@ -204,24 +213,36 @@ pub fn noise(
         metadata::NOISE_PER_SAMPLE.into(),
         if np > 1 {
             "time_domain".to_string()
-        } else if let Some(s) = stretch {
+        } else if let Some(periods) = stretch {
             format!(
-                "repeat for torques (half the mean square difference of the steady stretch of {:.2} periods and itself one period on, its windows within 4× the median's); fit_residual for positions (least-squares Fourier fit over the stretch)",
-                s.len() as f64 / n as f64,
+                "repeat for torques (half the mean square difference of the steady stretch of {periods:.2} periods and itself one period on, its windows within 4× the median's); fit_residual for positions (least-squares Fourier fit over the stretch)",
             )
         } else {
             "frequency_domain (one period)".to_string()
         },
     );
-    (
-        NoiseTable {
-            joints: p.joints.clone(),
-            var_q,
-            var_torque: var_t,
-            metadata: md,
-        },
-        summary,
-    )
+    md
+}
+
+/// Per joint, the positions' and torques' per-sample noise variance from a
+/// steady stretch of fewer than two periods: the positions' the residual
+/// of the least-squares Fourier fit at the excited harmonics over the
+/// stretch (what `fourier_fit` does with it); the torque's, whose many
+/// nonlinear harmonics fill the non-excited lines, from the stretch and
+/// itself one period on (`repeat_variance`).
+fn stretch_variances(p: &Periods, s: &Stretch, harmonics: &[u32]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let n = p.samples_per_period;
+    let m = s.len();
+    let fs = p.sample_rate_hz();
+    let time: Vec<f64> = (0..m).map(|k| k as f64 / fs).collect();
+    let dof = m.saturating_sub(1 + 2 * harmonics.len()).max(1);
+    (0..p.joints.len())
+        .map(|j| {
+            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, &s.q[j], p.period_s, harmonics);
+            let v = s.q[j].iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64;
+            (vec![v; n], vec![repeat_variance(&s.torque[j], n); n])
+        })
+        .unzip()
 }
 
 /// The per-sample noise variance of `x`, whose samples repeat `n` later

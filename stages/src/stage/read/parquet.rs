@@ -5,7 +5,7 @@
 use robotid_schemas::metadata;
 use std::collections::BTreeMap;
 
-use arrow::array::{Array, Float64Array, Int64Array};
+use arrow::array::{Array, Float64Array, Int64Array, RecordBatch};
 use parquet::arrow::ProjectionMask;
 
 use super::text::{into_columns, resolve};
@@ -14,6 +14,27 @@ use crate::{Error, Result};
 
 pub(crate) fn read_parquet_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     crate::formats::parquet::guarded(log.path(), || read_log(log, cfg, joints))
+}
+
+/// The batch's values of each of `columns` appended to it (Float64, or
+/// Int64 as f64; a null as NaN, which the checks then refuse).
+fn append(batch: &RecordBatch, columns: &mut BTreeMap<String, Vec<f64>>, source: &str) -> Result<()> {
+    for (name, out) in columns.iter_mut() {
+        let a = batch.column(batch.schema().index_of(name).expect("projected"));
+        if let Some(f) = a.as_any().downcast_ref::<Float64Array>() {
+            out.extend(f.iter().map(|v| v.unwrap_or(f64::NAN)));
+        } else if let Some(i) = a.as_any().downcast_ref::<Int64Array>() {
+            out.extend(i.iter().map(|v| v.map_or(f64::NAN, |x| x as f64)));
+        } else {
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: name.clone(),
+                sample: None,
+                msg: format!("expected Float64 or Int64, found {}", a.data_type()),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
@@ -66,21 +87,7 @@ fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
         if let Some(c) = crc.as_mut() {
             c.update(&batch);
         }
-        for (name, out) in columns.iter_mut() {
-            let a = batch.column(batch.schema().index_of(name).expect("projected"));
-            if let Some(f) = a.as_any().downcast_ref::<Float64Array>() {
-                out.extend(f.iter().map(|v| v.unwrap_or(f64::NAN)));
-            } else if let Some(i) = a.as_any().downcast_ref::<Int64Array>() {
-                out.extend(i.iter().map(|v| v.map_or(f64::NAN, |x| x as f64)));
-            } else {
-                return Err(Error::Data {
-                    source_name: source,
-                    channel: name.clone(),
-                    sample: None,
-                    msg: format!("expected Float64 or Int64, found {}", a.data_type()),
-                });
-            }
-        }
+        append(&batch, &mut columns, &source)?;
     }
     if let (Some(stored), Some(c)) = (stored, crc) {
         let found = format!("{:08x}", c.finish());
