@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use robotid_schemas::{metadata, RawSamples, TableKind};
 use robotid_stages::dynamics::load_robot;
 use robotid_stages::dynamics::{FrictionTerms, ModelKind};
+use robotid_stages::estimation::spectral::{FilterChoice, Score};
 use robotid_stages::signal::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::signal::{FilterFamily, FilterSpec};
 use robotid_stages::stage::align::AlignConfig;
@@ -400,16 +401,8 @@ pub fn design_with(
         ),
     ));
     let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
-    let still: Vec<&str> = sets
-        .iter()
-        .zip(&joints)
-        .filter(|(h, _)| h.is_empty())
-        .map(|(_, j)| j.as_str())
-        .collect();
-    // One joint moving, the others held: a joint-wise experiment (Bona
-    // §3), identified with the decoupled model from that joint's rows.
-    let joint_wise = joints.len() > 1 && still.len() == joints.len() - 1;
-    let moving = joint_wise.then(|| sets.iter().position(|h| !h.is_empty()).expect("one moves"));
+    let moving = joint_wise(log, period, &joints, &sets, &mut findings)?;
+    let joint_wise = moving.is_some();
     let held_at = moving.map(|m| {
         let at = |c: &Vec<f64>| c.iter().sum::<f64>() / c.len() as f64;
         let held = (0..joints.len())
@@ -418,23 +411,8 @@ pub fn design_with(
         (joints[m].clone(), held.collect::<Vec<_>>())
     });
     let mut regressor = regressor;
-    if joint_wise {
-        let moving = &joints[sets.iter().position(|h| !h.is_empty()).expect("one moves")];
-        findings.push((
-            "joint_wise".into(),
-            format!("only {moving} moves: a joint-wise experiment (Bona §3), the decoupled model from its rows only"),
-        ));
-        if own_regressor {
-            joint_wise_model(&mut regressor);
-        }
-    } else if !still.is_empty() {
-        return Err(refuse(
-            log,
-            format!(
-                "joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
-                still.join(", ")
-            ),
-        ));
+    if joint_wise && own_regressor {
+        joint_wise_model(&mut regressor);
     }
     if !own_regressor && joint_wise != regressor.joint_wise {
         return Err(refuse(
@@ -447,59 +425,7 @@ pub fn design_with(
         ));
     }
     findings.push(("harmonics".into(), harmonics_said));
-    // Lines beyond the excited ones. In the positions they belong to the
-    // motion (the robot does not follow its excitation exactly): the
-    // kinematics keep them, the DFT up to the highest. In the torques they
-    // are either motion too small for the encoder (a closed loop's
-    // tracking, amplified by ω² in the inertial torque) or the dynamics'
-    // own nonlinearity (a sign(q̇) friction answers a sinusoid with every
-    // odd harmonic), which the regressor's columns make themselves: both
-    // bands are tried, and the held-out periods decide. Without any, the
-    // Fourier fit at the excited lines rejects the noise between them.
-    let f0 = 1.0 / period;
-    // Held joints' positions carry sag and flicker, not the motion's lines.
-    let (moved_q, moved): (Vec<Vec<f64>>, Vec<String>) = (0..joints.len())
-        .filter(|&j| !sets[j].is_empty())
-        .map(|j| (mean.q[j].clone(), joints[j].clone()))
-        .unzip();
-    let by_positions = highest_beyond(&moved_q, &union, &moved);
-    let by_torques =
-        highest_beyond(&mean.torque, &union, &joints).filter(|(h, _)| by_positions.as_ref().is_none_or(|(p, _)| h > p));
-    let differentiate = |method, harmonics, bandwidth_hz| {
-        StageConfig::Differentiate(DifferentiateConfig {
-            method,
-            harmonics,
-            bandwidth_hz,
-            filter: None,
-        })
-    };
-    let dft = |h: u32| {
-        let band = (h as f64 + 0.5) * f0;
-        (band, differentiate(Differentiation::Dft, None, Some(band)))
-    };
-    let positions_stage = match &by_positions {
-        Some((h, whose)) => {
-            let (band, text) = dft(*h);
-            (
-                text,
-                format!("dft up to {band:.4} Hz: the positions of {whose} hold lines besides the excited ones up to harmonic {h} (tracking errors)"),
-                band,
-            )
-        }
-        None => (
-            differentiate(Differentiation::FourierFit, Some(union.clone()), None),
-            "fourier_fit at the excited lines: the positions hold no others".to_string(),
-            f0 * union.iter().max().copied().unwrap_or(1) as f64,
-        ),
-    };
-    let torques_stage = by_torques.as_ref().map(|(h, whose)| {
-        let (band, text) = dft(*h);
-        (
-            text,
-            format!("dft up to {band:.4} Hz: the torques of {whose} hold lines besides the excited ones up to harmonic {h} (tracking too small for the encoder, or the dynamics' nonlinearity)"),
-            band,
-        )
-    });
+    let (positions_stage, torques_stage) = bands(period, mean, &joints, &sets, &union);
     let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &StageConfig| {
         let mut stages = vec![align(tol)];
         stages.extend(inverse.map(inverse_filter));
@@ -531,24 +457,7 @@ pub fn design_with(
         )?;
         wide_band = Some(wide);
         findings.push(("differentiate".into(), said));
-        if inverse.is_none() {
-            if let Some(spec) = choice.filter {
-                let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
-                inverse = Some((spec, band));
-                regressor.band_limit_hz = Some(band);
-            }
-            findings.retain(|(k, _)| k != "inverse_filter");
-            findings.push(("inverse_filter".into(), choice.filter_said.clone()));
-        }
-        if let Some(v) = choice.transition.filter(|v| *v > 0.0) {
-            regressor.coulomb_transition_rad_s = Some(v);
-        }
-        regressor.friction = choice.friction;
-        if let Some(said) = choice.friction_said {
-            findings.push(("friction".into(), said));
-        }
-        findings.push(("coulomb_transition_rad_s".into(), choice.transition_said));
-        findings.push(("held_out".into(), choice.held_out_said));
+        apply_choice(choice, fs, &mut inverse, &mut regressor, &mut findings);
         differentiate = Some(
             if wide {
                 torques_stage.as_ref()
@@ -658,6 +567,144 @@ fn excited(
         per_joint.join(", ")
     );
     (sets, union, said)
+}
+
+/// The model choice into the design: the filter found (undone, the
+/// regressor band-limited alike) where none was declared, the Coulomb
+/// turn-over and friction terms into the regressor, what says them into
+/// `findings`.
+fn apply_choice(
+    choice: ModelChoice,
+    fs: f64,
+    inverse: &mut Option<(FilterSpec, f64)>,
+    regressor: &mut RegressorConfig,
+    findings: &mut Vec<(String, String)>,
+) {
+    if inverse.is_none() {
+        if let Some(spec) = choice.filter {
+            let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
+            *inverse = Some((spec, band));
+            regressor.band_limit_hz = Some(band);
+        }
+        findings.retain(|(k, _)| k != "inverse_filter");
+        findings.push(("inverse_filter".into(), choice.filter_said));
+    }
+    if let Some(v) = choice.transition.filter(|v| *v > 0.0) {
+        regressor.coulomb_transition_rad_s = Some(v);
+    }
+    regressor.friction = choice.friction;
+    if let Some(said) = choice.friction_said {
+        findings.push(("friction".into(), said));
+    }
+    findings.push(("coulomb_transition_rad_s".into(), choice.transition_said));
+    findings.push(("held_out".into(), choice.held_out_said));
+}
+
+/// The joint that moves when it is the only one (the others held: a
+/// joint-wise experiment, Bona §3, identified with the decoupled model from
+/// its rows), said in `findings`; None when every joint moves. Joints that
+/// do not move beside others that do are refused.
+fn joint_wise(
+    log: &Path,
+    period: f64,
+    joints: &[String],
+    sets: &[Vec<u32>],
+    findings: &mut Vec<(String, String)>,
+) -> Result<Option<usize>> {
+    let still: Vec<&str> = sets
+        .iter()
+        .zip(joints)
+        .filter(|(h, _)| h.is_empty())
+        .map(|(_, j)| j.as_str())
+        .collect();
+    if joints.len() > 1 && still.len() == joints.len() - 1 {
+        let m = sets.iter().position(|h| !h.is_empty()).expect("one moves");
+        findings.push((
+            "joint_wise".into(),
+            format!(
+                "only {} moves: a joint-wise experiment (Bona §3), the decoupled model from its rows only",
+                joints[m]
+            ),
+        ));
+        return Ok(Some(m));
+    }
+    if !still.is_empty() {
+        return Err(refuse(
+            log,
+            format!(
+                "joint(s) {} do not move at any harmonic of the {period} s period: their parameters cannot be identified from this record; lock them (`[lock]` in a pipeline file, docs/pipeline-file.md) or record them moving",
+                still.join(", ")
+            ),
+        ));
+    }
+    Ok(None)
+}
+
+/// The two bands the kinematics may be differentiated in, as
+/// differentiate stages: the positions' (a Fourier fit at the excited
+/// lines when they hold no others) and, when the torques hold lines beyond
+/// the positions' highest, the torques'.
+fn bands(
+    period: f64,
+    mean: &robotid_schemas::PeriodMean,
+    joints: &[String],
+    sets: &[Vec<u32>],
+    union: &[u32],
+) -> (Band, Option<Band>) {
+    // Lines beyond the excited ones. In the positions they belong to the
+    // motion (the robot does not follow its excitation exactly): the
+    // kinematics keep them, the DFT up to the highest. In the torques they
+    // are either motion too small for the encoder (a closed loop's
+    // tracking, amplified by ω² in the inertial torque) or the dynamics'
+    // own nonlinearity (a sign(q̇) friction answers a sinusoid with every
+    // odd harmonic), which the regressor's columns make themselves: both
+    // bands are tried, and the held-out periods decide. Without any, the
+    // Fourier fit at the excited lines rejects the noise between them.
+    let f0 = 1.0 / period;
+    // Held joints' positions carry sag and flicker, not the motion's lines.
+    let (moved_q, moved): (Vec<Vec<f64>>, Vec<String>) = (0..joints.len())
+        .filter(|&j| !sets[j].is_empty())
+        .map(|j| (mean.q[j].clone(), joints[j].clone()))
+        .unzip();
+    let by_positions = highest_beyond(&moved_q, union, &moved);
+    let by_torques =
+        highest_beyond(&mean.torque, union, joints).filter(|(h, _)| by_positions.as_ref().is_none_or(|(p, _)| h > p));
+    let differentiate = |method, harmonics, bandwidth_hz| {
+        StageConfig::Differentiate(DifferentiateConfig {
+            method,
+            harmonics,
+            bandwidth_hz,
+            filter: None,
+        })
+    };
+    let dft = |h: u32| {
+        let band = (h as f64 + 0.5) * f0;
+        (band, differentiate(Differentiation::Dft, None, Some(band)))
+    };
+    let positions_stage = match &by_positions {
+        Some((h, whose)) => {
+            let (band, text) = dft(*h);
+            (
+                text,
+                format!("dft up to {band:.4} Hz: the positions of {whose} hold lines besides the excited ones up to harmonic {h} (tracking errors)"),
+                band,
+            )
+        }
+        None => (
+            differentiate(Differentiation::FourierFit, Some(union.to_vec()), None),
+            "fourier_fit at the excited lines: the positions hold no others".to_string(),
+            f0 * union.iter().max().copied().unwrap_or(1) as f64,
+        ),
+    };
+    let torques_stage = by_torques.as_ref().map(|(h, whose)| {
+        let (band, text) = dft(*h);
+        (
+            text,
+            format!("dft up to {band:.4} Hz: the torques of {whose} hold lines besides the excited ones up to harmonic {h} (tracking too small for the encoder, or the dynamics' nonlinearity)"),
+            band,
+        )
+    });
+    (positions_stage, torques_stage)
 }
 
 /// A band's differentiate stage, what says it, and its width (Hz).
@@ -932,7 +979,7 @@ fn choose_model(
     fs: f64,
     lowest_hz: f64,
 ) -> Result<ModelChoice> {
-    use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem, Score};
+    use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem};
     use robotid_stages::signal::Spectra;
     use robotid_stages::stage::regressor::column_spectra_of;
     let kin = chain.kinematics()?;
@@ -1107,57 +1154,14 @@ fn choose_model(
             score,
         ),
     };
-    let describe_fit = |f: &Option<(Option<FilterSpec>, Score)>| match f {
-        Some((Some(s), x)) if declared.is_none() => format!("{:.3} ({})", x.ratio, describe(s)),
-        Some((_, x)) => format!("{:.3}", x.ratio),
-        None => "singular".into(),
-    };
-    let table = scored
-        .iter()
-        .map(|(v, f, ok)| {
-            if *ok {
-                format!("{v}: {}", describe_fit(f))
-            } else {
-                format!("{v}: friction < 0")
-            }
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
-    let transition_said = if at_floor {
-        format!(
-            "0, sign(q̇): its held-out residue {:.3}× the noise floor leaves no smooth turn-over {:.2} % to gain",
-            sign_fit.1.ratio,
-            100.0 * margin
-        )
-    } else if pick.0 == 0.0 {
-        format!("0, sign(q̇): no smooth turn-over with friction ≥ 0 predicts held-out periods better by {:.2} % (held-out residue over the noise floor: {table})", 100.0 * margin)
-    } else {
-        format!("{} (held-out residue over the noise floor: {table})", pick.0)
-    };
-    let filter_said = match &search {
-        None => String::new(),
-        Some(c) => {
-            let runner = c
-                .runner_up
-                .as_ref()
-                .map(|(s, r)| format!("; next best shape {} at {r:.3}", describe(s)))
-                .unwrap_or_default();
-            match &filter {
-                Some(s) => format!(
-                    "{}, found in the spectrum (not declared): the fit on half of the periods predicts the other half {:.3}× the noise floor with it, {:.3}× without{runner}; {} candidates",
-                    describe(s),
-                    score.ratio,
-                    c.none.ratio,
-                    c.candidates
-                ),
-                None => format!(
-                    "none: no analog filter predicts held-out periods better than none by {:.2} % ({:.3}× the noise floor without one{runner})",
-                    100.0 * c.margin,
-                    score.ratio
-                ),
-            }
-        }
-    };
+    let transition_said = transition_said(
+        &scored,
+        declared.is_some(),
+        at_floor.then_some(sign_fit.1.ratio),
+        pick.0,
+        margin,
+    );
+    let filter_said = filter_said(search.as_ref(), filter.as_ref(), score.ratio);
     let per_joint = score
         .per_joint
         .iter()
@@ -1180,6 +1184,70 @@ fn choose_model(
         friction_said,
         margin,
     })
+}
+
+/// A (transition, filter fit, friction ≥ 0) per turn-over tried.
+type Scored = (f64, Option<(Option<FilterSpec>, Score)>, bool);
+
+/// What says the Coulomb turn-over chosen (`pick`, 0 for sign(q̇)): the
+/// held-out scores of those tried (`declared`: the filter was the
+/// recording's, not found), or the sign(q̇) fit's ratio when it is `at_floor`.
+fn transition_said(scored: &[Scored], declared: bool, at_floor: Option<f64>, pick: f64, margin: f64) -> String {
+    let describe_fit = |f: &Option<(Option<FilterSpec>, Score)>| match f {
+        Some((Some(s), x)) if !declared => format!("{:.3} ({})", x.ratio, describe(s)),
+        Some((_, x)) => format!("{:.3}", x.ratio),
+        None => "singular".into(),
+    };
+    let table = scored
+        .iter()
+        .map(|(v, f, ok)| {
+            if *ok {
+                format!("{v}: {}", describe_fit(f))
+            } else {
+                format!("{v}: friction < 0")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    if let Some(ratio) = at_floor {
+        format!(
+            "0, sign(q̇): its held-out residue {ratio:.3}× the noise floor leaves no smooth turn-over {:.2} % to gain",
+            100.0 * margin
+        )
+    } else if pick == 0.0 {
+        format!("0, sign(q̇): no smooth turn-over with friction ≥ 0 predicts held-out periods better by {:.2} % (held-out residue over the noise floor: {table})", 100.0 * margin)
+    } else {
+        format!("{pick} (held-out residue over the noise floor: {table})")
+    }
+}
+
+/// What says the filter found in the spectrum, or that none was (empty
+/// when one was declared); `score`: the chosen model's held-out ratio.
+fn filter_said(search: Option<&FilterChoice>, filter: Option<&FilterSpec>, score: f64) -> String {
+    match search {
+        None => String::new(),
+        Some(c) => {
+            let runner = c
+                .runner_up
+                .as_ref()
+                .map(|(s, r)| format!("; next best shape {} at {r:.3}", describe(s)))
+                .unwrap_or_default();
+            match filter {
+                Some(s) => format!(
+                    "{}, found in the spectrum (not declared): the fit on half of the periods predicts the other half {:.3}× the noise floor with it, {:.3}× without{runner}; {} candidates",
+                    describe(s),
+                    score,
+                    c.none.ratio,
+                    c.candidates
+                ),
+                None => format!(
+                    "none: no analog filter predicts held-out periods better than none by {:.2} % ({:.3}× the noise floor without one{runner})",
+                    100.0 * c.margin,
+                    score
+                ),
+            }
+        }
+    }
 }
 
 /// The torques against the robot file's prediction for the same motion
