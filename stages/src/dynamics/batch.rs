@@ -268,7 +268,21 @@ impl Batched {
                 row[9] = v.dot(a);
             }
         }
-        // The joint terms, lane by lane: cheap, and sign/tanh are scalar.
+        self.joint_terms(ws, q, qd, qdd, terms);
+    }
+
+    /// Φ's joint terms (rotor, friction, offset, spring), lane by lane:
+    /// cheap, and sign/tanh are scalar.
+    fn joint_terms(
+        &self,
+        ws: &mut BatchData,
+        q: &[[f64; LANES]],
+        qd: &[[f64; LANES]],
+        qdd: &[[f64; LANES]],
+        terms: RegressorTerms,
+    ) {
+        let n = self.dof();
+        let count = ws.count;
         let per = (count - 10 * n - terms.spring.map_or(0, |s| 2 * s.harmonics as usize)) / n.max(1);
         for j in 0..n {
             let mut c = 10 * n + per * j;

@@ -205,19 +205,16 @@ const PRIOR_WEIGHTS: [f64; 8] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0];
 /// all but fix the fit (a prior the data do not contradict is kept).
 const HELD_OUT_WEIGHTS: [f64; 11] = [1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 1e2, 1e3, 1e4];
 
-/// Fits physically consistent standard parameters (names in regressor
-/// order, the first 10·links inertial) to a base estimate, each link within
-/// its `bounds` (none past their end). `prior_weight`: λ, or None to choose
-/// it by C_p.
-pub fn physically_consistent(
+/// The physical fit's inputs: finite, of matching sizes, a prior weight
+/// that is positive and finite when given.
+fn check_inputs(
     names: &[String],
     prior: &[f64],
     map: &DMatrix<f64>,
     base_estimate: &DVector<f64>,
     base_covariance: &DMatrix<f64>,
-    bounds: &[LinkBound],
     prior_weight: Option<f64>,
-) -> Result<PhysicalFit> {
+) -> Result<()> {
     let ns = names.len();
     if let Some(w) = prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
         return Err(Error::setting("prior weight", "> 0 and finite", w));
@@ -254,6 +251,24 @@ pub fn physically_consistent(
             format!("{} × {} map, {} prior values", map.nrows(), map.ncols(), prior.len()),
         ));
     }
+    Ok(())
+}
+
+/// Fits physically consistent standard parameters (names in regressor
+/// order, the first 10·links inertial) to a base estimate, each link within
+/// its `bounds` (none past their end). `prior_weight`: λ, or None to choose
+/// it by C_p.
+pub fn physically_consistent(
+    names: &[String],
+    prior: &[f64],
+    map: &DMatrix<f64>,
+    base_estimate: &DVector<f64>,
+    base_covariance: &DMatrix<f64>,
+    bounds: &[LinkBound],
+    prior_weight: Option<f64>,
+) -> Result<PhysicalFit> {
+    let ns = names.len();
+    check_inputs(names, prior, map, base_estimate, base_covariance, prior_weight)?;
     let problem = Problem::new(names, prior, map, base_estimate, base_covariance, bounds)?;
     let fits: Vec<(f64, Solved)> = match prior_weight {
         Some(w) => vec![(w, problem.solve(w, Fit::Central)?)],

@@ -193,6 +193,15 @@ impl ExciteConfig {
                 "sample_rate_hz gives too few samples per period for the harmonics",
             ));
         }
+        e.extend(self.limit_problems(model));
+        e
+    }
+
+    /// The problems of the limits (per joint, each known) and of the
+    /// Cartesian constraints.
+    fn limit_problems(&self, model: &Model) -> Vec<Problem> {
+        let mut e = Vec::new();
+        let n = model.dof();
         for (what, len) in [
             ("position", self.limits.position.as_ref().map(Vec::len)),
             ("velocity", self.limits.velocity.as_ref().map(Vec::len)),

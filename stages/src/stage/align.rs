@@ -477,6 +477,67 @@ fn steady_stretch(
     }
 }
 
+/// How far each kept period's positions are from the last one's (RMS,
+/// relative to the positions' spread `scale`): drift or a transient.
+fn period_change(q: &[&[f64]], from: usize, kept: usize, n: usize, scale: f64) -> Vec<f64> {
+    let to = from + kept * n;
+    let last = |j: usize| &q[j][to - n..to];
+    (0..kept)
+        .map(|k| {
+            let p0 = from + k * n;
+            (0..q.len())
+                .map(|j| {
+                    q[j][p0..p0 + n]
+                        .iter()
+                        .zip(last(j))
+                        .map(|(x, y)| (x - y) * (x - y))
+                        .sum::<f64>()
+                        / n as f64
+                })
+                .sum::<f64>()
+                .sqrt()
+                / scale
+        })
+        .collect()
+}
+
+/// The aligned periods' metadata: the recording's, with the period, the
+/// rate, how many periods from when, and what was left to the recording
+/// (also said in `notes`).
+fn periods_metadata(
+    raw_md: &std::collections::BTreeMap<String, String>,
+    period: f64,
+    n: usize,
+    kept: usize,
+    start: f64,
+    defaults: &[String],
+    notes: &mut Vec<String>,
+) -> std::collections::BTreeMap<String, String> {
+    let mut md = raw_md.clone();
+    md.insert(metadata::PERIOD_S.into(), period.to_string());
+    if !defaults.is_empty() {
+        notes.extend(defaults.iter().map(|d| format!("align: default {d}")));
+        md.insert(metadata::DEFAULTS.into(), defaults.join("; "));
+    }
+    md.insert(metadata::SAMPLE_RATE_HZ.into(), (n as f64 / period).to_string());
+    md.insert(metadata::PERIODS.into(), kept.to_string());
+    md.insert(metadata::PERIOD_START_S.into(), start.to_string());
+    md
+}
+
+/// The positions' RMS variation over their first `m` samples, all joints.
+fn spread(q: &[&[f64]], m: usize) -> f64 {
+    (0..q.len())
+        .map(|j| {
+            let l = &q[j][..m];
+            let mean = l.iter().sum::<f64>() / m as f64;
+            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / m as f64
+        })
+        .sum::<f64>()
+        .sqrt()
+        .max(1e-300)
+}
+
 /// Aligns the whole of `raw`.
 fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Periods> {
     let data_err = |channel: &str, sample: Option<usize>, msg: String| Error::Data {
@@ -576,16 +637,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     // positions' RMS variation over the record (not its last period, which
     // may be rest); the steady part starts where r stays below
     // `steady_tolerance` for good.
-    let nj = raw.joints.len();
-    let scale: f64 = (0..nj)
-        .map(|j| {
-            let l = &q[j][..m];
-            let mean = l.iter().sum::<f64>() / m as f64;
-            l.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / m as f64
-        })
-        .sum::<f64>()
-        .sqrt()
-        .max(1e-300);
+    let scale = spread(&q, m);
     let (steady_from, steady_to) = if m > n {
         steady_stretch(&q, n, m, scale, cfg.steady_tolerance).map_err(|u| {
             let at = grid0 + u.at as f64 * dt - t[0];
@@ -638,24 +690,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     };
     let to = from + kept * n;
     report.transient_periods = whole - kept;
-    let last = |j: usize| &q[j][to - n..to];
-    report.period_change = (0..kept)
-        .map(|k| {
-            let p0 = from + k * n;
-            (0..nj)
-                .map(|j| {
-                    q[j][p0..p0 + n]
-                        .iter()
-                        .zip(last(j))
-                        .map(|(x, y)| (x - y) * (x - y))
-                        .sum::<f64>()
-                        / n as f64
-                })
-                .sum::<f64>()
-                .sqrt()
-                / scale
-        })
-        .collect();
+    report.period_change = period_change(&q, from, kept, n, scale);
     // Fewer than two whole periods in a stretch that holds at least a tenth
     // of a period more: keep the stretch too, for a fit over all of it.
     let stretch = (kept < 2 && steady_to - steady_from >= kept * n + n / 10).then(|| {
@@ -680,17 +715,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             "only one full steady period: no averaging; noise comes from the non-excited lines only, with no time-domain estimate".into()
         });
     }
-    let mut md = raw.metadata.clone();
-    md.insert(metadata::PERIOD_S.into(), period.to_string());
-    if !defaults.is_empty() {
-        report
-            .notes
-            .extend(defaults.iter().map(|d| format!("align: default {d}")));
-        md.insert(metadata::DEFAULTS.into(), defaults.join("; "));
-    }
-    md.insert(metadata::SAMPLE_RATE_HZ.into(), (n as f64 / period).to_string());
-    md.insert(metadata::PERIODS.into(), kept.to_string());
-    md.insert(metadata::PERIOD_START_S.into(), start.to_string());
+    let md = periods_metadata(&raw.metadata, period, n, kept, start, &defaults, &mut report.notes);
     Ok(Periods {
         joints: raw.joints.clone(),
         period_s: period,
@@ -704,6 +729,42 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         report,
         metadata: md,
     })
+}
+
+/// Per joint and harmonic of `trajectory` below Nyquist: the recorded
+/// line X_h of the averaged period (`np` periods of `n` samples in
+/// `signal`) and the trajectory's N·c_h, with c_h = −(b + i·a)/(2ω) the
+/// e^{iωt} coefficient (`w0`: the fundamental, rad/s).
+fn line_pairs(
+    signal: &[Vec<f64>],
+    trajectory: &crate::trajectory::FourierSeries,
+    n: usize,
+    np: usize,
+    w0: f64,
+) -> Vec<(usize, Complex64, Complex64)> {
+    let mut pairs = Vec::new();
+    for (j, col) in signal.iter().enumerate() {
+        for l in 0..trajectory.terms() {
+            let h = trajectory.harmonic(l) as usize;
+            if h >= n / 2 {
+                continue;
+            }
+            let w = w0 * h as f64;
+            let mut x = Complex64::new(0.0, 0.0);
+            for k in 0..np {
+                for i in 0..n {
+                    x += Complex64::from_polar(
+                        col[k * n + i],
+                        -2.0 * std::f64::consts::PI * ((h * i) % n) as f64 / n as f64,
+                    );
+                }
+            }
+            x /= np as f64;
+            let c = -Complex64::new(trajectory.b[j][l], trajectory.a[j][l]) / (2.0 * w) * n as f64;
+            pairs.push((h, x, c));
+        }
+    }
+    pairs
 }
 
 /// Registers the phase of whole periods against the trajectory the robot
@@ -739,30 +800,7 @@ pub fn register_phase(p: &mut Periods, trajectory: &crate::trajectory::FourierSe
     let signal = p.reference.as_ref().unwrap_or(&p.q);
     let w0 = 2.0 * std::f64::consts::PI / p.period_s;
     let dt = p.period_s / n as f64;
-    // Per joint and harmonic: recorded line X_h (of the averaged period) and
-    // the trajectory's N·c_h, with c_h = −(b + i·a)/(2ω) the e^{iωt} coefficient.
-    let mut pairs = Vec::new();
-    for (j, col) in signal.iter().enumerate() {
-        for l in 0..trajectory.terms() {
-            let h = trajectory.harmonic(l) as usize;
-            if h >= n / 2 {
-                continue;
-            }
-            let w = w0 * h as f64;
-            let mut x = Complex64::new(0.0, 0.0);
-            for k in 0..np {
-                for i in 0..n {
-                    x += Complex64::from_polar(
-                        col[k * n + i],
-                        -2.0 * std::f64::consts::PI * ((h * i) % n) as f64 / n as f64,
-                    );
-                }
-            }
-            x /= np as f64;
-            let c = -Complex64::new(trajectory.b[j][l], trajectory.a[j][l]) / (2.0 * w) * n as f64;
-            pairs.push((h, x, c));
-        }
-    }
+    let pairs = line_pairs(signal, trajectory, n, np, w0);
     let norm = (pairs.iter().map(|(_, x, _)| x.norm_sqr()).sum::<f64>()
         * pairs.iter().map(|(_, _, c)| c.norm_sqr()).sum::<f64>())
     .sqrt();

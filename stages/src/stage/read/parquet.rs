@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use arrow::array::{Array, Float64Array, Int64Array, RecordBatch};
 use parquet::arrow::ProjectionMask;
 
-use super::text::{into_columns, resolve};
+use super::text::{into_columns, resolve, Mapping};
 use super::{Columns, Log, ReadConfig};
 use crate::{Error, Result};
 
@@ -103,7 +103,16 @@ fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
         .filter(|(k, _)| k.starts_with("robotid.") && *k != metadata::TABLE && *k != metadata::VERSION)
         .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
-    // Move each column out on its first use; a column mapped twice is cloned.
+    Ok(into_columns_moved(mapping, columns, md))
+}
+
+/// The mapped columns out of `columns`, each moved out on its last use (a
+/// column mapped twice is cloned once).
+fn into_columns_moved(
+    mapping: Mapping,
+    mut columns: BTreeMap<String, Vec<f64>>,
+    md: BTreeMap<String, String>,
+) -> Columns {
     let mut uses: BTreeMap<String, usize> = BTreeMap::new();
     for n in std::iter::once(&mapping.time)
         .chain(&mapping.position)
@@ -112,7 +121,7 @@ fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     {
         *uses.entry(n.clone()).or_default() += 1;
     }
-    Ok(into_columns(
+    into_columns(
         mapping,
         |n| {
             let left = uses.get_mut(n).expect("mapped");
@@ -124,5 +133,5 @@ fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
             }
         },
         md,
-    ))
+    )
 }
