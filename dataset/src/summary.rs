@@ -13,7 +13,7 @@ use arrow::datatypes::{Field, Schema};
 use polars::prelude::*;
 use serde::Deserialize;
 
-use crate::runs::Run;
+use crate::runs::{RecordingEntry, Run};
 
 /// The two tables of a summary.
 pub struct Summary {
@@ -178,20 +178,21 @@ impl Columns {
     }
 }
 
-/// Builds both tables from runs found by [`crate::runs::discover`].
-pub fn summarize(runs: &[Run]) -> Result<Summary> {
-    let parameters = scan_parameters(runs)?;
-    let hive_keys: Vec<String> = {
-        let mut seen = Vec::new();
-        for r in runs {
-            for (k, _) in &r.hive {
-                if !seen.contains(k) {
-                    seen.push(k.clone());
-                }
+/// The hive keys of every run, in the order first seen.
+fn hive_keys(runs: &[Run]) -> Vec<String> {
+    let mut seen = Vec::new();
+    for r in runs {
+        for (k, _) in &r.hive {
+            if !seen.contains(k) {
+                seen.push(k.clone());
             }
         }
-        seen
-    };
+    }
+    seen
+}
+
+/// The units of the recordings table's fixed columns.
+fn fixed_units() -> BTreeMap<String, String> {
     let mut units = BTreeMap::new();
     for (k, u) in [
         ("time_origin_s", "s"),
@@ -205,23 +206,124 @@ pub fn summarize(runs: &[Run]) -> Result<Summary> {
     ] {
         units.insert(k.to_string(), u.to_string());
     }
+    units
+}
+
+/// The per-joint adequacy the run's estimate wrote (none without one).
+fn adequacy_of(run: &Run) -> Result<Vec<Adequacy>> {
+    let m = &run.manifest;
+    let param_keys = match &m.parameters {
+        Some(p) => file_keys(&run.dir.join(p))?,
+        None => BTreeMap::new(),
+    };
+    Ok(match param_keys.get("robotid.estimate.adequacy") {
+        Some(text) => serde_json::from_str(text).map_err(|source| Error::Json {
+            path: run.dir.clone(),
+            what: "robotid.estimate.adequacy",
+            source,
+        })?,
+        None => Vec::new(),
+    })
+}
+
+/// One recording of a run, with what its tables' footers say.
+struct Recorded<'a> {
+    run: &'a Run,
+    rec: &'a RecordingEntry,
+    keys: &'a BTreeMap<String, String>,
+    adequacy: &'a [Adequacy],
+    params: &'a [Parameter],
+}
+
+/// A recording's rows, one per joint: its hive keys, hashes, noise,
+/// adequacy and the joint's parameters (their units into `units`).
+fn recording_rows(rows: &mut Columns, units: &mut BTreeMap<String, String>, at: &Recorded, hive_keys: &[String]) {
+    let number = |k: &str| at.keys.get(k).and_then(|v| v.parse::<f64>().ok());
+    let time = number("robotid.time_origin_s");
+    let mut joints: Vec<String> = at
+        .keys
+        .get("robotid.joints")
+        .map(|j| j.split(',').map(str::to_string).collect())
+        .unwrap_or_default();
+    if joints.is_empty() {
+        joints = at.adequacy.iter().map(|a| a.joint.clone()).collect();
+    }
+    for joint in &joints {
+        for k in hive_keys {
+            let v = at.run.hive.iter().find(|(hk, _)| hk == k).map(|(_, v)| v.clone());
+            rows.text(k, v);
+        }
+        rows.text("run", Some(at.run.name.clone()));
+        rows.text("recording", Some(at.rec.name.clone()));
+        rows.text("joint", Some(joint.clone()));
+        rows.text("robot_sha256", at.run.manifest.robot_sha256.clone());
+        rows.text("config_sha256", Some(at.run.manifest.config_sha256.clone()));
+        rows.text("source_sha256", Some(at.rec.source_sha256.clone()));
+        rows.float("time_origin_s", time);
+        rows.int("samples", Some(at.rec.samples as i64));
+        rows.int("periods", number("robotid.periods").map(|p| p as i64));
+        rows.float("noise_var_q", number(&format!("robotid.noise.{joint}.q.var_time")));
+        rows.float(
+            "noise_var_torque",
+            number(&format!("robotid.noise.{joint}.torque.var_time")),
+        );
+        let a = at.adequacy.iter().find(|a| &a.joint == joint);
+        rows.float("residual_variance", a.map(|a| a.msr));
+        rows.float("noise_floor", a.and_then(|a| a.noise_floor));
+        rows.float("adequacy_ratio", a.and_then(|a| a.ratio));
+        rows.text("verdict", a.map(|a| a.verdict.clone()));
+        // The joint's parameters, one column per name without the
+        // joint suffix (ZZ, Fv, …).
+        for p in at.params {
+            if let Some(stem) = p.name.strip_suffix(&format!("_{joint}")) {
+                rows.float(stem, Some(p.value));
+                units.entry(stem.to_string()).or_insert_with(|| p.unit.clone());
+            }
+        }
+        rows.end_row();
+    }
+}
+
+/// One drift row per parameter of a run (`run_time`: its earliest
+/// recording's time origin).
+fn drift_rows_of(
+    drift_rows: &mut Columns,
+    run: &Run,
+    params: &[Parameter],
+    hive_keys: &[String],
+    run_time: Option<f64>,
+) {
+    let m = &run.manifest;
+    for p in params {
+        for k in hive_keys {
+            let v = run.hive.iter().find(|(hk, _)| hk == k).map(|(_, v)| v.clone());
+            drift_rows.text(k, v);
+        }
+        drift_rows.text("robot_sha256", m.robot_sha256.clone());
+        drift_rows.text("config_sha256", Some(m.config_sha256.clone()));
+        drift_rows.text("parameter", Some(p.name.clone()));
+        drift_rows.text("unit", Some(p.unit.clone()));
+        drift_rows.text("run", Some(run.name.clone()));
+        let names: Vec<&str> = m.recordings.iter().map(|r| r.name.as_str()).collect();
+        drift_rows.text("recordings", Some(names.join(",")));
+        drift_rows.float("time_origin_s", run_time);
+        drift_rows.float("value", Some(p.value));
+        drift_rows.float("std", Some(p.std));
+        drift_rows.end_row();
+    }
+}
+
+/// Builds both tables from runs found by [`crate::runs::discover`].
+pub fn summarize(runs: &[Run]) -> Result<Summary> {
+    let parameters = scan_parameters(runs)?;
+    let hive_keys = hive_keys(runs);
+    let mut units = fixed_units();
     let mut rows = Columns::default();
     let mut drift_rows = Columns::default();
     for (i, run) in runs.iter().enumerate() {
         let m = &run.manifest;
         let params = parameters.get(&i).map(Vec::as_slice).unwrap_or_default();
-        let param_keys = match &m.parameters {
-            Some(p) => file_keys(&run.dir.join(p))?,
-            None => BTreeMap::new(),
-        };
-        let adequacy: Vec<Adequacy> = match param_keys.get("robotid.estimate.adequacy") {
-            Some(text) => serde_json::from_str(text).map_err(|source| Error::Json {
-                path: run.dir.clone(),
-                what: "robotid.estimate.adequacy",
-                source,
-            })?,
-            None => Vec::new(),
-        };
+        let adequacy = adequacy_of(run)?;
         let mut run_time: Option<f64> = None;
         for rec in &m.recordings {
             // Every table's footer: the keys the stages wrote.
@@ -235,65 +337,16 @@ pub fn summarize(runs: &[Run]) -> Result<Summary> {
                 (Some(a), Some(b)) => Some(a.min(b)),
                 (a, b) => a.or(b),
             };
-            let mut joints: Vec<String> = keys
-                .get("robotid.joints")
-                .map(|j| j.split(',').map(str::to_string).collect())
-                .unwrap_or_default();
-            if joints.is_empty() {
-                joints = adequacy.iter().map(|a| a.joint.clone()).collect();
-            }
-            for joint in &joints {
-                for k in &hive_keys {
-                    let v = run.hive.iter().find(|(hk, _)| hk == k).map(|(_, v)| v.clone());
-                    rows.text(k, v);
-                }
-                rows.text("run", Some(run.name.clone()));
-                rows.text("recording", Some(rec.name.clone()));
-                rows.text("joint", Some(joint.clone()));
-                rows.text("robot_sha256", m.robot_sha256.clone());
-                rows.text("config_sha256", Some(m.config_sha256.clone()));
-                rows.text("source_sha256", Some(rec.source_sha256.clone()));
-                rows.float("time_origin_s", time);
-                rows.int("samples", Some(rec.samples as i64));
-                rows.int("periods", number("robotid.periods").map(|p| p as i64));
-                rows.float("noise_var_q", number(&format!("robotid.noise.{joint}.q.var_time")));
-                rows.float(
-                    "noise_var_torque",
-                    number(&format!("robotid.noise.{joint}.torque.var_time")),
-                );
-                let a = adequacy.iter().find(|a| &a.joint == joint);
-                rows.float("residual_variance", a.map(|a| a.msr));
-                rows.float("noise_floor", a.and_then(|a| a.noise_floor));
-                rows.float("adequacy_ratio", a.and_then(|a| a.ratio));
-                rows.text("verdict", a.map(|a| a.verdict.clone()));
-                // The joint's parameters, one column per name without the
-                // joint suffix (ZZ, Fv, …).
-                for p in params {
-                    if let Some(stem) = p.name.strip_suffix(&format!("_{joint}")) {
-                        rows.float(stem, Some(p.value));
-                        units.entry(stem.to_string()).or_insert_with(|| p.unit.clone());
-                    }
-                }
-                rows.end_row();
-            }
+            let at = Recorded {
+                run,
+                rec,
+                keys: &keys,
+                adequacy: &adequacy,
+                params,
+            };
+            recording_rows(&mut rows, &mut units, &at, &hive_keys);
         }
-        for p in params {
-            for k in &hive_keys {
-                let v = run.hive.iter().find(|(hk, _)| hk == k).map(|(_, v)| v.clone());
-                drift_rows.text(k, v);
-            }
-            drift_rows.text("robot_sha256", m.robot_sha256.clone());
-            drift_rows.text("config_sha256", Some(m.config_sha256.clone()));
-            drift_rows.text("parameter", Some(p.name.clone()));
-            drift_rows.text("unit", Some(p.unit.clone()));
-            drift_rows.text("run", Some(run.name.clone()));
-            let names: Vec<&str> = m.recordings.iter().map(|r| r.name.as_str()).collect();
-            drift_rows.text("recordings", Some(names.join(",")));
-            drift_rows.float("time_origin_s", run_time);
-            drift_rows.float("value", Some(p.value));
-            drift_rows.float("std", Some(p.std));
-            drift_rows.end_row();
-        }
+        drift_rows_of(&mut drift_rows, run, params, &hive_keys, run_time);
     }
     let recordings = rows.frame()?;
     let drift = drift_rows.frame()?;

@@ -92,6 +92,92 @@ pub enum ExportError {
 
 type Result<T, E = ExportError> = std::result::Result<T, E>;
 
+/// Every file made, written (each atomically).
+fn write_outputs(files: &[(PathBuf, Output)]) -> Result<()> {
+    for (path, out) in files {
+        match out {
+            Output::Text(text) => write_atomic(path, |w| {
+                use std::io::Write;
+                w.write_all(text.as_bytes())
+                    .map_err(|e| robotid_stages::Error::io(path, e))
+            })?,
+            Output::Table(batch) => write_parquet(path, batch)?,
+        }
+    }
+    Ok(())
+}
+
+/// Bodies a simulator takes: every link with mass, finite, of a robot's
+/// size, inertias that satisfy the triangle inequality (a table holding
+/// ixx = 1e30 wrote a URDF that broke it).
+fn simulable(identified: &Model, parameters: &Path) -> Result<()> {
+    if let Some((l, j)) = identified
+        .links
+        .iter()
+        .zip(&identified.joints)
+        .find(|(l, _)| !(l.mass > 0.0))
+    {
+        return Err(ExportError::Massless {
+            joint: j.name.clone(),
+            mass: l.mass,
+        });
+    }
+    if let Err(p) = identified.validate() {
+        return Err(ExportError::Impossible {
+            parameters: parameters.to_path_buf(),
+            problem: p.to_string(),
+        });
+    }
+    Ok(())
+}
+
+/// The estimate's own consistent model (`stored`), unless another prior
+/// weight is asked for (or the table predates it being stored): then
+/// fitted again.
+fn consistent(
+    params: &robotid_stages::estimation::Parameters,
+    base: &robotid_stages::dynamics::BaseRegressor,
+    map: &nalgebra::DMatrix<f64>,
+    names: &[String],
+    stored: Option<Vec<f64>>,
+    prior_weight: Option<f64>,
+) -> Result<Consistent> {
+    Ok(match (stored, prior_weight) {
+        (Some(standard), None) => Consistent {
+            standard,
+            how: params.metadata[metadata::PHYSICAL].clone(),
+            said: format!(
+                "the estimate's physically consistent standard parameters ({})",
+                metadata::PHYSICAL_STANDARD
+            ),
+        },
+        (_, weight) => {
+            let prior = standard_parameters(&base.model, base.terms);
+            let weight = weight.or_else(|| {
+                params
+                    .metadata
+                    .get(metadata::PHYSICAL_PRIOR_WEIGHT)
+                    .and_then(|w| w.parse::<f64>().ok())
+            });
+            let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
+            let fit = physically_consistent(names, &prior, map, &params.values, &params.covariance, &bounds, weight)?;
+            let how = format!(
+                "fitted again: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, smallest pseudo-inertia eigenvalues {:?}",
+                fit.chi2,
+                params.names.len(),
+                fit.prior_weight,
+                fit.chosen.as_ref().map(|c| format!(" ({c})")).unwrap_or_default(),
+                fit.min_eigen
+            );
+            Consistent {
+                standard: fit.standard,
+                said: format!("physically consistent standard parameters {how}"),
+                how,
+            }
+        }
+    })
+}
+
 /// Physically consistent standard parameters closest to the a-priori model
 /// that reproduce the identified base parameters, written as URDF, MJCF
 /// and a sidecar with everything neither can hold.
@@ -115,63 +201,9 @@ pub fn export(args: &Export) -> Result<Exported> {
         .get(metadata::PHYSICAL_STANDARD)
         .and_then(|s| serde_json::from_str(s).ok())
         .filter(|v: &Vec<f64>| v.len() == names.len());
-    // The estimate's own consistent model, unless another prior weight is
-    // asked for (or the table predates it being stored): then fitted again.
-    let fit = match (stored, args.prior_weight) {
-        (Some(standard), None) => Consistent {
-            standard,
-            how: params.metadata[metadata::PHYSICAL].clone(),
-            said: format!(
-                "the estimate's physically consistent standard parameters ({})",
-                metadata::PHYSICAL_STANDARD
-            ),
-        },
-        (_, weight) => {
-            let prior = standard_parameters(&base.model, base.terms);
-            let weight = weight.or_else(|| {
-                params
-                    .metadata
-                    .get(metadata::PHYSICAL_PRIOR_WEIGHT)
-                    .and_then(|w| w.parse::<f64>().ok())
-            });
-            let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
-            let fit = physically_consistent(&names, &prior, map, &params.values, &params.covariance, &bounds, weight)?;
-            let how = format!(
-                "fitted again: χ² = {:.3} against the estimate's covariance ({} base parameters), prior weight {:e}{}, smallest pseudo-inertia eigenvalues {:?}",
-                fit.chi2,
-                params.names.len(),
-                fit.prior_weight,
-                fit.chosen.as_ref().map(|c| format!(" ({c})")).unwrap_or_default(),
-                fit.min_eigen
-            );
-            Consistent {
-                standard: fit.standard,
-                said: format!("physically consistent standard parameters {how}"),
-                how,
-            }
-        }
-    };
+    let fit = consistent(&params, &base, map, &names, stored, args.prior_weight)?;
     let identified = with_standard_parameters(&base.model, base.terms, &fit.standard);
-    if let Some((l, j)) = identified
-        .links
-        .iter()
-        .zip(&identified.joints)
-        .find(|(l, _)| !(l.mass > 0.0))
-    {
-        return Err(ExportError::Massless {
-            joint: j.name.clone(),
-            mass: l.mass,
-        });
-    }
-    // Bodies a simulator takes: finite, of a robot's size, inertias that
-    // satisfy the triangle inequality (a table holding ixx = 1e30 wrote a
-    // URDF that broke it).
-    if let Err(p) = identified.validate() {
-        return Err(ExportError::Impossible {
-            parameters: args.parameters.clone(),
-            problem: p.to_string(),
-        });
-    }
+    simulable(&identified, &args.parameters)?;
     let prior = standard_parameters(&base.model, base.terms);
     let bounds = robotid_stages::estimation::link_bounds(&base.model, &prior);
     let outside = outside_bounds(&identified, &bounds);
@@ -219,16 +251,7 @@ pub fn export(args: &Export) -> Result<Exported> {
             }
         }
     }
-    for (path, out) in &files {
-        match out {
-            Output::Text(text) => write_atomic(path, |w| {
-                use std::io::Write;
-                w.write_all(text.as_bytes())
-                    .map_err(|e| robotid_stages::Error::io(path, e))
-            })?,
-            Output::Table(batch) => write_parquet(path, batch)?,
-        }
-    }
+    write_outputs(&files)?;
     Ok(Exported {
         how: fit.said,
         warnings,

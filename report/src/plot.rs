@@ -192,6 +192,75 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
     .map_err(|e| picture(&e))
 }
 
+/// Each joint's noise standard deviation of the average, position and
+/// torque, against time in the period.
+fn noise_figure(path: &Path, noise: &NoiseTable, m: &PeriodMean) -> Result<()> {
+    figure(path, noise.joints.len(), 2, |areas| {
+        for j in 0..noise.joints.len() {
+            for (k, (v, what, unit)) in [
+                (&noise.var_q[j], "position", "rad"),
+                (&noise.var_torque[j], "torque", "N·m"),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let pts = m.time.iter().zip(v.iter()).map(|(t, v)| (*t, v.sqrt())).collect();
+                chart(
+                    &areas[2 * j + k],
+                    &format!("{} {what}: noise std of the average", noise.joints[j]),
+                    "time in period [s]",
+                    unit,
+                    &[(pts, ORANGE, "")],
+                    &[],
+                )?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// Each joint's recorded periods (up to 8) and their average, position
+/// and torque, against time in the period.
+fn signals_figure(path: &Path, p: &Periods, m: &PeriodMean) -> Result<()> {
+    let n = p.samples_per_period;
+    let nj = p.joints.len();
+    let t: Vec<f64> = m.time.clone();
+    figure(path, nj, 2, |areas| {
+        for j in 0..nj {
+            for (k, (col, avg, what, unit)) in [
+                (&p.q[j], &m.q[j], "position", "rad"),
+                (&p.torque[j], &m.torque[j], "torque", "N·m"),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let mut series: Vec<Series> = (0..p.periods.min(8))
+                    .map(|r| {
+                        (
+                            t.iter().zip(&col[r * n..(r + 1) * n]).map(|(a, b)| (*a, *b)).collect(),
+                            GREY,
+                            "",
+                        )
+                    })
+                    .collect();
+                series.push((t.iter().zip(avg).map(|(a, b)| (*a, *b)).collect(), BLACK, "average"));
+                if let Some(l) = series.first_mut() {
+                    l.2 = "recorded periods";
+                }
+                chart(
+                    &areas[2 * j + k],
+                    &format!("{} {what}", p.joints[j]),
+                    "time in period [s]",
+                    unit,
+                    &series,
+                    &[],
+                )?;
+            }
+        }
+        Ok(())
+    })
+}
+
 /// Writes the pictures of one recording into `dir`; returns the files.
 pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
@@ -200,44 +269,9 @@ pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>> {
     })?;
     let mut files = Vec::new();
     if let (Some(p), Some(m)) = (inp.periods, inp.mean) {
-        let n = p.samples_per_period;
         let nj = p.joints.len();
-        let t: Vec<f64> = m.time.clone();
         let path = dir.join("signals.svg");
-        figure(&path, nj, 2, |areas| {
-            for j in 0..nj {
-                for (k, (col, avg, what, unit)) in [
-                    (&p.q[j], &m.q[j], "position", "rad"),
-                    (&p.torque[j], &m.torque[j], "torque", "N·m"),
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    let mut series: Vec<Series> = (0..p.periods.min(8))
-                        .map(|r| {
-                            (
-                                t.iter().zip(&col[r * n..(r + 1) * n]).map(|(a, b)| (*a, *b)).collect(),
-                                GREY,
-                                "",
-                            )
-                        })
-                        .collect();
-                    series.push((t.iter().zip(avg).map(|(a, b)| (*a, *b)).collect(), BLACK, "average"));
-                    if let Some(l) = series.first_mut() {
-                        l.2 = "recorded periods";
-                    }
-                    chart(
-                        &areas[2 * j + k],
-                        &format!("{} {what}", p.joints[j]),
-                        "time in period [s]",
-                        unit,
-                        &series,
-                        &[],
-                    )?;
-                }
-            }
-            Ok(())
-        })?;
+        signals_figure(&path, p, m)?;
         files.push(path);
 
         let path = dir.join("spectrum.svg");
@@ -276,30 +310,8 @@ pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>> {
         files.push(path);
     }
     if let (Some(noise), Some(m)) = (inp.noise, inp.mean) {
-        let nj = noise.joints.len();
         let path = dir.join("noise.svg");
-        figure(&path, nj, 2, |areas| {
-            for j in 0..nj {
-                for (k, (v, what, unit)) in [
-                    (&noise.var_q[j], "position", "rad"),
-                    (&noise.var_torque[j], "torque", "N·m"),
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    let pts = m.time.iter().zip(v.iter()).map(|(t, v)| (*t, v.sqrt())).collect();
-                    chart(
-                        &areas[2 * j + k],
-                        &format!("{} {what}: noise std of the average", noise.joints[j]),
-                        "time in period [s]",
-                        unit,
-                        &[(pts, ORANGE, "")],
-                        &[],
-                    )?;
-                }
-            }
-            Ok(())
-        })?;
+        noise_figure(&path, noise, m)?;
         files.push(path);
     }
     if let Some(kin) = inp.kinematics {

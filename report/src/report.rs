@@ -11,7 +11,7 @@ use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, residues_by_joint, torques_svg};
 use crate::validation::{per_recording, table};
-use robotid::validation::{borrow_floor, residues};
+use robotid::validation::{borrow_floor, residues, JointResidue};
 
 /// Escapes text for HTML.
 fn esc(s: &str) -> String {
@@ -171,6 +171,12 @@ pub fn rounded(value: f64, std: f64) -> (String, String) {
 /// One joint's verdict on one data set: joint, residue / noise floor, verdict.
 type VerdictCell = (String, Option<f64>, String);
 
+/// A data set's title and its cells, joint by joint.
+type VerdictColumn = (String, Vec<VerdictCell>);
+
+/// A data set's predicted torques and per-joint residues.
+type SetStats = (DVector<f64>, Vec<JointResidue>);
+
 /// A verdict as a coloured badge.
 fn badge(verdict: &str) -> String {
     let class = match verdict {
@@ -201,28 +207,12 @@ fn readable(json: &str) -> String {
 
 /// The report's HTML. `expressions` are the parameters' regrouping
 /// expressions (the table's `expression` column).
-pub fn html(
-    params: &Parameters,
-    expressions: &[String],
-    source: &str,
-    sets: &[DataSet],
-    physical: Option<&Physical>,
-) -> Result<String> {
-    let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
-    let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
-    let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
-    let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
-    let mut h = String::new();
-    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk,.mid{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.mid{background:#ef6c00}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}.mi,.mf{height:7px;margin:1px 0}.mi{background:#1f77b4}.mf{background:#aaa}</style></head><body>\n");
-    h.push_str(&format!(
-        "<h1>Identification of <code>{}</code></h1>\n",
-        esc(md(metadata::ROBOT))
-    ));
-    // The verdicts first: is the model adequate where it was fitted, and
-    // on every data set shown?
-    h.push_str("<h2>Verdicts</h2>\n");
+/// The verdict table's columns: per data set (the fit's own first, from
+/// the estimate's metadata) and joint, the residue over the noise floor
+/// and the verdict; each data set's prediction and residues.
+fn verdict_columns(params: &Parameters, sets: &[DataSet]) -> Result<(Vec<VerdictColumn>, Vec<SetStats>)> {
     // Per data set and joint: (residue / noise floor, verdict).
-    let mut columns: Vec<(String, Vec<VerdictCell>)> = Vec::new();
+    let mut columns: Vec<VerdictColumn> = Vec::new();
     if let Some(found) = params
         .metadata
         .get(metadata::ADEQUACY)
@@ -268,6 +258,19 @@ pub fn html(
         ));
         set_stats.push((predicted, stats));
     }
+    Ok((columns, set_stats))
+}
+
+/// The verdicts table: per joint, the fit's residue over the noise floor
+/// and each data set's, with the relative errors (of the physically
+/// consistent estimate too); each data set's prediction and residues.
+fn verdicts_html(
+    h: &mut String,
+    params: &Parameters,
+    sets: &[DataSet],
+    physical: Option<&Physical>,
+) -> Result<Vec<SetStats>> {
+    let (columns, set_stats) = verdict_columns(params, sets)?;
     // One number per data set: √(Σ residue² / Σ torque²) over all rows.
     let relative: Vec<f64> = sets
         .iter()
@@ -320,18 +323,11 @@ pub fn html(
         h.push_str("</tr>\n");
     }
     h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A data set that does not repeat is judged against the excitation's floor (per sample, through its chain's low-pass): \"over the excitation's floor\" is model error or the chain's own, which that floor cannot tell apart.</p>\n");
-    if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
-        h.push_str(&bodies_html(&ph.bodies));
-    }
-    for (key, what) in [
-        (metadata::WIDENED, "Intervals widened"),
-        (metadata::IMPOSSIBLE, "Physically impossible values"),
-        (metadata::OUTLIERS, "Recordings that fit far worse than the others"),
-    ] {
-        if let Some(v) = params.metadata.get(key).filter(|v| !v.is_empty()) {
-            h.push_str(&format!("<p class=\"warn\"><b>{what}:</b> {}</p>\n", esc(v)));
-        }
-    }
+    Ok(set_stats)
+}
+
+/// The parameters, rounded to their uncertainty, with their intervals.
+fn parameters_html(h: &mut String, params: &Parameters, expressions: &[String], level: f64, t: f64) {
     h.push_str("<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th>");
     h.push_str(&format!("<th>{:.1} % interval</th><th>unit</th></tr>\n", 100.0 * level));
     for i in 0..params.names.len() {
@@ -346,6 +342,11 @@ pub fn html(
             esc(&params.units[i])
         ));
     }
+}
+
+/// How the estimate was made, from its metadata.
+fn made_html(h: &mut String, params: &Parameters, source: &str, dof: usize, level: f64, t: f64) {
+    let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
     h.push_str("</table>\n<h2>How it was made</h2>\n<table>\n");
     for (k, v) in [
         ("parameters", source.to_string()),
@@ -383,6 +384,43 @@ pub fn html(
             h.push_str(&format!("<tr><th>{k}</th><td class=\"l\">{}</td></tr>\n", esc(&v)));
         }
     }
+}
+
+pub fn html(
+    params: &Parameters,
+    expressions: &[String],
+    source: &str,
+    sets: &[DataSet],
+    physical: Option<&Physical>,
+) -> Result<String> {
+    let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
+    let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
+    let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
+    let t = robotid_stages::estimation::student_t_quantile(0.5 + level / 2.0, dof);
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>robotid identification</title>\n<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td.l{text-align:left}td{white-space:nowrap}td.l{white-space:normal}svg{max-width:100%;height:auto}.note{color:#555}.ok,.bad,.unk,.mid{padding:1px 8px;border-radius:8px;color:#fff;white-space:nowrap}.ok{background:#2e7d32}.bad{background:#c62828}.unk{background:#757575}.mid{background:#ef6c00}.warn{border-left:4px solid #c62828;padding:4px 10px;background:#fdecea}.mi,.mf{height:7px;margin:1px 0}.mi{background:#1f77b4}.mf{background:#aaa}</style></head><body>\n");
+    h.push_str(&format!(
+        "<h1>Identification of <code>{}</code></h1>\n",
+        esc(md(metadata::ROBOT))
+    ));
+    // The verdicts first: is the model adequate where it was fitted, and
+    // on every data set shown?
+    h.push_str("<h2>Verdicts</h2>\n");
+    let set_stats = verdicts_html(&mut h, params, sets, physical)?;
+    if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
+        h.push_str(&bodies_html(&ph.bodies));
+    }
+    for (key, what) in [
+        (metadata::WIDENED, "Intervals widened"),
+        (metadata::IMPOSSIBLE, "Physically impossible values"),
+        (metadata::OUTLIERS, "Recordings that fit far worse than the others"),
+    ] {
+        if let Some(v) = params.metadata.get(key).filter(|v| !v.is_empty()) {
+            h.push_str(&format!("<p class=\"warn\"><b>{what}:</b> {}</p>\n", esc(v)));
+        }
+    }
+    parameters_html(&mut h, params, expressions, level, t);
+    made_html(&mut h, params, source, dof, level, t);
     h.push_str("</table>\n");
     for (set, (predicted, stats)) in sets.iter().zip(&set_stats) {
         let sys = set.sys;
