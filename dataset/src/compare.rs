@@ -298,6 +298,122 @@ fn plain(v: &AnyValue) -> String {
     }
 }
 
+/// The rows of the full join present on one side only: counted into `t`,
+/// a few keys kept as examples.
+fn one_side_only(joined: &DataFrame, keys: &[String], t: &mut TableDiff) -> Result<()> {
+    let present_a = joined.column(&tag("a", ""))?.is_not_null();
+    let present_b = joined.column(&tag("b", ""))?.is_not_null();
+    for (i, (pa, pb)) in present_a.iter().zip(present_b.iter()).enumerate() {
+        let (pa, pb) = (pa.unwrap_or(false), pb.unwrap_or(false));
+        let slot = match (pa, pb) {
+            (true, false) => &mut t.only_a,
+            (false, true) => &mut t.only_b,
+            _ => continue,
+        };
+        slot.0 += 1;
+        if slot.1.len() < EXAMPLES {
+            slot.1.push(key_text(joined, keys, i)?);
+        }
+    }
+    Ok(())
+}
+
+/// Per cell of column `c`, the ratio of its difference to what is allowed
+/// (0 for equal cells, ∞ where a NaN or null meets a value).
+fn ratio_of(c: &str, numeric: bool, tol: &Tolerances) -> Expr {
+    let (a, b) = (col(tag("a", c)), col(tag("b", c)));
+    let inf = lit(f64::INFINITY);
+    if numeric {
+        let (rtol, atol) = tol.for_column(c);
+        let (a, b) = (a.cast(DataType::Float64), b.cast(DataType::Float64));
+        let same = a
+            .clone()
+            .eq_missing(b.clone())
+            .or(a.clone().is_nan().and(b.clone().is_nan()))
+            .fill_null(lit(false));
+        let allowed = lit(atol) + lit(rtol) * b.clone().abs();
+        when(same)
+            .then(lit(0.0))
+            .otherwise(((a - b).abs() / allowed).fill_nan(inf.clone()).fill_null(inf.clone()))
+    } else {
+        when(a.eq_missing(b)).then(lit(0.0)).otherwise(inf.clone())
+    }
+}
+
+/// The columns of both sides to compare (not keys, selected by `tol`, of
+/// one type on both), and whether each is numeric; columns in one side
+/// only or of two types into `problems`.
+fn comparable(
+    sa: &Schema,
+    sb: &Schema,
+    keys: &[String],
+    tol: &Tolerances,
+    problems: &mut Vec<String>,
+) -> Vec<(String, bool)> {
+    for name in sa.iter_names() {
+        if !sb.contains(name) {
+            problems.push(format!("column `{name}` only in A"));
+        }
+    }
+    for name in sb.iter_names() {
+        if !sa.contains(name) {
+            problems.push(format!("column `{name}` only in B (the reference)"));
+        }
+    }
+    let mut compared = Vec::new();
+    for (name, dtype) in sb.iter() {
+        let name = name.as_str();
+        if keys.iter().any(|k| k == name) || !tol.selected(name) {
+            continue;
+        }
+        let Some(dtype_a) = sa.get(name) else { continue };
+        if dtype_a != dtype {
+            problems.push(format!("column `{name}`: type {dtype_a}, reference has {dtype}"));
+            continue;
+        }
+        compared.push((name.to_string(), dtype.is_primitive_numeric()));
+    }
+    compared
+}
+
+/// Each compared column's difference from the per-column statistics `s`
+/// (`d`, `o`, `m`, `w` by index), with its worst cell's keys and values.
+fn column_diffs(
+    s: &DataFrame,
+    both: &DataFrame,
+    keys: &[String],
+    compared: &[(String, bool)],
+    tol: &Tolerances,
+) -> Result<Vec<ColumnDiff>> {
+    let get_usize = |name: &str| -> PolarsResult<usize> {
+        Ok(s.column(name)?.cast(&DataType::UInt64)?.u64()?.get(0).unwrap_or(0) as usize)
+    };
+    let mut diffs = Vec::new();
+    for (k, (c, _)) in compared.iter().enumerate() {
+        let (rtol, atol) = tol.for_column(c);
+        let differing = get_usize(&format!("d{k}"))?;
+        let mut diff = ColumnDiff {
+            column: c.clone(),
+            rtol,
+            atol,
+            differing,
+            over: get_usize(&format!("o{k}"))?,
+            worst_ratio: s.column(&format!("m{k}"))?.f64()?.get(0).unwrap_or(0.0),
+            worst_key: String::new(),
+            a: String::new(),
+            b: String::new(),
+        };
+        if differing > 0 {
+            let w = get_usize(&format!("w{k}"))?;
+            diff.worst_key = key_text(both, keys, w)?;
+            diff.a = plain(&both.column(&tag("a", c))?.get(w)?);
+            diff.b = plain(&both.column(&tag("b", c))?.get(w)?);
+        }
+        diffs.push(diff);
+    }
+    Ok(diffs)
+}
+
 fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
     let (da, kind_a) = read(pa)?;
     let (db, kind_b) = read(pb)?;
@@ -317,16 +433,6 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
         }
     }
     let (sa, sb) = (da.schema().clone(), db.schema().clone());
-    for name in sa.iter_names() {
-        if !sb.contains(name) {
-            t.problems.push(format!("column `{name}` only in A"));
-        }
-    }
-    for name in sb.iter_names() {
-        if !sa.contains(name) {
-            t.problems.push(format!("column `{name}` only in B (the reference)"));
-        }
-    }
     let mut keys: Vec<String> = keys_of(kind.as_deref())
         .iter()
         .filter(|k| sa.contains(k) && sb.contains(k))
@@ -339,20 +445,7 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
         db = db.with_row_index(name.into(), None)?;
         keys = vec![name.to_string()];
     }
-    let mut compared = Vec::new();
-    for (name, dtype) in sb.iter() {
-        let name = name.as_str();
-        if keys.iter().any(|k| k == name) || !tol.selected(name) {
-            continue;
-        }
-        let Some(dtype_a) = sa.get(name) else { continue };
-        if dtype_a != dtype {
-            t.problems
-                .push(format!("column `{name}`: type {dtype_a}, reference has {dtype}"));
-            continue;
-        }
-        compared.push((name.to_string(), dtype.is_primitive_numeric()));
-    }
+    let compared = comparable(&sa, &sb, &keys, tol, &mut t.problems);
     let side = |df: &DataFrame, s: &str| -> LazyFrame {
         let mut exprs: Vec<Expr> = keys.iter().map(|k| col(k.as_str())).collect();
         exprs.extend(compared.iter().map(|(c, _)| col(c.as_str()).alias(tag(s, c))));
@@ -369,20 +462,7 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
         )
         .sort(keys.clone(), SortMultipleOptions::default().with_maintain_order(true))
         .collect()?;
-    let present_a = joined.column(&tag("a", ""))?.is_not_null();
-    let present_b = joined.column(&tag("b", ""))?.is_not_null();
-    for (i, (pa, pb)) in present_a.iter().zip(present_b.iter()).enumerate() {
-        let (pa, pb) = (pa.unwrap_or(false), pb.unwrap_or(false));
-        let slot = match (pa, pb) {
-            (true, false) => &mut t.only_a,
-            (false, true) => &mut t.only_b,
-            _ => continue,
-        };
-        slot.0 += 1;
-        if slot.1.len() < EXAMPLES {
-            slot.1.push(key_text(&joined, &keys, i)?);
-        }
-    }
+    one_side_only(&joined, &keys, &mut t)?;
     let both = joined
         .lazy()
         .filter(col(tag("a", "")).is_not_null().and(col(tag("b", "")).is_not_null()))
@@ -392,58 +472,16 @@ fn compare_table(pa: &Path, pb: &Path, tol: &Tolerances) -> Result<TableDiff> {
     if compared.is_empty() || t.rows == 0 {
         return Ok(t);
     }
-    // Per column: the ratio of each cell's difference to what is allowed
-    // (0 for equal cells, ∞ where a NaN or null meets a value).
-    let inf = lit(f64::INFINITY);
     let mut stats = Vec::new();
     for (k, (c, numeric)) in compared.iter().enumerate() {
-        let (a, b) = (col(tag("a", c)), col(tag("b", c)));
-        let ratio = if *numeric {
-            let (rtol, atol) = tol.for_column(c);
-            let (a, b) = (a.cast(DataType::Float64), b.cast(DataType::Float64));
-            let same = a
-                .clone()
-                .eq_missing(b.clone())
-                .or(a.clone().is_nan().and(b.clone().is_nan()))
-                .fill_null(lit(false));
-            let allowed = lit(atol) + lit(rtol) * b.clone().abs();
-            when(same)
-                .then(lit(0.0))
-                .otherwise(((a - b).abs() / allowed).fill_nan(inf.clone()).fill_null(inf.clone()))
-        } else {
-            when(a.eq_missing(b)).then(lit(0.0)).otherwise(inf.clone())
-        };
+        let ratio = ratio_of(c, *numeric, tol);
         stats.push(ratio.clone().gt(lit(0.0)).sum().alias(format!("d{k}")));
         stats.push(ratio.clone().gt(lit(1.0)).sum().alias(format!("o{k}")));
         stats.push(ratio.clone().max().alias(format!("m{k}")));
         stats.push(ratio.arg_max().alias(format!("w{k}")));
     }
     let s = both.clone().lazy().select(stats).collect()?;
-    let get_usize = |name: &str| -> PolarsResult<usize> {
-        Ok(s.column(name)?.cast(&DataType::UInt64)?.u64()?.get(0).unwrap_or(0) as usize)
-    };
-    for (k, (c, _)) in compared.iter().enumerate() {
-        let (rtol, atol) = tol.for_column(c);
-        let differing = get_usize(&format!("d{k}"))?;
-        let mut diff = ColumnDiff {
-            column: c.clone(),
-            rtol,
-            atol,
-            differing,
-            over: get_usize(&format!("o{k}"))?,
-            worst_ratio: s.column(&format!("m{k}"))?.f64()?.get(0).unwrap_or(0.0),
-            worst_key: String::new(),
-            a: String::new(),
-            b: String::new(),
-        };
-        if differing > 0 {
-            let w = get_usize(&format!("w{k}"))?;
-            diff.worst_key = key_text(&both, &keys, w)?;
-            diff.a = plain(&both.column(&tag("a", c))?.get(w)?);
-            diff.b = plain(&both.column(&tag("b", c))?.get(w)?);
-        }
-        t.columns.push(diff);
-    }
+    t.columns = column_diffs(&s, &both, &keys, &compared, tol)?;
     t.columns
         .sort_by(|x, y| y.worst_ratio.total_cmp(&x.worst_ratio).then(x.column.cmp(&y.column)));
     Ok(t)

@@ -112,7 +112,56 @@ fn index_of(names: &mut Vec<String>, name: &str) -> usize {
     }
 }
 
+/// A regressor table's per-period torques, one column per period (None
+/// with fewer than two).
+fn period_torques(label: &str, t: &RecordBatch) -> Result<Option<DMatrix<f64>>> {
+    let pcols = columns_of(&t.schema(), PERIOD_TORQUE);
+    Ok(if pcols.len() >= 2 {
+        let mut m = DMatrix::zeros(t.num_rows(), pcols.len());
+        for (k, &c) in pcols.iter().enumerate() {
+            let col = t.column(c).as_any().downcast_ref::<Float64Array>().ok_or_else(|| {
+                Error::mismatch(format!("{label}: period torque column {c}"), "Float64", "another type")
+            })?;
+            for i in 0..t.num_rows() {
+                m[(i, k)] = col.value(i);
+            }
+        }
+        Some(m)
+    } else {
+        None
+    })
+}
+
 impl System {
+    /// Table `t` (recording `r`, `label`) into rows `at..` of A, b and
+    /// their row labels.
+    fn stack_table(&mut self, r: usize, at: usize, label: &str, t: &RecordBatch) -> Result<()> {
+        let b = f64_col(label, t, "torque")?;
+        let var = f64_col(label, t, "torque_var")?;
+        let joint = str_col(label, t, "joint")?;
+        let time = f64_col(label, t, "time")?;
+        let sample = t
+            .column_by_name("sample")
+            .and_then(|c| c.as_any().downcast_ref::<Int64Array>())
+            .ok_or_else(|| Error::mismatch(format!("{label}: column `sample`"), "an Int64 column", "none"))?;
+        for (j, name) in self.names.clone().iter().enumerate() {
+            let c = f64_col(label, t, name)?;
+            for i in 0..t.num_rows() {
+                self.a[(at + i, j)] = c.value(i);
+            }
+        }
+        for i in 0..t.num_rows() {
+            self.b[at + i] = b.value(i);
+            self.var[at + i] = if var.is_null(i) { f64::NAN } else { var.value(i) };
+            self.recording.push(r);
+            self.sample.push(sample.value(i));
+            self.time.push(time.value(i));
+            let ji = index_of(&mut self.joints, joint.value(i));
+            self.joint.push(ji);
+        }
+        Ok(())
+    }
+
     /// Stacks `regressor` tables (one per recording) with the same
     /// parameter columns.
     pub fn from_tables(tables: &[(String, RecordBatch)]) -> Result<System> {
@@ -173,44 +222,8 @@ impl System {
             }
             sys.recordings.push(label.clone());
             sys.offsets.push(at);
-            let pcols = columns_of(&s, PERIOD_TORQUE);
-            sys.periods.push(if pcols.len() >= 2 {
-                let mut m = DMatrix::zeros(t.num_rows(), pcols.len());
-                for (k, &c) in pcols.iter().enumerate() {
-                    let col = t.column(c).as_any().downcast_ref::<Float64Array>().ok_or_else(|| {
-                        Error::mismatch(format!("{label}: period torque column {c}"), "Float64", "another type")
-                    })?;
-                    for i in 0..t.num_rows() {
-                        m[(i, k)] = col.value(i);
-                    }
-                }
-                Some(m)
-            } else {
-                None
-            });
-            let b = f64_col(label, t, "torque")?;
-            let var = f64_col(label, t, "torque_var")?;
-            let joint = str_col(label, t, "joint")?;
-            let time = f64_col(label, t, "time")?;
-            let sample = t
-                .column_by_name("sample")
-                .and_then(|c| c.as_any().downcast_ref::<Int64Array>())
-                .ok_or_else(|| Error::mismatch(format!("{label}: column `sample`"), "an Int64 column", "none"))?;
-            for (j, name) in sys.names.clone().iter().enumerate() {
-                let c = f64_col(label, t, name)?;
-                for i in 0..t.num_rows() {
-                    sys.a[(at + i, j)] = c.value(i);
-                }
-            }
-            for i in 0..t.num_rows() {
-                sys.b[at + i] = b.value(i);
-                sys.var[at + i] = if var.is_null(i) { f64::NAN } else { var.value(i) };
-                sys.recording.push(r);
-                sys.sample.push(sample.value(i));
-                sys.time.push(time.value(i));
-                let ji = index_of(&mut sys.joints, joint.value(i));
-                sys.joint.push(ji);
-            }
+            sys.periods.push(period_torques(label, t)?);
+            sys.stack_table(r, at, label, t)?;
             at += t.num_rows();
         }
         // Projected tables (closed-loop Projection Method) hold fewer
