@@ -19,126 +19,150 @@ pub(crate) struct Mapping {
     pub effort_unit: Option<&'static str>,
 }
 
-pub(crate) fn resolve(header: &[String], cfg: &ReadConfig, joints: &[String], source: &str) -> Result<Mapping> {
-    let has = |n: &str| header.iter().any(|h| h == n);
-    let headerless = header.first().is_some_and(|h| h.starts_with(HEADERLESS));
-    let missing = |col: &str| Error::Data {
-        source_name: source.to_string(),
-        channel: col.to_string(),
-        sample: None,
-        msg: if headerless {
+/// A log's column names, its joints and its name, for resolving channels.
+struct Header<'a> {
+    header: &'a [String],
+    joints: &'a [String],
+    source: &'a str,
+}
+
+impl Header<'_> {
+    fn has(&self, n: &str) -> bool {
+        self.header.iter().any(|h| h == n)
+    }
+
+    fn err(&self, kind: &str, msg: String) -> Error {
+        Error::Data {
+            source_name: self.source.to_string(),
+            channel: kind.to_string(),
+            sample: None,
+            msg,
+        }
+    }
+
+    /// A column the log does not have, and what it has.
+    fn missing(&self, col: &str) -> Error {
+        let header = self.header;
+        let msg = if header.first().is_some_and(|h| h.starts_with(HEADERLESS)) {
             format!(
                 "missing column: the log has no header line ({} columns of numbers); name columns by 0-based number, e.g. `time = {{ column = 0, unit = \"s\" }}`, `position = {{ column = [1, 2, 3], unit = \"rad\" }}`",
                 header.len()
             )
         } else {
             format!("missing column; the log has: {}", header.join(", "))
-        },
-    };
-    let err = |kind: &str, msg: String| Error::Data {
-        source_name: source.to_string(),
-        channel: kind.to_string(),
-        sample: None,
-        msg,
-    };
-    let by_index = |kind: &str, i: usize| -> Result<String> {
-        header.get(i).cloned().ok_or_else(|| {
-            err(
+        };
+        self.err(col, msg)
+    }
+
+    fn by_index(&self, kind: &str, i: usize) -> Result<String> {
+        self.header.get(i).cloned().ok_or_else(|| {
+            self.err(
                 kind,
                 format!(
                     "column {i} does not exist: the log has {} columns (0 to {})",
-                    header.len(),
-                    header.len().saturating_sub(1)
+                    self.header.len(),
+                    self.header.len().saturating_sub(1)
                 ),
             )
         })
-    };
-    let one = |kind: &str, c: &OneColumn, j: usize, joint: &str| -> Result<String> {
+    }
+
+    fn one(&self, kind: &str, c: &OneColumn, j: usize, joint: &str) -> Result<String> {
         match c {
-            OneColumn::Index(i) => by_index(kind, *i),
+            OneColumn::Index(i) => self.by_index(kind, *i),
             OneColumn::Name(t) => Ok(column_name(t, j, joint)),
         }
-    };
-    // The columns of a per-joint channel, or None when it is not given.
-    let per_joint = |ch: &Option<super::Channel>, kind: &str| -> Result<Option<Vec<String>>> {
+    }
+
+    /// The columns of a per-joint channel, or None when it is not given.
+    fn per_joint(&self, ch: &Option<super::Channel>, kind: &str) -> Result<Option<Vec<String>>> {
+        let joints = self.joints;
         let Some(c) = ch else { return Ok(None) };
         match (&c.column, &c.topic) {
             (Some(Column::Each(list)), _) => {
                 if list.len() != joints.len() {
-                    return Err(err(
+                    return Err(self.err(
                         kind,
                         format!("lists {} columns for {} joints", list.len(), joints.len()),
                     ));
                 }
                 list.iter()
                     .enumerate()
-                    .map(|(j, c)| one(kind, c, j, &joints[j]))
+                    .map(|(j, c)| self.one(kind, c, j, &joints[j]))
                     .collect::<Result<Vec<_>>>()
                     .map(Some)
             }
-            (Some(Column::Index(i)), _) if joints.len() == 1 => Ok(Some(vec![by_index(kind, *i)?])),
-            (Some(Column::Index(_)), _) => Err(err(
+            (Some(Column::Index(i)), _) if joints.len() == 1 => Ok(Some(vec![self.by_index(kind, *i)?])),
+            (Some(Column::Index(_)), _) => Err(self.err(
                 kind,
                 format!(
                     "one column number for {} joints: give one per joint, e.g. `column = [1, 2, 3]`",
                     joints.len()
                 ),
             )),
-            (Some(Column::Name(t)), _) => Ok(Some(
-                joints
-                    .iter()
-                    .enumerate()
-                    .map(|(j, name)| column_name(t, j, name))
-                    .collect(),
-            )),
-            (None, Some(_)) => Err(err(
+            (Some(Column::Name(t)), _) => Ok(Some(self.names(t))),
+            (None, Some(_)) => Err(self.err(
                 kind,
                 "`topic` applies to MCAP logs; give `column` for text and Parquet logs".into(),
             )),
             (None, None) => Ok(None),
         }
-    };
-    let require = |cols: Vec<String>| -> Result<Vec<String>> {
-        match cols.iter().find(|c| !has(c)) {
-            Some(c) => Err(missing(c)),
+    }
+
+    /// `cols`, when the log has every one.
+    fn require(&self, cols: Vec<String>) -> Result<Vec<String>> {
+        match cols.iter().find(|c| !self.has(c)) {
+            Some(c) => Err(self.missing(c)),
             None => Ok(cols),
         }
-    };
-    let names = |template: &str| -> Vec<String> {
-        joints
+    }
+
+    /// A template's column per joint.
+    fn names(&self, template: &str) -> Vec<String> {
+        self.joints
             .iter()
             .enumerate()
             .map(|(j, name)| column_name(template, j, name))
             .collect()
-    };
+    }
+}
+
+/// The column each channel is read from: as `cfg` says, else the defaults
+/// (`time`, `q_{joint}`, `current_{joint}` or else `torque_{joint}`, and
+/// `ref_{joint}` when the log has them all), each checked to exist.
+pub(crate) fn resolve(header: &[String], cfg: &ReadConfig, joints: &[String], source: &str) -> Result<Mapping> {
+    let h = Header { header, joints, source };
     let time = match cfg.time.as_ref().and_then(|c| c.column.as_ref()) {
-        Some(Column::Index(i)) => by_index("time", *i)?,
+        Some(Column::Index(i)) => h.by_index("time", *i)?,
         Some(Column::Name(n)) => n.clone(),
-        Some(Column::Each(_)) => return Err(err("time", "is one column, not a list".into())),
+        Some(Column::Each(_)) => return Err(h.err("time", "is one column, not a list".into())),
         None => "time".into(),
     };
-    if !has(&time) {
-        return Err(missing(&time));
+    if !h.has(&time) {
+        return Err(h.missing(&time));
     }
-    let position = require(per_joint(&cfg.position, "position")?.unwrap_or_else(|| names("q_{joint}")))?;
-    let (effort, effort_unit) = match per_joint(&cfg.effort, "effort")? {
-        Some(cols) => (require(cols)?, None),
+    let position = h.require(
+        h.per_joint(&cfg.position, "position")?
+            .unwrap_or_else(|| h.names("q_{joint}")),
+    )?;
+    let (effort, effort_unit) = match h.per_joint(&cfg.effort, "effort")? {
+        Some(cols) => (h.require(cols)?, None),
         None => {
             // Currents if the log has any, else torques; the error names
             // the first missing column of the set in use.
-            let current = names("current_{joint}");
-            if current.iter().any(|c| has(c)) {
-                (require(current)?, Some("A"))
+            let current = h.names("current_{joint}");
+            if current.iter().any(|c| h.has(c)) {
+                (h.require(current)?, Some("A"))
             } else {
-                (require(names("torque_{joint}"))?, Some("N*m"))
+                (h.require(h.names("torque_{joint}"))?, Some("N*m"))
             }
         }
     };
-    let reference = match per_joint(&cfg.reference, "reference")? {
-        Some(cols) => Some(require(cols)?),
+    let reference = match h.per_joint(&cfg.reference, "reference")? {
+        Some(cols) => Some(h.require(cols)?),
         None => {
-            let r = names("ref_{joint}");
-            r.iter().all(|c| has(c)).then_some(r)
+            let r = h.names("ref_{joint}");
+            r.iter().all(|c| h.has(c)).then_some(r)
         }
     };
     Ok(Mapping {
