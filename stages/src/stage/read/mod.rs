@@ -443,8 +443,7 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             time.iter_mut().for_each(|v| *v -= t0);
         }
     }
-    let channels = [(&position, &names[0]), (&effort, &names[1])];
-    check_channels(&units, &time, &channels, reference.as_ref().map(|r| (r, &names[2])))?;
+    check_channels(&units, &time, &position, &effort, reference.as_deref(), &names)?;
     repair_spikes(
         &source,
         cfg.spikes,
@@ -632,8 +631,10 @@ fn add_note(md: &mut std::collections::BTreeMap<String, String>, note: String) {
 fn check_channels(
     units: &Units,
     time: &[f64],
-    [(position, q_names), (effort, tau_names)]: &[(&Vec<Vec<f64>>, &Vec<String>); 2],
-    reference: Option<(&Vec<Vec<f64>>, &Vec<String>)>,
+    position: &[Vec<f64>],
+    effort: &[Vec<f64>],
+    reference: Option<&[Vec<f64>]>,
+    [q_names, tau_names, ref_names]: &[Vec<String>; 3],
 ) -> Result<()> {
     let source = units.source;
     check_finite(source, &[time], &[String::from("time")])?;
@@ -645,8 +646,8 @@ fn check_channels(
         check_speeds(source, time, position, q_names)?;
     }
     check_finite(source, effort, tau_names)?;
-    if let Some((r, names)) = reference {
-        check_finite(source, r, names)?;
+    if let Some(r) = reference {
+        check_finite(source, r, ref_names)?;
     }
     if let Some(m) = units.model {
         let factor = units.cfg.max_torque_factor.unwrap_or(MAX_TORQUE_FACTOR);
