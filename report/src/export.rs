@@ -230,10 +230,7 @@ pub fn export(args: &Export) -> Result<Exported> {
             Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
             Format::Sidecar => {
                 let batch = read_parquet(&args.parameters)?;
-                let table = Table::of(&batch, &params.names).map_err(|column| ExportError::Column {
-                    parameters: args.parameters.clone(),
-                    column,
-                })?;
+                let table = Table::of(&batch, &params.names, &args.parameters)?;
                 let side = Sidecar {
                     args,
                     params: &params,
@@ -384,13 +381,16 @@ struct Table {
 }
 
 impl Table {
-    /// The table's columns; the name of the first missing one, if any.
-    fn of(batch: &RecordBatch, names: &[String]) -> Result<Table, String> {
-        let f = |c: &str| -> Result<Vec<f64>, String> {
+    /// The columns of `parameters`' table; the first missing one is named.
+    fn of(batch: &RecordBatch, names: &[String], parameters: &Path) -> Result<Table> {
+        let f = |c: &str| -> Result<Vec<f64>> {
             let a = batch
                 .column_by_name(c)
                 .and_then(|a| a.as_any().downcast_ref::<Float64Array>())
-                .ok_or_else(|| c.to_string())?;
+                .ok_or_else(|| ExportError::Column {
+                    parameters: parameters.to_path_buf(),
+                    column: c.to_string(),
+                })?;
             Ok(a.values().to_vec())
         };
         let expressions = match batch

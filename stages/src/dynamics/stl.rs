@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 
 use super::model::Extent;
+use crate::{Error, Result};
 
 /// The file a URDF's `<mesh filename>` names, when it is an STL found on
 /// disk: `package://pkg/rest` looked up as `pkg/rest` or `rest` in the
@@ -29,9 +30,12 @@ pub fn resolve(filename: &str, urdf: &Path) -> Option<PathBuf> {
 }
 
 /// The box holding an STL file's vertices, in its units.
-pub fn extent(path: &Path) -> Result<Extent, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let bad = |why: &str| format!("{}: not an STL mesh: {why}", path.display());
+pub fn extent(path: &Path) -> Result<Extent> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bad = |why: &str| Error::Format {
+        path: path.to_path_buf(),
+        msg: format!("not an STL mesh: {why}"),
+    };
     // Binary: an 80-byte header, a triangle count, 50 bytes per triangle.
     let binary = bytes.len() >= 84 && {
         let n = u32::from_le_bytes(bytes[80..84].try_into().expect("4 bytes")) as usize;
@@ -61,7 +65,7 @@ pub fn extent(path: &Path) -> Result<Extent, String> {
                     _ => Err(bad(&format!("vertex `{}`", v.trim()))),
                 }
             })
-            .collect::<Result<_, _>>()?
+            .collect::<Result<_>>()?
     };
     if let Some(p) = points.iter().find(|p| !p.iter().all(|x| x.is_finite())) {
         return Err(bad(&format!("vertex {p:?} is not finite")));
@@ -105,6 +109,9 @@ mod tests {
         assert_eq!(resolve("m.stl", &urdf), Some(b));
         assert_eq!(resolve("package://desc/missing.stl", &urdf), None);
         std::fs::write(dir.path().join("x.stl"), "solid\nvertex 1 nope 2\n").unwrap();
-        assert!(extent(&dir.path().join("x.stl")).unwrap_err().contains("vertex"));
+        assert!(extent(&dir.path().join("x.stl"))
+            .unwrap_err()
+            .to_string()
+            .contains("vertex"));
     }
 }

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use super::{Channel, Columns, Log, ReadConfig};
 use crate::formats::cdr::{
-    decode_controller_state, decode_dynamic_joint_state, decode_joint_state_into, JointStateField,
+    decode_controller_state, decode_dynamic_joint_state, decode_joint_state_into, CdrError, JointStateField,
     CONTROLLER_STATE_NAME, DYNAMIC_JOINT_STATE_NAME, JOINT_STATE_NAME,
 };
 use crate::{Error, Result};
@@ -66,6 +66,29 @@ pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
     Ok(files)
 }
 
+/// Why a CDR message cannot give the field its channel was asked for.
+#[derive(Debug, thiserror::Error)]
+enum Unreadable {
+    #[error("a CDR channel without a schema: its message type is unknown")]
+    NoSchema,
+    #[error("the channel's schema is named {JOINT_STATE_NAME} but does not define its fields (string[] name, float64[] position, velocity, effort)")]
+    NotJointState,
+    #[error("JointState has no field `{0}` (position, velocity, effort)")]
+    NoJointStateField(String),
+    #[error("joint `{joint}` has no interface `{field}` (it has {has})")]
+    NoInterface { joint: String, field: String, has: String },
+    #[error("the controller state has no point `{point}` (it has {has})")]
+    NoPoint { point: String, has: String },
+    #[error("a trajectory point has no `{0}` (positions, velocities, accelerations, effort)")]
+    NoPart(String),
+    #[error(
+        "message type `{0}` is not read ({JOINT_STATE_NAME}, {DYNAMIC_JOINT_STATE_NAME}, {CONTROLLER_STATE_NAME})"
+    )]
+    MessageType(String),
+    #[error(transparent)]
+    Cdr(#[from] CdrError),
+}
+
 /// The joint names and the values of `field` in a CDR message of one of the
 /// types ROS 2 arms log: `sensor_msgs/msg/JointState` (`position`,
 /// `velocity`, `effort`), ros2_control's `control_msgs/msg/DynamicJointState`
@@ -86,12 +109,8 @@ fn decode_cdr(
     names: &mut Vec<String>,
     raw_names: &mut Vec<u8>,
     values: &mut Vec<f64>,
-) -> std::result::Result<bool, String> {
-    let schema = message
-        .channel
-        .schema
-        .as_ref()
-        .ok_or("a CDR channel without a schema: its message type is unknown")?;
+) -> std::result::Result<bool, Unreadable> {
+    let schema = message.channel.schema.as_ref().ok_or(Unreadable::NoSchema)?;
     match schema.name.as_str() {
         JOINT_STATE_NAME => {
             // The schema's text, when given, must define JointState's
@@ -101,11 +120,11 @@ fn decode_cdr(
             if !verified.contains(&address) {
                 let text = String::from_utf8_lossy(&schema.data);
                 if !schema.data.is_empty()
-                    && !["string[] name", "float64[] position", "float64[] effort"].iter().all(|f| text.contains(f))
+                    && !["string[] name", "float64[] position", "float64[] effort"]
+                        .iter()
+                        .all(|f| text.contains(f))
                 {
-                    return Err(format!(
-                        "the channel's schema is named {JOINT_STATE_NAME} but does not define its fields (string[] name, float64[] position, velocity, effort)"
-                    ));
+                    return Err(Unreadable::NotJointState);
                 }
                 verified.push(address);
             }
@@ -113,12 +132,12 @@ fn decode_cdr(
                 "position" => JointStateField::Position,
                 "velocity" => JointStateField::Velocity,
                 "effort" => JointStateField::Effort,
-                other => return Err(format!("JointState has no field `{other}` (position, velocity, effort)")),
+                other => return Err(Unreadable::NoJointStateField(other.to_string())),
             };
-            decode_joint_state_into(&message.data, which, names, raw_names, values).map_err(|e| e.to_string())
+            Ok(decode_joint_state_into(&message.data, which, names, raw_names, values)?)
         }
         DYNAMIC_JOINT_STATE_NAME => {
-            let d = decode_dynamic_joint_state(&message.data).map_err(|e| e.to_string())?;
+            let d = decode_dynamic_joint_state(&message.data)?;
             let dynamic = d
                 .interfaces
                 .iter()
@@ -128,40 +147,42 @@ fn decode_cdr(
                         .iter()
                         .position(|n| n == field)
                         .and_then(|k| values.get(k).copied())
-                        .ok_or_else(|| format!("joint `{joint}` has no interface `{field}` (it has {names:?})"))
+                        .ok_or_else(|| Unreadable::NoInterface {
+                            joint: joint.clone(),
+                            field: field.to_string(),
+                            has: names.join(", "),
+                        })
                 })
-                .collect::<std::result::Result<Vec<f64>, String>>()?;
+                .collect::<std::result::Result<Vec<f64>, Unreadable>>()?;
             (*names, *values) = (d.joint_names, dynamic);
             raw_names.clear();
             Ok(true)
         }
         CONTROLLER_STATE_NAME => {
             let text = String::from_utf8_lossy(&schema.data);
-            let c = decode_controller_state(&message.data, &text).map_err(|e| e.to_string())?;
+            let c = decode_controller_state(&message.data, &text)?;
             let (point, part) = field.split_once('.').unwrap_or((field, "positions"));
             let p = c
                 .points
                 .iter()
                 .find(|(n, _)| n == point)
                 .map(|(_, p)| p)
-                .ok_or_else(|| {
-                    let have: Vec<&str> = c.points.iter().map(|(n, _)| n.as_str()).collect();
-                    format!("the controller state has no point `{point}` ({have:?})")
+                .ok_or_else(|| Unreadable::NoPoint {
+                    point: point.to_string(),
+                    has: c.points.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", "),
                 })?;
             *values = match part {
                 "positions" => p.positions.clone(),
                 "velocities" => p.velocities.clone(),
                 "accelerations" => p.accelerations.clone(),
                 "effort" => p.effort.clone(),
-                other => return Err(format!("a trajectory point has no `{other}` (positions, velocities, accelerations, effort)")),
+                other => return Err(Unreadable::NoPart(other.to_string())),
             };
             *names = c.joint_names;
             raw_names.clear();
             Ok(true)
         }
-        other => Err(format!(
-            "message type `{other}` is not read ({JOINT_STATE_NAME}, {DYNAMIC_JOINT_STATE_NAME}, {CONTROLLER_STATE_NAME})"
-        )),
+        other => Err(Unreadable::MessageType(other.to_string())),
     }
 }
 
@@ -582,7 +603,8 @@ pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result
                     "cdr" => {
                         let (names, values) = (&mut s.message_names, &mut s.message_values);
                         let raw = &mut s.message_names_raw;
-                        let changed = decode_cdr(message, &w.field, &mut verified, names, raw, values).map_err(err)?;
+                        let changed = decode_cdr(message, &w.field, &mut verified, names, raw, values)
+                            .map_err(|e| err(e.to_string()))?;
                         // Names are matched on every message whose names differ
                         // from the last: a publisher that reorders its joints
                         // is followed, one that drops or repeats a name refused.
