@@ -69,6 +69,38 @@ pub struct Design {
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
 }
 
+impl Design {
+    /// The design of `plan` (its stages up to the regressor's), writing
+    /// `tables`, as a non-periodic record's: a periodic one sets its own
+    /// periods, band and harmonics.
+    fn finish(
+        mut plan: Plan,
+        tables: Vec<TableKind>,
+        findings: Vec<(String, String)>,
+        regressor: RegressorConfig,
+        inverse: Option<(FilterSpec, f64)>,
+    ) -> Result<Design> {
+        plan.stages.push(StageConfig::Regressor(regressor.clone()));
+        plan.tables = tables;
+        plan.inferred = findings.iter().cloned().collect();
+        Ok(Design {
+            text: file_text(&plan)?,
+            plan,
+            findings,
+            periodic: false,
+            regressor,
+            inverse,
+            wide_band: false,
+            periods: 0,
+            repeated: false,
+            joint_wise: None,
+            period_s: None,
+            harmonics: Vec::new(),
+            union: Vec::new(),
+        })
+    }
+}
+
 /// A joint whose strongest line is under this fraction of the most moving
 /// joint's is held: sag and flicker, not excitation (a joint-wise record's
 /// held joints sag by milliradians, its moving one swings by radians).
@@ -336,37 +368,24 @@ pub fn design_with(
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> Result<Design> {
-    let regressor = first.map(|d| d.regressor.clone());
-    let own_regressor = regressor.is_none();
     let model = load_robot(robot)?;
     let joints = model.joint_names();
     let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
     let mut findings: Vec<(String, String)> = Vec::new();
-    let mut plan = Plan::draft(
+    let plan = Plan::draft(
         &log.with_extension("toml"),
         Some(robot.to_path_buf()),
         log.display().to_string(),
         read_cfg.clone(),
     );
-    match &layout {
-        Layout::Default => {}
-        Layout::Named => {
-            let mut said = Vec::new();
-            for (key, ch) in read_cfg.channels() {
-                if let Some(c) = ch {
-                    said.push(format!("{key} {}", toml::Value::try_from(c)?));
-                }
-            }
-            findings.push(("read".into(), format!("columns by their names: {}", said.join("; "))));
-        }
-        Layout::Headerless(said) => findings.push(("read".into(), said.clone())),
-        Layout::Stated => findings.push(("read".into(), "as stated (--read)".into())),
-    }
+    findings.extend(layout_said(&layout, &read_cfg)?.map(|said| ("read".into(), said)));
     let (fs, fs_said) = sample_rate(&raw);
     let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
-    let regressor = regressor.unwrap_or_else(|| identify_regressor(inverse.map(|(_, b)| b)));
+    let regressor = match first {
+        Some(d) => d.regressor.clone(),
+        None => identify_regressor(inverse.map(|(_, b)| b)),
+    };
     findings.push(("sample_rate_hz".into(), fs_said));
-
     let period = period_of(log, &raw, &mut findings);
     let (period, period_said) = match period {
         Ok(p) => p,
@@ -376,69 +395,69 @@ pub fn design_with(
         }
     };
     findings.push(("period_s".into(), period_said));
-    let align = |tol: f64| {
-        StageConfig::Align(AlignConfig {
-            period_s: Some(period),
-            sample_rate_hz: Some(fs),
-            steady_tolerance: tol,
-            ..AlignConfig::default()
-        })
-    };
+    periodic(
+        Draft {
+            log,
+            first,
+            model,
+            raw,
+            fs,
+            plan,
+            findings,
+            regressor,
+            inverse,
+        },
+        period,
+    )
+}
 
-    let (tol, chain) = steady(log, &plan, &raw, period, &align, &findings)?;
+/// A design before its period: the recording read, its rate, the filter
+/// declared, the draft pipeline and what was found so far.
+struct Draft<'a> {
+    log: &'a Path,
+    /// The identification recording's design, when this one validates.
+    first: Option<&'a Design>,
+    model: robotid_stages::dynamics::Model,
+    raw: RawSamples,
+    fs: f64,
+    plan: Plan,
+    findings: Vec<(String, String)>,
+    regressor: RegressorConfig,
+    inverse: Option<(FilterSpec, f64)>,
+}
+
+/// The design of a periodic record with `period`: its steady periods, the
+/// harmonics excited, whether one joint moves, and (for an identification
+/// recording) the band, filter and Coulomb model held-out periods prefer.
+fn periodic(d: Draft, period: f64) -> Result<Design> {
+    let Draft {
+        log,
+        first,
+        model,
+        raw,
+        fs,
+        mut plan,
+        mut findings,
+        mut regressor,
+        mut inverse,
+    } = d;
+    let own_regressor = first.is_none();
+    let joints = model.joint_names();
+    let (tol, chain) = steady(log, &plan, &raw, (period, fs), &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
-    let steady_periods = p.periods;
-    let repeated = p.periods >= 2 || p.stretch.is_some();
-    findings.push((
-        "steady".into(),
-        format!(
-            "{} of {} whole periods from t = {:.3} s, repeating within {} % (steady_tolerance = {tol})",
-            p.periods,
-            p.report.periods_found,
-            p.start_s,
-            100.0 * tol
-        ),
-    ));
+    let (steady_periods, repeated) = (p.periods, p.periods >= 2 || p.stretch.is_some());
+    findings.push(("steady".into(), steady_said(p, tol)));
     let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
     let moving = joint_wise(log, period, &joints, &sets, &mut findings)?;
-    let joint_wise = moving.is_some();
-    let held_at = moving.map(|m| {
-        let at = |c: &Vec<f64>| c.iter().sum::<f64>() / c.len() as f64;
-        let held = (0..joints.len())
-            .filter(|&j| j != m)
-            .map(|j| (joints[j].clone(), at(&mean.q[j])));
-        (joints[m].clone(), held.collect::<Vec<_>>())
-    });
-    let mut regressor = regressor;
-    if joint_wise && own_regressor {
-        joint_wise_model(&mut regressor);
-    }
-    if !own_regressor && joint_wise != regressor.joint_wise {
-        return Err(refuse(
-            log,
-            format!(
-                "{} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
-                if joint_wise { "one joint moves" } else { "every joint moves" },
-                if joint_wise { "moved every joint" } else { "moved one joint" }
-            ),
-        ));
-    }
+    let held_at = moving.map(|m| held_positions(m, &joints, &mean.q));
+    same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
     findings.push(("harmonics".into(), harmonics_said));
     let (positions_stage, torques_stage) = bands(period, mean, &joints, &sets, &union);
     let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &StageConfig| {
-        let mut stages = vec![align(tol)];
-        stages.extend(inverse.map(inverse_filter));
-        stages.push(StageConfig::Average(AverageConfig::default()));
-        stages.push(StageConfig::Noise(NoiseConfig {
-            harmonics: Some(union.clone()),
-        }));
-        stages.push(differentiate.clone());
-        stages
+        stages_after(align(period, fs, tol), &union, inverse, differentiate)
     };
-    let mut inverse = inverse;
     let mut wide_band = first.map(|d| d.wide_band);
-    let mut differentiate = None;
     if own_regressor {
         let (wide, said, choice) = best_band(
             &Scoring {
@@ -458,42 +477,24 @@ pub fn design_with(
         wide_band = Some(wide);
         findings.push(("differentiate".into(), said));
         apply_choice(choice, fs, &mut inverse, &mut regressor, &mut findings);
-        differentiate = Some(
-            if wide {
-                torques_stage.as_ref()
-            } else {
-                Some(&positions_stage)
-            }
-            .expect("tried")
-            .0
-            .clone(),
-        );
     }
-    let differentiate = differentiate.unwrap_or_else(|| {
-        // Validation recordings take the identification's rule.
-        let (stage, said, _) = match (&torques_stage, wide_band) {
-            (Some(t), Some(true)) => t,
-            _ => &positions_stage,
-        };
+    // Validation recordings take the identification's rule.
+    let (differentiate, said, _) = match (&torques_stage, wide_band) {
+        (Some(t), Some(true)) => t,
+        _ => &positions_stage,
+    };
+    if !own_regressor {
         findings.push(("differentiate".into(), said.clone()));
-        stage.clone()
-    });
-    plan.stages = stages_after(inverse.as_ref(), &differentiate);
-    plan.stages.push(StageConfig::Regressor(regressor.clone()));
-    plan.tables = vec![
+    }
+    plan.stages = stages_after(inverse.as_ref(), differentiate);
+    let tables = vec![
         TableKind::PeriodMean,
         TableKind::Noise,
         TableKind::Kinematics,
         TableKind::Regressor,
     ];
-    plan.inferred = findings.iter().cloned().collect();
     Ok(Design {
-        text: file_text(&plan)?,
-        plan,
-        findings,
         periodic: true,
-        regressor,
-        inverse,
         wide_band: wide_band.unwrap_or(false),
         periods: steady_periods,
         repeated,
@@ -501,7 +502,95 @@ pub fn design_with(
         period_s: Some(period),
         harmonics: sets,
         union,
+        ..Design::finish(plan, tables, findings, regressor, inverse)?
     })
+}
+
+/// The align stage for `period` at `fs`, steady within `tol`.
+fn align(period: f64, fs: f64, tol: f64) -> StageConfig {
+    StageConfig::Align(AlignConfig {
+        period_s: Some(period),
+        sample_rate_hz: Some(fs),
+        steady_tolerance: tol,
+        ..AlignConfig::default()
+    })
+}
+
+/// The stages up to differentiation: `align`, the filter undone (when
+/// one is), the average, the noise at the excited `union`, `differentiate`.
+fn stages_after(
+    align: StageConfig,
+    union: &[u32],
+    inverse: Option<&(FilterSpec, f64)>,
+    differentiate: &StageConfig,
+) -> Vec<StageConfig> {
+    let mut stages = vec![align];
+    stages.extend(inverse.map(inverse_filter));
+    stages.push(StageConfig::Average(AverageConfig::default()));
+    stages.push(StageConfig::Noise(NoiseConfig {
+        harmonics: Some(union.to_vec()),
+    }));
+    stages.push(differentiate.clone());
+    stages
+}
+
+/// What says how the log's columns were found (None: the default layout).
+fn layout_said(layout: &Layout, read_cfg: &ReadConfig) -> Result<Option<String>> {
+    Ok(match layout {
+        Layout::Default => None,
+        Layout::Named => {
+            let mut said = Vec::new();
+            for (key, ch) in read_cfg.channels() {
+                if let Some(c) = ch {
+                    said.push(format!("{key} {}", toml::Value::try_from(c)?));
+                }
+            }
+            Some(format!("columns by their names: {}", said.join("; ")))
+        }
+        Layout::Headerless(said) => Some(said.clone()),
+        Layout::Stated => Some("as stated (--read)".into()),
+    })
+}
+
+/// What says the steady periods found at tolerance `tol`.
+fn steady_said(p: &robotid_stages::stage::Periods, tol: f64) -> String {
+    format!(
+        "{} of {} whole periods from t = {:.3} s, repeating within {} % (steady_tolerance = {tol})",
+        p.periods,
+        p.report.periods_found,
+        p.start_s,
+        100.0 * tol
+    )
+}
+
+/// A joint-wise record's moving joint `m`, and where each other joint is
+/// held (its mean position over the averaged period).
+fn held_positions(m: usize, joints: &[String], q: &[Vec<f64>]) -> (String, Vec<(String, f64)>) {
+    let at = |c: &Vec<f64>| c.iter().sum::<f64>() / c.len() as f64;
+    let held = (0..joints.len())
+        .filter(|&j| j != m)
+        .map(|j| (joints[j].clone(), at(&q[j])));
+    (joints[m].clone(), held.collect())
+}
+
+/// A joint-wise record gets the joint-wise model when it sets the
+/// regressor (`own`); one that takes the first recording's must be of its
+/// kind, joint-wise or whole-arm.
+fn same_kind(log: &Path, joint_wise: bool, own: bool, regressor: &mut RegressorConfig) -> Result<()> {
+    if joint_wise && own {
+        joint_wise_model(regressor);
+    }
+    if !own && joint_wise != regressor.joint_wise {
+        return Err(refuse(
+            log,
+            format!(
+                "{} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
+                if joint_wise { "one joint moves" } else { "every joint moves" },
+                if joint_wise { "moved every joint" } else { "moved one joint" }
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Each joint's excited harmonics, from the reference's lines when the log
@@ -882,15 +971,14 @@ fn steady(
     log: &Path,
     plan: &Plan,
     raw: &RawSamples,
-    period: f64,
-    align: &dyn Fn(f64) -> StageConfig,
+    (period, fs): (f64, f64),
     findings: &[(String, String)],
 ) -> Result<(f64, Chain)> {
     // The steady periods: align with the default tolerance, then looser.
     let mut last_err = None;
     let mut found = None;
     for tol in STEADY_LADDER {
-        let stages = vec![align(tol), StageConfig::Average(AverageConfig::default())];
+        let stages = vec![align(period, fs, tol), StageConfig::Average(AverageConfig::default())];
         match probe(plan, stages, log, raw) {
             Ok(chain) => {
                 found = Some((tol, chain));
@@ -961,6 +1049,24 @@ struct ModelChoice {
     margin: f64,
 }
 
+impl ModelChoice {
+    /// The choice where fewer than two steady periods leave nothing to
+    /// score: no filter, sign(q̇), the template's friction.
+    fn unscored(friction: FrictionTerms, margin: f64) -> ModelChoice {
+        ModelChoice {
+            filter: None,
+            filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
+            transition: None,
+            transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
+            held_out_said: "not scored: fewer than two steady periods".into(),
+            score: None,
+            friction,
+            friction_said: None,
+            margin,
+        }
+    }
+}
+
 /// The anti-alias filter (when `declared` is None) and the Coulomb model,
 /// jointly: each (transition, filter) pair scored by how well its fit on
 /// half of the periods predicts the other half (`estimation::spectral`).
@@ -979,77 +1085,16 @@ fn choose_model(
     fs: f64,
     lowest_hz: f64,
 ) -> Result<ModelChoice> {
-    use robotid_stages::estimation::spectral::{choose_filter, refit_filter, LineSystem};
-    use robotid_stages::signal::Spectra;
-    use robotid_stages::stage::regressor::column_spectra_of;
+    use robotid_stages::estimation::spectral::choose_filter;
     let kin = chain.kinematics()?;
     let p = chain
         .periods
         .as_ref()
         .ok_or_else(|| refuse(log, "no aligned periods to choose the model on"))?;
-    let samples = p.samples_per_period;
-    let lines = samples.saturating_sub(1) / 2 + 1;
-    let spectra = Spectra::new();
     let margin = 3.0 * (2.0 / (chain_samples(kin) as f64)).sqrt();
-    // A joint-wise record: the moving joint's rows only, as the regressor
-    // stage takes them.
-    let used: Vec<bool> = match moving {
-        Some(m) => (0..kin.joints.len()).map(|j| j == m).collect(),
-        None => Vec::new(),
-    };
-    // The columns' lines with sign(q̇). Another friction model changes
-    // only the friction columns (the others are the same columns of the
-    // same regressor, by name): only they are made again.
-    type Lines<'a> = (&'a [robotid_stages::signal::Complex64], &'a [String]);
-    let system = |friction: FrictionTerms, v: f64, reuse: Option<Lines>| -> Result<(Option<LineSystem>, Vec<String>)> {
-        let cfg = RegressorConfig {
-            friction,
-            coulomb_transition_rad_s: Some(v),
-            band_limit_hz: None,
-            joint_wise: false,
-            ..template.clone()
-        };
-        let base = cfg.base_regressor(model)?;
-        let (cols, names) = (base.parameters(), base.names());
-        let spec = match reuse {
-            Some((lines0, names0)) => {
-                let before = |c: usize| {
-                    let name = &names[c];
-                    (base.friction_term(c).is_none())
-                        .then(|| names0.iter().position(|n| n == name))
-                        .flatten()
-                };
-                let fresh: Vec<usize> = (0..cols).filter(|&c| before(c).is_none()).collect();
-                let mut spec = column_spectra_of(&base, kin, lines - 1, &spectra, Some(&fresh));
-                for c in 0..cols {
-                    if let Some(c0) = before(c) {
-                        for j in 0..kin.joints.len() {
-                            let (at, at0) = ((j * cols + c) * lines, (j * names0.len() + c0) * lines);
-                            spec[at..at + lines].copy_from_slice(&lines0[at0..at0 + lines]);
-                        }
-                    }
-                }
-                spec
-            }
-            None => column_spectra_of(&base, kin, lines - 1, &spectra, None),
-        };
-        Ok((
-            LineSystem::new(spec, lines, cols, &p.torque, samples, p.period_s, &used, &spectra),
-            names,
-        ))
-    };
-    let (Some(sign), sign_names) = system(template.friction, 0.0, None)? else {
-        return Ok(ModelChoice {
-            filter: None,
-            filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
-            transition: None,
-            transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
-            held_out_said: "not scored: fewer than two steady periods".into(),
-            score: None,
-            friction: template.friction,
-            friction_said: None,
-            margin,
-        });
+    let systems = LineSystems::new(kin, p, model, template, moving);
+    let (Some(sign), sign_names) = systems.system(template.friction, 0.0, None)? else {
+        return Ok(ModelChoice::unscored(template.friction, margin));
     };
     // What the other friction models reuse: the sign(q̇) system's lines.
     let first: Lines = (sign.columns(), &sign_names);
@@ -1061,60 +1106,22 @@ fn choose_model(
                 .ok_or_else(|| refuse(log, "the held-out scores of the filters: the regression is singular"))?,
         ),
     };
-    let score_with = |sys: &LineSystem| -> Option<(Option<FilterSpec>, Score)> {
-        match (declared, &search) {
-            (Some(f), _) => Some((None, sys.score(&sys.response(Some(&f))?)?)),
-            (None, Some(c)) => {
-                let none = sys.score(&sys.response(None)?)?;
-                match refit_filter(sys, &c.top) {
-                    Some((f, s)) if s.ratio < none.ratio * (1.0 - c.margin) => Some((Some(f), s)),
-                    _ => Some((None, none)),
-                }
-            }
-            (None, None) => unreachable!("a search without a declared filter"),
-        }
+    let scorer = Scorer {
+        declared,
+        search: search.as_ref(),
+        moving: moving.map(|m| kin.joints[m].as_str()),
     };
     let sign_fit = match &search {
         Some(c) => (c.spec, c.score.clone()),
-        None => score_with(&sign).ok_or_else(|| refuse(log, "the held-out score: the regression is singular"))?,
+        None => scorer
+            .score(&sign)
+            .ok_or_else(|| refuse(log, "the held-out score: the regression is singular"))?,
     };
-    let moving_name = moving.map(|m| kin.joints[m].as_str());
-    let friction_ok = |names: &[String], s: &Score| {
-        names.iter().zip(s.theta.iter()).all(|(n, x)| {
-            let friction = robotid_stages::dynamics::ParameterKind::of(n).is_friction();
-            let scored = moving_name.is_none_or(|m| n.ends_with(m));
-            !(friction && scored) || *x >= 0.0
-        })
-    };
-    let mut scored = vec![(0.0, Some(sign_fit.clone()), true)];
     // At the noise floor nothing can do better by more than the score's
     // spread: a smooth turn-over is tried only above it.
     let at_floor = sign_fit.1.ratio < 1.0 + margin;
-    // Each turn-over on its own thread: independent, kept in order.
-    let smooth: Vec<_> = TRANSITIONS[1..]
-        .par_iter()
-        .filter(|_| !at_floor)
-        .map(|&v| -> Result<_> {
-            let (sys, names) = system(template.friction, v, Some(first))?;
-            Ok(sys.map(|sys| {
-                let fit = score_with(&sys);
-                let ok = fit.as_ref().is_some_and(|(_, s)| friction_ok(&names, s));
-                (v, fit, ok)
-            }))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    scored.extend(smooth.into_iter().flatten());
-    let ratio = |f: &Option<(Option<FilterSpec>, Score)>| f.as_ref().map_or(f64::INFINITY, |x| x.1.ratio);
-    let best = scored
-        .iter()
-        .filter(|s| s.2)
-        .min_by(|a, b| ratio(&a.1).total_cmp(&ratio(&b.1)))
-        .expect("sign(q̇) is always possible");
-    let pick = if ratio(&best.1) < sign_fit.1.ratio * (1.0 - margin) {
-        best
-    } else {
-        &scored[0]
-    };
+    let scored = scored_transitions(&systems, &scorer, first, &sign_fit, at_floor)?;
+    let pick = pick_transition(&scored, margin);
     let (filter, score) = pick.1.clone().expect("scored");
     // A Coulomb pair that differs by direction is a symmetric one plus the
     // offset only with sign(q̇); with a smooth turn-over, and with viscous
@@ -1122,38 +1129,9 @@ fn choose_model(
     // another model: tried at the chosen turn-over, kept when held-out
     // periods prefer it by the score's spread.
     let symmetric = template.friction == FrictionTerms::Symmetric && !at_floor;
-    let asymmetric = match symmetric {
-        true => match system(FrictionTerms::Asymmetric, pick.0, Some(first))? {
-            (Some(sys), names) => score_with(&sys).filter(|(_, s)| friction_ok(&names, s)),
-            (None, _) => None,
-        },
-        false => None,
-    };
-    let (friction, friction_said, filter, score) = match asymmetric {
-        Some((f, s)) if s.ratio < score.ratio * (1.0 - margin) => (
-            FrictionTerms::Asymmetric,
-            Some(format!(
-                "asymmetric (Bona eq. 2: viscous and Coulomb for each direction): held-out residue {:.3}× the noise floor, symmetric {:.3}×",
-                s.ratio, score.ratio
-            )),
-            f,
-            s,
-        ),
-        other => (
-            template.friction,
-            symmetric.then(|| match &other {
-                Some((_, s)) => format!(
-                    "symmetric (and an offset): asymmetric friction predicts held-out periods {:.3}× the noise floor, not better than {:.3}× by {:.2} %",
-                    s.ratio,
-                    score.ratio,
-                    100.0 * margin
-                ),
-                None => "symmetric (and an offset): asymmetric friction is singular or has friction < 0 on these periods".into(),
-            }),
-            filter,
-            score,
-        ),
-    };
+    let asymmetric = asymmetric_fit(&systems, &scorer, symmetric, pick.0, first)?;
+    let (friction, friction_said, (filter, score)) =
+        friction_choice(template.friction, symmetric, asymmetric, (filter, score), margin);
     let transition_said = transition_said(
         &scored,
         declared.is_some(),
@@ -1161,18 +1139,10 @@ fn choose_model(
         pick.0,
         margin,
     );
-    let filter_said = filter_said(search.as_ref(), filter.as_ref(), score.ratio);
-    let per_joint = score
-        .per_joint
-        .iter()
-        .zip(&kin.joints)
-        .filter(|(r, _)| !r.is_nan())
-        .map(|(r, j)| format!("{j} {r:.2}"))
-        .collect::<Vec<_>>()
-        .join(", ");
+    let per_joint = per_joint(&score, &kin.joints);
     Ok(ModelChoice {
+        filter_said: filter_said(search.as_ref(), filter.as_ref(), score.ratio),
         filter,
-        filter_said,
         transition: Some(pick.0),
         transition_said,
         held_out_said: format!(
@@ -1184,6 +1154,250 @@ fn choose_model(
         friction_said,
         margin,
     })
+}
+
+/// Scores a line system by its held-out periods: with the declared
+/// filter, or with and without the search's best shapes refitted.
+struct Scorer<'a> {
+    declared: Option<FilterSpec>,
+    search: Option<&'a FilterChoice>,
+    /// A joint-wise record's moving joint, the only one whose friction is judged.
+    moving: Option<&'a str>,
+}
+
+impl Scorer<'_> {
+    fn score(&self, sys: &robotid_stages::estimation::spectral::LineSystem) -> Option<(Option<FilterSpec>, Score)> {
+        use robotid_stages::estimation::spectral::refit_filter;
+        match (self.declared, self.search) {
+            (Some(f), _) => Some((None, sys.score(&sys.response(Some(&f))?)?)),
+            (None, Some(c)) => {
+                let none = sys.score(&sys.response(None)?)?;
+                match refit_filter(sys, &c.top) {
+                    Some((f, s)) if s.ratio < none.ratio * (1.0 - c.margin) => Some((Some(f), s)),
+                    _ => Some((None, none)),
+                }
+            }
+            (None, None) => unreachable!("a search without a declared filter"),
+        }
+    }
+
+    /// Whether the fit's friction (of the moving joint, in a joint-wise
+    /// record) is ≥ 0.
+    fn friction_ok(&self, names: &[String], s: &Score) -> bool {
+        names.iter().zip(s.theta.iter()).all(|(n, x)| {
+            let friction = robotid_stages::dynamics::ParameterKind::of(n).is_friction();
+            let scored = self.moving.is_none_or(|m| n.ends_with(m));
+            !(friction && scored) || *x >= 0.0
+        })
+    }
+}
+
+/// Every turn-over tried, scored: sign(q̇)'s `sign_fit` first, then each
+/// smooth one (above the noise floor only), each on its own thread,
+/// independent, kept in order.
+fn scored_transitions(
+    systems: &LineSystems,
+    scorer: &Scorer,
+    first: Lines,
+    sign_fit: &(Option<FilterSpec>, Score),
+    at_floor: bool,
+) -> Result<Vec<Scored>> {
+    let mut scored = vec![(0.0, Some(sign_fit.clone()), true)];
+    let smooth: Vec<_> = TRANSITIONS[1..]
+        .par_iter()
+        .filter(|_| !at_floor)
+        .map(|&v| -> Result<_> {
+            let (sys, names) = systems.system(systems.template.friction, v, Some(first))?;
+            Ok(sys.map(|sys| {
+                let fit = scorer.score(&sys);
+                let ok = fit.as_ref().is_some_and(|(_, s)| scorer.friction_ok(&names, s));
+                (v, fit, ok)
+            }))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    scored.extend(smooth.into_iter().flatten());
+    Ok(scored)
+}
+
+/// Bona's asymmetric friction at turn-over `v`, scored, where its friction
+/// is ≥ 0 (when `tried`: symmetric friction is the template's).
+fn asymmetric_fit(
+    systems: &LineSystems,
+    scorer: &Scorer,
+    tried: bool,
+    v: f64,
+    first: Lines,
+) -> Result<Option<(Option<FilterSpec>, Score)>> {
+    if !tried {
+        return Ok(None);
+    }
+    Ok(match systems.system(FrictionTerms::Asymmetric, v, Some(first))? {
+        (Some(sys), names) => scorer.score(&sys).filter(|(_, s)| scorer.friction_ok(&names, s)),
+        (None, _) => None,
+    })
+}
+
+/// The turn-over chosen: the best-scored one with friction ≥ 0, where it
+/// beats sign(q̇) (the first) by `margin`; else sign(q̇).
+fn pick_transition(scored: &[Scored], margin: f64) -> &Scored {
+    let ratio = |f: &Option<(Option<FilterSpec>, Score)>| f.as_ref().map_or(f64::INFINITY, |x| x.1.ratio);
+    let best = scored
+        .iter()
+        .filter(|s| s.2)
+        .min_by(|a, b| ratio(&a.1).total_cmp(&ratio(&b.1)))
+        .expect("sign(q̇) is always possible");
+    if ratio(&best.1) < ratio(&scored[0].1) * (1.0 - margin) {
+        best
+    } else {
+        &scored[0]
+    }
+}
+
+/// The columns' line systems of one recording's periods, for any friction
+/// model and Coulomb turn-over.
+struct LineSystems<'a> {
+    kin: &'a robotid_schemas::Kinematics,
+    periods: &'a robotid_stages::stage::Periods,
+    model: &'a robotid_stages::dynamics::Model,
+    template: &'a RegressorConfig,
+    lines: usize,
+    used: Vec<bool>,
+    spectra: robotid_stages::signal::Spectra,
+}
+
+/// A line system's columns and their names, for another to reuse.
+type Lines<'a> = (&'a [robotid_stages::signal::Complex64], &'a [String]);
+
+impl<'a> LineSystems<'a> {
+    fn new(
+        kin: &'a robotid_schemas::Kinematics,
+        periods: &'a robotid_stages::stage::Periods,
+        model: &'a robotid_stages::dynamics::Model,
+        template: &'a RegressorConfig,
+        moving: Option<usize>,
+    ) -> Self {
+        LineSystems {
+            kin,
+            periods,
+            model,
+            template,
+            lines: periods.samples_per_period.saturating_sub(1) / 2 + 1,
+            // A joint-wise record: the moving joint's rows only, as the
+            // regressor stage takes them.
+            used: match moving {
+                Some(m) => (0..kin.joints.len()).map(|j| j == m).collect(),
+                None => Vec::new(),
+            },
+            spectra: robotid_stages::signal::Spectra::new(),
+        }
+    }
+
+    /// The system with `friction` and turn-over `v`. Another friction
+    /// model than `reuse`'s changes only the friction columns (the others
+    /// are the same columns of the same regressor, by name): only they are
+    /// made again.
+    fn system(
+        &self,
+        friction: FrictionTerms,
+        v: f64,
+        reuse: Option<Lines>,
+    ) -> Result<(Option<robotid_stages::estimation::spectral::LineSystem>, Vec<String>)> {
+        use robotid_stages::estimation::spectral::LineSystem;
+        use robotid_stages::stage::regressor::column_spectra_of;
+        let (p, lines) = (self.periods, self.lines);
+        let cfg = RegressorConfig {
+            friction,
+            coulomb_transition_rad_s: Some(v),
+            band_limit_hz: None,
+            joint_wise: false,
+            ..self.template.clone()
+        };
+        let base = cfg.base_regressor(self.model)?;
+        let (cols, names) = (base.parameters(), base.names());
+        let spec = match reuse {
+            Some((lines0, names0)) => {
+                let before = |c: usize| {
+                    let name = &names[c];
+                    (base.friction_term(c).is_none())
+                        .then(|| names0.iter().position(|n| n == name))
+                        .flatten()
+                };
+                let fresh: Vec<usize> = (0..cols).filter(|&c| before(c).is_none()).collect();
+                let mut spec = column_spectra_of(&base, self.kin, lines - 1, &self.spectra, Some(&fresh));
+                for c in 0..cols {
+                    if let Some(c0) = before(c) {
+                        for j in 0..self.kin.joints.len() {
+                            let (at, at0) = ((j * cols + c) * lines, (j * names0.len() + c0) * lines);
+                            spec[at..at + lines].copy_from_slice(&lines0[at0..at0 + lines]);
+                        }
+                    }
+                }
+                spec
+            }
+            None => column_spectra_of(&base, self.kin, lines - 1, &self.spectra, None),
+        };
+        Ok((
+            LineSystem::new(
+                spec,
+                lines,
+                cols,
+                &p.torque,
+                p.samples_per_period,
+                p.period_s,
+                &self.used,
+                &self.spectra,
+            ),
+            names,
+        ))
+    }
+}
+
+/// Symmetric friction, or Bona's asymmetric one where its held-out score
+/// beats the symmetric one's by `margin`; what says so (when `symmetric`
+/// was a choice), and the filter and score of the model chosen.
+#[allow(clippy::type_complexity)]
+fn friction_choice(
+    template: FrictionTerms,
+    symmetric: bool,
+    asymmetric: Option<(Option<FilterSpec>, Score)>,
+    (filter, score): (Option<FilterSpec>, Score),
+    margin: f64,
+) -> (FrictionTerms, Option<String>, (Option<FilterSpec>, Score)) {
+    match asymmetric {
+        Some((f, s)) if s.ratio < score.ratio * (1.0 - margin) => (
+            FrictionTerms::Asymmetric,
+            Some(format!(
+                "asymmetric (Bona eq. 2: viscous and Coulomb for each direction): held-out residue {:.3}× the noise floor, symmetric {:.3}×",
+                s.ratio, score.ratio
+            )),
+            (f, s),
+        ),
+        other => (
+            template,
+            symmetric.then(|| match &other {
+                Some((_, s)) => format!(
+                    "symmetric (and an offset): asymmetric friction predicts held-out periods {:.3}× the noise floor, not better than {:.3}× by {:.2} %",
+                    s.ratio,
+                    score.ratio,
+                    100.0 * margin
+                ),
+                None => "symmetric (and an offset): asymmetric friction is singular or has friction < 0 on these periods".into(),
+            }),
+            (filter, score),
+        ),
+    }
+}
+
+/// Each joint's held-out ratio, as "joint ratio" pairs.
+fn per_joint(score: &Score, joints: &[String]) -> String {
+    score
+        .per_joint
+        .iter()
+        .zip(joints)
+        .filter(|(r, _)| !r.is_nan())
+        .map(|(r, j)| format!("{j} {r:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// A (transition, filter fit, friction ≥ 0) per turn-over tried.
@@ -1356,24 +1570,8 @@ fn non_periodic(
             ripple_db: None,
         }),
     }));
-    plan.stages.push(StageConfig::Regressor(regressor.clone()));
-    plan.tables = vec![TableKind::Kinematics, TableKind::Regressor];
-    plan.inferred = findings.iter().cloned().collect();
-    Ok(Design {
-        text: file_text(&plan)?,
-        plan,
-        findings,
-        periodic: false,
-        regressor,
-        inverse: inverse.copied(),
-        wide_band: false,
-        periods: 0,
-        repeated: false,
-        joint_wise: None,
-        period_s: None,
-        harmonics: Vec::new(),
-        union: Vec::new(),
-    })
+    let tables = vec![TableKind::Kinematics, TableKind::Regressor];
+    Design::finish(plan, tables, findings, regressor.clone(), inverse.copied())
 }
 
 /// The absolute form of a path that exists.

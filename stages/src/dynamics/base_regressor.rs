@@ -91,7 +91,11 @@ impl RegressorModel {
         let spring = match &self.spring {
             Some(sc) => {
                 let joint = model.joints.iter().position(|j| j.name == sc.joint).ok_or_else(|| {
-                    Error::mismatch("spring: joint", format!("one of {:?}", model.joint_names()), &sc.joint)
+                    Error::mismatch(
+                        "spring: joint",
+                        format!("one of {}", model.joint_names().join(", ")),
+                        &sc.joint,
+                    )
                 })?;
                 if sc.harmonics == 0 {
                     return Err(Error::setting("spring.harmonics", "≥ 1", 0));

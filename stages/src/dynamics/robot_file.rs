@@ -163,105 +163,8 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
     let file: RobotFile = toml::from_str(text).map_err(|e| err(crate::error::toml_message(text, &e)))?;
     let gravity = Vector3::from(file.gravity);
     let mut model = match &file.urdf {
-        Some(urdf) => {
-            let full = path.parent().unwrap_or(Path::new(".")).join(urdf);
-            let mut m = super::urdf::load_urdf_with(&full, locks)?;
-            for entry in &file.joints {
-                let i = m.joints.iter().position(|j| j.name == entry.name).ok_or_else(|| {
-                    err(format!(
-                        "joint `{}` is not a moving joint of {}",
-                        entry.name,
-                        full.display()
-                    ))
-                })?;
-                for (key, given) in [
-                    ("origin", entry.origin.is_some()),
-                    ("dh", entry.dh.is_some()),
-                    ("axis", entry.axis.is_some()),
-                    ("mass", entry.mass.is_some()),
-                    ("com", entry.com.is_some()),
-                    ("inertia", entry.inertia.is_some()),
-                ] {
-                    if given {
-                        return Err(err(format!(
-                            "joint `{}`: `{key}` comes from the URDF and cannot be set here",
-                            entry.name
-                        )));
-                    }
-                }
-                apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i])
-                    .map_err(|p| err(format!("joint `{}`: {p}", entry.name)))?;
-                if let Some(e) = extent_of(entry).map_err(|p| err(format!("joint `{}`: {p}", entry.name)))? {
-                    m.extents.resize(m.links.len(), None);
-                    m.extents[i] = Some(e);
-                }
-            }
-            m.name = file.name.clone();
-            m
-        }
-        None => {
-            if file.joints.is_empty() {
-                return Err(err("no [[joint]] entries and no `urdf`".into()));
-            }
-            let mut m = Model::empty(&file.name, gravity);
-            for entry in &file.joints {
-                let ctx = |msg: String| err(format!("joint `{}`: {msg}", entry.name));
-                let (origin_rot, origin_xyz) = match (&entry.origin, &entry.dh) {
-                    (Some(o), None) => (rpy_rotation(o.rpy), Vector3::from(o.xyz)),
-                    (None, Some(dh)) => {
-                        let x = Unit::new_unchecked(Vector3::x());
-                        let z = Unit::new_unchecked(Vector3::z());
-                        let rx = super::model::axis_rotation(&x, dh.alpha);
-                        (
-                            rx * super::model::axis_rotation(&z, dh.theta),
-                            Vector3::new(dh.a, 0.0, 0.0) + rx * Vector3::new(0.0, 0.0, dh.d),
-                        )
-                    }
-                    (None, None) => (Matrix3::identity(), Vector3::zeros()),
-                    (Some(_), Some(_)) => return Err(ctx("give either `origin` or `dh`, not both".into())),
-                };
-                let axis = match (entry.axis, entry.dh.is_some()) {
-                    (Some(_), true) => return Err(ctx("with `dh` the axis is z; remove `axis`".into())),
-                    (Some(a), false) => a,
-                    (None, _) => [0.0, 0.0, 1.0],
-                };
-                let axis = Vector3::from(axis);
-                if !(axis.norm() > 0.0) {
-                    return Err(ctx("`axis` must be a non-zero vector".into()));
-                }
-                let mass = entry.mass.ok_or_else(|| ctx("`mass` is required".into()))?;
-                let com = Vector3::from(entry.com.unwrap_or([0.0; 3]));
-                let inertia = entry
-                    .inertia
-                    .as_ref()
-                    .ok_or_else(|| ctx("`inertia` is required".into()))?;
-                let inertia_com = Matrix3::new(
-                    inertia.ixx,
-                    inertia.ixy,
-                    inertia.ixz,
-                    inertia.ixy,
-                    inertia.iyy,
-                    inertia.iyz,
-                    inertia.ixz,
-                    inertia.iyz,
-                    inertia.izz,
-                );
-                m.joints.push(Joint {
-                    name: entry.name.clone(),
-                    origin_rot,
-                    origin_xyz,
-                    axis: Unit::new_normalize(axis),
-                });
-                m.links.push(Inertial { mass, com, inertia_com });
-                m.extents.push(extent_of(entry).map_err(ctx)?);
-                let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
-                apply_actuation(entry, &mut d, &mut f, &mut l).map_err(|p| ctx(p.to_string()))?;
-                m.drives.push(d);
-                m.friction.push(f);
-                m.limits.push(l);
-            }
-            m
-        }
+        Some(urdf) => with_urdf(&file, urdf, path, locks)?,
+        None => from_entries(&file, gravity, path)?,
     };
     model.gravity = gravity;
     if let Some(ee) = file.end_effector {
@@ -274,6 +177,118 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
         return Err(err(format!("joint name `{}` is used twice", w[0])));
     }
     Ok(model)
+}
+
+/// The model of a robot file that names a URDF: the URDF's bodies, with
+/// the file's drives, friction, limits and shapes per joint.
+fn with_urdf(file: &RobotFile, urdf: &Path, path: &Path, locks: &Locks) -> Result<Model> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let full = path.parent().unwrap_or(Path::new(".")).join(urdf);
+    let mut m = super::urdf::load_urdf_with(&full, locks)?;
+    for entry in &file.joints {
+        let i = m.joints.iter().position(|j| j.name == entry.name).ok_or_else(|| {
+            err(format!(
+                "joint `{}` is not a moving joint of {}",
+                entry.name,
+                full.display()
+            ))
+        })?;
+        for (key, given) in [
+            ("origin", entry.origin.is_some()),
+            ("dh", entry.dh.is_some()),
+            ("axis", entry.axis.is_some()),
+            ("mass", entry.mass.is_some()),
+            ("com", entry.com.is_some()),
+            ("inertia", entry.inertia.is_some()),
+        ] {
+            if given {
+                return Err(err(format!(
+                    "joint `{}`: `{key}` comes from the URDF and cannot be set here",
+                    entry.name
+                )));
+            }
+        }
+        apply_actuation(entry, &mut m.drives[i], &mut m.friction[i], &mut m.limits[i])
+            .map_err(|p| err(format!("joint `{}`: {p}", entry.name)))?;
+        if let Some(e) = extent_of(entry).map_err(|p| err(format!("joint `{}`: {p}", entry.name)))? {
+            m.extents.resize(m.links.len(), None);
+            m.extents[i] = Some(e);
+        }
+    }
+    m.name = file.name.clone();
+    Ok(m)
+}
+
+/// The model of a robot file that gives every joint and body itself.
+fn from_entries(file: &RobotFile, gravity: Vector3<f64>, path: &Path) -> Result<Model> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    if file.joints.is_empty() {
+        return Err(err("no [[joint]] entries and no `urdf`".into()));
+    }
+    let mut m = Model::empty(&file.name, gravity);
+    for entry in &file.joints {
+        let ctx = |msg: String| err(format!("joint `{}`: {msg}", entry.name));
+        let (origin_rot, origin_xyz) = match (&entry.origin, &entry.dh) {
+            (Some(o), None) => (rpy_rotation(o.rpy), Vector3::from(o.xyz)),
+            (None, Some(dh)) => {
+                let x = Unit::new_unchecked(Vector3::x());
+                let z = Unit::new_unchecked(Vector3::z());
+                let rx = super::model::axis_rotation(&x, dh.alpha);
+                (
+                    rx * super::model::axis_rotation(&z, dh.theta),
+                    Vector3::new(dh.a, 0.0, 0.0) + rx * Vector3::new(0.0, 0.0, dh.d),
+                )
+            }
+            (None, None) => (Matrix3::identity(), Vector3::zeros()),
+            (Some(_), Some(_)) => return Err(ctx("give either `origin` or `dh`, not both".into())),
+        };
+        let axis = match (entry.axis, entry.dh.is_some()) {
+            (Some(_), true) => return Err(ctx("with `dh` the axis is z; remove `axis`".into())),
+            (Some(a), false) => a,
+            (None, _) => [0.0, 0.0, 1.0],
+        };
+        let axis = Vector3::from(axis);
+        if !(axis.norm() > 0.0) {
+            return Err(ctx("`axis` must be a non-zero vector".into()));
+        }
+        let mass = entry.mass.ok_or_else(|| ctx("`mass` is required".into()))?;
+        let com = Vector3::from(entry.com.unwrap_or([0.0; 3]));
+        let inertia = entry
+            .inertia
+            .as_ref()
+            .ok_or_else(|| ctx("`inertia` is required".into()))?;
+        let inertia_com = Matrix3::new(
+            inertia.ixx,
+            inertia.ixy,
+            inertia.ixz,
+            inertia.ixy,
+            inertia.iyy,
+            inertia.iyz,
+            inertia.ixz,
+            inertia.iyz,
+            inertia.izz,
+        );
+        m.joints.push(Joint {
+            name: entry.name.clone(),
+            origin_rot,
+            origin_xyz,
+            axis: Unit::new_normalize(axis),
+        });
+        m.links.push(Inertial { mass, com, inertia_com });
+        m.extents.push(extent_of(entry).map_err(ctx)?);
+        let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
+        apply_actuation(entry, &mut d, &mut f, &mut l).map_err(|p| ctx(p.to_string()))?;
+        m.drives.push(d);
+        m.friction.push(f);
+        m.limits.push(l);
+    }
+    Ok(m)
 }
 
 /// Whether a joint entry declares anything of its drive.

@@ -135,14 +135,19 @@ fn locked_positions(robot: &urdf_rs::Robot, locks: &Locks, path: &Path) -> Resul
     Ok(out)
 }
 
-pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
+/// The root link of a URDF's joints, refused unless they make a tree:
+/// every link named defined, one root, each link the child of one joint
+/// at most, every link reached from the root (a joint cycle hung the walk).
+fn tree_root<'a>(
+    robot: &'a urdf_rs::Robot,
+    links: &HashMap<&str, &urdf_rs::Link>,
+    children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    path: &Path,
+) -> Result<&'a str> {
     let err = |msg: String| Error::Robot {
         path: path.to_path_buf(),
         msg,
     };
-    let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(format!("invalid XML: {e}")))?;
-    let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
-    let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
     if let Some((j, link)) = robot
         .joints
         .iter()
@@ -154,36 +159,19 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
             j.name
         )));
     }
-    let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
-    for j in &robot.joints {
-        children.entry(j.parent.link.as_str()).or_default().push(j);
-    }
     let roots: Vec<&str> = robot
         .links
         .iter()
         .map(|l| l.name.as_str())
         .filter(|l| !robot.joints.iter().any(|j| j.child.link == *l))
         .collect();
-    let locked = locked_positions(&robot, locks, path)?;
-    // A joint moves unless it is fixed or locked.
-    let moves = |j: &urdf_rs::Joint| j.joint_type != JointType::Fixed && !locked.contains_key(&j.name);
-    // The transform of a joint that does not move: its origin, and its
-    // motion at the locked position.
-    let rigid = |j: &urdf_rs::Joint| {
-        compose(
-            &pose(&j.origin),
-            &motion(j, locked.get(&j.name).copied().unwrap_or(0.0)),
-        )
-    };
     let [root] = roots[..] else {
         return Err(err(format!(
-            "expected one root link, found {}: {:?}",
+            "expected one root link, found {}: {}",
             roots.len(),
-            roots
+            roots.join(", ")
         )));
     };
-    // A URDF is a tree: each link the child of one joint at most, and every
-    // link reached from the root (a joint cycle hung the walk below).
     let mut parent_of: HashMap<&str, &str> = HashMap::new();
     for j in &robot.joints {
         if j.parent.link == j.child.link {
@@ -211,127 +199,180 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
             away.name
         )));
     }
-    // Whether a link's subtree holds a moving joint.
-    fn moving_below<'a>(
-        link: &'a str,
-        children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
-        moves: &dyn Fn(&urdf_rs::Joint) -> bool,
-    ) -> bool {
-        children.get(link).is_some_and(|js| {
-            js.iter()
-                .any(|j| moves(j) || moving_below(&j.child.link, children, moves))
-        })
+    Ok(root)
+}
+
+/// Whether a link's subtree holds a moving joint.
+fn moving_below<'a>(
+    link: &'a str,
+    children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    moves: &dyn Fn(&urdf_rs::Joint) -> bool,
+) -> bool {
+    children.get(link).is_some_and(|js| {
+        js.iter()
+            .any(|j| moves(j) || moving_below(&j.child.link, children, moves))
+    })
+}
+
+/// A revolute joint `j` at `origin` (in the last moving link's frame) and
+/// its link, still without mass (the walk merges the URDF's links into
+/// it), with the URDF's damping, friction and limits. Any other moving
+/// joint is refused.
+fn push_revolute(model: &mut Model, j: &urdf_rs::Joint, origin: Frame, path: &Path) -> Result<()> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    if !matches!(j.joint_type, JointType::Revolute | JointType::Continuous) {
+        return Err(err(format!(
+            "joint `{}`: a moving {:?} joint is not supported (revolute chains): lock it (`[lock] {} = position`) or leave it out of the recorded joints",
+            j.name, j.joint_type, j.name
+        )));
     }
+    let axis = Vector3::from(j.axis.xyz.0);
+    if !(axis.norm() > 0.0) {
+        return Err(err(format!("joint `{}`: zero axis", j.name)));
+    }
+    model.joints.push(Joint {
+        name: j.name.clone(),
+        origin_rot: origin.0,
+        origin_xyz: origin.1,
+        axis: Unit::new_normalize(axis),
+    });
+    model.links.push(Inertial {
+        mass: 0.0,
+        com: Vector3::zeros(),
+        inertia_com: Matrix3::zeros(),
+    });
+    model.drives.push(Drive::default());
+    let (viscous, coulomb) = j.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
+    model.friction.push(Friction::symmetric(viscous, coulomb));
+    let lim = &j.limit;
+    model.limits.push(Limits {
+        position: (j.joint_type == JointType::Revolute && lim.upper > lim.lower).then_some((lim.lower, lim.upper)),
+        velocity: (lim.velocity > 0.0).then_some(lim.velocity),
+        acceleration: None,
+        torque: (lim.effort > 0.0).then_some(lim.effort),
+    });
+    Ok(())
+}
+
+/// A URDF link's inertial in the frame `frame` places it in; its shapes'
+/// box merged into `extent`, the box of the moving link it joins.
+fn link_inertial(
+    l: &urdf_rs::Link,
+    frame: &Frame,
+    path: &Path,
+    extent: &std::cell::RefCell<Option<Extent>>,
+) -> Inertial {
+    if let Some(e) = shapes_extent(l, frame, path) {
+        let mut x = extent.borrow_mut();
+        *x = Some(x.map_or(e, |x| x.union(&e)));
+    }
+    let (r, p) = compose(frame, &pose(&l.inertial.origin));
+    let i = &l.inertial.inertia;
+    let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+    Inertial {
+        mass: l.inertial.mass.value,
+        com: p,
+        inertia_com: r * local * r.transpose(),
+    }
+}
+
+/// Each link's child joints.
+fn children_of(robot: &urdf_rs::Robot) -> HashMap<&str, Vec<&urdf_rs::Joint>> {
+    let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
+    for j in &robot.joints {
+        children.entry(j.parent.link.as_str()).or_default().push(j);
+    }
+    children
+}
+
+/// The tool point, in the last moving link's frame: a single chain of
+/// fixed links followed past the last moving joint (a flange, `ee_link`)
+/// from `link` at `frame`.
+fn tool_point<'a>(
+    mut link: &'a str,
+    mut frame: Frame,
+    children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    rigid: &dyn Fn(&urdf_rs::Joint) -> Frame,
+) -> Vector3<f64> {
+    while let Some([j]) = children.get(link).map(Vec::as_slice) {
+        (frame, link) = (compose(&frame, &rigid(j)), &j.child.link);
+    }
+    frame.1
+}
+
+pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
+    let err = |msg: String| Error::Robot {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(format!("invalid XML: {e}")))?;
+    let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
+    let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    let children = children_of(&robot);
+    let root = tree_root(&robot, &links, &children, path)?;
+    let locked = locked_positions(&robot, locks, path)?;
+    // A joint moves unless it is fixed or locked.
+    let moves = |j: &urdf_rs::Joint| j.joint_type != JointType::Fixed && !locked.contains_key(&j.name);
+    // The transform of a joint that does not move: its origin, and its
+    // motion at the locked position.
+    let at = |j: &urdf_rs::Joint| locked.get(&j.name).copied().unwrap_or(0.0);
+    let rigid = |j: &urdf_rs::Joint| compose(&pose(&j.origin), &motion(j, at(j)));
     // The shapes of the URDF links merged into the current moving link,
     // as a box in its frame (meshes: their STL's vertices, when found).
     let extent = std::cell::RefCell::new(None::<Extent>);
-    let inertial_of = |name: &str, frame: &Frame| -> Inertial {
-        let l = links[name];
-        if let Some(e) = shapes_extent(l, frame, path) {
-            let mut x = extent.borrow_mut();
-            *x = Some(x.map_or(e, |x| x.union(&e)));
-        }
-        let (r, p) = compose(frame, &pose(&l.inertial.origin));
-        let i = &l.inertial.inertia;
-        let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
-        Inertial {
-            mass: l.inertial.mass.value,
-            com: p,
-            inertia_com: r * local * r.transpose(),
-        }
-    };
-
+    let inertial_of = |name: &str, frame: &Frame| link_inertial(links[name], frame, path, &extent);
     let mut model = Model::empty(&robot.name, Vector3::new(0.0, 0.0, -9.81));
     // `frame`: the current URDF link's frame in the current moving link's
     // frame (or the base frame before the first moving joint).
     let mut frame: Frame = (Matrix3::identity(), Vector3::zeros());
     let mut link = root;
     loop {
-        if !model.links.is_empty() {
-            let add = inertial_of(link, &frame);
-            let last = model.links.last_mut().expect("non-empty");
-            *last = last.merge(&add);
+        if let Some(last) = model.links.last_mut() {
+            *last = last.merge(&inertial_of(link, &frame));
         }
-        let kids = children.get(link).cloned().unwrap_or_default();
-        let mut next = None;
-        for j in kids {
-            if moving_below(&j.child.link, &children, &moves) || moves(j) {
-                if next.is_some() {
-                    return Err(err(format!(
-                        "link `{link}` branches into several moving chains; robotid handles serial chains"
-                    )));
-                }
-                next = Some(j);
-            } else if !model.links.is_empty() {
+        // One child leads to the next moving joint; the others are rigid parts.
+        let kids = children.get(link).map(Vec::as_slice).unwrap_or_default();
+        let (ahead, rigid_kids): (Vec<&urdf_rs::Joint>, Vec<&urdf_rs::Joint>) = kids
+            .iter()
+            .copied()
+            .partition(|j| moving_below(&j.child.link, &children, &moves) || moves(j));
+        if let Some(last) = model.links.last_mut() {
+            for j in rigid_kids {
                 lump_fixed(
                     &j.child.link,
                     compose(&frame, &rigid(j)),
                     &children,
                     &rigid,
                     &inertial_of,
-                    model.links.last_mut().expect("non-empty"),
+                    last,
                 );
             }
         }
-        let Some(j) = next else { break };
+        if ahead.len() > 1 {
+            return Err(err(format!(
+                "link `{link}` branches into several moving chains; robotid handles serial chains"
+            )));
+        }
+        let Some(j) = ahead.first().copied() else { break };
         let origin = compose(&frame, &pose(&j.origin));
         if !moves(j) {
-            frame = compose(&frame, &rigid(j));
-            link = &j.child.link;
+            (frame, link) = (compose(&frame, &rigid(j)), &j.child.link);
             continue;
         }
-        match &j.joint_type {
-            JointType::Revolute | JointType::Continuous => {
-                let axis = Vector3::from(j.axis.xyz.0);
-                if !(axis.norm() > 0.0) {
-                    return Err(err(format!("joint `{}`: zero axis", j.name)));
-                }
-                if !model.links.is_empty() {
-                    model.extents.push(extent.borrow_mut().take());
-                }
-                model.joints.push(Joint {
-                    name: j.name.clone(),
-                    origin_rot: origin.0,
-                    origin_xyz: origin.1,
-                    axis: Unit::new_normalize(axis),
-                });
-                model.links.push(Inertial {
-                    mass: 0.0,
-                    com: Vector3::zeros(),
-                    inertia_com: Matrix3::zeros(),
-                });
-                model.drives.push(Drive::default());
-                let (viscous, coulomb) = j.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
-                model.friction.push(Friction::symmetric(viscous, coulomb));
-                let lim = &j.limit;
-                model.limits.push(Limits {
-                    position: (j.joint_type == JointType::Revolute && lim.upper > lim.lower)
-                        .then_some((lim.lower, lim.upper)),
-                    velocity: (lim.velocity > 0.0).then_some(lim.velocity),
-                    acceleration: None,
-                    torque: (lim.effort > 0.0).then_some(lim.effort),
-                });
-                frame = (Matrix3::identity(), Vector3::zeros());
-            }
-            other => {
-                return Err(err(format!(
-                    "joint `{}`: a moving {other:?} joint is not supported (revolute chains): lock it (`[lock] {} = position`) or leave it out of the recorded joints",
-                    j.name, j.name
-                )));
-            }
+        if !model.links.is_empty() {
+            model.extents.push(extent.borrow_mut().take());
         }
+        push_revolute(&mut model, j, origin, path)?;
+        frame = (Matrix3::identity(), Vector3::zeros());
         link = &j.child.link;
     }
     if !model.links.is_empty() {
         model.extents.push(extent.borrow_mut().take());
     }
-    // The tool point: follow a single chain of fixed links past the last
-    // moving joint (e.g. a flange or `ee_link`).
-    while let Some([j]) = children.get(link).map(Vec::as_slice) {
-        frame = compose(&frame, &rigid(j));
-        link = &j.child.link;
-    }
-    model.end_effector = frame.1;
+    model.end_effector = tool_point(link, frame, &children, &rigid);
     model.warnings = warnings;
     model.locked = locked.into_iter().collect();
     if model.joints.is_empty() {

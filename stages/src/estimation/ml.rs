@@ -93,86 +93,15 @@ pub fn maximum_likelihood(
     // Start from WLS, in column-scaled parameters θ_s = D·θ.
     let start = solve(sys, Some(weights))?;
     let norms: Vec<f64> = (0..p).map(|j| sys.a.column(j).norm()).collect();
-    let mut theta = DVector::from_fn(p, |j, _| start.theta[j] * norms[j]);
-    let sums = |theta: &DVector<f64>| -> Sums {
-        let mut s = Sums {
-            m: DMatrix::zeros(p, p),
-            l: DMatrix::zeros(p, p),
-            c: DVector::zeros(p),
-            cost: 0.0,
-        };
-        let mut ag = DMatrix::zeros(n, p);
-        let mut d = vec![DVector::zeros(n); li];
-        let mut dmat = vec![DMatrix::zeros(n, p); li];
-        for g in 0..groups {
-            let r0 = g * n;
-            for i in 0..n {
-                for j in 0..p {
-                    ag[(i, j)] = sys.a[(r0 + i, j)] / norms[j];
-                }
-            }
-            let mut cov = DMatrix::from_fn(n, n, |i, k| if i == k { 1.0 / weights[r0 + i] } else { 0.0 });
-            for l in 0..li {
-                let base = ((g * li + l) * n) * p;
-                for i in 0..n {
-                    for j in 0..p {
-                        dmat[l][(i, j)] = noise.jacobian[base + i * p + j] / norms[j];
-                    }
-                }
-                d[l] = &dmat[l] * theta;
-                let v = noise.var[g * li + l];
-                cov.ger(v, &d[l], &d[l], 1.0);
-            }
-            let b = DVector::from_fn(n, |i, _| sys.b[r0 + i]);
-            let r = &b - &ag * theta;
-            let Some(w_mat) = cov.cholesky().map(|c| c.inverse()) else {
-                continue;
-            };
-            let w = &w_mat * &r;
-            s.cost += 0.5 * r.dot(&w);
-            let awt = ag.transpose() * &w_mat;
-            s.m += &awt * &ag;
-            s.c += &awt * &b;
-            for l in 0..li {
-                let v = noise.var[g * li + l];
-                let dw = dmat[l].transpose() * &w;
-                s.l.ger(v, &dw, &dw, 1.0);
-            }
-        }
-        s
+    let theta = DVector::from_fn(p, |j, _| start.theta[j] * norms[j]);
+    let likelihood = Likelihood {
+        sys,
+        weights,
+        noise,
+        norms: &norms,
+        groups,
     };
-    let mut current = sums(&theta);
-    let mut iterations = 0;
-    for it in 1..=opts.max_iterations {
-        iterations = it;
-        let lhs = &current.m - &current.l;
-        let Some(next) = lhs.lu().solve(&current.c) else {
-            return Err(Error::numerical("ml", "the fixed-point system became singular"));
-        };
-        // Step halving until the criterion does not rise.
-        let mut step = 1.0;
-        let mut accepted = None;
-        for _ in 0..30 {
-            let cand = &theta + (&next - &theta) * step;
-            let s = sums(&cand);
-            if s.cost <= current.cost * (1.0 + 1e-12) {
-                accepted = Some((cand, s));
-                break;
-            }
-            step *= 0.5;
-        }
-        let Some((cand, s)) = accepted else {
-            return Err(Error::numerical("ml", format!(
-                "no descent at iteration {it}: the input noise is too large for the first-order noise model (e.g. velocity noise wider than the Coulomb transition); use wls"
-            )));
-        };
-        let change = (&cand - &theta).amax() / theta.amax().max(1e-300);
-        theta = cand;
-        current = s;
-        if change < opts.tolerance {
-            break;
-        }
-    }
+    let (theta, current, iterations) = likelihood.maximise(theta, opts)?;
     let inv = current
         .m
         .clone()
@@ -203,6 +132,109 @@ pub fn maximum_likelihood(
         adequacy: found,
         widened: false,
     })
+}
+
+/// The likelihood of one system's rows, in column-scaled parameters
+/// θ_s = D·θ (`norms`: A's column norms), its rows in `groups` of one
+/// sample's joints.
+struct Likelihood<'a> {
+    sys: &'a System,
+    weights: &'a DVector<f64>,
+    noise: &'a InputNoise,
+    norms: &'a [f64],
+    groups: usize,
+}
+
+impl Likelihood<'_> {
+    /// The fixed-point iteration's sums at `theta`: the information
+    /// matrix M, the input-noise correction L, the right side c and the
+    /// cost.
+    fn sums(&self, theta: &DVector<f64>) -> Sums {
+        let (n, p, li) = (self.noise.n, self.sys.parameters(), self.noise.inputs);
+        let mut s = Sums {
+            m: DMatrix::zeros(p, p),
+            l: DMatrix::zeros(p, p),
+            c: DVector::zeros(p),
+            cost: 0.0,
+        };
+        let mut ag = DMatrix::zeros(n, p);
+        let mut d = vec![DVector::zeros(n); li];
+        let mut dmat = vec![DMatrix::zeros(n, p); li];
+        for g in 0..self.groups {
+            let r0 = g * n;
+            for i in 0..n {
+                for j in 0..p {
+                    ag[(i, j)] = self.sys.a[(r0 + i, j)] / self.norms[j];
+                }
+            }
+            let mut cov = DMatrix::from_fn(n, n, |i, k| if i == k { 1.0 / self.weights[r0 + i] } else { 0.0 });
+            for l in 0..li {
+                let base = ((g * li + l) * n) * p;
+                for i in 0..n {
+                    for j in 0..p {
+                        dmat[l][(i, j)] = self.noise.jacobian[base + i * p + j] / self.norms[j];
+                    }
+                }
+                d[l] = &dmat[l] * theta;
+                let v = self.noise.var[g * li + l];
+                cov.ger(v, &d[l], &d[l], 1.0);
+            }
+            let b = DVector::from_fn(n, |i, _| self.sys.b[r0 + i]);
+            let r = &b - &ag * theta;
+            let Some(w_mat) = cov.cholesky().map(|c| c.inverse()) else {
+                continue;
+            };
+            let w = &w_mat * &r;
+            s.cost += 0.5 * r.dot(&w);
+            let awt = ag.transpose() * &w_mat;
+            s.m += &awt * &ag;
+            s.c += &awt * &b;
+            for l in 0..li {
+                let v = self.noise.var[g * li + l];
+                let dw = dmat[l].transpose() * &w;
+                s.l.ger(v, &dw, &dw, 1.0);
+            }
+        }
+        s
+    }
+
+    /// θ_s iterated from `theta` to the maximum: its value, its sums and
+    /// the iterations taken.
+    fn maximise(&self, mut theta: DVector<f64>, opts: &MlOptions) -> Result<(DVector<f64>, Sums, usize)> {
+        let mut current = self.sums(&theta);
+        let mut iterations = 0;
+        for it in 1..=opts.max_iterations {
+            iterations = it;
+            let lhs = &current.m - &current.l;
+            let Some(next) = lhs.lu().solve(&current.c) else {
+                return Err(Error::numerical("ml", "the fixed-point system became singular"));
+            };
+            // Step halving until the criterion does not rise.
+            let mut step = 1.0;
+            let mut accepted = None;
+            for _ in 0..30 {
+                let cand = &theta + (&next - &theta) * step;
+                let s = self.sums(&cand);
+                if s.cost <= current.cost * (1.0 + 1e-12) {
+                    accepted = Some((cand, s));
+                    break;
+                }
+                step *= 0.5;
+            }
+            let Some((cand, s)) = accepted else {
+                return Err(Error::numerical("ml", format!(
+                    "no descent at iteration {it}: the input noise is too large for the first-order noise model (e.g. velocity noise wider than the Coulomb transition); use wls"
+                )));
+            };
+            let change = (&cand - &theta).amax() / theta.amax().max(1e-300);
+            theta = cand;
+            current = s;
+            if change < opts.tolerance {
+                break;
+            }
+        }
+        Ok((theta, current, iterations))
+    }
 }
 
 /// The input noise of a kinematics table made by `differentiate` from an

@@ -442,6 +442,44 @@ struct Solved {
     iterations: usize,
 }
 
+/// A sparse matrix's entries (row, column, value) as they are added, and
+/// its rows so far.
+#[derive(Default)]
+struct Triplets {
+    ai: Vec<usize>,
+    aj: Vec<usize>,
+    av: Vec<f64>,
+    rows: usize,
+}
+
+impl Triplets {
+    fn push(&mut self, row: usize, col: usize, value: f64) {
+        self.ai.push(row);
+        self.aj.push(col);
+        self.av.push(value);
+    }
+}
+
+/// The program's objective ½δᵀPδ, P = 2·normal scaled to a unit largest
+/// diagonal (the solver's tolerances and regularisation are absolute):
+/// its upper triangle.
+fn objective(normal: &DMatrix<f64>) -> CscMatrix<f64> {
+    let ns = normal.nrows();
+    let unit = 1.0 / (0..ns).map(|i| normal[(i, i)]).fold(0.0, f64::max).max(1e-300);
+    let (mut pi, mut pj, mut pv) = (Vec::new(), Vec::new(), Vec::new());
+    for c in 0..ns {
+        for r in 0..=c {
+            let v = 2.0 * unit * normal[(r, c)];
+            if v != 0.0 {
+                pi.push(r);
+                pj.push(c);
+                pv.push(v);
+            }
+        }
+    }
+    CscMatrix::new_from_triplets(ns, ns, pi, pj, pv)
+}
+
 impl Problem {
     fn new(
         names: &[String],
@@ -572,103 +610,9 @@ impl Problem {
         x_u: &DVector<f64>,
     ) -> Result<Solved> {
         let ns = self.kinds.len();
-        // Objective scaled to a unit largest diagonal (the solver's
-        // tolerances and regularisation are absolute).
-        let unit = 1.0 / (0..ns).map(|i| normal[(i, i)]).fold(0.0, f64::max).max(1e-300);
-        let (mut pi, mut pj, mut pv) = (Vec::new(), Vec::new(), Vec::new());
-        for c in 0..ns {
-            for r in 0..=c {
-                let v = 2.0 * unit * normal[(r, c)];
-                if v != 0.0 {
-                    pi.push(r);
-                    pj.push(c);
-                    pv.push(v);
-                }
-            }
-        }
-        let p = CscMatrix::new_from_triplets(ns, ns, pi, pj, pv);
+        let p = objective(normal);
         let q = vec![0.0; ns];
-        // Constraints s = b − A·x in the cones: per link svec(J(S·x)) in a
-        // PSD cone (upper triangle by columns, off-diagonals ×√2), then
-        // x_i ≥ 0 for rotor inertia and friction.
-        let (mut ai, mut aj, mut av) = (Vec::new(), Vec::new(), Vec::new());
-        let mut row = 0;
-        let mut cones: Vec<SupportedConeT<f64>> = Vec::new();
-        for l in 0..self.links {
-            for k in 0..10 {
-                let mut unit = [0.0; 10];
-                unit[k] = self.scale[10 * l + k];
-                let e = pseudo_inertia(&unit);
-                let mut at = row;
-                for c in 0..4 {
-                    for r in 0..=c {
-                        let v = if r == c {
-                            e[(r, c)]
-                        } else {
-                            std::f64::consts::SQRT_2 * e[(r, c)]
-                        };
-                        if v != 0.0 {
-                            ai.push(at);
-                            aj.push(10 * l + k);
-                            av.push(-v);
-                        }
-                        at += 1;
-                    }
-                }
-            }
-            row += 10;
-            cones.push(PSDTriangleConeT(4));
-        }
-        let nonneg: Vec<usize> = (0..ns).filter(|&i| self.kinds[i] == Kind::NonNegative).collect();
-        for (k, &i) in nonneg.iter().enumerate() {
-            ai.push(row + k);
-            aj.push(i);
-            av.push(-1.0);
-        }
-        let first_bound = row;
-        row += nonneg.len();
-        // The links' bounds, s = c − A·x ≥ 0: M − m_lo, m_hi − M, and the
-        // ellipsoid's g·θ (θ = S·x).
-        let mut constant = Vec::new();
-        for (l, b) in self.bounds.iter().enumerate() {
-            let m = 10 * l + 9;
-            if b.mass.0 > 0.0 {
-                ai.push(row);
-                aj.push(m);
-                av.push(-self.scale[m]);
-                constant.push((row, -b.mass.0));
-                row += 1;
-            }
-            if b.mass.1.is_finite() {
-                ai.push(row);
-                aj.push(m);
-                av.push(self.scale[m]);
-                constant.push((row, b.mass.1));
-                row += 1;
-            }
-            if let Some(e) = &b.ellipsoid {
-                for (k, g) in e.coefficients().iter().enumerate() {
-                    if *g != 0.0 {
-                        ai.push(row);
-                        aj.push(10 * l + k);
-                        av.push(-g * self.scale[10 * l + k]);
-                    }
-                }
-                row += 1;
-            }
-        }
-        if row > first_bound {
-            cones.push(NonnegativeConeT(row - first_bound));
-        }
-        // s = c − A·δ − A·x_u (x = x_u + δ): b = c − A·x_u.
-        let mut b = vec![0.0; row];
-        for (r, c) in constant {
-            b[r] += c;
-        }
-        for k in 0..ai.len() {
-            b[ai[k]] -= av[k] * x_u[aj[k]];
-        }
-        let a = CscMatrix::new_from_triplets(row, ns, ai, aj, av);
+        let (a, b, cones) = self.constraints(x_u);
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
             .max_iter(500)
@@ -708,6 +652,87 @@ impl Problem {
         }
         let x: Vec<f64> = (0..ns).map(|i| x_u[i] + solver.solution.x[i]).collect();
         Ok(self.solved(x, chol, fit, solver.solution.iterations as usize))
+    }
+
+    /// Constraints s = b − A·δ in the cones, for the step δ from `x_u`
+    /// (x = x_u + δ): per link svec(J(S·x)) in a PSD cone (upper triangle
+    /// by columns, off-diagonals ×√2), then x_i ≥ 0 for rotor inertia and
+    /// friction, then the links' bounds.
+    fn constraints(&self, x_u: &DVector<f64>) -> (CscMatrix<f64>, Vec<f64>, Vec<SupportedConeT<f64>>) {
+        let ns = self.kinds.len();
+        let mut t = Triplets::default();
+        let mut cones: Vec<SupportedConeT<f64>> = Vec::new();
+        for l in 0..self.links {
+            for k in 0..10 {
+                let mut unit = [0.0; 10];
+                unit[k] = self.scale[10 * l + k];
+                let e = pseudo_inertia(&unit);
+                let mut at = t.rows;
+                for c in 0..4 {
+                    for r in 0..=c {
+                        let v = if r == c {
+                            e[(r, c)]
+                        } else {
+                            std::f64::consts::SQRT_2 * e[(r, c)]
+                        };
+                        if v != 0.0 {
+                            t.push(at, 10 * l + k, -v);
+                        }
+                        at += 1;
+                    }
+                }
+            }
+            t.rows += 10;
+            cones.push(PSDTriangleConeT(4));
+        }
+        let nonneg: Vec<usize> = (0..ns).filter(|&i| self.kinds[i] == Kind::NonNegative).collect();
+        for (k, &i) in nonneg.iter().enumerate() {
+            t.push(t.rows + k, i, -1.0);
+        }
+        let first_bound = t.rows;
+        t.rows += nonneg.len();
+        let constant = self.link_bounds(&mut t);
+        if t.rows > first_bound {
+            cones.push(NonnegativeConeT(t.rows - first_bound));
+        }
+        // s = c − A·δ − A·x_u: b = c − A·x_u.
+        let mut b = vec![0.0; t.rows];
+        for (r, c) in constant {
+            b[r] += c;
+        }
+        for k in 0..t.ai.len() {
+            b[t.ai[k]] -= t.av[k] * x_u[t.aj[k]];
+        }
+        let a = CscMatrix::new_from_triplets(t.rows, ns, t.ai, t.aj, t.av);
+        (a, b, cones)
+    }
+
+    /// The links' bounds as rows s = c − A·x ≥ 0: M − m_lo, m_hi − M, and
+    /// the ellipsoid's g·θ (θ = S·x). Their constants c, by row.
+    fn link_bounds(&self, t: &mut Triplets) -> Vec<(usize, f64)> {
+        let mut constant = Vec::new();
+        for (l, b) in self.bounds.iter().enumerate() {
+            let m = 10 * l + 9;
+            if b.mass.0 > 0.0 {
+                t.push(t.rows, m, -self.scale[m]);
+                constant.push((t.rows, -b.mass.0));
+                t.rows += 1;
+            }
+            if b.mass.1.is_finite() {
+                t.push(t.rows, m, self.scale[m]);
+                constant.push((t.rows, b.mass.1));
+                t.rows += 1;
+            }
+            if let Some(e) = &b.ellipsoid {
+                for (k, g) in e.coefficients().iter().enumerate() {
+                    if *g != 0.0 {
+                        t.push(t.rows, 10 * l + k, -g * self.scale[10 * l + k]);
+                    }
+                }
+                t.rows += 1;
+            }
+        }
+        constant
     }
 
     fn solved(

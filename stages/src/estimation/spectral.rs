@@ -85,78 +85,96 @@ fn multiplicity(l: usize, n: usize) -> f64 {
     }
 }
 
-impl LineSystem {
-    /// `columns`: the regressor columns' lines over one period
-    /// (`stage::regressor::column_spectra`, `lines` each); `torque`:
-    /// `[joint][period · samples + sample]`, whole periods (at least two);
-    /// `used`: the joints whose rows enter (a joint-wise record's moving
-    /// joint), all when empty.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        columns: Vec<Complex64>,
+/// Each joint's weight (1/σ², σ² one sample's variance about the
+/// periods' mean; 0 for a joint not `used`) and the lines of the mean of
+/// the even and of the odd periods (`counts` of each), per joint.
+fn period_halves(
+    torque: &[Vec<f64>],
+    samples: usize,
+    counts: [usize; 2],
+    lines: usize,
+    used: &[bool],
+    spectra: &Spectra,
+) -> (Vec<f64>, [Vec<Vec<Complex64>>; 2]) {
+    // Each joint's noise: one sample's variance about the periods' mean.
+    let (joints, periods) = (torque.len(), counts[0] + counts[1]);
+    let mut weight = Vec::with_capacity(joints);
+    let mut halves: [Vec<Vec<Complex64>>; 2] = [Vec::new(), Vec::new()];
+    for (j, t) in torque.iter().enumerate() {
+        let mut var = 0.0;
+        let mut half = [vec![0.0; samples], vec![0.0; samples]];
+        for i in 0..samples {
+            let mean = (0..periods).map(|k| t[k * samples + i]).sum::<f64>() / periods as f64;
+            for k in 0..periods {
+                let x = t[k * samples + i];
+                var += (x - mean) * (x - mean);
+                half[k % 2][i] += x / counts[k % 2] as f64;
+            }
+        }
+        let var = var / (samples * (periods - 1)) as f64;
+        let used = used.is_empty() || used.get(j).copied().unwrap_or(false);
+        weight.push(if var > 0.0 && used { 1.0 / var } else { 0.0 });
+        for h in 0..2 {
+            let mut s = spectra.forward(&half[h]);
+            s.truncate(lines);
+            halves[h].push(s);
+        }
+    }
+    (weight, halves)
+}
+
+/// Each column's weighted power on each line, `[line · cols + col]`,
+/// m_l·Σ_j w_j·|Â_jc|²; each column's total; the band's samples Σ m_l.
+fn line_power(
+    at: &impl Fn(usize, usize, usize) -> Complex64,
+    weight: &[f64],
+    lines: usize,
+    cols: usize,
+    samples: usize,
+) -> (Vec<f64>, Vec<f64>, f64) {
+    let joints = weight.len();
+    let mut power = vec![0.0; lines * cols];
+    let mut band_samples = 0.0;
+    for l in 0..lines {
+        let m = multiplicity(l, samples);
+        band_samples += m;
+        for j in 0..joints {
+            let w = m * weight[j];
+            for c in 0..cols {
+                let a = at(j, c, l);
+                power[l * cols + c] += w * (a.re * a.re + a.im * a.im);
+            }
+        }
+    }
+    let total: Vec<f64> = (0..cols)
+        .map(|c| (0..lines).map(|l| power[l * cols + c]).sum())
+        .collect();
+    (power, total, band_samples)
+}
+
+/// The sums over the band of the columns active on each line: the
+/// weighted Gram matrix's upper triangle and the cross terms with each
+/// half's torque, line by line.
+struct LineSums {
+    active: Vec<u32>,
+    starts: Vec<usize>,
+    gram: Vec<f64>,
+    gram_starts: Vec<usize>,
+    cross: [Vec<Complex64>; 2],
+    energy: [f64; 2],
+}
+
+impl LineSums {
+    fn of(
+        at: &impl Fn(usize, usize, usize) -> Complex64,
+        weight: &[f64],
+        halves: &[Vec<Vec<Complex64>>; 2],
+        power: &[f64],
+        total: &[f64],
         lines: usize,
-        cols: usize,
-        torque: &[Vec<f64>],
         samples: usize,
-        period_s: f64,
-        used: &[bool],
-        spectra: &Spectra,
-    ) -> Option<LineSystem> {
-        let joints = torque.len();
-        let periods = torque.first().map_or(0, |t| t.len() / samples.max(1));
-        if periods < 2 || columns.len() != joints * cols * lines || lines == 0 || lines > samples / 2 + 1 {
-            return None;
-        }
-        // Each joint's noise: one sample's variance about the periods' mean.
-        let mut weight = Vec::with_capacity(joints);
-        let mut halves: [Vec<Vec<Complex64>>; 2] = [Vec::new(), Vec::new()];
-        let counts = [periods.div_ceil(2), periods / 2];
-        for (j, t) in torque.iter().enumerate() {
-            let mut var = 0.0;
-            let mut half = [vec![0.0; samples], vec![0.0; samples]];
-            for i in 0..samples {
-                let mean = (0..periods).map(|k| t[k * samples + i]).sum::<f64>() / periods as f64;
-                for k in 0..periods {
-                    let x = t[k * samples + i];
-                    var += (x - mean) * (x - mean);
-                    half[k % 2][i] += x / counts[k % 2] as f64;
-                }
-            }
-            let var = var / (samples * (periods - 1)) as f64;
-            let used = used.is_empty() || used.get(j).copied().unwrap_or(false);
-            weight.push(if var > 0.0 && used { 1.0 / var } else { 0.0 });
-            for h in 0..2 {
-                let mut s = spectra.forward(&half[h]);
-                s.truncate(lines);
-                halves[h].push(s);
-            }
-        }
-        if weight.iter().all(|w| *w == 0.0) {
-            return None;
-        }
-        // Each column's power on each line, m_l·Σ_j w_j·|Â_jc|²: a column is
-        // active on a line where it is over 1e-28 of its total; by
-        // Cauchy–Schwarz the entries left out are under 1e-14 of their
-        // totals' geometric mean, far below what the fit sees. Far up the
-        // band only the non-smooth (Coulomb) columns are, and the sums
-        // below are made over the active ones only.
-        let at = |j: usize, c: usize, l: usize| columns[(j * cols + c) * lines + l];
-        let mut power = vec![0.0; lines * cols];
-        let mut band_samples = 0.0;
-        for l in 0..lines {
-            let m = multiplicity(l, samples);
-            band_samples += m;
-            for j in 0..joints {
-                let w = m * weight[j];
-                for c in 0..cols {
-                    let a = at(j, c, l);
-                    power[l * cols + c] += w * (a.re * a.re + a.im * a.im);
-                }
-            }
-        }
-        let total: Vec<f64> = (0..cols)
-            .map(|c| (0..lines).map(|l| power[l * cols + c]).sum())
-            .collect();
+    ) -> LineSums {
+        let (joints, cols) = (weight.len(), total.len());
         let (mut active, mut starts) = (Vec::new(), vec![0]);
         let (mut sparse, mut gram_starts) = (Vec::new(), vec![0]);
         let mut sparse_cross = [Vec::new(), Vec::new()];
@@ -197,18 +215,65 @@ impl LineSystem {
             starts.push(active.len());
             gram_starts.push(sparse.len());
         }
-        Some(LineSystem {
-            lines,
-            samples,
-            cols,
-            joints,
-            period_s,
+        LineSums {
             active,
             starts,
             gram: sparse,
             gram_starts,
             cross: sparse_cross,
             energy,
+        }
+    }
+}
+
+impl LineSystem {
+    /// `columns`: the regressor columns' lines over one period
+    /// (`stage::regressor::column_spectra`, `lines` each); `torque`:
+    /// `[joint][period · samples + sample]`, whole periods (at least two);
+    /// `used`: the joints whose rows enter (a joint-wise record's moving
+    /// joint), all when empty.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        columns: Vec<Complex64>,
+        lines: usize,
+        cols: usize,
+        torque: &[Vec<f64>],
+        samples: usize,
+        period_s: f64,
+        used: &[bool],
+        spectra: &Spectra,
+    ) -> Option<LineSystem> {
+        let joints = torque.len();
+        let periods = torque.first().map_or(0, |t| t.len() / samples.max(1));
+        if periods < 2 || columns.len() != joints * cols * lines || lines == 0 || lines > samples / 2 + 1 {
+            return None;
+        }
+        let counts = [periods.div_ceil(2), periods / 2];
+        let (weight, halves) = period_halves(torque, samples, counts, lines, used, spectra);
+        if weight.iter().all(|w| *w == 0.0) {
+            return None;
+        }
+        // Each column's power on each line, m_l·Σ_j w_j·|Â_jc|²: a column is
+        // active on a line where it is over 1e-28 of its total; by
+        // Cauchy–Schwarz the entries left out are under 1e-14 of their
+        // totals' geometric mean, far below what the fit sees. Far up the
+        // band only the non-smooth (Coulomb) columns are, and the sums
+        // below are made over the active ones only.
+        let at = |j: usize, c: usize, l: usize| columns[(j * cols + c) * lines + l];
+        let (power, total, band_samples) = line_power(&at, &weight, lines, cols, samples);
+        let sums = LineSums::of(&at, &weight, &halves, &power, &total, lines, samples);
+        Some(LineSystem {
+            lines,
+            samples,
+            cols,
+            joints,
+            period_s,
+            active: sums.active,
+            starts: sums.starts,
+            gram: sums.gram,
+            gram_starts: sums.gram_starts,
+            cross: sums.cross,
+            energy: sums.energy,
             columns,
             torque: halves,
             weight,

@@ -211,8 +211,8 @@ impl Summary {
                     "{}: parameters (the recordings were not made with one regressor configuration)",
                     other.recordings.join(", ")
                 ),
-                format!("{:?} (those of {})", self.names, self.recordings.join(", ")),
-                format!("{:?}", other.names),
+                format!("{} (those of {})", self.names.join(", "), self.recordings.join(", ")),
+                other.names.join(", "),
             ));
         }
         if other.weighted != self.weighted {
@@ -326,55 +326,8 @@ impl Summary {
         let inverse_normal = DMatrix::from_fn(p, p, |i, j| inv_scaled[(i, j)] / (norms[i] * norms[j]));
         let dof = self.equations.saturating_sub(p).max(1);
         let residual_variance = self.factor.rss / dof as f64;
-        let have_periods = self.period_moments.iter().all(Option::is_some);
-        let have_spectrum = have_periods
-            && self.spectrum_moments.len() == self.period_moments.len()
-            && self.spectrum_moments.iter().all(Option::is_some);
-        let covariance = match covariance {
-            Covariance::Auto if have_spectrum => Covariance::Spectrum,
-            Covariance::Spectrum if !have_spectrum => {
-                return Err(Error::missing(
-                    "the torque of every period, over one averaged period",
-                    "covariance = \"spectrum\" needs them in the regressor tables (an `align` and an `average` stage before `regressor`)",
-                ))
-            }
-            c => c,
-        };
-        let use_periods = match covariance {
-            Covariance::Periods if !have_periods => {
-                return Err(Error::missing(
-                    "the torque of every period",
-                    "covariance = \"periods\" needs them in the regressor tables (an `align` stage with at least two periods before `regressor`)",
-                ))
-            }
-            Covariance::Periods | Covariance::Spectrum => true,
-            Covariance::Residual | Covariance::Bootstrap => false,
-            Covariance::Auto => have_periods,
-        };
-        let (mut cov, dof) = if covariance == Covariance::Spectrum {
-            // θ = G·b̄: Cov θ = G·(Aᵀ·W·Ĉov(b̄)·W·A)·Gᵀ, summed over recordings.
-            let mut moments = DMatrix::zeros(p, p);
-            let mut dof = 0;
-            for (mm, d) in self.spectrum_moments.iter().flatten() {
-                moments += mm;
-                dof += d;
-            }
-            (&inverse_normal * moments * &inverse_normal, dof)
-        } else if use_periods {
-            // θ = G·b̄ with b̄ the mean of P periods: Cov θ = G·Cov(b̄)·Gᵀ,
-            // Cov(b̄) from the periods' deviations, Σ(P − 1) degrees of freedom.
-            let mut cov = DMatrix::zeros(p, p);
-            let mut dof = 0;
-            for mm in self.period_moments.iter().flatten() {
-                let np = mm.ncols();
-                let g = &inverse_normal * mm;
-                cov += &g * g.transpose() / (np * (np - 1)) as f64;
-                dof += np - 1;
-            }
-            (cov, dof)
-        } else {
-            (&inverse_normal * residual_variance, dof)
-        };
+        let (covariance, use_periods) = self.covariance_from(covariance)?;
+        let (mut cov, dof) = self.spread(covariance, use_periods, &inverse_normal, residual_variance, dof);
         // Known parameters' uncertainty: θ = G·(b − A_k θ_k) adds G·A_k·C_k·A_kᵀ·Gᵀ.
         if let Some(k) = &self.known {
             let g_ak = &inverse_normal * &k.cross;
@@ -417,6 +370,74 @@ impl Summary {
             adequacy: found,
             widened,
         })
+    }
+    /// The covariance asked for, `Auto` resolved (the spectrum's where
+    /// every recording has it, else the periods' where they all have
+    /// them, else the residual's), and whether it comes from the periods.
+    fn covariance_from(&self, asked: Covariance) -> Result<(Covariance, bool)> {
+        let have_periods = self.period_moments.iter().all(Option::is_some);
+        let have_spectrum = have_periods
+            && self.spectrum_moments.len() == self.period_moments.len()
+            && self.spectrum_moments.iter().all(Option::is_some);
+        let covariance = match asked {
+            Covariance::Auto if have_spectrum => Covariance::Spectrum,
+            Covariance::Spectrum if !have_spectrum => {
+                return Err(Error::missing(
+                    "the torque of every period, over one averaged period",
+                    "covariance = \"spectrum\" needs them in the regressor tables (an `align` and an `average` stage before `regressor`)",
+                ))
+            }
+            c => c,
+        };
+        let use_periods = match covariance {
+            Covariance::Periods if !have_periods => {
+                return Err(Error::missing(
+                    "the torque of every period",
+                    "covariance = \"periods\" needs them in the regressor tables (an `align` stage with at least two periods before `regressor`)",
+                ))
+            }
+            Covariance::Periods | Covariance::Spectrum => true,
+            Covariance::Residual | Covariance::Bootstrap => false,
+            Covariance::Auto => have_periods,
+        };
+        Ok((covariance, use_periods))
+    }
+
+    /// The estimate's covariance from the chosen spread, before the known
+    /// parameters' share and any widening, with its degrees of freedom.
+    fn spread(
+        &self,
+        covariance: Covariance,
+        use_periods: bool,
+        inverse_normal: &DMatrix<f64>,
+        residual_variance: f64,
+        dof: usize,
+    ) -> (DMatrix<f64>, usize) {
+        let p = self.parameters();
+        if covariance == Covariance::Spectrum {
+            // θ = G·b̄: Cov θ = G·(Aᵀ·W·Ĉov(b̄)·W·A)·Gᵀ, summed over recordings.
+            let mut moments = DMatrix::zeros(p, p);
+            let mut dof = 0;
+            for (mm, d) in self.spectrum_moments.iter().flatten() {
+                moments += mm;
+                dof += d;
+            }
+            (inverse_normal * moments * inverse_normal, dof)
+        } else if use_periods {
+            // θ = G·b̄ with b̄ the mean of P periods: Cov θ = G·Cov(b̄)·Gᵀ,
+            // Cov(b̄) from the periods' deviations, Σ(P − 1) degrees of freedom.
+            let mut cov = DMatrix::zeros(p, p);
+            let mut dof = 0;
+            for mm in self.period_moments.iter().flatten() {
+                let np = mm.ncols();
+                let g = inverse_normal * mm;
+                cov += &g * g.transpose() / (np * (np - 1)) as f64;
+                dof += np - 1;
+            }
+            (cov, dof)
+        } else {
+            (inverse_normal * residual_variance, dof)
+        }
     }
 }
 

@@ -216,8 +216,8 @@ impl System {
             if theirs.len() != p || theirs.iter().zip(&sys.names).any(|(a, b)| *a != b) {
                 return Err(Error::mismatch(
                     format!("{label}: parameters (the recordings were not made with one regressor configuration)"),
-                    format!("{:?} (the first table's)", sys.names),
-                    format!("{theirs:?}"),
+                    format!("{} (the first table's)", sys.names.join(", ")),
+                    theirs.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
                 ));
             }
             sys.recordings.push(label.clone());
@@ -268,8 +268,8 @@ impl System {
             if s.names != first.names {
                 return Err(Error::mismatch(
                     format!("{}: parameters", s.recordings.join(", ")),
-                    format!("{:?}", first.names),
-                    format!("{:?}", s.names),
+                    first.names.join(", "),
+                    s.names.join(", "),
                 ));
             }
             out.a.view_mut((at, 0), (s.rows(), p)).copy_from(&s.a);

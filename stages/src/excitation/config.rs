@@ -122,15 +122,24 @@ impl Cartesian {
 
     pub fn name(&self) -> String {
         let at = self.link().map_or("end effector".to_string(), |l| format!("link {l}"));
+        let bound = |b: &Option<f64>, none: &str| b.map_or(none.to_string(), |v| v.to_string());
+        let point = |p: &[f64]| format!("({})", p.iter().map(f64::to_string).collect::<Vec<_>>().join(", "));
         match self {
-            Cartesian::Height { min, max, .. } => format!("{at} height in [{min:?}, {max:?}] m"),
+            Cartesian::Height { min, max, .. } => {
+                format!("{at} height in [{}, {}] m", bound(min, "-inf"), bound(max, "inf"))
+            }
             Cartesian::Cylinder {
                 radius, center, below, ..
             } => match below {
-                Some(h) => format!("{at} outside the cylinder r = {radius} m at {center:?} below z = {h} m"),
-                None => format!("{at} outside the cylinder r = {radius} m at {center:?}"),
+                Some(h) => format!(
+                    "{at} outside the cylinder r = {radius} m at {} below z = {h} m",
+                    point(center)
+                ),
+                None => format!("{at} outside the cylinder r = {radius} m at {}", point(center)),
             },
-            Cartesian::Box { min, max, keep, .. } => format!("{at} {keep:?} box {min:?}..{max:?}").to_lowercase(),
+            Cartesian::Box { min, max, keep, .. } => {
+                format!("{at} {keep:?} box {}..{}", point(min), point(max)).to_lowercase()
+            }
         }
     }
 }

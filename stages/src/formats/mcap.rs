@@ -26,6 +26,64 @@ const COUNTS_SCHEMA: &str =
 const CURRENT_SCHEMA: &str =
     r#"{"type":"object","properties":{"current":{"type":"array","items":{"type":"number"}}},"required":["current"]}"#;
 
+/// The channels of a recording's MCAP file: its JointState, and the
+/// reference, encoder counts and motor current it has.
+struct Channels {
+    state: u16,
+    reference: Option<u16>,
+    counts: Option<u16>,
+    current: Option<u16>,
+}
+
+impl Channels {
+    fn add<W: std::io::Write + std::io::Seek>(
+        out: &mut mcap::Writer<W>,
+        raw: &RawSamples,
+    ) -> std::result::Result<Channels, mcap::McapError> {
+        let no_md = BTreeMap::new();
+        let js = out.add_schema(JOINT_STATE_NAME, "ros2msg", JOINT_STATE_SCHEMA.as_bytes())?;
+        let state = out.add_channel(js, TOPIC_JOINT_STATES, "cdr", &no_md)?;
+        let reference = match raw.reference {
+            Some(_) => Some(out.add_channel(js, TOPIC_REFERENCE, "cdr", &no_md)?),
+            None => None,
+        };
+        let counts = match raw.counts {
+            Some(_) => {
+                let s = out.add_schema("robotid/EncoderCounts", "jsonschema", COUNTS_SCHEMA.as_bytes())?;
+                Some(out.add_channel(s, TOPIC_COUNTS, "json", &no_md)?)
+            }
+            None => None,
+        };
+        let current = match raw.effort_kind {
+            TorqueChannel::Current => {
+                let s = out.add_schema("robotid/MotorCurrent", "jsonschema", CURRENT_SCHEMA.as_bytes())?;
+                Some(out.add_channel(s, TOPIC_CURRENT, "json", &no_md)?)
+            }
+            TorqueChannel::Torque => None,
+        };
+        Ok(Channels {
+            state,
+            reference,
+            counts,
+            current,
+        })
+    }
+}
+
+/// `{"key":[v0,v1,…]}` into `text` (a buffer reused from message to message).
+fn json_array<T: std::fmt::Display>(text: &mut String, key: &str, values: impl Iterator<Item = T>) {
+    use std::fmt::Write;
+    text.clear();
+    let _ = write!(text, "{{\"{key}\":[");
+    for (j, v) in values.enumerate() {
+        if j > 0 {
+            text.push(',');
+        }
+        let _ = write!(text, "{v}");
+    }
+    text.push_str("]}");
+}
+
 /// Writes `raw` as an MCAP file. `torque_per_amp` (N·m/A, per joint) turns
 /// sampled motor current into the JointState `effort` (joint torque), as a
 /// drive's ROS interface reports it.
@@ -42,33 +100,7 @@ pub fn write_recording_mcap(path: &Path, raw: &RawSamples, torque_per_amp: &[f64
             .profile("ros2")
             .create(w)
             .map_err(err)?;
-        let no_md = BTreeMap::new();
-        let js = out
-            .add_schema(JOINT_STATE_NAME, "ros2msg", JOINT_STATE_SCHEMA.as_bytes())
-            .map_err(err)?;
-        let ch_state = out.add_channel(js, TOPIC_JOINT_STATES, "cdr", &no_md).map_err(err)?;
-        let ch_ref = match raw.reference {
-            Some(_) => Some(out.add_channel(js, TOPIC_REFERENCE, "cdr", &no_md).map_err(err)?),
-            None => None,
-        };
-        let ch_counts = match raw.counts {
-            Some(_) => {
-                let s = out
-                    .add_schema("robotid/EncoderCounts", "jsonschema", COUNTS_SCHEMA.as_bytes())
-                    .map_err(err)?;
-                Some(out.add_channel(s, TOPIC_COUNTS, "json", &no_md).map_err(err)?)
-            }
-            None => None,
-        };
-        let ch_current = match raw.effort_kind {
-            TorqueChannel::Current => {
-                let s = out
-                    .add_schema("robotid/MotorCurrent", "jsonschema", CURRENT_SCHEMA.as_bytes())
-                    .map_err(err)?;
-                Some(out.add_channel(s, TOPIC_CURRENT, "json", &no_md).map_err(err)?)
-            }
-            TorqueChannel::Torque => None,
-        };
+        let ch = Channels::add(&mut out, raw).map_err(err)?;
         let n = raw.joints.len();
         let mut msg = JointState {
             frame_id: String::new(),
@@ -103,8 +135,8 @@ pub fn write_recording_mcap(path: &Path, raw: &RawSamples, torque_per_amp: &[f64
                 };
             }
             encode_joint_state(&msg, &mut buf);
-            write(&mut out, ch_state, ns, &buf).map_err(err)?;
-            if let (Some(ch), Some(r)) = (ch_ref, &raw.reference) {
+            write(&mut out, ch.state, ns, &buf).map_err(err)?;
+            if let (Some(ch), Some(r)) = (ch.reference, &raw.reference) {
                 let refmsg = JointState {
                     position: r.iter().map(|c| c[k]).collect(),
                     effort: Vec::new(),
@@ -113,28 +145,12 @@ pub fn write_recording_mcap(path: &Path, raw: &RawSamples, torque_per_amp: &[f64
                 encode_joint_state(&refmsg, &mut buf);
                 write(&mut out, ch, ns, &buf).map_err(err)?;
             }
-            if let (Some(ch), Some(c)) = (ch_counts, &raw.counts) {
-                text.clear();
-                text.push_str("{\"counts\":[");
-                for (j, col) in c.iter().enumerate() {
-                    if j > 0 {
-                        text.push(',');
-                    }
-                    text.push_str(&col[k].to_string());
-                }
-                text.push_str("]}");
+            if let (Some(ch), Some(c)) = (ch.counts, &raw.counts) {
+                json_array(&mut text, "counts", c.iter().map(|col| col[k]));
                 write(&mut out, ch, ns, text.as_bytes()).map_err(err)?;
             }
-            if let Some(ch) = ch_current {
-                text.clear();
-                text.push_str("{\"current\":[");
-                for (j, col) in raw.effort.iter().enumerate() {
-                    if j > 0 {
-                        text.push(',');
-                    }
-                    text.push_str(&format!("{}", col[k]));
-                }
-                text.push_str("]}");
+            if let Some(ch) = ch.current {
+                json_array(&mut text, "current", raw.effort.iter().map(|col| col[k]));
                 write(&mut out, ch, ns, text.as_bytes()).map_err(err)?;
             }
         }

@@ -39,53 +39,20 @@ fn stream(seed: u64, id: u64) -> ChaCha8Rng {
 /// Simulates `cfg` on `model`. `provenance` is merged into the raw table's
 /// schema metadata (config file name and hash, …).
 pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, String>) -> Result<Simulation> {
-    let n = model.dof();
-    let mut plant_model = model.clone();
-    for f in &mut plant_model.friction {
-        if f.transition == 0.0 {
-            f.transition = cfg.plant.coulomb_transition_rad_s;
-        }
-    }
+    let plant_model = plant_model(cfg, model)?;
     let model = &plant_model;
-    let invalid = |msg: String| Error::Config {
-        path: "simulation".into(),
-        msg,
-    };
-    if cfg.trajectory.dof() != n {
-        return Err(invalid(format!(
-            "the trajectory drives {} joints, robot `{}` has {n}",
-            cfg.trajectory.dof(),
-            model.name
-        )));
-    }
+    let n = model.dof();
     cfg.validate()?;
-    // The plant is integrated through M(q)⁻¹: a chain end without mass or
-    // inertia about its axis makes M singular. Refused here, naming the
-    // joint, rather than failing inside the integrator.
-    {
-        let mut data = crate::dynamics::Data::new(model);
-        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        cfg.trajectory.eval(0.0, &mut q, &mut qd, &mut qdd);
-        crate::dynamics::mass_matrix(model, &mut data, &q);
-        if let Some(j) = (0..n).find(|&j| {
-            let minor = data.mass.view((0, 0), (j + 1, j + 1)).clone_owned();
-            minor.cholesky().is_none()
-        }) {
-            return Err(Error::Robot {
-                path: cfg.robot.clone(),
-                msg: format!(
-                    "joint `{}`: the mass matrix is singular there (no mass or inertia about its axis beyond it, and no rotor): a simulation needs every moving link to have inertia (a URDF link without <inertial>?)",
-                    model.joints[j].name
-                ),
-            });
-        }
-    }
+    check_mass_matrix(cfg, model)?;
     let m = &cfg.measurement;
-    let pos_std = m
-        .position_noise_std_rad
-        .resolve(n, "measurement.position_noise_std_rad")?;
-    let cur_std = m.current_noise_std_a.resolve(n, "measurement.current_noise_std_a")?;
-    let dist_std = cfg.disturbance.torque_std_nm.resolve(n, "disturbance.torque_std_nm")?;
+    let noise = Noise {
+        pos_std: m
+            .position_noise_std_rad
+            .resolve(n, "measurement.position_noise_std_rad")?,
+        cur_std: m.current_noise_std_a.resolve(n, "measurement.current_noise_std_a")?,
+        dist_std: cfg.disturbance.torque_std_nm.resolve(n, "disturbance.torque_std_nm")?,
+        quantise: m.quantise,
+    };
 
     let timing = &cfg.timing;
     let fs = timing.log_rate_hz;
@@ -97,16 +64,168 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
         (None, Some(t)) => stream(cfg.seed, 0).random_range(0.0..t),
         (None, None) => 0.0,
     };
+    let (schedule, dropped) = sampling_schedule(cfg, h);
+
+    let reference = Reference::new(cfg.trajectory.clone(), timing.transient_s, phase);
+    let rest = reference.rest.clone();
+    let mut data = Data::new(model);
+    let gains = controller_gains(&cfg.controller, model, &mut data, &rest)?;
+    let filter = m.filter.as_ref().map(|spec| AnalogFilter::new(*spec)).transpose()?;
+    let gains_truth = gains.as_ref().map(GainsTruth::from);
+    let filt_truth = filter.as_ref().map(filter_truth);
+    let mut plant = Plant::new(model, reference, gains, filter);
+    let x = held_at_rest(&mut plant, model, &mut data, &rest);
+    let (truth, raw) = run_plant(&mut plant, x, &schedule, &noise, cfg.seed, steps, h)?;
+
+    let harmonics = match &cfg.trajectory {
+        Trajectory::Fourier(f) => Some(f.harmonic_numbers()),
+        Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
+    };
+    let md = raw_metadata(cfg, provenance, period, harmonics.as_deref());
+    let raw = RawSamples {
+        joints: model.joint_names(),
+        time: truth.time.clone(),
+        q: raw.q,
+        effort_kind: TorqueChannel::Current,
+        effort: raw.current,
+        reference: Some(raw.reference),
+        counts: Some(raw.counts),
+        metadata: md,
+    };
+    let notes = limit_notes(model, &mut plant.reference, &truth, timing.transient_s);
+    let ground_truth = GroundTruth {
+        robot: model.name.clone(),
+        seed: cfg.seed,
+        log_rate_hz: fs,
+        steps_per_sample: timing.steps_per_sample,
+        period_s: period,
+        harmonics,
+        transient_s: timing.transient_s,
+        start_phase_s: phase,
+        samples: schedule.len(),
+        dropped_samples: dropped,
+        jitter_std_s: timing.jitter_std_s,
+        filter: filt_truth,
+        controller: gains_truth,
+        trajectory: cfg.trajectory.clone(),
+        joints: joint_truths(model, &noise.pos_std, noise.quantise, &noise.cur_std, &noise.dist_std),
+    };
+    Ok(Simulation {
+        raw,
+        truth,
+        ground_truth,
+        notes,
+    })
+}
+
+/// The robot as the simulation runs it: Coulomb friction's transition
+/// from the plant settings where the robot file gives none; refused unless
+/// the trajectory drives its joints.
+fn plant_model(cfg: &SimConfig, model: &Model) -> Result<Model> {
+    let n = model.dof();
+    let mut plant_model = model.clone();
+    for f in &mut plant_model.friction {
+        if f.transition == 0.0 {
+            f.transition = cfg.plant.coulomb_transition_rad_s;
+        }
+    }
+    if cfg.trajectory.dof() != n {
+        return Err(Error::Config {
+            path: "simulation".into(),
+            msg: format!(
+                "the trajectory drives {} joints, robot `{}` has {n}",
+                cfg.trajectory.dof(),
+                model.name
+            ),
+        });
+    }
+    Ok(plant_model)
+}
+
+/// The raw table's schema metadata: the provenance, the log rate, and
+/// what the simulation knows of the recording (period, analog filter,
+/// harmonics).
+fn raw_metadata(
+    cfg: &SimConfig,
+    provenance: &BTreeMap<String, String>,
+    period: Option<f64>,
+    harmonics: Option<&[u32]>,
+) -> BTreeMap<String, String> {
+    let mut md = provenance.clone();
+    md.insert(metadata::SAMPLE_RATE_HZ.into(), cfg.timing.log_rate_hz.to_string());
+    if let Some(p) = period {
+        md.insert(metadata::PERIOD_S.into(), p.to_string());
+    }
+    if let Some(f) = &cfg.measurement.filter {
+        md.insert(
+            metadata::ANALOG_FILTER.into(),
+            serde_json::to_string(f).expect("a filter spec serialises"),
+        );
+    }
+    if let Some(hs) = harmonics {
+        md.insert(
+            metadata::HARMONICS.into(),
+            hs.iter().map(u32::to_string).collect::<Vec<_>>().join(","),
+        );
+    }
+    md
+}
+
+impl From<&Gains> for GainsTruth {
+    fn from(g: &Gains) -> GainsTruth {
+        GainsTruth {
+            kp: g.kp.clone(),
+            kd: g.kd.clone(),
+            ki: g.ki.clone(),
+        }
+    }
+}
+
+/// The plant is integrated through M(q)⁻¹: a chain end without mass or
+/// inertia about its axis makes M singular. Refused here, naming the
+/// joint, rather than failing inside the integrator.
+fn check_mass_matrix(cfg: &SimConfig, model: &Model) -> Result<()> {
+    let n = model.dof();
+    let mut data = crate::dynamics::Data::new(model);
+    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    cfg.trajectory.eval(0.0, &mut q, &mut qd, &mut qdd);
+    crate::dynamics::mass_matrix(model, &mut data, &q);
+    if let Some(j) = (0..n).find(|&j| {
+        let minor = data.mass.view((0, 0), (j + 1, j + 1)).clone_owned();
+        minor.cholesky().is_none()
+    }) {
+        return Err(Error::Robot {
+            path: cfg.robot.clone(),
+            msg: format!(
+                "joint `{}`: the mass matrix is singular there (no mass or inertia about its axis beyond it, and no rotor): a simulation needs every moving link to have inertia (a URDF link without <inertial>?)",
+                model.joints[j].name
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The measurement's and the disturbance's standard deviations, per joint.
+struct Noise {
+    pos_std: Vec<f64>,
+    cur_std: Vec<f64>,
+    dist_std: Vec<f64>,
+    quantise: bool,
+}
+
+/// The sampling schedule on the integration grid (`h` s a step) over the
+/// transient and the trajectory: jittered, strictly increasing, some
+/// samples dropped. The steps sampled, and how many were dropped.
+fn sampling_schedule(cfg: &SimConfig, h: f64) -> (Vec<usize>, usize) {
+    let timing = &cfg.timing;
     let duration = timing.transient_s
         + match &cfg.trajectory {
             Trajectory::Fourier(f) => f.period() * timing.periods.unwrap_or(1) as f64,
             Trajectory::Waypoints(w) => w.duration(),
             Trajectory::Sweeps(s) => s.duration(),
         };
-    let nominal = (duration * fs).round() as usize;
-
-    // Sampling schedule on the integration grid: jittered, strictly
-    // increasing, some samples dropped.
+    let nominal = (duration * timing.log_rate_hz).round() as usize;
+    let steps = timing.steps_per_sample as usize;
     let mut rng_sched = stream(cfg.seed, 1);
     let mut schedule = Vec::with_capacity(nominal);
     let mut dropped = 0;
@@ -125,11 +244,19 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
         }
         schedule.push(idx);
     }
+    (schedule, dropped)
+}
 
-    let reference = Reference::new(cfg.trajectory.clone(), timing.transient_s, phase);
-    let rest = reference.rest.clone();
-    let mut data = Data::new(model);
-    let gains = match &cfg.controller {
+/// The controller's gains: as given, or placed for the bandwidth on the
+/// mass matrix's diagonal at `rest`.
+fn controller_gains(
+    controller: &ControllerConfig,
+    model: &Model,
+    data: &mut Data,
+    rest: &[f64],
+) -> Result<Option<Gains>> {
+    let n = model.dof();
+    Ok(match controller {
         ControllerConfig::Off => None,
         ControllerConfig::Pid {
             bandwidth_hz,
@@ -139,7 +266,7 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             kd,
             ki,
         } => {
-            let mm = mass_matrix(model, &mut data, &rest).clone();
+            let mm = mass_matrix(model, data, rest).clone();
             let w = 2.0 * std::f64::consts::PI * bandwidth_hz;
             let wi = 2.0 * std::f64::consts::PI * integral_hz;
             let diag: Vec<f64> = (0..n).map(|i| mm[(i, i)]).collect();
@@ -153,28 +280,21 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             let ki = pick(ki, "controller.ki", &|i| kp[i] * wi)?;
             Some(Gains { kp, kd, ki })
         }
-    };
-    let filter = match &m.filter {
-        Some(spec) => Some(AnalogFilter::new(*spec)?),
-        None => None,
-    };
-    let gains_truth = gains.as_ref().map(|g| GainsTruth {
-        kp: g.kp.clone(),
-        kd: g.kd.clone(),
-        ki: g.ki.clone(),
-    });
-    let filt_truth = filter.as_ref().map(filter_truth);
+    })
+}
 
-    let mut plant = Plant::new(model, reference, gains, filter);
+/// The plant's start state: at `rest`, as if the controller had been
+/// holding it (the integrator carries the gravity torque, the analog
+/// filter is in its steady state).
+fn held_at_rest(plant: &mut Plant, model: &Model, data: &mut Data, rest: &[f64]) -> Vec<f64> {
+    let n = model.dof();
     let mut x = vec![0.0; plant.state_len()];
-    x[..n].copy_from_slice(&rest);
-    // Start as if the controller had been holding the rest position: the
-    // integrator carries the gravity torque.
+    x[..n].copy_from_slice(rest);
     let zero = vec![0.0; n];
     let g0 = rnea_terms(
         model,
-        &mut data,
-        &rest,
+        data,
+        rest,
         &zero,
         &zero,
         Terms {
@@ -200,16 +320,42 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             f.steady_state(current, &mut x[s..s + order]);
         }
     }
+    x
+}
 
-    let mut rng_pos = stream(cfg.seed, 2);
-    let mut rng_cur = stream(cfg.seed, 3);
-    let mut rng_dist = stream(cfg.seed, 4);
+/// What the lab's logger writes, per joint and sample.
+struct Logged {
+    q: Vec<Vec<f64>>,
+    current: Vec<Vec<f64>>,
+    reference: Vec<Vec<f64>>,
+    counts: Vec<Vec<i64>>,
+}
+
+/// The plant run from state `x` over the `schedule`'s steps (`steps` a
+/// sample, `h` s each), disturbed anew every sample: the truth at every
+/// sample, and what the logger writes, with its noise.
+fn run_plant(
+    plant: &mut Plant,
+    mut x: Vec<f64>,
+    schedule: &[usize],
+    noise: &Noise,
+    seed: u64,
+    steps: usize,
+    h: f64,
+) -> Result<(TruthSamples, Logged)> {
+    let model = plant.model;
+    let n = model.dof();
+    let mut rng_pos = stream(seed, 2);
+    let mut rng_cur = stream(seed, 3);
+    let mut rng_dist = stream(seed, 4);
     let cols = |len: usize| vec![Vec::with_capacity(len); n];
     let len = schedule.len();
-    let mut raw_q = cols(len);
-    let mut raw_i = cols(len);
-    let mut raw_r = cols(len);
-    let mut raw_c: Vec<Vec<i64>> = vec![Vec::with_capacity(len); n];
+    let mut raw = Logged {
+        q: cols(len),
+        current: cols(len),
+        reference: cols(len),
+        counts: vec![Vec::with_capacity(len); n],
+    };
     let mut truth = TruthSamples {
         joints: model.joint_names(),
         time: Vec::with_capacity(len),
@@ -222,32 +368,17 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
     };
     let mut dx = vec![0.0; x.len()];
     let mut step = 0usize;
-    for &idx in &schedule {
+    for &idx in schedule {
         while step < idx {
             if step.is_multiple_of(steps) {
                 for i in 0..n {
                     let z: f64 = rng_dist.sample(StandardNormal);
-                    plant.disturbance[i] = dist_std[i] * z;
+                    plant.disturbance[i] = noise.dist_std[i] * z;
                 }
             }
             plant.step(step as f64 * h, h, &mut x);
             step += 1;
-            // RK4 beyond its stability limit (a light link under stiff
-            // gains) blows up within steps: stop while the numbers are
-            // still numbers, with the way out.
-            if let Some(j) = (0..2 * n).find(|&j| !(x[j].abs() < 1e4)) {
-                return Err(Error::setting(
-                    "timing.steps_per_sample",
-                    format!(
-                        "large enough for the controller's gains: the integration diverged at t = {:.4} s ({} of joint `{}` = {:e}); raise it or lower the controller bandwidth",
-                        step as f64 * h,
-                        if j < n { "position" } else { "velocity" },
-                        model.joints[j % n].name,
-                        x[j]
-                    ),
-                    steps,
-                ));
-            }
+            diverged(&x, model, step as f64 * h, steps)?;
         }
         let t = idx as f64 * h;
         plant.derivative(t, &x, &mut dx);
@@ -262,76 +393,42 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
             let clean = plant.filtered_current(&x, i);
             truth.current_clean[i].push(clean);
             let zq: f64 = rng_pos.sample(StandardNormal);
-            let noisy = x[i] + pos_std[i] * zq;
+            let noisy = x[i] + noise.pos_std[i] * zq;
             let quantum = drive.radians_per_count();
             let counts = (noisy / quantum).round();
-            raw_c[i].push(counts as i64);
+            raw.counts[i].push(counts as i64);
             // `+ 0.0` turns −0 into 0 so files never show "-0".
-            raw_q[i].push(if m.quantise { counts * quantum + 0.0 } else { noisy });
+            raw.q[i].push(if noise.quantise { counts * quantum + 0.0 } else { noisy });
             let zi: f64 = rng_cur.sample(StandardNormal);
-            raw_i[i].push(clean + cur_std[i] * zi);
+            raw.current[i].push(clean + noise.cur_std[i] * zi);
         }
         let (r, _) = plant.reference_at(t);
         for i in 0..n {
-            raw_r[i].push(r[i]);
+            raw.reference[i].push(r[i]);
         }
     }
+    Ok((truth, raw))
+}
 
-    let mut md = provenance.clone();
-    md.insert(metadata::SAMPLE_RATE_HZ.into(), fs.to_string());
-    if let Some(p) = period {
-        md.insert(metadata::PERIOD_S.into(), p.to_string());
+/// RK4 beyond its stability limit (a light link under stiff gains) blows
+/// up within steps: stopped at `t` while the numbers are still numbers,
+/// with the way out.
+fn diverged(x: &[f64], model: &Model, t: f64, steps: usize) -> Result<()> {
+    let n = model.dof();
+    if let Some(j) = (0..2 * n).find(|&j| !(x[j].abs() < 1e4)) {
+        return Err(Error::setting(
+            "timing.steps_per_sample",
+            format!(
+                "large enough for the controller's gains: the integration diverged at t = {:.4} s ({} of joint `{}` = {:e}); raise it or lower the controller bandwidth",
+                t,
+                if j < n { "position" } else { "velocity" },
+                model.joints[j % n].name,
+                x[j]
+            ),
+            steps,
+        ));
     }
-    if let Some(f) = &cfg.measurement.filter {
-        md.insert(
-            metadata::ANALOG_FILTER.into(),
-            serde_json::to_string(f).expect("a filter spec serialises"),
-        );
-    }
-    let harmonics = match &cfg.trajectory {
-        Trajectory::Fourier(f) => Some(f.harmonic_numbers()),
-        Trajectory::Waypoints(_) | Trajectory::Sweeps(_) => None,
-    };
-    if let Some(hs) = &harmonics {
-        md.insert(
-            metadata::HARMONICS.into(),
-            hs.iter().map(u32::to_string).collect::<Vec<_>>().join(","),
-        );
-    }
-    let raw = RawSamples {
-        joints: model.joint_names(),
-        time: truth.time.clone(),
-        q: raw_q,
-        effort_kind: TorqueChannel::Current,
-        effort: raw_i,
-        reference: Some(raw_r),
-        counts: Some(raw_c),
-        metadata: md,
-    };
-    let notes = limit_notes(model, &mut plant.reference, &truth, timing.transient_s);
-    let ground_truth = GroundTruth {
-        robot: model.name.clone(),
-        seed: cfg.seed,
-        log_rate_hz: fs,
-        steps_per_sample: timing.steps_per_sample,
-        period_s: period,
-        harmonics,
-        transient_s: timing.transient_s,
-        start_phase_s: phase,
-        samples: len,
-        dropped_samples: dropped,
-        jitter_std_s: timing.jitter_std_s,
-        filter: filt_truth,
-        controller: gains_truth,
-        trajectory: cfg.trajectory.clone(),
-        joints: joint_truths(model, &pos_std, m.quantise, &cur_std, &dist_std),
-    };
-    Ok(Simulation {
-        raw,
-        truth,
-        ground_truth,
-        notes,
-    })
+    Ok(())
 }
 
 /// The reference after the transient (what the trajectory designer

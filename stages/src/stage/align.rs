@@ -546,48 +546,12 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         sample,
         msg,
     };
-    let Stamps {
-        min_step,
-        max_step,
-        median: med,
-        fs,
-        unit_hint,
-    } = stamps(raw, cfg, &data_err)?;
+    let stamps = stamps(raw, cfg, &data_err)?;
     let t = &raw.time;
-    let (period, defaults) = period_and_defaults(raw, cfg, fs, &data_err)?;
-    let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
-    if n < 4 {
-        return Err(data_err(
-            "time",
-            None,
-            format!(
-                "{n} samples per period ({period} s at {fs} Hz) is too few; at least 4 are needed{}",
-                if unit_hint.is_empty() && period * fs < 4.0 && med > 1e-3 * period {
-                    format!(" (the median step is {med:.4e} s: times in ms declared as s?)")
-                } else {
-                    unit_hint.clone()
-                }
-            ),
-        ));
-    }
+    let (period, defaults) = period_and_defaults(raw, cfg, stamps.fs, &data_err)?;
+    let n = samples_per_period(cfg, period, &stamps, &data_err)?;
     let dt = period / n as f64;
-    // Deviation of the stamps from a uniform grid of step dt through the first sample.
-    let k0 = t[0];
-    let deviation = |ti: f64| (ti - k0) - ((ti - k0) / dt).round() * dt;
-    let jitter_rms = (t.iter().map(|&ti| deviation(ti).powi(2)).sum::<f64>() / t.len() as f64).sqrt();
-    // On the grid: every step one grid step (no drops) and every stamp
-    // within 1e-6 of a step of its grid point (nanosecond stamps are).
-    let on_grid = t.windows(2).all(|w| ((w[1] - w[0]) / dt - 1.0).abs() < 1e-3)
-        && t.iter().all(|&ti| deviation(ti).abs() < 1e-6 * dt);
-    let mut report = AlignReport {
-        nominal_rate_hz: fs,
-        median_step_s: med,
-        min_step_s: min_step,
-        max_step_s: max_step,
-        jitter_rms_s: jitter_rms,
-        ..Default::default()
-    };
-
+    let (on_grid, mut report) = grid_report(t, dt, &stamps);
     // The whole record on a uniform grid, end-aligned.
     let span = t[t.len() - 1] - t[0];
     let m = (span / dt + 1e-9).floor() as usize + 1;
@@ -601,28 +565,12 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     // On the grid the samples are used in place, from `first` on; off it
     // they are resampled into owned columns. Either way only the kept
     // periods are copied, once, at the end.
-    let mut owned: Option<Resampled> = None;
-    let (first, grid0) = if on_grid {
-        (t.len() - m, t[t.len() - m])
+    let (owned, first, grid0) = if on_grid {
+        (None, t.len() - m, t[t.len() - m])
     } else {
-        report.resampled = true;
-        let t_end = t[t.len() - 1];
-        let grid: Vec<f64> = (0..m).map(|j| t_end - (m - 1 - j) as f64 * dt).collect();
-        let res = |c: &Vec<Vec<f64>>| c.par_iter().map(|v| resample(t, v, &grid)).collect::<Vec<_>>();
-        report.resample_error_rad = Some(leave_one_out_error(t, &raw.q));
-        report.notes.push(format!(
-            "stamps jitter (steps {:.6}..{:.6} s, RMS {:.2e} s off a uniform grid): resampled onto {n} samples per period by cubic Hermite interpolation, leave-one-out position error {:.2e} rad; interpolation also lowers white-noise variance",
-            min_step, max_step, jitter_rms, report.resample_error_rad.unwrap_or(0.0)
-        ));
-        owned = Some((res(&raw.q), res(&raw.effort), raw.reference.as_ref().map(res)));
-        (0, grid[0])
+        let (owned, grid0) = resampled(raw, m, dt, n, &stamps, &mut report);
+        (Some(owned), 0, grid0)
     };
-    fn view<'a>(resampled: Option<&'a Vec<Vec<f64>>>, src: &'a [Vec<f64>], first: usize) -> Vec<&'a [f64]> {
-        match resampled {
-            Some(cols) => cols.iter().map(Vec::as_slice).collect(),
-            None => src.iter().map(|v| &v[first..]).collect(),
-        }
-    }
     let q = view(owned.as_ref().map(|o| &o.0), &raw.q, first);
     let torque = view(owned.as_ref().map(|o| &o.1), &raw.effort, first);
     let reference = raw
@@ -631,16 +579,199 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
         .map(|r| view(owned.as_ref().and_then(|o| o.2.as_ref()), r, first));
     let whole = m / n;
     report.periods_found = whole;
-
-    // The steady part: where the positions repeat one period later. r(i) is
-    // the RMS over a window of N/10 samples of q(i) − q(i+N), relative to the
-    // positions' RMS variation over the record (not its last period, which
-    // may be rest); the steady part starts where r stays below
-    // `steady_tolerance` for good.
+    let grid = Grid {
+        n,
+        m,
+        dt,
+        start: grid0 - t[0],
+        period,
+        span,
+    };
     let scale = spread(&q, m);
+    let steady = steady_periods(&q, &grid, scale, cfg, &mut report, &data_err)?;
+    let Steady { from, to, kept, .. } = steady;
+    report.transient_periods = whole - kept;
+    report.period_change = period_change(&q, from, kept, n, scale);
+    let stretch = short_stretch(&q, &torque, &steady, (n, grid0, dt), &mut report.notes);
+    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..to].to_vec()).collect::<Vec<_>>();
+    let start = grid0 + from as f64 * dt;
+    report.dropped_s = start - t[0];
+    let md = periods_metadata(&raw.metadata, period, n, kept, start, &defaults, &mut report.notes);
+    Ok(Periods {
+        joints: raw.joints.clone(),
+        period_s: period,
+        samples_per_period: n,
+        periods: kept,
+        start_s: start,
+        q: keep(q),
+        torque: keep(torque),
+        reference: reference.map(keep),
+        stretch,
+        report,
+        metadata: md,
+    })
+}
+
+/// Columns from sample `first` on, or their resampled copies.
+fn view<'a>(resampled: Option<&'a Vec<Vec<f64>>>, src: &'a [Vec<f64>], first: usize) -> Vec<&'a [f64]> {
+    match resampled {
+        Some(cols) => cols.iter().map(Vec::as_slice).collect(),
+        None => src.iter().map(|v| &v[first..]).collect(),
+    }
+}
+
+/// Fewer than two whole periods in a stretch that holds at least a tenth
+/// of a period more: the stretch, kept too for a fit over all of it. The
+/// notes say what one period leaves to the noise estimate.
+fn short_stretch(
+    q: &[&[f64]],
+    torque: &[&[f64]],
+    steady: &Steady,
+    (n, grid0, dt): (usize, f64, f64),
+    notes: &mut Vec<String>,
+) -> Option<Stretch> {
+    let kept = steady.kept;
+    let (steady_from, steady_to) = steady.stretch;
+    let stretch = (kept < 2 && steady_to - steady_from >= kept * n + n / 10).then(|| {
+        let cut = |c: &[&[f64]]| c.iter().map(|v| v[steady_from..steady_to].to_vec()).collect::<Vec<_>>();
+        notes.push(format!(
+            "a steady stretch of {:.2} periods: `differentiate` with `fourier_fit` fits all of it",
+            (steady_to - steady_from) as f64 / n as f64
+        ));
+        Stretch {
+            start_s: grid0 + steady_from as f64 * dt,
+            q: cut(q),
+            torque: cut(torque),
+        }
+    });
+    if kept == 1 {
+        notes.push(if stretch.is_some() {
+            "only one full steady period: no averaging; the torque noise comes from the steady stretch and itself one period on".into()
+        } else {
+            "only one full steady period: no averaging; noise comes from the non-excited lines only, with no time-domain estimate".into()
+        });
+    }
+    stretch
+}
+
+/// Samples per period: as given, else the period at the stamps' rate;
+/// refused under four (with a hint when the stamps look like ms).
+fn samples_per_period(cfg: &AlignConfig, period: f64, stamps: &Stamps, data_err: &DataErr) -> Result<usize> {
+    let (fs, med) = (stamps.fs, stamps.median);
+    let n = cfg.samples_per_period.unwrap_or_else(|| (period * fs).round() as usize);
+    if n < 4 {
+        return Err(data_err(
+            "time",
+            None,
+            format!(
+                "{n} samples per period ({period} s at {fs} Hz) is too few; at least 4 are needed{}",
+                if stamps.unit_hint.is_empty() && period * fs < 4.0 && med > 1e-3 * period {
+                    format!(" (the median step is {med:.4e} s: times in ms declared as s?)")
+                } else {
+                    stamps.unit_hint.clone()
+                }
+            ),
+        ));
+    }
+    Ok(n)
+}
+
+/// Whether the stamps lie on a uniform grid of step `dt` through the
+/// first one (every step one grid step, no drops, and every stamp within
+/// 1e-6 of a step of its grid point, as nanosecond stamps are), and the
+/// report of the stamps' steps and jitter.
+fn grid_report(t: &[f64], dt: f64, stamps: &Stamps) -> (bool, AlignReport) {
+    let k0 = t[0];
+    let deviation = |ti: f64| (ti - k0) - ((ti - k0) / dt).round() * dt;
+    let jitter_rms = (t.iter().map(|&ti| deviation(ti).powi(2)).sum::<f64>() / t.len() as f64).sqrt();
+    let on_grid = t.windows(2).all(|w| ((w[1] - w[0]) / dt - 1.0).abs() < 1e-3)
+        && t.iter().all(|&ti| deviation(ti).abs() < 1e-6 * dt);
+    let report = AlignReport {
+        nominal_rate_hz: stamps.fs,
+        median_step_s: stamps.median,
+        min_step_s: stamps.min_step,
+        max_step_s: stamps.max_step,
+        jitter_rms_s: jitter_rms,
+        ..Default::default()
+    };
+    (on_grid, report)
+}
+
+/// The record resampled onto `m` samples of a uniform grid of step `dt`,
+/// end-aligned, and the grid's first time; the report says so, with the
+/// leave-one-out error of the interpolation.
+fn resampled(
+    raw: &RawSamples,
+    m: usize,
+    dt: f64,
+    n: usize,
+    stamps: &Stamps,
+    report: &mut AlignReport,
+) -> (Resampled, f64) {
+    let t = &raw.time;
+    report.resampled = true;
+    let t_end = t[t.len() - 1];
+    let grid: Vec<f64> = (0..m).map(|j| t_end - (m - 1 - j) as f64 * dt).collect();
+    let res = |c: &Vec<Vec<f64>>| c.par_iter().map(|v| resample(t, v, &grid)).collect::<Vec<_>>();
+    report.resample_error_rad = Some(leave_one_out_error(t, &raw.q));
+    report.notes.push(format!(
+        "stamps jitter (steps {:.6}..{:.6} s, RMS {:.2e} s off a uniform grid): resampled onto {n} samples per period by cubic Hermite interpolation, leave-one-out position error {:.2e} rad; interpolation also lowers white-noise variance",
+        stamps.min_step, stamps.max_step, report.jitter_rms_s, report.resample_error_rad.unwrap_or(0.0)
+    ));
+    (
+        (res(&raw.q), res(&raw.effort), raw.reference.as_ref().map(res)),
+        grid[0],
+    )
+}
+
+/// The record's uniform grid: `m` samples of `dt` s, `n` a period, its
+/// first `start` s after the record's first stamp.
+struct Grid {
+    n: usize,
+    m: usize,
+    dt: f64,
+    start: f64,
+    period: f64,
+    /// The record's span, s.
+    span: f64,
+}
+
+impl Grid {
+    /// Seconds into the record of grid sample `i`.
+    fn at(&self, i: usize) -> f64 {
+        self.start + i as f64 * self.dt
+    }
+}
+
+/// The samples kept: `kept` whole periods `from..to`, in the steady
+/// stretch `stretch` (samples of the grid).
+struct Steady {
+    from: usize,
+    to: usize,
+    kept: usize,
+    stretch: (usize, usize),
+}
+
+/// The steady part: where the positions repeat one period later. r(i) is
+/// the RMS over a window of N/10 samples of q(i) − q(i+N), relative to the
+/// positions' RMS variation over the record (`scale`; not its last period,
+/// which may be rest); the steady part starts where r stays below
+/// `steady_tolerance` for good. In it, the latest whole periods (past the
+/// start-up transient); between two ramps, centred in the stretch: where a
+/// ramp starts at a rest point the positions repeat a little into it, at
+/// both ends alike.
+fn steady_periods(
+    q: &[&[f64]],
+    grid: &Grid,
+    scale: f64,
+    cfg: &AlignConfig,
+    report: &mut AlignReport,
+    data_err: &DataErr,
+) -> Result<Steady> {
+    let (n, m, period) = (grid.n, grid.m, grid.period);
     let (steady_from, steady_to) = if m > n {
-        steady_stretch(&q, n, m, scale, cfg.steady_tolerance).map_err(|u| {
-            let at = grid0 + u.at as f64 * dt - t[0];
+        steady_stretch(q, n, m, scale, cfg.steady_tolerance).map_err(|u| {
+            let at = grid.at(u.at);
             data_err(
                 "q_*",
                 None,
@@ -651,7 +782,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
                     100.0 * u.end,
                     100.0 * cfg.steady_tolerance,
                     at,
-                    (at + 2.0 * period).min(span),
+                    (at + 2.0 * period).min(grid.span),
                 ),
             )
         })?
@@ -668,66 +799,28 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
             None,
             format!(
                 "less than one full steady period: the start-up transient lasts until {:.3} s, leaving {:.3} s of the {period} s period",
-                grid0 + steady_from as f64 * dt - t[0],
-                (steady_to - steady_from) as f64 * dt
+                grid.at(steady_from),
+                (steady_to - steady_from) as f64 * grid.dt
             ),
         ));
     }
     if steady_to < m {
         report.notes.push(format!(
             "the last {:.3} s do not repeat with the period (a ramp-down?): left out",
-            (m - steady_to) as f64 * dt
+            (m - steady_to) as f64 * grid.dt
         ));
     }
-    // The latest whole periods (past the start-up transient); between two
-    // ramps, centred in the stretch: where a ramp starts at a rest point
-    // the positions repeat a little into it, at both ends alike.
     let slack = steady_to - steady_from - kept * n;
     let from = if steady_to < m {
         steady_from + slack / 2
     } else {
         steady_to - kept * n
     };
-    let to = from + kept * n;
-    report.transient_periods = whole - kept;
-    report.period_change = period_change(&q, from, kept, n, scale);
-    // Fewer than two whole periods in a stretch that holds at least a tenth
-    // of a period more: keep the stretch too, for a fit over all of it.
-    let stretch = (kept < 2 && steady_to - steady_from >= kept * n + n / 10).then(|| {
-        let cut = |c: &Vec<&[f64]>| c.iter().map(|v| v[steady_from..steady_to].to_vec()).collect::<Vec<_>>();
-        report.notes.push(format!(
-            "a steady stretch of {:.2} periods: `differentiate` with `fourier_fit` fits all of it",
-            (steady_to - steady_from) as f64 / n as f64
-        ));
-        Stretch {
-            start_s: grid0 + steady_from as f64 * dt,
-            q: cut(&q),
-            torque: cut(&torque),
-        }
-    });
-    let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..to].to_vec()).collect::<Vec<_>>();
-    let start = grid0 + from as f64 * dt;
-    report.dropped_s = start - t[0];
-    if kept == 1 {
-        report.notes.push(if stretch.is_some() {
-            "only one full steady period: no averaging; the torque noise comes from the steady stretch and itself one period on".into()
-        } else {
-            "only one full steady period: no averaging; noise comes from the non-excited lines only, with no time-domain estimate".into()
-        });
-    }
-    let md = periods_metadata(&raw.metadata, period, n, kept, start, &defaults, &mut report.notes);
-    Ok(Periods {
-        joints: raw.joints.clone(),
-        period_s: period,
-        samples_per_period: n,
-        periods: kept,
-        start_s: start,
-        q: keep(q),
-        torque: keep(torque),
-        reference: reference.map(keep),
-        stretch,
-        report,
-        metadata: md,
+    Ok(Steady {
+        from,
+        to: from + kept * n,
+        kept,
+        stretch: (steady_from, steady_to),
     })
 }
 

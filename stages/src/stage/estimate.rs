@@ -281,6 +281,120 @@ impl Part {
     }
 }
 
+/// Each recording's residue under the pooled estimate `est` (name, rows,
+/// mean squared residue), and the recordings whose residue is over 3× the
+/// median of the others' (with three or more).
+#[allow(clippy::type_complexity)]
+fn residues(parts: &[Part], est: &Estimate) -> (Vec<(String, usize, f64)>, Vec<String>) {
+    // Each recording's residue under the pooled estimate: ‖A_r θ − b_r‖²
+    // = ‖R_r θ − z_r‖² + its own residual, from its summary alone.
+    let theta = &est.values;
+    let residues: Vec<(String, usize, f64)> = parts
+        .iter()
+        .filter(|p| p.summary.names == est.names)
+        .map(|p| {
+            let f = &p.summary.factor;
+            let d = &f.r * theta - &f.z;
+            let msr = (d.norm_squared() + f.rss) / f.rows.max(1) as f64;
+            (p.summary.recordings.join(","), f.rows, msr)
+        })
+        .collect();
+    let outliers: Vec<String> = if residues.len() >= 3 {
+        residues
+            .iter()
+            .enumerate()
+            .filter(|(i, r)| {
+                let mut others: Vec<f64> = residues
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| j != i)
+                    .map(|(_, o)| o.2)
+                    .collect();
+                others.sort_by(f64::total_cmp);
+                r.2 > 3.0 * others[others.len() / 2]
+            })
+            .map(|(_, r)| r.0.clone())
+            .collect()
+    } else {
+        Vec::new()
+    };
+    (residues, outliers)
+}
+
+/// The table's notes on the parameters the data cannot tell at their
+/// physical size and on the essential set (of `parameters`).
+fn identifiability_notes(
+    unidentified: &[Unidentified],
+    essential: Option<&Essential>,
+    parameters: usize,
+) -> BTreeMap<String, String> {
+    let mut md = BTreeMap::new();
+    if !unidentified.is_empty() {
+        md.insert(
+            metadata::UNIDENTIFIED.into(),
+            unidentified
+                .iter()
+                .map(|u| {
+                    format!(
+                        "{} = {:.4e} ± {:.2e} (a-priori size {:.2e})",
+                        u.name, u.value, u.std, u.scale
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+        );
+    }
+    if let Some(e) = essential {
+        md.insert(
+            metadata::ESSENTIAL.into(),
+            format!(
+                "{} of {} essential (residual sum of squares ×{:.4}); dropped: {}",
+                e.kept.len(),
+                parameters,
+                e.rss_ratio,
+                e.dropped
+                    .iter()
+                    .map(|(n, r)| format!("{n} ({:.0} % relative std)", 100.0 * r))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        );
+    }
+    md
+}
+
+/// The table's notes on the estimate: parameters no body can have, the
+/// model's adequacy per joint, and intervals widened for model error.
+fn estimate_notes(est: &Estimate, expressions: &[String]) -> BTreeMap<String, String> {
+    let mut md = BTreeMap::new();
+    let impossible = est.impossible(expressions);
+    if !impossible.is_empty() {
+        md.insert(
+            metadata::IMPOSSIBLE.into(),
+            impossible
+                .iter()
+                .map(|(n, v, z)| format!("{n} = {v} ({z:.1} σ)"))
+                .collect::<Vec<_>>()
+                .join(", "),
+        );
+    }
+    md.insert(metadata::ADEQUACY.into(), adequacy_json(&est.adequacy));
+    if est.widened {
+        md.insert(
+            metadata::WIDENED.into(),
+            format!(
+                "model error dominates on {}: the excess residual variance added to the periods' spread",
+                est.inadequate()
+                    .iter()
+                    .map(|a| a.joint.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        );
+    }
+    md
+}
+
 /// What the reduce gives: the estimate, its `parameters` table and what
 /// the physical fit did.
 #[derive(Debug, Clone)]
@@ -360,8 +474,8 @@ impl Reducer {
             if sys.fix(k)?.is_empty() {
                 return Err(Error::mismatch(
                     "known: parameters",
-                    format!("some of the model's {:?}", sys.names),
-                    format!("{:?}", k.names),
+                    format!("some of the model's {}", sys.names.join(", ")),
+                    k.names.join(", "),
                 ));
             }
         }
@@ -400,6 +514,42 @@ impl Reducer {
             .ok_or_else(|| Error::missing("the robot", "set `robot`"))?;
         let base = rc.base_regressor(model)?;
         Ok(input_noise(&base, kin, &var_q, gains))
+    }
+
+    /// The physically consistent estimate in place of `est` (its values,
+    /// bootstrap covariance and adequacy), with its notes in `md`.
+    fn physical(
+        &self,
+        base: Option<&BaseRegressor>,
+        summary: &Summary,
+        est: &mut Estimate,
+        md: &mut BTreeMap<String, String>,
+    ) -> Result<PhysicalFit> {
+        if self.model.is_none() {
+            return Err(Error::missing("the robot", "physical = true needs it: set `robot`"));
+        }
+        let base = base.ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
+        // Held-out periods choose λ; the halves are least squares'.
+        let halves = match self.cfg.method {
+            Estimator::Ml => None,
+            _ => summary.halves(&est.values),
+        };
+        let (fit, covariance, note) = physical_fit(base, est, halves.as_ref(), self.cfg.prior_weight)?;
+        est.values = fit.base.clone();
+        est.covariance = covariance;
+        est.covariance_from = Covariance::Bootstrap;
+        est.widened = false;
+        est.adequacy = summary.adequacy_at(&est.values)?;
+        md.insert(metadata::PHYSICAL.into(), note);
+        md.insert(
+            metadata::PHYSICAL_PRIOR_WEIGHT.into(),
+            format!("{:?}", fit.prior_weight),
+        );
+        md.insert(
+            metadata::PHYSICAL_STANDARD.into(),
+            serde_json::to_string(&fit.standard).expect("numbers serialise"),
+        );
+        Ok(fit)
     }
 
     /// Merges the recordings' parts (in the order given) and solves.
@@ -441,68 +591,16 @@ impl Reducer {
             _ => Vec::new(),
         };
         let mut md = summary.metadata.clone();
-        if !unidentified.is_empty() {
-            md.insert(
-                metadata::UNIDENTIFIED.into(),
-                unidentified
-                    .iter()
-                    .map(|u| {
-                        format!(
-                            "{} = {:.4e} ± {:.2e} (a-priori size {:.2e})",
-                            u.name, u.value, u.std, u.scale
-                        )
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            );
-        }
-        if let Some(e) = &essential {
-            md.insert(
-                metadata::ESSENTIAL.into(),
-                format!(
-                    "{} of {} essential (residual sum of squares ×{:.4}); dropped: {}",
-                    e.kept.len(),
-                    summary.names.len(),
-                    e.rss_ratio,
-                    e.dropped
-                        .iter()
-                        .map(|(n, r)| format!("{n} ({:.0} % relative std)", 100.0 * r))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            );
-        }
+        md.extend(identifiability_notes(
+            &unidentified,
+            essential.as_ref(),
+            summary.names.len(),
+        ));
         let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
-        let mut physical = None;
-        if self.cfg.physical {
-            if self.model.is_none() {
-                return Err(Error::missing("the robot", "physical = true needs it: set `robot`"));
-            }
-            let base = base
-                .as_ref()
-                .ok_or_else(|| Error::missing("the regressor configuration", "physical = true needs it"))?;
-            // Held-out periods choose λ; the halves are least squares'.
-            let halves = match self.cfg.method {
-                Estimator::Ml => None,
-                _ => summary.halves(&est.values),
-            };
-            let (fit, covariance, note) = physical_fit(base, &est, halves.as_ref(), self.cfg.prior_weight)?;
-            est.values = fit.base.clone();
-            est.covariance = covariance;
-            est.covariance_from = Covariance::Bootstrap;
-            est.widened = false;
-            est.adequacy = summary.adequacy_at(&est.values)?;
-            md.insert(metadata::PHYSICAL.into(), note);
-            md.insert(
-                metadata::PHYSICAL_PRIOR_WEIGHT.into(),
-                format!("{:?}", fit.prior_weight),
-            );
-            md.insert(
-                metadata::PHYSICAL_STANDARD.into(),
-                serde_json::to_string(&fit.standard).expect("numbers serialise"),
-            );
-            physical = Some(fit);
-        }
+        let physical = match self.cfg.physical {
+            true => Some(self.physical(base.as_deref(), &summary, &mut est, &mut md)?),
+            false => None,
+        };
         for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
             md.remove(k);
         }
@@ -515,67 +613,12 @@ impl Reducer {
             md.insert(metadata::PROJECTION_EQUATIONS.into(), e.to_string());
         }
         md.insert(metadata::RECORDINGS.into(), summary.recordings.join(","));
-        // Each recording's residue under the pooled estimate: ‖A_r θ − b_r‖²
-        // = ‖R_r θ − z_r‖² + its own residual, from its summary alone.
-        let theta = &est.values;
-        let residues: Vec<(String, usize, f64)> = parts
-            .iter()
-            .filter(|p| p.summary.names == est.names)
-            .map(|p| {
-                let f = &p.summary.factor;
-                let d = &f.r * theta - &f.z;
-                let msr = (d.norm_squared() + f.rss) / f.rows.max(1) as f64;
-                (p.summary.recordings.join(","), f.rows, msr)
-            })
-            .collect();
-        let outliers: Vec<String> = if residues.len() >= 3 {
-            residues
-                .iter()
-                .enumerate()
-                .filter(|(i, r)| {
-                    let mut others: Vec<f64> = residues
-                        .iter()
-                        .enumerate()
-                        .filter(|(j, _)| j != i)
-                        .map(|(_, o)| o.2)
-                        .collect();
-                    others.sort_by(f64::total_cmp);
-                    r.2 > 3.0 * others[others.len() / 2]
-                })
-                .map(|(_, r)| r.0.clone())
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let (residues, outliers) = residues(parts, &est);
         if !outliers.is_empty() {
             md.insert(metadata::OUTLIERS.into(), outliers.join(","));
         }
         md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
-        let impossible = est.impossible(&summary.expressions);
-        if !impossible.is_empty() {
-            md.insert(
-                metadata::IMPOSSIBLE.into(),
-                impossible
-                    .iter()
-                    .map(|(n, v, z)| format!("{n} = {v} ({z:.1} σ)"))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-            );
-        }
-        md.insert(metadata::ADEQUACY.into(), adequacy_json(&est.adequacy));
-        if est.widened {
-            md.insert(
-                metadata::WIDENED.into(),
-                format!(
-                    "model error dominates on {}: the excess residual variance added to the periods' spread",
-                    est.inadequate()
-                        .iter()
-                        .map(|a| a.joint.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            );
-        }
+        md.extend(estimate_notes(&est, &summary.expressions));
         let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
         Ok(Outcome {
             estimate: est,

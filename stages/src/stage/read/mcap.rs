@@ -45,6 +45,128 @@ struct Series {
     message_values: Vec<f64>,
 }
 
+impl Series {
+    fn new(joints: usize) -> Series {
+        Series {
+            stamps: Vec::new(),
+            values: vec![Vec::new(); joints],
+            order: None,
+            names: Vec::new(),
+            reorders: 0,
+            message_names: Vec::new(),
+            message_names_raw: Vec::new(),
+            message_values: Vec::new(),
+        }
+    }
+
+    /// Message `message` of the topic `w` names: its field's values, in
+    /// `joints`' order (matched by name where the message has names), and
+    /// its stamp.
+    fn push(
+        &mut self,
+        message: &mcap::Message<'_>,
+        w: &Wanted,
+        joints: &[String],
+        verified: &mut Vec<*const ()>,
+        source: &str,
+    ) -> Result<()> {
+        let sample = self.stamps.len();
+        let err = |msg: String| Error::Data {
+            source_name: source.to_string(),
+            channel: format!("{}:{}", w.topic, w.field),
+            sample: Some(sample),
+            msg,
+        };
+        match message.channel.message_encoding.as_str() {
+            "cdr" => self.push_cdr(message, w, joints, verified, &err)?,
+            "json" => self.push_json(message, w, joints, &err)?,
+            other => return Err(err(format!("message encoding `{other}` is not supported (cdr, json)"))),
+        }
+        self.stamps.push(message.log_time);
+        Ok(())
+    }
+
+    fn push_cdr(
+        &mut self,
+        message: &mcap::Message<'_>,
+        w: &Wanted,
+        joints: &[String],
+        verified: &mut Vec<*const ()>,
+        err: &dyn Fn(String) -> Error,
+    ) -> Result<()> {
+        let (names, values) = (&mut self.message_names, &mut self.message_values);
+        let raw = &mut self.message_names_raw;
+        let changed = decode_cdr(message, &w.field, verified, names, raw, values).map_err(|e| err(e.to_string()))?;
+        // Names are matched on every message whose names differ
+        // from the last: a publisher that reorders its joints
+        // is followed, one that drops or repeats a name refused.
+        // (A first message with no names matches the empty
+        // start: it is matched too, and refused.)
+        if self.order.is_none() || (changed && self.names != *names) {
+            if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
+                return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
+            }
+            let order = joints
+                .iter()
+                .map(|j| names.iter().position(|n| n == j))
+                .collect::<Option<Vec<usize>>>()
+                .ok_or_else(|| {
+                    err(format!(
+                        "joints {} not all in the message's names {}",
+                        joints.join(", "),
+                        names.join(", ")
+                    ))
+                })?;
+            if self.order.is_some() {
+                self.reorders += 1;
+            }
+            self.order = Some(order);
+            self.names.clone_from(names);
+        }
+        let order = self.order.as_ref().expect("set");
+        for (j, &i) in order.iter().enumerate() {
+            let v = *values.get(i).ok_or_else(|| {
+                err(format!(
+                    "`{}` has {} values, joint `{}` is number {}",
+                    w.field,
+                    values.len(),
+                    joints[j],
+                    i + 1
+                ))
+            })?;
+            self.values[j].push(v);
+        }
+        Ok(())
+    }
+
+    fn push_json(
+        &mut self,
+        message: &mcap::Message<'_>,
+        w: &Wanted,
+        joints: &[String],
+        err: &dyn Fn(String) -> Error,
+    ) -> Result<()> {
+        let v: serde_json::Value =
+            serde_json::from_slice(&message.data).map_err(|e| err(format!("invalid JSON: {e}")))?;
+        let arr = v
+            .get(&w.field)
+            .and_then(|a| a.as_array())
+            .ok_or_else(|| err(format!("no array `{}` in the message", w.field)))?;
+        if arr.len() != joints.len() {
+            return Err(err(format!(
+                "`{}` has {} values for {} joints",
+                w.field,
+                arr.len(),
+                joints.len()
+            )));
+        }
+        for (j, x) in arr.iter().enumerate() {
+            self.values[j].push(x.as_f64().ok_or_else(|| err(format!("`{x}` is not a number")))?);
+        }
+        Ok(())
+    }
+}
+
 /// The MCAP files of a recording: the file itself, or the `.mcap` files of
 /// a rosbag2 folder (`metadata.yaml` beside them) in name order.
 pub(crate) fn bag_files(path: &Path) -> Result<Vec<std::path::PathBuf>> {
@@ -137,53 +259,67 @@ fn decode_cdr(
             Ok(decode_joint_state_into(&message.data, which, names, raw_names, values)?)
         }
         DYNAMIC_JOINT_STATE_NAME => {
-            let d = decode_dynamic_joint_state(&message.data)?;
-            let dynamic = d
-                .interfaces
-                .iter()
-                .zip(&d.joint_names)
-                .map(|((names, values), joint)| {
-                    names
-                        .iter()
-                        .position(|n| n == field)
-                        .and_then(|k| values.get(k).copied())
-                        .ok_or_else(|| Unreadable::NoInterface {
-                            joint: joint.clone(),
-                            field: field.to_string(),
-                            has: names.join(", "),
-                        })
-                })
-                .collect::<std::result::Result<Vec<f64>, Unreadable>>()?;
-            (*names, *values) = (d.joint_names, dynamic);
+            (*names, *values) = dynamic_joint_state(&message.data, field)?;
             raw_names.clear();
             Ok(true)
         }
         CONTROLLER_STATE_NAME => {
-            let text = String::from_utf8_lossy(&schema.data);
-            let c = decode_controller_state(&message.data, &text)?;
-            let (point, part) = field.split_once('.').unwrap_or((field, "positions"));
-            let p = c
-                .points
-                .iter()
-                .find(|(n, _)| n == point)
-                .map(|(_, p)| p)
-                .ok_or_else(|| Unreadable::NoPoint {
-                    point: point.to_string(),
-                    has: c.points.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", "),
-                })?;
-            *values = match part {
-                "positions" => p.positions.clone(),
-                "velocities" => p.velocities.clone(),
-                "accelerations" => p.accelerations.clone(),
-                "effort" => p.effort.clone(),
-                other => return Err(Unreadable::NoPart(other.to_string())),
-            };
-            *names = c.joint_names;
+            (*names, *values) = controller_state(&message.data, &String::from_utf8_lossy(&schema.data), field)?;
             raw_names.clear();
             Ok(true)
         }
         other => Err(Unreadable::MessageType(other.to_string())),
     }
+}
+
+/// A DynamicJointState's joint names and each joint's interface `field`.
+fn dynamic_joint_state(data: &[u8], field: &str) -> std::result::Result<(Vec<String>, Vec<f64>), Unreadable> {
+    let d = decode_dynamic_joint_state(data)?;
+    let dynamic = d
+        .interfaces
+        .iter()
+        .zip(&d.joint_names)
+        .map(|((names, values), joint)| {
+            names
+                .iter()
+                .position(|n| n == field)
+                .and_then(|k| values.get(k).copied())
+                .ok_or_else(|| Unreadable::NoInterface {
+                    joint: joint.clone(),
+                    field: field.to_string(),
+                    has: names.join(", "),
+                })
+        })
+        .collect::<std::result::Result<Vec<f64>, Unreadable>>()?;
+    Ok((d.joint_names, dynamic))
+}
+
+/// A trajectory controller state's joint names and the part `field` names
+/// (`reference`, `feedback.effort`, …) of its point.
+fn controller_state(
+    data: &[u8],
+    schema: &str,
+    field: &str,
+) -> std::result::Result<(Vec<String>, Vec<f64>), Unreadable> {
+    let c = decode_controller_state(data, schema)?;
+    let (point, part) = field.split_once('.').unwrap_or((field, "positions"));
+    let p = c
+        .points
+        .iter()
+        .find(|(n, _)| n == point)
+        .map(|(_, p)| p)
+        .ok_or_else(|| Unreadable::NoPoint {
+            point: point.to_string(),
+            has: c.points.iter().map(|(n, _)| n.as_str()).collect::<Vec<_>>().join(", "),
+        })?;
+    let values = match part {
+        "positions" => p.positions.clone(),
+        "velocities" => p.velocities.clone(),
+        "accelerations" => p.accelerations.clone(),
+        "effort" => p.effort.clone(),
+        other => return Err(Unreadable::NoPart(other.to_string())),
+    };
+    Ok((c.joint_names, values))
 }
 
 /// A record: its opcode, its body, and the whole record (opcode and length
@@ -338,6 +474,14 @@ enum Holder<'a> {
 /// to 66 ms with this, the skipped topics and the names kept). Every
 /// record, inside a chunk too, is bounded by the bytes that hold it; chunk
 /// CRCs are checked.
+///
+/// One piece, on purpose: the record decoder (`take`) and the pipeline's
+/// step (`step`) share the channel table, the pool of chunk buffers and
+/// the message count inside one rayon scope, with every message borrowed
+/// from the map or a buffer; taken apart they would be a struct whose
+/// fields borrow each other. It is the MCAP read's whole hot path, and is
+/// measured as one (`cargo bench -p robotid --bench pipeline`, the UR5 MCAP
+/// recording's `read_and_write_only`).
 fn for_each_message<'m>(
     path: &Path,
     map: &'m [u8],
@@ -521,6 +665,112 @@ fn for_each_message<'m>(
     Ok(())
 }
 
+/// The messages of the `specs`' topics in every file, into their
+/// `series`; the file metadata into `metadata`. The messages seen per topic.
+fn read_messages(
+    maps: &[(std::path::PathBuf, bytes::Bytes)],
+    specs: &[&Wanted],
+    series: &mut [Series],
+    joints: &[String],
+    source: &str,
+    metadata: &mut BTreeMap<String, String>,
+) -> Result<BTreeMap<String, usize>> {
+    let mut seen_topics: BTreeMap<String, usize> = BTreeMap::new();
+    let topics: Vec<&str> = specs.iter().map(|w| w.topic.as_str()).collect();
+    // JointState schemas already checked, by address: the file's channel
+    // accumulator keeps them alive, so an address is not reused within it.
+    let mut verified: Vec<*const ()> = Vec::new();
+    for (f, map) in maps {
+        // The messages end at the data-end record: the summary after it
+        // is checked on its own (a warning), the end magic here (a file
+        // cut short is refused).
+        if !map.ends_with(mcap::MAGIC) {
+            return Err(Error::Format {
+                path: f.to_path_buf(),
+                msg: "truncated: it does not end with the MCAP magic (a copy or a recording cut short)".into(),
+            });
+        }
+        verified.clear();
+        for_each_message(f, map, &topics, &mut seen_topics, metadata, |message| {
+            let topic = &message.channel.topic;
+            for (w, s) in specs.iter().zip(series.iter_mut()) {
+                if &w.topic != topic {
+                    continue;
+                }
+                s.push(message, w, joints, &mut verified, source)?;
+            }
+            Ok(())
+        })?;
+    }
+    Ok(seen_topics)
+}
+
+/// Every topic wanted has messages, all on the position topic's stamps.
+fn check_series(
+    specs: &[&Wanted],
+    series: &[Series],
+    seen_topics: &BTreeMap<String, usize>,
+    source: &str,
+) -> Result<()> {
+    for (w, s) in specs.iter().zip(series) {
+        if s.stamps.is_empty() {
+            let have: Vec<String> = seen_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: w.topic.clone(),
+                sample: None,
+                msg: format!(
+                    "missing channel: no messages on this topic; the log has {}",
+                    have.join(", ")
+                ),
+            });
+        }
+    }
+    let base = &series[0].stamps;
+    for (w, s) in specs.iter().zip(series).skip(1) {
+        if let Some(k) = (0..base.len().max(s.stamps.len())).find(|&k| base.get(k) != s.stamps.get(k)) {
+            return Err(Error::Data {
+                source_name: source.to_string(),
+                channel: w.topic.clone(),
+                sample: Some(k),
+                msg: format!(
+                    "stamps differ from the position topic `{}` here; resample before reading",
+                    specs[0].topic
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The summary (index and statistics at the end) is not needed to read
+/// the messages, but a damaged or inconsistent one says the file was
+/// changed or cut: said, not ignored. `seen`: the messages read.
+fn summary_notes(maps: &[(std::path::PathBuf, bytes::Bytes)], seen: usize) -> Vec<String> {
+    let mut notes = Vec::new();
+    for (f, map) in maps {
+        let name = f
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        match mcap::read::Summary::read(map) {
+            Err(e) => notes.push(format!(
+                "warning: {name}: its summary section is unreadable ({e}); the messages were read from the data section"
+            )),
+            Ok(None) => {}
+            Ok(Some(summary)) => {
+                let counted = summary.stats.as_ref().map(|st| st.message_count as usize);
+                if let Some(count) = counted.filter(|c| maps.len() == 1 && *c != seen) {
+                    notes.push(format!(
+                        "warning: {name}: its summary counts {count} messages, the file holds {seen}: the file was changed or cut after it was written"
+                    ));
+                }
+            }
+        }
+    }
+    notes
+}
+
 /// A chunk may declare at most this many times its stored size, and at
 /// most MAX_CHUNK_BYTES, uncompressed (zstd and lz4 on sensor data reach
 /// 10–50×; writers make chunks of a few MB).
@@ -537,17 +787,13 @@ pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result
             .collect::<Result<_>>()?,
         Log::Bytes { name, bytes, .. } => vec![(name.to_path_buf(), bytes.clone())],
     };
-    let fmt_at = |f: &Path, msg: String| Error::Format {
-        path: f.to_path_buf(),
-        msg,
-    };
-    let fmt = |msg: String| fmt_at(path, msg);
     if cfg.position.as_ref().is_some_and(|c| c.column.is_some())
         || cfg.effort.as_ref().is_some_and(|c| c.column.is_some())
     {
-        return Err(fmt(
-            "MCAP channels are given by `topic` and `field`, not `column`".into()
-        ));
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            msg: "MCAP channels are given by `topic` and `field`, not `column`".into(),
+        });
     }
     let mut metadata = BTreeMap::new();
     let pos = wanted(&cfg.position, "/joint_states", "position");
@@ -557,144 +803,10 @@ pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result
         .as_ref()
         .map(|c| wanted(&Some(c.clone()), "/joint_reference", "position"));
     let specs: Vec<&Wanted> = [Some(&pos), Some(&eff), refw.as_ref()].into_iter().flatten().collect();
-    let mut series: Vec<Series> = specs
-        .iter()
-        .map(|_| Series {
-            stamps: Vec::new(),
-            values: vec![Vec::new(); joints.len()],
-            order: None,
-            names: Vec::new(),
-            reorders: 0,
-            message_names: Vec::new(),
-            message_names_raw: Vec::new(),
-            message_values: Vec::new(),
-        })
-        .collect();
-    let mut seen_topics: BTreeMap<String, usize> = BTreeMap::new();
-    let topics: Vec<&str> = specs.iter().map(|w| w.topic.as_str()).collect();
-    // JointState schemas already checked, by address: the file's channel
-    // accumulator keeps them alive, so an address is not reused within it.
-    let mut verified: Vec<*const ()> = Vec::new();
-    for (f, map) in &maps {
-        // The messages end at the data-end record: the summary after it
-        // is checked on its own (a warning), the end magic here (a file
-        // cut short is refused).
-        if !map.ends_with(mcap::MAGIC) {
-            return Err(fmt_at(
-                f,
-                "truncated: it does not end with the MCAP magic (a copy or a recording cut short)".into(),
-            ));
-        }
-        verified.clear();
-        for_each_message(f, map, &topics, &mut seen_topics, &mut metadata, |message| {
-            let topic = &message.channel.topic;
-            for (w, s) in specs.iter().zip(series.iter_mut()) {
-                if &w.topic != topic {
-                    continue;
-                }
-                let sample = s.stamps.len();
-                let err = |msg: String| Error::Data {
-                    source_name: source.clone(),
-                    channel: format!("{}:{}", w.topic, w.field),
-                    sample: Some(sample),
-                    msg,
-                };
-                match message.channel.message_encoding.as_str() {
-                    "cdr" => {
-                        let (names, values) = (&mut s.message_names, &mut s.message_values);
-                        let raw = &mut s.message_names_raw;
-                        let changed = decode_cdr(message, &w.field, &mut verified, names, raw, values)
-                            .map_err(|e| err(e.to_string()))?;
-                        // Names are matched on every message whose names differ
-                        // from the last: a publisher that reorders its joints
-                        // is followed, one that drops or repeats a name refused.
-                        // (A first message with no names matches the empty
-                        // start: it is matched too, and refused.)
-                        if s.order.is_none() || (changed && s.names != *names) {
-                            if let Some(d) = names.iter().enumerate().find(|(i, n)| names[..*i].contains(n)) {
-                                return Err(err(format!("joint name `{}` appears twice in the message", d.1)));
-                            }
-                            let order = joints
-                                .iter()
-                                .map(|j| names.iter().position(|n| n == j))
-                                .collect::<Option<Vec<usize>>>()
-                                .ok_or_else(|| {
-                                    err(format!("joints {joints:?} not all in the message's names {:?}", names))
-                                })?;
-                            if s.order.is_some() {
-                                s.reorders += 1;
-                            }
-                            s.order = Some(order);
-                            s.names.clone_from(names);
-                        }
-                        let order = s.order.as_ref().expect("set");
-                        for (j, &i) in order.iter().enumerate() {
-                            let v = *values.get(i).ok_or_else(|| {
-                                err(format!(
-                                    "`{}` has {} values, joint `{}` is number {}",
-                                    w.field,
-                                    values.len(),
-                                    joints[j],
-                                    i + 1
-                                ))
-                            })?;
-                            s.values[j].push(v);
-                        }
-                    }
-                    "json" => {
-                        let v: serde_json::Value =
-                            serde_json::from_slice(&message.data).map_err(|e| err(format!("invalid JSON: {e}")))?;
-                        let arr = v
-                            .get(&w.field)
-                            .and_then(|a| a.as_array())
-                            .ok_or_else(|| err(format!("no array `{}` in the message", w.field)))?;
-                        if arr.len() != joints.len() {
-                            return Err(err(format!(
-                                "`{}` has {} values for {} joints",
-                                w.field,
-                                arr.len(),
-                                joints.len()
-                            )));
-                        }
-                        for (j, x) in arr.iter().enumerate() {
-                            s.values[j].push(x.as_f64().ok_or_else(|| err(format!("`{x}` is not a number")))?);
-                        }
-                    }
-                    other => return Err(err(format!("message encoding `{other}` is not supported (cdr, json)"))),
-                }
-                s.stamps.push(message.log_time);
-            }
-            Ok(())
-        })?;
-    }
-    for (w, s) in specs.iter().zip(&series) {
-        if s.stamps.is_empty() {
-            let have: Vec<String> = seen_topics.iter().map(|(t, n)| format!("{t} ({n})")).collect();
-            return Err(Error::Data {
-                source_name: source.clone(),
-                channel: w.topic.clone(),
-                sample: None,
-                msg: format!(
-                    "missing channel: no messages on this topic; the log has {}",
-                    have.join(", ")
-                ),
-            });
-        }
-    }
+    let mut series: Vec<Series> = specs.iter().map(|_| Series::new(joints.len())).collect();
+    let seen_topics = read_messages(&maps, &specs, &mut series, joints, &source, &mut metadata)?;
+    check_series(&specs, &series, &seen_topics, &source)?;
     let base = &series[0].stamps;
-    for (w, s) in specs.iter().zip(&series).skip(1) {
-        if let Some(k) = (0..base.len().max(s.stamps.len())).find(|&k| base.get(k) != s.stamps.get(k)) {
-            return Err(Error::Data {
-                source_name: source.clone(),
-                channel: w.topic.clone(),
-                sample: Some(k),
-                msg: format!(
-                    "stamps differ from the position topic `{}` here; resample before reading",
-                    specs[0].topic
-                ),
-            });
-        }
-    }
     // Integer nanoseconds relative to the first stamp: epoch stamps as f64
     // seconds would carry only ~0.2 µs of resolution, fake jitter.
     let t0 = base.first().copied().unwrap_or(0);
@@ -706,31 +818,7 @@ pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result
             .to_string(),
     );
     let time: Vec<f64> = base.iter().map(|&ns| (ns - t0) as f64).collect();
-    let mut notes: Vec<String> = Vec::new();
-    // The summary (index and statistics at the end) is not needed to read
-    // the messages, but a damaged or inconsistent one says the file was
-    // changed or cut: said, not ignored.
-    for (f, map) in &maps {
-        let name = f
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        match mcap::read::Summary::read(map) {
-            Err(e) => notes.push(format!(
-                "warning: {name}: its summary section is unreadable ({e}); the messages were read from the data section"
-            )),
-            Ok(None) => {}
-            Ok(Some(summary)) => {
-                let seen: usize = seen_topics.values().sum();
-                let counted = summary.stats.as_ref().map(|st| st.message_count as usize);
-                if let Some(count) = counted.filter(|c| maps.len() == 1 && *c != seen) {
-                    notes.push(format!(
-                        "warning: {name}: its summary counts {count} messages, the file holds {seen}: the file was changed or cut after it was written"
-                    ));
-                }
-            }
-        }
-    }
+    let mut notes = summary_notes(&maps, seen_topics.values().sum());
     notes.extend(specs.iter().zip(&series).filter(|(_, s)| s.reorders > 0).map(|(w, s)| {
         format!(
             "{}: the publisher changed its joint names or order {} time(s); matched by name on every message",

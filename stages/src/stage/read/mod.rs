@@ -270,7 +270,11 @@ impl ReadConfig {
                 if !names.contains(name) {
                     out.push(Problem::new(
                         "joints",
-                        format!("`{name}` is not a joint of robot `{}` ({names:?})", model.name),
+                        format!(
+                            "`{name}` is not a joint of robot `{}` ({})",
+                            model.name,
+                            names.join(", ")
+                        ),
                     ));
                 }
             }

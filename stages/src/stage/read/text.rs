@@ -353,165 +353,215 @@ pub(crate) fn width_of(path: &Path) -> Result<Option<usize>> {
 pub(crate) fn read_text(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     let path = log.path();
     let source = path.display().to_string();
-    let mut reader: Box<dyn BufRead + '_> = match log {
+    let reader: Box<dyn BufRead + '_> = match log {
         Log::File(path) => Box::new(std::io::BufReader::new(
             std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
         )),
         Log::Bytes { bytes, .. } => Box::new(&bytes[..]),
     };
-    let mut line = String::new();
-    let mut line_no = 0usize;
-    let fmt = |msg: String| Error::Format {
-        path: path.to_path_buf(),
-        msg,
+    let mut lines = Lines {
+        reader,
+        path,
+        line: String::new(),
+        no: 0,
     };
-    // The next non-empty, non-comment line into `line`; false at the end.
-    let mut next = |line: &mut String, line_no: &mut usize| -> Result<bool> {
-        loop {
-            line.clear();
-            let read = read_record(&mut reader, line).map_err(|e| match e.kind() {
-                std::io::ErrorKind::InvalidData => Error::Format {
-                    path: path.to_path_buf(),
-                    msg: format!("line {}: not UTF-8 text (is it a binary file?)", *line_no + 1),
-                },
-                std::io::ErrorKind::InvalidInput => Error::Format {
-                    path: path.to_path_buf(),
-                    msg: format!("line {}: {e} (is it a text log?)", *line_no + 1),
-                },
-                _ => Error::io(path, e),
-            })?;
-            if read == 0 {
-                return Ok(false);
-            }
-            *line_no += 1;
-            if *line_no == 1 && line.starts_with('\u{feff}') {
-                line.drain(..'\u{feff}'.len_utf8());
-            }
-            let t = line.trim_end_matches(['\n', '\r']);
-            if !t.trim().is_empty() && !comment(t) {
-                let len = t.len();
-                line.truncate(len);
-                return Ok(true);
-            }
-        }
-    };
-    if !next(&mut line, &mut line_no)? {
-        return Err(fmt("empty file (no line of data)".into()));
+    if !lines.next()? {
+        return Err(lines.format("empty file (no line of data)".into()));
     }
-    let sep = cfg.separator.unwrap_or_else(|| separator_of(&line));
-    let first: Vec<String> = fields(&line, sep)
-        .map(|s| s.trim().trim_matches('"').to_string())
-        .collect();
-    // A comma can be the decimal mark only where it does not separate;
-    // there, either mark is read.
-    let decimal = cfg.decimal.unwrap_or(if sep == Separator::Comma {
-        Decimal::Point
-    } else {
-        Decimal::Comma
-    });
-    if sep == Separator::Comma && cfg.decimal == Some(Decimal::Comma) {
-        return Err(fmt("decimal = \"comma\" needs another separator than the comma".into()));
-    }
-    let numeric = first.iter().all(|f| number(f, decimal).is_some());
-    let has_header = cfg.header.unwrap_or(!numeric);
-    let header: Vec<String> = if has_header {
-        first.clone()
-    } else {
-        (0..first.len()).map(|i| format!("{HEADERLESS}{i}")).collect()
-    };
-    if header.len() < 2 {
-        return Err(fmt(format!(
-            "line {line_no} has a single field `{}`: the separator is not {} (give `separator` = \"comma\", \"semicolon\", \"tab\" or \"whitespace\")",
-            first.first().map(String::as_str).unwrap_or(""),
-            match sep {
-                Separator::Comma => "a comma",
-                Separator::Semicolon => "a semicolon",
-                Separator::Tab => "a tab",
-                Separator::Whitespace => "whitespace",
-            }
-        )));
-    }
-    let mapping = resolve(&header, cfg, joints, &source)?;
+    let layout = Layout::of(&lines, cfg)?;
+    let mapping = resolve(&layout.header, cfg, joints, &source)?;
     let wanted: Vec<String> = std::iter::once(mapping.time.clone())
         .chain(mapping.position.iter().cloned())
         .chain(mapping.effort.iter().cloned())
         .chain(mapping.reference.iter().flatten().cloned())
         .collect();
     // For each header column, the slots (wanted entries) it feeds.
-    let mut slots: Vec<Vec<usize>> = vec![Vec::new(); header.len()];
+    let mut slots: Vec<Vec<usize>> = vec![Vec::new(); layout.header.len()];
     for (k, w) in wanted.iter().enumerate() {
-        slots[header.iter().position(|h| h == w).expect("resolved")].push(k);
+        slots[layout.header.iter().position(|h| h == w).expect("resolved")].push(k);
     }
     let mut data: Vec<Vec<f64>> = vec![Vec::new(); wanted.len()];
-    let mut notes = Vec::new();
-    let mut sample = 0usize;
-    let mut have = if has_header {
-        next(&mut line, &mut line_no)?
-    } else {
-        true
-    };
-    while have {
-        let this_line = line_no;
-        let mut count = 0usize;
-        let mut bad = None;
-        for (i, text) in fields(&line, sep).enumerate() {
-            count += 1;
-            if i >= header.len() || slots[i].is_empty() || bad.is_some() {
-                continue;
-            }
-            match number(text, decimal) {
-                Some(v) => slots[i].iter().for_each(|&k| data[k].push(v)),
-                None => bad = Some((i, text.trim().to_string())),
-            }
-        }
-        let short = count < header.len();
-        have = next(&mut line, &mut line_no)?;
-        if short && !have && cfg.drop_truncated_last_line {
-            // Roll back what the cut line gave.
-            let n = sample;
-            data.iter_mut().for_each(|c| c.truncate(n));
-            notes.push(format!(
-                "dropped the last line ({this_line}): {count} of {} fields, a write cut short",
-                header.len()
-            ));
-            break;
-        }
-        if count != header.len() {
-            return Err(Error::Data {
-                source_name: source.clone(),
-                channel: "(row)".into(),
-                sample: Some(sample),
-                msg: format!(
-                    "line {this_line} has {count} fields, the {} has {}{}",
-                    if has_header { "header" } else { "first line" },
-                    header.len(),
-                    if !have && short {
-                        " (truncated file? `drop_truncated_last_line = true` in [read] drops such a last line)"
-                    } else {
-                        " (truncated or corrupt file?)"
-                    }
-                ),
-            });
-        }
-        if let Some((i, text)) = bad {
-            let hint = if decimal == Decimal::Point && text.contains(',') {
-                " (a decimal comma? give `decimal = \"comma\"` and a separator other than the comma)"
-            } else {
-                ""
-            };
-            return Err(Error::Data {
-                source_name: source.clone(),
-                channel: header[i].clone(),
-                sample: Some(sample),
-                msg: format!("line {this_line}, column {i}: `{text}` is not a number{hint}"),
-            });
-        }
-        sample += 1;
-    }
+    let notes = layout.rows(&mut lines, &slots, &mut data, cfg, &source)?;
     let by_name: BTreeMap<String, usize> = wanted.iter().enumerate().map(|(k, w)| (w.clone(), k)).collect();
     let mut md = BTreeMap::new();
     if !notes.is_empty() {
         md.insert(metadata::READ_NOTES.into(), notes.join("; "));
     }
     Ok(into_columns(mapping, |name| data[by_name[name]].clone(), md))
+}
+
+/// A text log's lines, blank and comment lines skipped: the current one
+/// and its number (from 1, counting every line of the file).
+struct Lines<'a> {
+    reader: Box<dyn BufRead + 'a>,
+    path: &'a Path,
+    line: String,
+    no: usize,
+}
+
+impl Lines<'_> {
+    /// The next non-empty, non-comment line into `line`; false at the end.
+    fn next(&mut self) -> Result<bool> {
+        loop {
+            self.line.clear();
+            let read = read_record(&mut self.reader, &mut self.line).map_err(|e| match e.kind() {
+                std::io::ErrorKind::InvalidData => {
+                    self.format(format!("line {}: not UTF-8 text (is it a binary file?)", self.no + 1))
+                }
+                std::io::ErrorKind::InvalidInput => {
+                    self.format(format!("line {}: {e} (is it a text log?)", self.no + 1))
+                }
+                _ => Error::io(self.path, e),
+            })?;
+            if read == 0 {
+                return Ok(false);
+            }
+            self.no += 1;
+            if self.no == 1 && self.line.starts_with('\u{feff}') {
+                self.line.drain(..'\u{feff}'.len_utf8());
+            }
+            let t = self.line.trim_end_matches(['\n', '\r']);
+            if !t.trim().is_empty() && !comment(t) {
+                let len = t.len();
+                self.line.truncate(len);
+                return Ok(true);
+            }
+        }
+    }
+
+    fn format(&self, msg: String) -> Error {
+        Error::Format {
+            path: self.path.to_path_buf(),
+            msg,
+        }
+    }
+}
+
+/// How a text log is laid out, read off its first line and the settings.
+struct Layout {
+    sep: Separator,
+    decimal: Decimal,
+    has_header: bool,
+    /// The columns' names: the header's, or `HEADERLESS`0, 1, … without one.
+    header: Vec<String>,
+}
+
+impl Layout {
+    fn of(lines: &Lines, cfg: &ReadConfig) -> Result<Layout> {
+        let sep = cfg.separator.unwrap_or_else(|| separator_of(&lines.line));
+        let first: Vec<String> = fields(&lines.line, sep)
+            .map(|s| s.trim().trim_matches('"').to_string())
+            .collect();
+        // A comma can be the decimal mark only where it does not separate;
+        // there, either mark is read.
+        let decimal = cfg.decimal.unwrap_or(if sep == Separator::Comma {
+            Decimal::Point
+        } else {
+            Decimal::Comma
+        });
+        if sep == Separator::Comma && cfg.decimal == Some(Decimal::Comma) {
+            return Err(lines.format("decimal = \"comma\" needs another separator than the comma".into()));
+        }
+        let numeric = first.iter().all(|f| number(f, decimal).is_some());
+        let has_header = cfg.header.unwrap_or(!numeric);
+        let header: Vec<String> = if has_header {
+            first.clone()
+        } else {
+            (0..first.len()).map(|i| format!("{HEADERLESS}{i}")).collect()
+        };
+        if header.len() < 2 {
+            return Err(lines.format(format!(
+                "line {} has a single field `{}`: the separator is not {} (give `separator` = \"comma\", \"semicolon\", \"tab\" or \"whitespace\")",
+                lines.no,
+                first.first().map(String::as_str).unwrap_or(""),
+                match sep {
+                    Separator::Comma => "a comma",
+                    Separator::Semicolon => "a semicolon",
+                    Separator::Tab => "a tab",
+                    Separator::Whitespace => "whitespace",
+                }
+            )));
+        }
+        Ok(Layout {
+            sep,
+            decimal,
+            has_header,
+            header,
+        })
+    }
+
+    /// The data lines' numbers into `data`, each column's into the slots
+    /// `slots` gives it; the notes on what was dropped.
+    fn rows(
+        &self,
+        lines: &mut Lines,
+        slots: &[Vec<usize>],
+        data: &mut [Vec<f64>],
+        cfg: &ReadConfig,
+        source: &str,
+    ) -> Result<Vec<String>> {
+        let (header, decimal) = (&self.header, self.decimal);
+        let mut notes = Vec::new();
+        let mut sample = 0usize;
+        let mut have = if self.has_header { lines.next()? } else { true };
+        while have {
+            let this_line = lines.no;
+            let mut count = 0usize;
+            let mut bad = None;
+            for (i, text) in fields(&lines.line, self.sep).enumerate() {
+                count += 1;
+                if i >= header.len() || slots[i].is_empty() || bad.is_some() {
+                    continue;
+                }
+                match number(text, decimal) {
+                    Some(v) => slots[i].iter().for_each(|&k| data[k].push(v)),
+                    None => bad = Some((i, text.trim().to_string())),
+                }
+            }
+            let short = count < header.len();
+            have = lines.next()?;
+            if short && !have && cfg.drop_truncated_last_line {
+                // Roll back what the cut line gave.
+                let n = sample;
+                data.iter_mut().for_each(|c| c.truncate(n));
+                notes.push(format!(
+                    "dropped the last line ({this_line}): {count} of {} fields, a write cut short",
+                    header.len()
+                ));
+                break;
+            }
+            if count != header.len() {
+                return Err(Error::Data {
+                    source_name: source.to_string(),
+                    channel: "(row)".into(),
+                    sample: Some(sample),
+                    msg: format!(
+                        "line {this_line} has {count} fields, the {} has {}{}",
+                        if self.has_header { "header" } else { "first line" },
+                        header.len(),
+                        if !have && short {
+                            " (truncated file? `drop_truncated_last_line = true` in [read] drops such a last line)"
+                        } else {
+                            " (truncated or corrupt file?)"
+                        }
+                    ),
+                });
+            }
+            if let Some((i, text)) = bad {
+                let hint = if decimal == Decimal::Point && text.contains(',') {
+                    " (a decimal comma? give `decimal = \"comma\"` and a separator other than the comma)"
+                } else {
+                    ""
+                };
+                return Err(Error::Data {
+                    source_name: source.to_string(),
+                    channel: header[i].clone(),
+                    sample: Some(sample),
+                    msg: format!("line {this_line}, column {i}: `{text}` is not a number{hint}"),
+                });
+            }
+            sample += 1;
+        }
+        Ok(notes)
+    }
 }

@@ -213,6 +213,13 @@ const SMOOTH_TAIL: f64 = 1e-24;
 
 /// [`column_spectra_of`] with the columns to make on the fine grid chosen
 /// by `fine` (the others at the samples, unless their lines say otherwise).
+///
+/// One piece, on purpose: its three passes (columns at the samples, each
+/// joint's friction on the fine grid, the other fine columns) share the
+/// motion's spectra, the shifted copies' phase turns and one accumulator,
+/// through four closures over them. It is the band-limited regressor's
+/// kernel, measured as one (`cargo bench -p robotid-stages --bench
+/// regressor`, `rows_band_limited_16x`).
 fn column_spectra_on(
     base: &BaseRegressor,
     kin: &Kinematics,
@@ -364,7 +371,7 @@ fn column_spectra_on(
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::DMatrix;
+    use rand::{Rng, SeedableRng};
 
     /// The columns' lines at the samples, where they are smooth, equal
     /// those of the fine grid to rounding; the rough ones (Coulomb's) are

@@ -8,7 +8,8 @@ use nalgebra::{DMatrix, DVector};
 use robotid_schemas::{Kinematics, NoiseTable};
 
 use super::{band_limited_matrix, torque_against_robot_file, RegressorConfig};
-use crate::dynamics::{parameter_unit, BaseRegressor};
+use crate::dynamics::{parameter_unit, BaseRegressor, Model};
+use crate::estimation::projection::ProjectionConfig;
 use crate::estimation::{block_rows, RowBlocks, System};
 use crate::signal::Spectra;
 use crate::stage::Periods;
@@ -89,18 +90,7 @@ pub fn regressor_rows(
     on_demand: bool,
 ) -> Result<RegressorRows> {
     let model = &base.model;
-    let names = model.joint_names();
-    if names != kin.joints {
-        return Err(Error::mismatch(
-            "the kinematics' joints",
-            format!("{names:?} (the robot's)"),
-            format!("{:?}", kin.joints),
-        ));
-    }
-    let torque = kin
-        .torque
-        .as_ref()
-        .ok_or_else(|| Error::missing("torques", "the kinematics table has none"))?;
+    let (names, torque) = (model.joint_names(), torques_of(kin, model)?);
     let n = model.dof();
     let samples = kin.time.len();
     let rows = samples * n;
@@ -120,68 +110,15 @@ pub fn regressor_rows(
         None => base.matrix(kin),
     };
     let mut b_torque: Vec<Vec<f64>> = torque.clone();
-    let mut projection = None;
-    let mut equations = None;
-    if let Some(pc) = &cfg.projection {
-        let p = periods.filter(|p| p.samples_per_period == samples).ok_or_else(|| {
-            Error::missing(
-                "the aligned periods of this table",
-                "projection needs an `align` stage and no resampling after it",
-            )
-        })?;
-        let reference = p.reference.as_ref().ok_or_else(|| {
-            Error::missing(
-                "the reference channel",
-                "the Projection Method needs it: map `reference` in [read]",
-            )
-        })?;
-        let proj = crate::estimation::projection::sensitivity(reference, &p.torque, p.samples_per_period, pc)?;
-        let eq = n * proj.rank();
-        if eq <= a.ncols() {
-            return Err(Error::mismatch(
-                "projection: equations (the references' span per joint × joints)",
-                format!(
-                    "more than the {} parameters (excite more harmonics or use a smaller model)",
-                    a.ncols()
-                ),
-                format!("{eq} ({} per joint)", proj.rank()),
-            ));
+    let (projection, equations) = match &cfg.projection {
+        Some(pc) => {
+            let (said, eq) = project(&mut a, &mut b_torque, periods, samples, pc)?;
+            (Some(said), Some(eq))
         }
-        let mut series = vec![0.0; samples];
-        for j in 0..n {
-            b_torque[j] = proj.apply(&torque[j]);
-            for c in 0..a.ncols() {
-                for k in 0..samples {
-                    series[k] = a[(k * n + j, c)];
-                }
-                let back = proj.apply(&series);
-                for k in 0..samples {
-                    a[(k * n + j, c)] = back[k];
-                }
-            }
-        }
-        projection = Some(format!(
-            "m1 = {}, m2 = {}, rank {} per joint, explained {:?}, corr(û, u − û) {:?}",
-            proj.m1,
-            proj.m2,
-            proj.rank(),
-            proj.explained,
-            proj.correlation
-        ));
-        equations = Some(eq);
-    }
+        None => (None, None),
+    };
     let b = DVector::from_fn(rows, |i, _| b_torque[i % n][i / n]);
-    // Per sample where the noise table has the kinematics' samples; its
-    // mean over the period where they span more (a fitted stretch).
-    let var = DVector::from_fn(rows, |i, _| {
-        noise
-            .and_then(|t| t.var_torque.get(i % n))
-            .and_then(|v| match v.len() == samples {
-                true => v.get(i / n).copied(),
-                false => Some(v.iter().sum::<f64>() / v.len().max(1) as f64),
-            })
-            .unwrap_or(f64::NAN)
-    });
+    let var = torque_variance(noise, n, samples);
     let period_torques = periods
         .filter(|p| p.periods >= 2 && p.samples_per_period == samples)
         .map(|p| DMatrix::from_fn(rows, p.periods, |i, pi| p.torque[i % n][pi * samples + i / n]));
@@ -194,39 +131,11 @@ pub fn regressor_rows(
     system.time = (0..rows).map(|i| kin.time[i / n]).collect();
     let mut period_torques = period_torques;
     if cfg.joint_wise {
-        // The joint that moves: the one whose range is more than 5 % of
-        // the largest (and over a milliradian); exactly one must.
-        let range =
-            |c: &Vec<f64>| c.iter().fold(f64::MIN, |m, v| m.max(*v)) - c.iter().fold(f64::MAX, |m, v| m.min(*v));
-        let ranges: Vec<f64> = kin.q.iter().map(range).collect();
-        let top = ranges.iter().fold(0.0f64, |m, r| m.max(*r));
-        let moving: Vec<usize> = (0..n).filter(|&j| ranges[j] > (0.05 * top).max(1e-3)).collect();
-        let [j] = moving[..] else {
-            return Err(Error::Data {
-                source_name: recording.to_string(),
-                channel: "q_*".into(),
-                sample: None,
-                msg: format!(
-                    "joint_wise: {} joints move (ranges {}), a joint-wise recording moves one",
-                    moving.len(),
-                    names
-                        .iter()
-                        .zip(&ranges)
-                        .map(|(name, r)| format!("{name} {r:.3} rad"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            });
-        };
+        let j = moving_joint(kin, recording)?;
         let keep = system.keep_joint(j);
         period_torques = period_torques.map(|p| p.select_rows(keep.iter()));
     }
-    let source: &dyn RowBlocks = match &maker {
-        Some(m) => m,
-        None => &system.a,
-    };
-    let gram = row_pass(source, &system);
-    let condition = normalised_condition(source, &system, &gram);
+    let condition = condition_of(maker.as_ref(), &system);
     let torque_note = torque_against_robot_file(kin, &base.model);
     system.expressions = base.expressions();
     system.recordings = vec![recording.to_string()];
@@ -243,6 +152,135 @@ pub fn regressor_rows(
         robot: model.name.clone(),
         metadata: kin.metadata.clone(),
     })
+}
+
+/// The kinematics' torques, refused unless it has them for the robot's joints.
+fn torques_of<'a>(kin: &'a Kinematics, model: &Model) -> Result<&'a Vec<Vec<f64>>> {
+    let names = model.joint_names();
+    if names != kin.joints {
+        return Err(Error::mismatch(
+            "the kinematics' joints",
+            format!("{} (the robot's)", names.join(", ")),
+            kin.joints.join(", "),
+        ));
+    }
+    kin.torque
+        .as_ref()
+        .ok_or_else(|| Error::missing("torques", "the kinematics table has none"))
+}
+
+/// Each row's torque noise variance: per sample where the noise table has
+/// the kinematics' samples; its mean over the period where they span more
+/// (a fitted stretch); NaN without a noise table.
+fn torque_variance(noise: Option<&NoiseTable>, n: usize, samples: usize) -> DVector<f64> {
+    DVector::from_fn(samples * n, |i, _| {
+        noise
+            .and_then(|t| t.var_torque.get(i % n))
+            .and_then(|v| match v.len() == samples {
+                true => v.get(i / n).copied(),
+                false => Some(v.iter().sum::<f64>() / v.len().max(1) as f64),
+            })
+            .unwrap_or(f64::NAN)
+    })
+}
+
+/// The Projection Method (closed loop): every joint's torque and A's
+/// columns projected onto the span of the references that explains the
+/// torques, in place. What says so, and the equations left.
+fn project(
+    a: &mut DMatrix<f64>,
+    b_torque: &mut [Vec<f64>],
+    periods: Option<&Periods>,
+    samples: usize,
+    pc: &ProjectionConfig,
+) -> Result<(String, usize)> {
+    let n = b_torque.len();
+    let p = periods.filter(|p| p.samples_per_period == samples).ok_or_else(|| {
+        Error::missing(
+            "the aligned periods of this table",
+            "projection needs an `align` stage and no resampling after it",
+        )
+    })?;
+    let reference = p.reference.as_ref().ok_or_else(|| {
+        Error::missing(
+            "the reference channel",
+            "the Projection Method needs it: map `reference` in [read]",
+        )
+    })?;
+    let proj = crate::estimation::projection::sensitivity(reference, &p.torque, p.samples_per_period, pc)?;
+    let eq = n * proj.rank();
+    if eq <= a.ncols() {
+        return Err(Error::mismatch(
+            "projection: equations (the references' span per joint × joints)",
+            format!(
+                "more than the {} parameters (excite more harmonics or use a smaller model)",
+                a.ncols()
+            ),
+            format!("{eq} ({} per joint)", proj.rank()),
+        ));
+    }
+    let mut series = vec![0.0; samples];
+    for j in 0..n {
+        b_torque[j] = proj.apply(&b_torque[j]);
+        for c in 0..a.ncols() {
+            for k in 0..samples {
+                series[k] = a[(k * n + j, c)];
+            }
+            let back = proj.apply(&series);
+            for k in 0..samples {
+                a[(k * n + j, c)] = back[k];
+            }
+        }
+    }
+    let said = format!(
+        "m1 = {}, m2 = {}, rank {} per joint, explained {:?}, corr(û, u − û) {:?}",
+        proj.m1,
+        proj.m2,
+        proj.rank(),
+        proj.explained,
+        proj.correlation
+    );
+    Ok((said, eq))
+}
+
+/// A joint-wise recording's joint.
+fn moving_joint(kin: &Kinematics, recording: &str) -> Result<usize> {
+    let (n, names) = (kin.joints.len(), &kin.joints);
+    // The joint that moves: the one whose range is more than 5 % of
+    // the largest (and over a milliradian); exactly one must.
+    let range = |c: &Vec<f64>| c.iter().fold(f64::MIN, |m, v| m.max(*v)) - c.iter().fold(f64::MAX, |m, v| m.min(*v));
+    let ranges: Vec<f64> = kin.q.iter().map(range).collect();
+    let top = ranges.iter().fold(0.0f64, |m, r| m.max(*r));
+    let moving: Vec<usize> = (0..n).filter(|&j| ranges[j] > (0.05 * top).max(1e-3)).collect();
+    let [j] = moving[..] else {
+        return Err(Error::Data {
+            source_name: recording.to_string(),
+            channel: "q_*".into(),
+            sample: None,
+            msg: format!(
+                "joint_wise: {} joints move (ranges {}), a joint-wise recording moves one",
+                moving.len(),
+                names
+                    .iter()
+                    .zip(&ranges)
+                    .map(|(name, r)| format!("{name} {r:.3} rad"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        });
+    };
+    Ok(j)
+}
+
+/// The condition number of the column-normalised A, its rows made by
+/// `maker` or the system's own.
+fn condition_of(maker: Option<&RowMaker>, system: &System) -> f64 {
+    let source: &dyn RowBlocks = match maker {
+        Some(m) => m,
+        None => &system.a,
+    };
+    let gram = row_pass(source, system);
+    normalised_condition(source, system, &gram)
 }
 
 /// AᵀA, in fixed blocks of rows ([`block_rows`]) across threads,
