@@ -83,11 +83,12 @@ impl<F: Fn(&[RecordingResult]) + Sync> Observer for Bars<F> {
     fn report(
         &self,
         parameters: &Path,
+        shown: &Path,
         recordings: &[RecordingResult],
         dir: &Path,
     ) -> robotid::Result<Option<PathBuf>> {
         match &self.plots {
-            Some(p) => p.report(parameters, recordings, dir),
+            Some(p) => p.report(parameters, shown, recordings, dir),
             None => Ok(None),
         }
     }

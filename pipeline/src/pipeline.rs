@@ -323,7 +323,7 @@ impl Built {
         let placed = |p: &Path| crate::output::placed(p, &staging, opts);
         let (mut report, mut warnings) = (None, Vec::new());
         if let (Some((_, path)), Some(dir)) = (&estimate, staging.staged_plot()) {
-            match observer.report(path, &recordings, &dir) {
+            match observer.report(path, &placed(path), &recordings, &dir) {
                 Ok(r) => report = r.map(|r| placed(&r)),
                 Err(e) => warnings.push(format!("no report: {e}")),
             }

@@ -56,9 +56,11 @@ pub trait Observer: Sync {
     }
     /// With [`RunOptions::plot`] and an estimate: the run's report into
     /// `dir`, from the parameters table and every recording's rows.
+    /// `shown`: the table's path once the run is committed, for the page.
     fn report(
         &self,
         _parameters: &Path,
+        _shown: &Path,
         _recordings: &[RecordingResult],
         _dir: &Path,
     ) -> crate::Result<Option<PathBuf>> {

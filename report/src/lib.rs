@@ -34,7 +34,13 @@ impl Observer for Plots {
         Ok(files)
     }
 
-    fn report(&self, parameters: &Path, recordings: &[RecordingResult], dir: &Path) -> Result<Option<PathBuf>> {
-        report::write_run_report(parameters, recordings, dir).map(Some)
+    fn report(
+        &self,
+        parameters: &Path,
+        shown: &Path,
+        recordings: &[RecordingResult],
+        dir: &Path,
+    ) -> Result<Option<PathBuf>> {
+        report::write_run_report(parameters, shown, recordings, dir).map(Some)
     }
 }

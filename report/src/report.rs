@@ -236,8 +236,8 @@ fn verdict_columns(params: &Parameters, sets: &[DataSet]) -> Result<(Vec<Verdict
         if sys.names != params.names {
             return Err(Error::Stage(robotid_stages::Error::mismatch(
                 format!("{}: parameters", set.title),
-                format!("{:?} (the estimate's)", params.names),
-                format!("{:?}", sys.names),
+                format!("{} (the estimate's)", params.names.join(", ")),
+                sys.names.join(", "),
             )));
         }
         let predicted: DVector<f64> = &sys.a * &params.values;
@@ -451,8 +451,11 @@ pub fn html(
 
 /// The report of a run with an `estimate` stage: its parameters against
 /// the regressor tables of its own recordings, as `<dir>/report.html`.
+/// `shown`: where the parameters table will be once the run commits (the
+/// page names it, not the staging folder it is read from).
 pub fn write_run_report(
     parameters: &std::path::Path,
+    shown: &std::path::Path,
     results: &[robotid::RecordingResult],
     dir: &std::path::Path,
 ) -> Result<std::path::PathBuf> {
@@ -478,7 +481,7 @@ pub fn write_run_report(
     let page = html(
         &params,
         &expressions,
-        &parameters.display().to_string(),
+        &shown.display().to_string(),
         &[DataSet {
             title: "Excitation data",
             sys: &sys,
