@@ -33,7 +33,9 @@ enum Command {
     Run(cmd::run::Args),
     /// Check a pipeline file without running it; report every problem.
     Lint(cmd::lint::Args),
-    /// Estimate parameters (OLS, WLS) with intervals from regressor tables.
+    /// Estimate parameters with intervals from regressor tables: least
+    /// squares (OLS, WLS) or, with --physical, the nearest physically
+    /// consistent estimate.
     Estimate(cmd::estimate::Args),
     /// Validate identified parameters on recordings they were not estimated
     /// from: predicted vs measured torque, residues, their distribution.
@@ -42,8 +44,10 @@ enum Command {
     /// coefficients minimising the regressor's condition number under
     /// joint and Cartesian constraints.
     Excite(cmd::excite::Args),
-    /// Export identified parameters as a URDF: physically consistent
-    /// standard parameters closest to the a-priori model.
+    /// Export identified parameters for simulators: a URDF, a MuJoCo MJCF
+    /// and a sidecar (JSON and Parquet) with every value's interval; the
+    /// standard parameters are the physically consistent ones closest to
+    /// the a-priori model.
     Export(cmd::export::Args),
     /// One self-contained HTML page per identification: parameters with
     /// intervals, torques, residues and noise densities.

@@ -402,8 +402,15 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
             &run_plots
         ])
     );
-    // With --plot, a run with an `estimate` stage writes its report too.
-    assert!(out.join("run_plots/report.html").is_file());
+    // With --plot, a run with an `estimate` stage writes its report too,
+    // naming the parameters table where the run put it (not the staging
+    // folder it was read from while the run was under way).
+    let page = std::fs::read_to_string(out.join("run_plots/report.html")).unwrap();
+    assert!(page.contains(&out.join("ex/parameters.parquet").display().to_string()));
+    assert!(
+        !page.contains(".robotid-staging"),
+        "the report names the staging folder"
+    );
     run_cli(&["run", &p("pipelines/validation.toml"), "--out", &va]);
     let params_path = out.join("ex/parameters.parquet");
     let params = parameters_from_table(&read_parquet(&params_path).unwrap()).unwrap();
@@ -774,6 +781,14 @@ fn excite_writes_a_trajectory_the_simulator_reads() {
     }
     let traj = robotid_stages::trajectory::load_trajectory(&out.join("excitation.toml")).unwrap();
     assert_eq!(traj.period(), Some(10.0));
+    // Without -o, each excitation file's design goes to its own folder.
+    let o = Command::new(env!("CARGO_BIN_EXE_robotid"))
+        .args(["excite", &cfg.display().to_string(), "--starts", "1"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(dir.path().join("out/excite/kuka_axis3/excitation.toml").is_file());
     let sim = dir.path().join("sim.toml");
     std::fs::write(
         &sim,

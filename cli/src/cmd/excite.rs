@@ -17,9 +17,11 @@ pub struct Args {
     pub config: PathBuf,
     /// Output folder: excitation.toml (the trajectory, readable by the
     /// simulator and by `align`'s reference_trajectory), coefficients and
-    /// sampled trajectory as Parquet, plots.
-    #[arg(long, short, default_value = "out/excite")]
-    pub out: PathBuf,
+    /// sampled trajectory as Parquet, plots [default: out/excite/<the
+    /// excitation file's name>, so that one design does not overwrite
+    /// another's].
+    #[arg(long, short)]
+    pub out: Option<PathBuf>,
     /// Override the number of starts.
     #[arg(long)]
     pub starts: Option<usize>,
@@ -64,7 +66,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     .map_err(anyhow::Error::msg)?;
     bar.finish_and_clear();
-    std::fs::create_dir_all(&args.out).with_context(|| args.out.display().to_string())?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        let stem = args.config.file_stem().unwrap_or_default();
+        PathBuf::from("out/excite").join(stem)
+    });
+    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
     let feasible = d.starts.iter().filter(|s| s.feasible).count();
     println!(
         "{:?} criterion {:.4}, condition number {:.4}, {} of {} starts feasible, {:.2} s",
@@ -97,7 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         toml::Value::Array(d.active().into_iter().map(|s| s.to_string().into()).collect()),
     );
     doc.insert("result".into(), toml::Value::Table(result));
-    let toml_path = args.out.join("excitation.toml");
+    let toml_path = out.join("excitation.toml");
     robotid_report::plot::write_text(
         &toml_path,
         &format!(
@@ -146,7 +152,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Arc::new(Float64Array::from(q0)),
     ];
     write_parquet(
-        &args.out.join("coefficients.parquet"),
+        &out.join("coefficients.parquet"),
         &RecordBatch::try_new(Arc::new(schema), cols)?,
     )
     .map_err(anyhow::Error::msg)?;
@@ -187,8 +193,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         ee.push(end_effector_position(&model, &mut data, &q));
     }
-    write_parquet(&args.out.join("trajectory.parquet"), &kin.to_record_batch()?).map_err(anyhow::Error::msg)?;
-    let pictures = robotid_report::plot::plot_excitation(&args.out, &kin, &ee).map_err(anyhow::Error::msg)?;
+    write_parquet(&out.join("trajectory.parquet"), &kin.to_record_batch()?).map_err(anyhow::Error::msg)?;
+    let pictures = robotid_report::plot::plot_excitation(&out, &kin, &ee).map_err(anyhow::Error::msg)?;
     println!(
         "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
         toml_path.display(),
