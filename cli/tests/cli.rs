@@ -20,6 +20,24 @@ fn every_subcommand_has_help() {
     }
 }
 
+/// `schema` names every table kind in its help and prints its Arrow
+/// schema as lines a person reads, not Rust's debug dump.
+#[test]
+fn schema_lists_every_kind_and_reads_plainly() {
+    let help = robotid().args(["schema", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    for kind in robotid_schemas::TableKind::ALL {
+        assert!(help.contains(kind.name()), "{} missing from: {help}", kind.name());
+    }
+    let out = robotid().args(["schema", "noise", "--joints", "a,b"]).output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("Arrow schema for joints a, b:"), "{text}");
+    let line = text.lines().find(|l| l.trim_start().starts_with("var_torque_b")).unwrap();
+    assert!(line.contains("not null") && line.contains("joint=b quantity=torque_noise_variance unit=N^2*m^2"), "{line}");
+    assert!(!text.contains("Field {") && !text.contains("[\""), "{text}");
+}
+
 #[test]
 fn errors_are_one_line_and_exit_non_zero() {
     let dir = tempfile::tempdir().unwrap();

@@ -39,19 +39,8 @@ pub struct LineSystem {
     cols: usize,
     joints: usize,
     period_s: f64,
-    /// Per line, the columns with content there (`active[starts[l]..
-    /// starts[l + 1]]`): far up the band only the non-smooth (Coulomb)
-    /// ones, so a candidate's sums cost what the lines hold.
-    active: Vec<u32>,
-    starts: Vec<usize>,
-    /// Per line, the upper triangle of m_l·Σ_j w_j·Re(Â_jᴴ·Â_j) over its
-    /// active columns, row by row (`gram_starts[l]..`).
-    gram: Vec<f64>,
-    gram_starts: Vec<usize>,
-    /// Per half and line, m_l·Σ_j w_j·Â_jᴴ·b̂_j over its active columns.
-    cross: [Vec<Complex64>; 2],
-    /// Per half, Σ_l m_l·Σ_j w_j·|b̂_j|².
-    energy: [f64; 2],
+    /// The sums over the lines of the active columns.
+    sums: LineSums,
     /// The columns' lines, `[(joint · cols + col) · lines + line]`.
     columns: Vec<Complex64>,
     /// Per half and joint, the torque mean's lines.
@@ -156,11 +145,18 @@ fn line_power(
 /// weighted Gram matrix's upper triangle and the cross terms with each
 /// half's torque, line by line.
 struct LineSums {
+    /// Per line, the columns with content there (`active[starts[l]..
+    /// starts[l + 1]]`): far up the band only the non-smooth (Coulomb)
+    /// ones, so a candidate's sums cost what the lines hold.
     active: Vec<u32>,
     starts: Vec<usize>,
+    /// Per line, the upper triangle of m_l·Σ_j w_j·Re(Â_jᴴ·Â_j) over its
+    /// active columns, row by row (`gram_starts[l]..`).
     gram: Vec<f64>,
     gram_starts: Vec<usize>,
+    /// Per half and line, m_l·Σ_j w_j·Â_jᴴ·b̂_j over its active columns.
     cross: [Vec<Complex64>; 2],
+    /// Per half, Σ_l m_l·Σ_j w_j·|b̂_j|².
     energy: [f64; 2],
 }
 
@@ -268,12 +264,7 @@ impl LineSystem {
             cols,
             joints,
             period_s,
-            active: sums.active,
-            starts: sums.starts,
-            gram: sums.gram,
-            gram_starts: sums.gram_starts,
-            cross: sums.cross,
-            energy: sums.energy,
+            sums,
             columns,
             torque: halves,
             weight,
@@ -311,14 +302,14 @@ impl LineSystem {
         let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
         for l in 0..self.lines {
             let s = h[l].norm_sqr();
-            let on = &self.active[self.starts[l]..self.starts[l + 1]];
-            let mut y = self.gram[self.gram_starts[l]..].iter();
+            let on = &self.sums.active[self.sums.starts[l]..self.sums.starts[l + 1]];
+            let mut y = self.sums.gram[self.sums.gram_starts[l]..].iter();
             for (i, &c) in on.iter().enumerate() {
                 for &d in &on[i..] {
                     full[(c as usize, d as usize)] += s * y.next().expect("one per pair");
                 }
                 for half in 0..2 {
-                    r[half][c as usize] += (h[l].conj() * self.cross[half][self.starts[l] + i]).re;
+                    r[half][c as usize] += (h[l].conj() * self.sums.cross[half][self.sums.starts[l] + i]).re;
                 }
             }
         }
@@ -383,7 +374,7 @@ impl LineSystem {
         // Fitted on one half, the other's residue: E − 2θᵀr + θᵀGθ.
         let held = |fit: usize, on: usize| {
             let t = &theta[fit];
-            self.energy[on] - 2.0 * t.dot(&r[on]) + t.dot(&(&g * t))
+            self.sums.energy[on] - 2.0 * t.dot(&r[on]) + t.dot(&(&g * t))
         };
         // Its noise part: each held-out half's mean has σ²/P_h per sample.
         // A line of white noise of variance σ² over N samples has E|n̂|² = N·σ².
