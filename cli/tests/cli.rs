@@ -33,8 +33,14 @@ fn schema_lists_every_kind_and_reads_plainly() {
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("Arrow schema for joints a, b:"), "{text}");
-    let line = text.lines().find(|l| l.trim_start().starts_with("var_torque_b")).unwrap();
-    assert!(line.contains("not null") && line.contains("joint=b quantity=torque_noise_variance unit=N^2*m^2"), "{line}");
+    let line = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("var_torque_b"))
+        .unwrap();
+    assert!(
+        line.contains("not null") && line.contains("joint=b quantity=torque_noise_variance unit=N^2*m^2"),
+        "{line}"
+    );
     assert!(!text.contains("Field {") && !text.contains("[\""), "{text}");
 }
 

@@ -613,7 +613,7 @@ fn ros2_joint_states_epoch_times_and_reordered_names() {
     write(&nameless, &|_| vec![]);
     let e = read(&nameless, &cfg, None).map(|r| r.len()).unwrap_err();
     assert!(
-        matches!(&e, Error::Data { sample: Some(0), msg, .. } if msg.contains("not all in the message's names []")),
+        matches!(&e, Error::Data { sample: Some(0), msg, .. } if msg.contains("not all in the message's names (it has none)")),
         "{e}"
     );
 }

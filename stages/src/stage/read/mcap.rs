@@ -111,10 +111,14 @@ impl Series {
                 .map(|j| names.iter().position(|n| n == j))
                 .collect::<Option<Vec<usize>>>()
                 .ok_or_else(|| {
-                    err(format!(
-                        "joints {} not all in the message's names {}",
-                        joints.join(", "),
+                    let has = if names.is_empty() {
+                        "none".to_string()
+                    } else {
                         names.join(", ")
+                    };
+                    err(format!(
+                        "joints {} not all in the message's names (it has {has})",
+                        joints.join(", ")
                     ))
                 })?;
             if self.order.is_some() {
