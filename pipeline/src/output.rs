@@ -16,9 +16,15 @@
 //! writable, `--out` a mount point, a file system without it, the process
 //! working inside `--out`) the commit moves the staged files in one rename
 //! each after a `COMMIT` marker, and a run killed during those moves is
-//! finished by the next run. One run at a time holds the folder (an OS lock on `.robotid.lock`, released even by kill -9); a
-//! second is refused with the first's process id. `--out` where the inputs
-//! are is refused.
+//! finished by the next run. One run at a time holds the folder (an OS
+//! lock on `.robotid.lock`, released even by kill -9); a second is refused
+//! with the first's process id. `--out` where the inputs are is refused.
+//!
+//! Nothing of the user's is removed or overwritten: the commit records the
+//! files it wrote (`.robotid-files`), overwrites and removes only those
+//! (or, in a folder from before that record, what its run manifest
+//! names), and refuses, before anything moves, a run whose outputs would
+//! land on any other path.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::path::{Path, PathBuf};
@@ -44,6 +50,9 @@ const STALE: &str = ".stale";
 /// folder's path (a run finishing another's commit needs it).
 const PLOTS: &str = ".plots";
 const PLOT_TARGET: &str = ".plot-target";
+/// In a committed folder: the files robotid wrote there, one relative path
+/// a line; a commit overwrites no other file.
+pub const WRITTEN: &str = ".robotid-files";
 
 fn output_error(out: &Path, msg: String) -> Error {
     Error::Output {
@@ -88,16 +97,29 @@ impl Staging {
     /// the tables the previous run listed that this one does not make go
     /// (they would stand beside a manifest that does not name them).
     pub fn commit(mut self) -> Result<()> {
+        let control = [COMMIT, PLOTS, PLOT_TARGET, STALE];
+        let ours = written(&self.out);
+        let plots = self.staged_plot().filter(|p| p.exists());
+        // Every collision with a user's path refused before anything moves.
+        let staged = staged_entries(&self.dir, &control)?;
+        refuse_collisions(&self.out, &staged, &ours)?;
+        if let (Some(staged), Some(target)) = (&plots, &self.plot) {
+            refuse_collisions(target, &staged_entries(staged, &[])?, &written(target))?;
+        }
         let stale: Vec<String> = listed(&self.out)
             .into_iter()
             .filter(|rel| !self.dir.join(rel).exists())
             .collect();
-        let plots = self.staged_plot().filter(|p| p.exists());
+        record_written(&self.dir, &self.out, &staged, &ours, &stale)?;
+        if let (Some(staged), Some(target)) = (&plots, &self.plot) {
+            let entries = staged_entries(staged, &[])?;
+            record_written(staged, target, &entries, &written(target), &[])?;
+        }
         let plots_swapped = match (&plots, &self.plot) {
             (Some(staged), Some(target)) => exchange(staged, target, &[], &[]),
             _ => true,
         };
-        if plots_swapped && exchange(&self.dir, &self.out, &stale, &[COMMIT, PLOTS, PLOT_TARGET, STALE]) {
+        if plots_swapped && exchange(&self.dir, &self.out, &stale, &control) {
             let _ = std::fs::remove_dir_all(&self.dir);
             self.committed = true;
             return Ok(());
@@ -132,6 +154,108 @@ impl Drop for Staging {
             let _ = std::fs::remove_dir(plot);
         }
     }
+}
+
+/// One path a commit puts in place, relative to its folder.
+struct Entry {
+    rel: PathBuf,
+    dir: bool,
+}
+
+/// What a staged folder holds, folders before their contents, less its
+/// top-level `control` files.
+fn staged_entries(staged: &Path, control: &[&str]) -> Result<Vec<Entry>> {
+    let mut entries = Vec::new();
+    let mut stack = vec![staged.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let mut names: Vec<_> = std::fs::read_dir(&d).map_err(io(&d))?.flatten().collect();
+        names.sort_by_key(|e| e.file_name());
+        for e in names {
+            let path = e.path();
+            let rel = path.strip_prefix(staged).unwrap_or(&path).to_path_buf();
+            if d == staged && control.iter().any(|c| e.file_name() == *c) {
+                continue;
+            }
+            let dir = e.file_type().map_err(io(&path))?.is_dir();
+            if dir {
+                stack.push(path);
+            }
+            entries.push(Entry { rel, dir });
+        }
+    }
+    Ok(entries)
+}
+
+/// Refuses a commit that would remove or overwrite a path of the user's in
+/// `target`: a file where the commit puts a folder, a folder where it puts
+/// a file, or a file it did not write earlier (`ours`) where it puts one.
+fn refuse_collisions(target: &Path, staged: &[Entry], ours: &std::collections::BTreeSet<PathBuf>) -> Result<()> {
+    for e in staged {
+        let path = target.join(&e.rel);
+        let Ok(there) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        let what = match (e.dir, there.is_dir()) {
+            (true, true) => continue,
+            (false, false) if ours.contains(&e.rel) => continue,
+            (true, false) => "a file stands where it writes a folder",
+            (false, true) => "a folder stands where it writes a file",
+            (false, false) => "a file that robotid did not write stands where it writes one",
+        };
+        return Err(output_error(
+            &path,
+            format!(
+                "{what}; it is not robotid's to remove or overwrite, so nothing was written: move it, or give another --out"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Records in the staged folder the files the folder will hold that robotid
+/// wrote: the staged ones, and those written earlier that stay (not
+/// `stale`, still there). The next commit may overwrite only these.
+fn record_written(
+    staged: &Path,
+    target: &Path,
+    entries: &[Entry],
+    ours: &std::collections::BTreeSet<PathBuf>,
+    stale: &[String],
+) -> Result<()> {
+    let mut files: std::collections::BTreeSet<PathBuf> =
+        entries.iter().filter(|e| !e.dir).map(|e| e.rel.clone()).collect();
+    files.extend(
+        ours.iter()
+            .filter(|rel| !stale.iter().any(|s| Path::new(s) == rel.as_path()) && target.join(rel).is_file())
+            .cloned(),
+    );
+    files.remove(Path::new(WRITTEN));
+    let text: String = files.iter().map(|f| format!("{}\n", f.display())).collect();
+    let path = staged.join(WRITTEN);
+    std::fs::write(&path, text).map_err(io(&path))
+}
+
+/// The files in `out` that robotid wrote: those its last commit recorded,
+/// the tables and parameters a run manifest names, and the manifest.
+fn written(out: &Path) -> std::collections::BTreeSet<PathBuf> {
+    let recorded = std::fs::read_to_string(out.join(WRITTEN)).unwrap_or_default();
+    let mut files: std::collections::BTreeSet<PathBuf> = recorded
+        .lines()
+        .map(Path::new)
+        .filter(|p| plain_relative(p))
+        .map(Path::to_path_buf)
+        .chain(listed(out).into_iter().map(PathBuf::from))
+        .collect();
+    if is_manifest(&out.join(MANIFEST)) {
+        files.insert(PathBuf::from(MANIFEST));
+    }
+    files.insert(PathBuf::from(WRITTEN));
+    files
+}
+
+/// A relative path that stays inside its folder.
+fn plain_relative(p: &Path) -> bool {
+    !p.as_os_str().is_empty() && p.is_relative() && p.components().all(|c| matches!(c, std::path::Component::Normal(_)))
 }
 
 /// Where a staged file will be after the commit.
@@ -292,10 +416,7 @@ fn rename_exchange(_: &Path, _: &Path) -> bool {
 /// relative to `out`; none without a readable manifest. Only plain
 /// relative paths inside `out` are taken.
 fn listed(out: &Path) -> Vec<String> {
-    let Ok(text) = std::fs::read_to_string(out.join(MANIFEST)) else {
-        return Vec::new();
-    };
-    let Ok(m) = serde_json::from_str::<serde_json::Value>(&text) else {
+    let Some(m) = manifest(&out.join(MANIFEST)) else {
         return Vec::new();
     };
     let tables = m["recordings"]
@@ -307,12 +428,20 @@ fn listed(out: &Path) -> Vec<String> {
     tables
         .chain(std::iter::once(&m["parameters"]))
         .filter_map(|v| v.as_str())
-        .filter(|rel| {
-            let p = Path::new(rel);
-            p.is_relative() && p.components().all(|c| matches!(c, std::path::Component::Normal(_)))
-        })
+        .filter(|rel| plain_relative(Path::new(rel)))
         .map(str::to_string)
         .collect()
+}
+
+/// A run manifest's JSON: an object naming the robotid version.
+fn manifest(path: &Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let m = serde_json::from_str::<serde_json::Value>(&text).ok()?;
+    m["robotid_version"].is_string().then_some(m)
+}
+
+fn is_manifest(path: &Path) -> bool {
+    manifest(path).is_some()
 }
 
 /// Moves a file or folder tree to `to`, file by file (replacing files,
