@@ -485,53 +485,93 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
     }
 }
 
-/// identify holds its output folder while it writes: a second identify
-/// into it refuses while the first's process lives, touching nothing; the
-/// partial folder of one that was killed is cleared by the next run, said,
-/// rather than blocking it ("not empty"); a finished run leaves no lock.
+/// What a reader sees in an output folder: every file by relative path,
+/// robotid's hidden bookkeeping (`.robotid*`) left out.
+fn visible(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    robotid_tests::bytes_of(dir)
+        .into_iter()
+        .filter(|(k, _)| !k.split('/').any(|c| c.starts_with(".robotid")))
+        .collect()
+}
+
+/// identify's outputs appear together or not at all, as a run's: killed
+/// at 24 seeded random points it leaves nothing of itself or everything
+/// (the next identify clears what a killed one staged, and succeeds); a
+/// folder another run holds is refused, naming its process; a user's file
+/// in the folder is refused and kept, byte for byte.
 #[test]
-fn the_output_folder_is_locked_and_a_killed_runs_is_cleared() {
+fn identify_is_atomic_and_keeps_the_users_files() {
     let dir = tempfile::tempdir().unwrap();
     let csv = simulate_arm3(dir.path(), 9, 10.0, &[vec![1, 2, 3], vec![1, 2, 4], vec![2, 3, 5]]);
     let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
-    let out = dir.path().join("id");
-    let lock = out.join(".robotid-identify.lock");
-    let partial = out.join("parameters.parquet");
-    std::fs::create_dir_all(&out).unwrap();
-    std::fs::write(&partial, b"partial").unwrap();
-    let identify = || {
+    let identify = |out: &Path| {
         Command::new(env!("CARGO_BIN_EXE_robotid"))
-            .args(["identify", s(&csv), "--robot", s(&robot), "--out", s(&out)])
-            .output()
+            .args(["identify", s(&csv), "--robot", s(&robot), "--out", s(out)])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
             .unwrap()
     };
-    // This test's own process stands for a running identify.
-    std::fs::write(&lock, std::process::id().to_string()).unwrap();
-    let o = identify();
-    let said = String::from_utf8_lossy(&o.stderr);
+    let reference = dir.path().join("reference");
+    let t = std::time::Instant::now();
+    let o = identify(&reference).wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let full = t.elapsed();
+    let files: Vec<String> = visible(&reference).into_keys().collect();
+    assert!(
+        files.contains(&"parameters.parquet".to_string()) && files.len() > 5,
+        "{files:?}"
+    );
+    // A user's file in the folder: refused, kept.
+    let mine = dir.path().join("mine");
+    std::fs::create_dir_all(&mine).unwrap();
+    std::fs::write(mine.join("notes.txt"), b"arm 3").unwrap();
+    let o = identify(&mine).wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not empty"));
+    assert_eq!(
+        robotid_tests::bytes_of(&mine).into_keys().collect::<Vec<_>>(),
+        ["notes.txt"]
+    );
+    assert_eq!(std::fs::read(mine.join("notes.txt")).unwrap(), b"arm 3");
+    // Held by another run (this process): refused, nothing touched.
+    let held = dir.path().join("held");
+    let hold = robotid::output::prepare(&held, None, &[]).unwrap();
+    let o = identify(&held).wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(1), "{said}");
-    assert!(
-        said.contains(&format!(
-            "another robotid identify (process {}) is writing",
-            std::process::id()
-        )),
-        "{said}"
-    );
-    assert_eq!(std::fs::read(&partial).unwrap(), b"partial");
-    // A process that has ended stands for a killed one.
-    let mut gone = Command::new("true").spawn().unwrap();
-    let pid = gone.id();
-    gone.wait().unwrap();
-    std::fs::write(&lock, pid.to_string()).unwrap();
-    let o = identify();
-    let said = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{said}");
-    assert!(
-        said.contains(&format!(
-            "the partial output of an identify that stopped (process {pid}) is removed"
-        )),
-        "{said}"
-    );
-    assert!(parameters_from_table(&read_parquet(&partial).unwrap()).is_ok());
-    assert!(!lock.exists(), "the lock is released");
+    assert!(said.contains(&format!("process {}", std::process::id())), "{said}");
+    drop(hold);
+    let (mut none, mut all) = (0, 0);
+    let mut seed: u64 = 0x1de4_71f7;
+    for trial in 0..24 {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        let out = dir.path().join(format!("killed-{trial}"));
+        let mut child = identify(&out);
+        std::thread::sleep(full.mul_f64((seed % 1000) as f64 / 1000.0 * 1.1));
+        let _ = child.kill();
+        let _ = child.wait();
+        let seen: Vec<String> = if out.exists() {
+            visible(&out).into_keys().collect()
+        } else {
+            Vec::new()
+        };
+        if seen.is_empty() {
+            none += 1;
+            // What the killed one staged is cleared, and the folder taken.
+            let o = identify(&out).wait_with_output().unwrap();
+            assert!(
+                o.status.success(),
+                "trial {trial}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            assert_eq!(visible(&out).into_keys().collect::<Vec<_>>(), files, "trial {trial}");
+        } else {
+            all += 1;
+            assert_eq!(seen, files, "trial {trial}: a partial identify output");
+        }
+    }
+    println!("24 kill -9s during identify: {none} left nothing, {all} everything, 0 partial");
 }

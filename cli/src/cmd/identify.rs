@@ -73,69 +73,39 @@ fn over_floor(est: &robotid_stages::estimation::Estimate) -> Vec<(String, f64)> 
         .collect()
 }
 
-/// The lock identify holds on its output folder while it writes: a file
-/// holding its process id. Another identify into the folder refuses; one
-/// whose process is gone (killed) left a partial folder, which the next
-/// run clears (said).
-const LOCK: &str = ".robotid-identify.lock";
+/// The process working inside a folder until dropped, then back where it
+/// was (before the commit: a folder is not exchanged under a process that
+/// works inside it).
+struct Inside(PathBuf);
 
-/// Removes the output folder unless told the work is done, and the lock
-/// when it is: a failed identify leaves nothing behind.
-struct Cleanup<'a>(&'a Path, bool);
-
-impl Drop for Cleanup<'_> {
-    fn drop(&mut self) {
-        if self.1 {
-            let _ = std::fs::remove_file(self.0.join(LOCK));
-        } else {
-            let _ = std::fs::remove_dir_all(self.0);
-        }
+impl Inside {
+    fn enter(dir: &Path) -> anyhow::Result<Inside> {
+        let back = std::env::current_dir().context("the working folder")?;
+        std::env::set_current_dir(dir).with_context(|| dir.display().to_string())?;
+        Ok(Inside(back))
     }
 }
 
-/// Takes the output folder: an empty or absent one, or the partial output
-/// of an identify that was killed (cleared); refuses a folder in use or
-/// holding anything else.
-fn take_folder(out: &Path) -> anyhow::Result<()> {
-    let lock = out.join(LOCK);
-    if let Ok(text) = std::fs::read_to_string(&lock) {
-        match text.trim().parse::<u32>() {
-            Ok(pid) if robotid::output::alive(pid) => bail!(
-                "{}: another robotid identify (process {pid}) is writing into this folder; wait for it, or give another with --out",
-                out.display()
-            ),
-            _ => {
-                eprintln!(
-                    "note: {}: the partial output of an identify that stopped (process {}) is removed",
-                    out.display(),
-                    text.trim()
-                );
-                std::fs::remove_dir_all(out).with_context(|| out.display().to_string())?;
-            }
-        }
+impl Drop for Inside {
+    fn drop(&mut self) {
+        let _ = std::env::set_current_dir(&self.0);
     }
-    if out.exists() && std::fs::read_dir(out).map(|mut d| d.next().is_some()).unwrap_or(true) {
-        bail!(
-            "{}: the output folder is not empty; give another with --out, or remove it",
-            out.display()
-        );
-    }
-    std::fs::create_dir_all(out).with_context(|| out.display().to_string())?;
-    // Two runs that both found it empty: one lock file wins.
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&lock)
-        .map_err(|e| match e.kind() {
-            std::io::ErrorKind::AlreadyExists => anyhow::anyhow!(
-                "{}: another robotid identify started writing into this folder just now; give another with --out",
-                out.display()
-            ),
-            _ => anyhow::Error::new(e).context(lock.display().to_string()),
-        })?;
-    use std::io::Write as _;
-    write!(f, "{}", std::process::id()).with_context(|| lock.display().to_string())?;
-    Ok(())
+}
+
+/// `p` made absolute against the working folder (it need not exist).
+fn absolute_path(p: &Path) -> anyhow::Result<PathBuf> {
+    std::path::absolute(p).with_context(|| p.display().to_string())
+}
+
+/// Whether `out` holds anything of the user's (robotid's own hidden
+/// bookkeeping aside): identify writes only into an empty folder.
+fn holds_anything(out: &Path) -> bool {
+    std::fs::read_dir(out)
+        .map(|d| {
+            d.flatten()
+                .any(|e| !e.file_name().to_string_lossy().starts_with(".robotid"))
+        })
+        .unwrap_or(true)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -166,9 +136,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
 
-    // From here the folder is this run's: removed if it fails.
-    take_folder(&out)?;
-    let mut cleanup = Cleanup(&out, false);
+    // Everything is written into a staging folder and appears at once when
+    // identify ends, refused or not (robotid::output): a kill or a failure
+    // leaves the folder as it was. One identify or run at a time holds it.
+    let staging = robotid::output::prepare(&absolute_path(&out)?, None, &all)?;
+    if holds_anything(&out) {
+        bail!(
+            "{}: the output folder is not empty; give another with --out, or remove it",
+            out.display()
+        );
+    }
 
     let stated: Option<robotid_stages::stage::read::ReadConfig> = match &args.read {
         None => None,
@@ -222,29 +199,41 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("\n# {}/pipelines/{}.toml\n{}", out.display(), names[0], designs[0].text);
     }
 
-    std::fs::create_dir_all(out.join("pipelines")).with_context(|| out.display().to_string())?;
+    // From here identify works inside its staging folder, every output
+    // named relative to it: the files that name each other (the report,
+    // the exports, the estimate's provenance) hold paths that stay right
+    // when the folder appears as `out`, and when it is moved.
+    let inside = Inside::enter(staging.staged_out())?;
+    let work = PathBuf::new();
+    std::fs::create_dir_all(work.join("pipelines")).with_context(|| out.display().to_string())?;
     let mut script = String::from(
         "#!/usr/bin/env bash\n# What `robotid identify` ran, as commands to pin and edit (from this folder).\nset -euo pipefail\ncd \"$(dirname \"$0\")\"\n",
     );
     let mut tables = Vec::new();
     for (i, d) in designs.iter().enumerate() {
-        let file = out.join("pipelines").join(format!("{}.toml", names[i]));
-        std::fs::write(&file, &d.text).with_context(|| file.display().to_string())?;
-        super::run::run(super::run::Args {
-            pipeline: file,
-            out: Some(out.join(&names[i])),
-            threads: None,
-            timings: false,
-            plot: None,
-        })?;
+        // Written staged, read as the file it will be: what the tables and
+        // the manifest say of it names its final place.
+        let rel = Path::new("pipelines").join(format!("{}.toml", names[i]));
+        std::fs::write(work.join(&rel), &d.text).with_context(|| out.join(&rel).display().to_string())?;
+        super::run::run_pipeline(
+            robotid::Pipeline::from_toml(&d.text, out.join(&rel))?,
+            super::run::Args {
+                pipeline: out.join(&rel),
+                out: Some(work.join(&names[i])),
+                threads: None,
+                timings: false,
+                plot: None,
+            },
+            &out.join(&names[i]),
+        )?;
         writeln!(script, "robotid run pipelines/{0}.toml --out {0}", names[i])?;
-        tables.push(out.join(&names[i]).join(&names[i]).join("regressor.parquet"));
+        tables.push(work.join(&names[i]).join(&names[i]).join("regressor.parquet"));
     }
     let (id_tables, val_tables) = tables.split_at(ident.len());
-    let rel = |p: &Path| p.strip_prefix(&out).unwrap_or(p).display().to_string();
+    let rel = |p: &Path| p.strip_prefix(&work).unwrap_or(p).display().to_string();
     let joined = |ts: &[PathBuf]| ts.iter().map(|t| rel(t)).collect::<Vec<_>>().join(" ");
 
-    let parameters = out.join("parameters.parquet");
+    let parameters = work.join("parameters.parquet");
     // Over 3× the noise floor on a joint: the joints, their ratios and what
     // identify measured on the way, for the table and the message.
     let causes: String = designs[0]
@@ -309,7 +298,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let level = if inadequate.is_some() { None } else { Some(0.95) };
     print!("{}", super::estimate::summary_at(&ols.estimate, 0.95, level));
     print!("{}", super::estimate::findings(&ols));
-    println!("parameters in {}", parameters.display());
+    println!("parameters in {}", out.join("parameters.parquet").display());
     writeln!(
         script,
         "robotid estimate {} --robot {} -o parameters.parquet",
@@ -342,9 +331,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             parameters: parameters.clone(),
             excitation: id_tables.to_vec(),
             validation: val_tables.to_vec(),
-            physical: physical.then(|| out.join("parameters_physical.parquet")),
+            physical: physical.then(|| work.join("parameters_physical.parquet")),
             robot: physical.then(|| robot.clone()),
-            out: out.join("report.html"),
+            out: work.join("report.html"),
         })?;
         let with_physical = if physical {
             format!(" --physical parameters_physical.parquet --robot {}", robot.display())
@@ -360,10 +349,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if let Some(why) = inadequate.filter(|_| !args.accept_inadequate) {
         report(&mut script, false)?;
-        let sh = out.join("identify.sh");
-        std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
-        std::fs::write(out.join("INADEQUATE.txt"), format!("{why}\n")).with_context(|| out.display().to_string())?;
-        cleanup.1 = true;
+        let sh = work.join("identify.sh");
+        std::fs::write(&sh, script).with_context(|| out.join("identify.sh").display().to_string())?;
+        std::fs::write(work.join("INADEQUATE.txt"), format!("{why}\n")).with_context(|| out.display().to_string())?;
+        drop(inside);
+        staging.commit()?;
         return Err(Inadequate(format!(
             "{}: not identified: {why}\nThe estimate and the report are in {} marked inadequate (INADEQUATE.txt), with no physical fit and no export; its intervals are not 95 % intervals. To write everything anyway: --accept-inadequate",
             ident[0].display(),
@@ -377,17 +367,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("no physical fit and no export for simulators: joint-wise records give the decoupled model (each joint's inertia, gravity and friction), not the links' bodies");
         false
     } else {
-        physical_fit(&parts, id_tables, val_tables, &robot, &out, &mut script, &joined)?
+        physical_fit(&parts, id_tables, val_tables, &robot, &work, &mut script, &joined)?
     };
     report(&mut script, physical)?;
-    let sh = out.join("identify.sh");
-    std::fs::write(&sh, script).with_context(|| sh.display().to_string())?;
-    cleanup.1 = true;
+    std::fs::write(work.join("identify.sh"), script).with_context(|| out.join("identify.sh").display().to_string())?;
+    drop(inside);
+    staging.commit()?;
     println!(
         "\nidentified: {} (pipelines in {}, commands in {})",
         out.display(),
         out.join("pipelines").display(),
-        sh.display()
+        out.join("identify.sh").display()
     );
     Ok(())
 }
@@ -523,7 +513,11 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> robotid::Resul
     for d in designs.iter_mut() {
         d.plan.lock.extend(locked.iter().cloned());
         d.findings.push(("locked".into(), said.clone()));
-        d.plan.inferred.insert("locked".into(), said.clone());
+        let all = match d.plan.inferred.get("locked") {
+            Some(before) => format!("{before}; {said}"),
+            None => said.clone(),
+        };
+        d.plan.inferred.insert("locked".into(), all);
         d.text = robotid::identify::file_text(&d.plan)?;
     }
     Ok(())

@@ -24,8 +24,24 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let started = Instant::now();
     let pipeline = Pipeline::from_path(&args.pipeline)?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
+    });
+    run_pipeline(
+        pipeline,
+        Args {
+            out: Some(out.clone()),
+            ..args
+        },
+        &out,
+    )
+}
+
+/// [`run`] of a pipeline already read, its output folder said as `shown`
+/// (identify runs its pipelines into its staging folder).
+pub fn run_pipeline(pipeline: Pipeline, args: Args, shown: &std::path::Path) -> anyhow::Result<()> {
+    let started = Instant::now();
     let built = pipeline.build()?;
     for w in built.model.iter().flat_map(|m| &m.warnings) {
         eprintln!("warning: robot: {w}");
@@ -34,9 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let l: Vec<String> = m.locked.iter().map(|(j, x)| format!("{j} at {x}")).collect();
         println!("robot `{}`: {} moving joints; locked {}", m.name, m.dof(), l.join(", "));
     }
-    let out = args.out.unwrap_or_else(|| {
-        PathBuf::from("out").join(args.pipeline.file_stem().map(|s| s.to_os_string()).unwrap_or_default())
-    });
+    let out = args.out.clone().unwrap_or_else(|| shown.to_path_buf());
     // Everything appears at the end, or not at all (robotid::output); the
     // recordings are shown as soon as all are through.
     let failed = std::sync::atomic::AtomicUsize::new(0);
@@ -48,7 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             recordings.len() - n,
             recordings.len(),
             started.elapsed().as_secs_f64(),
-            out.display()
+            shown.display()
         );
     });
     let run = built.run_with(
