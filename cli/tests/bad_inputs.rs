@@ -434,6 +434,38 @@ fn every_class_of_bad_input_is_refused_cleanly() {
             says: vec!["inf.parquet".into(), "holds inf".into()],
         });
     }
+    // predict on kinematics with a NaN position (the table's checksum
+    // made anew): a NaN torque was written, "samples predicted".
+    let nan = w.join("nan_kinematics.parquet");
+    let batch = robotid_stages::formats::parquet::read_parquet(&out.join("kuka_axis3/kinematics.parquet")).unwrap();
+    let i = batch.schema().index_of("q_a3").unwrap();
+    let mut columns = batch.columns().to_vec();
+    let mut v: Vec<f64> = columns[i]
+        .as_any()
+        .downcast_ref::<arrow::array::Float64Array>()
+        .unwrap()
+        .values()
+        .to_vec();
+    v[17] = f64::NAN;
+    columns[i] = std::sync::Arc::new(arrow::array::Float64Array::from(v));
+    let mut schema = (*batch.schema()).clone();
+    schema.metadata.remove(robotid_schemas::metadata::CONTENT_CRC32);
+    let batch = arrow::array::RecordBatch::try_new(std::sync::Arc::new(schema), columns).unwrap();
+    robotid_stages::formats::parquet::write_parquet(&nan, &batch).unwrap();
+    cases.push(Case {
+        name: "predict on a NaN position",
+        args: vec![
+            "predict".into(),
+            "--robot".into(),
+            s(&robot),
+            "-p".into(),
+            s(&params),
+            s(&nan),
+            "-o".into(),
+            s(&w.join("predicted.parquet")),
+        ],
+        says: vec!["nan_kinematics.parquet".into(), "q_a3".into(), "sample 17".into()],
+    });
     let before_out = bytes_of(&out);
     let inputs = [w.join("recordings"), w.join("csv"), w.join("robots"), w.join("sims")];
     let before_in: Vec<_> = inputs.iter().map(|d| bytes_of(d)).collect();

@@ -213,7 +213,13 @@ pub fn export(args: &Export) -> Result<Exported> {
             links: outside,
         });
     }
-    let mut warnings = far_from_the_robot_file(&base.model, &identified, &bounds, &params.metadata);
+    let mut warnings = estimate_warnings(&params.metadata);
+    warnings.extend(far_from_the_robot_file(
+        &base.model,
+        &identified,
+        &bounds,
+        &params.metadata,
+    ));
     warnings.extend(outside.iter().map(|o| format!("written with --force: {o}")));
     let note = format!(
         "identified by robotid {} from {} (a-priori model {}); physically consistent",
@@ -295,6 +301,46 @@ fn outside_bounds(exported: &Model, bounds: &[LinkBound]) -> Vec<String> {
             })
         })
         .collect()
+}
+
+/// What the estimate's own checks said of the table, carried into the
+/// export: a model exported from a fit that disagreed with its data (a
+/// residue over the noise floor, parameters no body can have, identify's
+/// refusal overridden) is said again where it is used.
+fn estimate_warnings(md: &std::collections::BTreeMap<String, String>) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(v) = md.get(metadata::INADEQUATE) {
+        out.push(format!("identify judged this estimate inadequate: {v}"));
+    }
+    let adequacy: Vec<serde_json::Value> = md
+        .get(metadata::ADEQUACY)
+        .and_then(|a| serde_json::from_str(a).ok())
+        .unwrap_or_default();
+    let over: Vec<String> = adequacy
+        .iter()
+        .filter_map(|a| Some((a.get("joint")?.as_str()?, a.get("ratio")?.as_f64()?)))
+        .filter(|(_, r)| *r > robotid_stages::estimation::ADEQUATE_RATIO)
+        .map(|(j, r)| format!("{j} {r:.1}×"))
+        .collect();
+    if !over.is_empty() {
+        out.push(format!(
+            "the estimate's residue is over {}× the noise floor on {} (model error, or a channel that disagrees with the data: swapped, scaled or late); the exported model carries it",
+            robotid_stages::estimation::ADEQUATE_RATIO,
+            over.join(", ")
+        ));
+    }
+    for (key, what) in [
+        (metadata::IMPOSSIBLE, "parameters no body can have"),
+        (
+            metadata::UNIDENTIFIED,
+            "parameters not identified at their physical size",
+        ),
+    ] {
+        if let Some(v) = md.get(key) {
+            out.push(format!("the estimate has {what}: {v}"));
+        }
+    }
+    out
 }
 
 /// Links whose exported mass is over 3× from the robot file's (either

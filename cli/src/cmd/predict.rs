@@ -35,6 +35,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             model.joint_names()
         );
     }
+    // A NaN in the motion would come out as a NaN torque, written as if
+    // predicted: refused where it is.
+    for (channel, values) in [("q", &kin.q), ("qd", &kin.qd), ("qdd", &kin.qdd)] {
+        for (j, series) in values.iter().enumerate() {
+            if let Some(k) = series.iter().position(|x| !x.is_finite()) {
+                bail!(
+                    "{}: column `{channel}_{}`, sample {k}: {} is not a number; nothing predicted",
+                    args.kinematics.display(),
+                    kin.joints[j],
+                    series[k]
+                );
+            }
+        }
+    }
     let n = model.dof();
     let tau = base.matrix(&kin) * &params.values;
     let samples = kin.time.len();
