@@ -22,7 +22,9 @@ use robotid_stages::stage::average::AverageConfig;
 use robotid_stages::stage::differentiate::{DifferentiateConfig, Differentiation};
 use robotid_stages::stage::inverse_filter::InverseFilterConfig;
 use robotid_stages::stage::noise::NoiseConfig;
-use robotid_stages::stage::read::{guess_read, headerless_layouts, log_columns, log_width, read, ReadConfig};
+use robotid_stages::stage::read::{
+    guess_read, headerless_layouts, log_columns, log_joint_names, log_width, named_joints, read, ReadConfig,
+};
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::stage::Chain;
 
@@ -49,6 +51,10 @@ pub struct Design {
     /// The anti-alias filter undone (declared, found in the spectrum, or
     /// the identification recording's) and the band it is undone in, Hz.
     pub inverse: Option<(FilterSpec, f64)>,
+    /// How late the effort channel is against the positions, s, undone
+    /// with the filter (found on held-out periods, or the identification
+    /// recording's); None: not late.
+    pub delay_s: Option<f64>,
     /// The kinematics keep the torques' lines beyond the excited ones (the
     /// identification's choice, which validation recordings follow).
     pub wide_band: bool,
@@ -90,6 +96,7 @@ impl Design {
             periodic: false,
             regressor,
             inverse,
+            delay_s: None,
             wide_band: false,
             periods: 0,
             repeated: false,
@@ -130,13 +137,20 @@ fn joint_wise_model(c: &mut RegressorConfig) {
     c.joint_wise = true;
 }
 
-/// The `inverse_filter` stage for a declared filter, undone up to `band`.
-fn inverse_filter(&(f, band): &(FilterSpec, f64)) -> StageConfig {
-    StageConfig::InverseFilter(InverseFilterConfig {
-        filter: Some(f),
+/// The `inverse_filter` stage: the filter undone up to its band (when
+/// there is one) and the effort channel's delay (when it is late); None
+/// for neither. A delay alone is undone over the whole band the log holds.
+fn inverse_filter(inverse: Option<&(FilterSpec, f64)>, delay_s: Option<f64>, fs: f64) -> Option<StageConfig> {
+    if inverse.is_none() && delay_s.is_none() {
+        return None;
+    }
+    Some(StageConfig::InverseFilter(InverseFilterConfig {
+        filter: inverse.map(|i| i.0),
         zpk: None,
-        bandwidth_hz: band,
-    })
+        // Below Nyquist by the sample clock's jitter.
+        bandwidth_hz: inverse.map_or(0.45 * fs, |i| i.1),
+        delay_s,
+    }))
 }
 
 /// identify's refusal of `log`, or what it could not find there.
@@ -230,6 +244,14 @@ fn read_settings(
         })?;
         let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the guessed columns"))?;
         return Ok((cfg, raw, Layout::Named));
+    }
+    if log_width(log)?.is_none() {
+        // Not text (MCAP, a rosbag2 folder): its topics and names are what
+        // the default read said of them.
+        return Err(at_step(
+            log,
+            "read at the default topics (/joint_states: position, effort); give others with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
+        )(default_err));
     }
     headerless(log, joints, model, &with_gains, default_err)
 }
@@ -368,19 +390,41 @@ pub fn design_with(
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> Result<Design> {
-    let model = load_robot(robot)?;
+    let (model, locked) = unheld_locked(log, robot, first, stated)?;
     let joints = model.joint_names();
     let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
     let mut findings: Vec<(String, String)> = Vec::new();
-    let plan = Plan::draft(
+    let mut plan = Plan::draft(
         &log.with_extension("toml"),
         Some(robot.to_path_buf()),
         log.display().to_string(),
         read_cfg.clone(),
     );
+    if !locked.is_empty() {
+        let said = locked
+            .iter()
+            .map(|(j, q)| format!("{j} at {q}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        findings.push((
+            "locked".into(),
+            format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'"),
+        ));
+        plan.lock.extend(locked);
+    }
     findings.extend(layout_said(&layout, &read_cfg)?.map(|said| ("read".into(), said)));
     let (fs, fs_said) = sample_rate(&raw);
     let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
+    if let Some(d) = first.and_then(|d| d.delay_s) {
+        findings.push((
+            "effort_delay".into(),
+            format!(
+                "{:.3} samples ({:.3} ms) late, the identification recording's, undone",
+                d * fs,
+                d * 1e3
+            ),
+        ));
+    }
     let regressor = match first {
         Some(d) => d.regressor.clone(),
         None => identify_regressor(inverse.map(|(_, b)| b)),
@@ -391,7 +435,8 @@ pub fn design_with(
         Ok(p) => p,
         Err(why) => {
             findings.push(("periodic".into(), format!("no: {why}")));
-            return non_periodic(plan, findings, &raw, fs, &regressor, inverse.as_ref());
+            let delay = first.and_then(|d| d.delay_s);
+            return non_periodic(plan, findings, &raw, fs, &regressor, (inverse.as_ref(), delay));
         }
     };
     findings.push(("period_s".into(), period_said));
@@ -409,6 +454,66 @@ pub fn design_with(
         },
         period,
     )
+}
+
+/// The robot as the log holds it: joints of the robot file that a log
+/// naming its joints does not hold (a gripper, a tool changer: URDFs
+/// carry them, arm logs often do not) are locked at the robot file's
+/// position for them, and returned with it. A validation recording takes
+/// the identification recording's locks (one parameter set).
+fn unheld_locked(
+    log: &Path,
+    robot: &Path,
+    first: Option<&Design>,
+    stated: Option<&ReadConfig>,
+) -> Result<(robotid_stages::dynamics::Model, Vec<(String, f64)>)> {
+    let model = load_robot(robot)?;
+    let joints = model.joint_names();
+    let missing: Vec<String> = match first {
+        Some(d) => d.plan.lock.keys().filter(|j| joints.contains(j)).cloned().collect(),
+        // The user's `joints` are what the log holds.
+        None if stated.is_some_and(|c| c.joints.is_some()) => Vec::new(),
+        None => {
+            let held: Option<Vec<String>> = match log_columns(log).map_err(at_step(log, "read its header"))? {
+                Some(header) => Some(named_joints(&header, &joints)),
+                None => log_joint_names(log, &stated.cloned().unwrap_or_default())
+                    .map_err(at_step(log, "read its joint names"))?
+                    .map(|names| joints.iter().filter(|j| names.contains(j)).cloned().collect()),
+            };
+            match held {
+                Some(h) if !h.is_empty() && h.len() < joints.len() => {
+                    joints.iter().filter(|j| !h.contains(j)).cloned().collect()
+                }
+                _ => Vec::new(),
+            }
+        }
+    };
+    if missing.is_empty() {
+        return Ok((model, Vec::new()));
+    }
+    let keep: Vec<String> = joints.iter().filter(|j| !missing.contains(j)).cloned().collect();
+    let locked_model = robotid_stages::dynamics::load_robot_with(
+        robot,
+        &robotid_stages::dynamics::Locks {
+            keep: Some(keep),
+            positions: Default::default(),
+        },
+    )?;
+    let locked: Vec<(String, f64)> = locked_model
+        .locked
+        .iter()
+        .filter(|(j, _)| missing.contains(j))
+        .cloned()
+        .collect();
+    // The pipeline states them as `[lock]`: the same model from its file.
+    let model = robotid_stages::dynamics::load_robot_with(
+        robot,
+        &robotid_stages::dynamics::Locks {
+            keep: None,
+            positions: locked.iter().cloned().collect(),
+        },
+    )?;
+    Ok((model, locked))
 }
 
 /// A design before its period: the recording read, its rate, the filter
@@ -442,6 +547,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         mut inverse,
     } = d;
     let own_regressor = first.is_none();
+    let mut delay = first.and_then(|d| d.delay_s);
     let joints = model.joint_names();
     let (tol, chain) = steady(log, &plan, &raw, (period, fs), &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
@@ -454,8 +560,13 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
     same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
     findings.push(("harmonics".into(), harmonics_said));
     let (positions_stage, torques_stage) = bands(period, mean, &joints, &sets, &union);
-    let stages_after = |inverse: Option<&(FilterSpec, f64)>, differentiate: &StageConfig| {
-        stages_after(align(period, fs, tol), &union, inverse, differentiate)
+    let stages_after = |inverse: Option<&(FilterSpec, f64)>, delay: Option<f64>, differentiate: &StageConfig| {
+        stages_after(
+            align(period, fs, tol),
+            &union,
+            inverse_filter(inverse, delay, fs),
+            differentiate,
+        )
     };
     let mut wide_band = first.map(|d| d.wide_band);
     if own_regressor {
@@ -476,7 +587,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         )?;
         wide_band = Some(wide);
         findings.push(("differentiate".into(), said));
-        apply_choice(choice, fs, &mut inverse, &mut regressor, &mut findings);
+        apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
     }
     // Validation recordings take the identification's rule.
     let (differentiate, said, _) = match (&torques_stage, wide_band) {
@@ -486,7 +597,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
     if !own_regressor {
         findings.push(("differentiate".into(), said.clone()));
     }
-    plan.stages = stages_after(inverse.as_ref(), differentiate);
+    plan.stages = stages_after(inverse.as_ref(), delay, differentiate);
     let tables = vec![
         TableKind::PeriodMean,
         TableKind::Noise,
@@ -502,6 +613,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         period_s: Some(period),
         harmonics: sets,
         union,
+        delay_s: delay,
         ..Design::finish(plan, tables, findings, regressor, inverse)?
     })
 }
@@ -521,11 +633,11 @@ fn align(period: f64, fs: f64, tol: f64) -> StageConfig {
 fn stages_after(
     align: StageConfig,
     union: &[u32],
-    inverse: Option<&(FilterSpec, f64)>,
+    inverse: Option<StageConfig>,
     differentiate: &StageConfig,
 ) -> Vec<StageConfig> {
     let mut stages = vec![align];
-    stages.extend(inverse.map(inverse_filter));
+    stages.extend(inverse);
     stages.push(StageConfig::Average(AverageConfig::default()));
     stages.push(StageConfig::Noise(NoiseConfig {
         harmonics: Some(union.to_vec()),
@@ -665,10 +777,12 @@ fn excited(
 fn apply_choice(
     choice: ModelChoice,
     fs: f64,
-    inverse: &mut Option<(FilterSpec, f64)>,
+    (inverse, delay): (&mut Option<(FilterSpec, f64)>, &mut Option<f64>),
     regressor: &mut RegressorConfig,
     findings: &mut Vec<(String, String)>,
 ) {
+    *delay = choice.delay_s;
+    findings.push(("effort_delay".into(), choice.delay_said));
     if inverse.is_none() {
         if let Some(spec) = choice.filter {
             let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
@@ -800,7 +914,7 @@ fn bands(
 type Band = (StageConfig, String, f64);
 
 /// The stages up to differentiation, with the filter undone (and its band).
-type StagesAfter<'a> = dyn Fn(Option<&(FilterSpec, f64)>, &StageConfig) -> Vec<StageConfig> + 'a;
+type StagesAfter<'a> = dyn Fn(Option<&(FilterSpec, f64)>, Option<f64>, &StageConfig) -> Vec<StageConfig> + 'a;
 
 /// What the bands' candidates are scored with.
 struct Scoring<'a> {
@@ -832,7 +946,7 @@ fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) -> Result<(
         {
             break;
         }
-        let chain = probe(sc.plan, (sc.stages_after)(None, stage), sc.log, sc.raw)?;
+        let chain = probe(sc.plan, (sc.stages_after)(None, None, stage), sc.log, sc.raw)?;
         if tried.is_empty() {
             if let Some(why) = torque_check(chain.kinematics()?, sc.model) {
                 return Err(refuse(sc.log, why));
@@ -1034,6 +1148,9 @@ struct ModelChoice {
     /// An anti-alias filter found in the spectrum (when none was declared).
     filter: Option<FilterSpec>,
     filter_said: String,
+    /// How late the effort channel is, s (None: not late by the scores).
+    delay_s: Option<f64>,
+    delay_said: String,
     /// The Coulomb transition velocity (None: the regression could not be
     /// scored, and sign(q̇) is kept).
     transition: Option<f64>,
@@ -1056,6 +1173,8 @@ impl ModelChoice {
         ModelChoice {
             filter: None,
             filter_said: "none: fewer than two steady periods, nothing to score a filter on; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
+            delay_s: None,
+            delay_said: "not searched: fewer than two steady periods; a late effort channel is declared as `delay_s` in an `inverse_filter` stage".into(),
             transition: None,
             transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
             held_out_said: "not scored: fewer than two steady periods".into(),
@@ -1085,7 +1204,6 @@ fn choose_model(
     fs: f64,
     lowest_hz: f64,
 ) -> Result<ModelChoice> {
-    use robotid_stages::estimation::spectral::choose_filter;
     let kin = chain.kinematics()?;
     let p = chain
         .periods
@@ -1098,18 +1216,17 @@ fn choose_model(
     };
     // What the other friction models reuse: the sign(q̇) system's lines.
     let first: Lines = (sign.columns(), &sign_names);
-    // With sign(q̇): the declared filter, or the search over all shapes.
-    let search = match declared {
-        Some(_) => None,
-        None => Some(
-            choose_filter(&sign, lowest_hz, 0.5 * fs)
-                .ok_or_else(|| refuse(log, "the held-out scores of the filters: the regression is singular"))?,
-        ),
-    };
+    // With sign(q̇): the effort's delay, and with it the declared filter or
+    // the search over all shapes.
+    let late = choose_delay(&sign, declared, (lowest_hz, 0.5 * fs), fs, margin)
+        .ok_or_else(|| refuse(log, "the held-out scores of the filters: the regression is singular"))?;
+    // The scorer undoes the delay on every system it scores, this one too.
+    let search = late.search;
     let scorer = Scorer {
         declared,
         search: search.as_ref(),
         moving: moving.map(|m| kin.joints[m].as_str()),
+        delay_s: late.delay_s,
     };
     let sign_fit = match &search {
         Some(c) => (c.spec, c.score.clone()),
@@ -1143,6 +1260,8 @@ fn choose_model(
     Ok(ModelChoice {
         filter_said: filter_said(search.as_ref(), filter.as_ref(), score.ratio),
         filter,
+        delay_s: late.delay_s,
+        delay_said: late.said,
         transition: Some(pick.0),
         transition_said,
         held_out_said: format!(
@@ -1156,6 +1275,109 @@ fn choose_model(
     })
 }
 
+/// Effort delays tried on the first grid, in half samples: from one
+/// sample early to four late (a controller that logs the previous cycle's
+/// torque is one to three samples late).
+const DELAY_GRID: std::ops::RangeInclusive<i32> = -2..=8;
+
+/// The effort channel's delay, with the filter search made at it.
+struct Late {
+    delay_s: Option<f64>,
+    search: Option<FilterChoice>,
+    said: String,
+}
+
+/// How late the effort channel is against the positions, found jointly
+/// with the filter on held-out periods: a delay turns line f's phase by
+/// 2πf·d, a filter by its own phase, so each delay on a half-sample grid
+/// gets its own filter search (or the declared filter); the best delay is
+/// refined to 0.005 sample with its best shapes refitted, and kept only
+/// where it beats no delay by one spread of the score (a near-linear-phase
+/// filter such as a Bessel can take up part of a delay: the two are told
+/// apart by the filter's magnitude, and a delay must earn its place).
+fn choose_delay(
+    sign: &robotid_stages::estimation::spectral::LineSystem,
+    declared: Option<FilterSpec>,
+    (lowest_hz, highest_hz): (f64, f64),
+    fs: f64,
+    margin: f64,
+) -> Option<Late> {
+    use robotid_stages::estimation::spectral::{choose_filter, refit_filter};
+    let search_at = |d: f64| -> Option<(f64, Option<FilterChoice>)> {
+        let sys = sign.delayed(d);
+        match declared {
+            Some(f) => Some((sys.ratio(Some(&f)), None)),
+            None => {
+                let c = choose_filter(&sys, lowest_hz, highest_hz)?;
+                Some((c.score.ratio, Some(c)))
+            }
+        }
+    };
+    let grid: Vec<(f64, f64, Option<FilterChoice>)> = DELAY_GRID
+        .map(|k| {
+            let d = 0.5 * k as f64 / fs;
+            search_at(d).map(|(r, c)| (d, r, c))
+        })
+        .collect::<Option<_>>()?;
+    let at_zero = grid.iter().find(|g| g.0 == 0.0).expect("0 on the grid").1;
+    let best = grid.iter().min_by(|a, b| a.1.total_cmp(&b.1)).expect("a grid");
+    let tried = format!(
+        "delays from {} to {} samples tried, each with its best filter",
+        0.5 * *DELAY_GRID.start() as f64,
+        0.5 * *DELAY_GRID.end() as f64
+    );
+    let keep_zero = |why: String| {
+        let search = grid.iter().find(|g| g.0 == 0.0).and_then(|g| g.2.clone());
+        Some(Late {
+            delay_s: None,
+            search,
+            said: why,
+        })
+    };
+    // One spread of the score (a third of `margin`): a delay is a single
+    // parameter, and each delay gets the same filter search as none.
+    if best.0 == 0.0 || !(best.1 < at_zero * (1.0 - margin / 3.0)) {
+        return keep_zero(format!(
+            "none: no delay predicts held-out periods better than none by one spread of the score ({at_zero:.3}× the noise floor at 0; best {:.3}× at {:.2} samples; {tried})",
+            best.1,
+            best.0 * fs
+        ));
+    }
+    // Refined between the grid's neighbours with the best shapes refitted.
+    let top: Vec<FilterSpec> = best.2.as_ref().map(|c| c.top.clone()).unwrap_or_default();
+    let refined = |d: f64| {
+        let sys = sign.delayed(d);
+        match declared {
+            Some(f) => sys.ratio(Some(&f)),
+            None if top.is_empty() => sys.ratio(None),
+            None => refit_filter(&sys, &top).map_or(f64::INFINITY, |(_, s)| s.ratio),
+        }
+    };
+    // Searched in samples + 10, which stays positive for the relative tolerance.
+    let x = robotid_stages::signal::golden(
+        |x| refined((x - 10.0) / fs),
+        best.0 * fs + 10.0 - 0.5,
+        best.0 * fs + 10.0 + 0.5,
+        5e-4,
+    );
+    let d = (x - 10.0) / fs;
+    let (ratio, search) = search_at(d)?;
+    let (d, ratio, search) = if ratio <= best.1 {
+        (d, ratio, search)
+    } else {
+        (best.0, best.1, best.2.clone())
+    };
+    Some(Late {
+        delay_s: Some(d),
+        search,
+        said: format!(
+            "{:.3} samples ({:.3} ms) late against the positions, undone: held-out residue {ratio:.3}× the noise floor, {at_zero:.3}× with none ({tried}, the best refined)",
+            d * fs,
+            d * 1e3
+        ),
+    })
+}
+
 /// Scores a line system by its held-out periods: with the declared
 /// filter, or with and without the search's best shapes refitted.
 struct Scorer<'a> {
@@ -1163,11 +1385,21 @@ struct Scorer<'a> {
     search: Option<&'a FilterChoice>,
     /// A joint-wise record's moving joint, the only one whose friction is judged.
     moving: Option<&'a str>,
+    /// The effort's delay found, undone on every system scored.
+    delay_s: Option<f64>,
 }
 
 impl Scorer<'_> {
     fn score(&self, sys: &robotid_stages::estimation::spectral::LineSystem) -> Option<(Option<FilterSpec>, Score)> {
         use robotid_stages::estimation::spectral::refit_filter;
+        let delayed;
+        let sys = match self.delay_s {
+            Some(d) => {
+                delayed = sys.delayed(d);
+                &delayed
+            }
+            None => sys,
+        };
         match (self.declared, self.search) {
             (Some(f), _) => Some((None, sys.score(&sys.response(Some(&f))?)?)),
             (None, Some(c)) => {
@@ -1524,7 +1756,7 @@ fn non_periodic(
     raw: &RawSamples,
     fs: f64,
     regressor: &RegressorConfig,
-    inverse: Option<&(FilterSpec, f64)>,
+    (inverse, delay): (Option<&(FilterSpec, f64)>, Option<f64>),
 ) -> Result<Design> {
     // Band-limiting the columns needs whole periods.
     let mut regressor = RegressorConfig {
@@ -1558,7 +1790,7 @@ fn non_periodic(
             "filtered, 2nd-order Butterworth at {cutoff} Hz (Swevers' 5 Hz data filter, or 4× the {reach:.3} Hz holding 99.99 % of the positions' power when higher; at most fs/8)"
         ),
     ));
-    plan.stages.extend(inverse.map(inverse_filter));
+    plan.stages.extend(inverse_filter(inverse, delay, fs));
     plan.stages.push(StageConfig::Differentiate(DifferentiateConfig {
         method: Differentiation::Filtered,
         harmonics: None,
@@ -1571,7 +1803,10 @@ fn non_periodic(
         }),
     }));
     let tables = vec![TableKind::Kinematics, TableKind::Regressor];
-    Design::finish(plan, tables, findings, regressor.clone(), inverse.copied())
+    Ok(Design {
+        delay_s: delay,
+        ..Design::finish(plan, tables, findings, regressor.clone(), inverse.copied())?
+    })
 }
 
 /// The absolute form of a path that exists.

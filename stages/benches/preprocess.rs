@@ -17,6 +17,7 @@ fn stages(c: &mut Criterion) {
     let cfg = AlignConfig::default();
     let periods = align(&raw, &cfg, "bench").unwrap();
     let ifc = InverseFilterConfig {
+        delay_s: None,
         filter: Some(FilterSpec {
             family: FilterFamily::Chebyshev1,
             order: 8,

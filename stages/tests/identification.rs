@@ -52,6 +52,7 @@ fn run_with(
     let spectra = Spectra::new();
     let mut p = align(&s.raw, &AlignConfig::default(), case.sim).unwrap();
     let ifc = InverseFilterConfig {
+        delay_s: None,
         filter: cfg.measurement.filter,
         zpk: None,
         bandwidth_hz: case.bandwidth_hz,
@@ -288,6 +289,7 @@ fn sweeps_give_gravity_and_friction_and_compensate_it() {
     let (_, mut s) = simulate_torque(&cfg);
     let spectra = Spectra::new();
     let ifc = InverseFilterConfig {
+        delay_s: None,
         filter: cfg.measurement.filter,
         zpk: None,
         bandwidth_hz: 20.0,
@@ -591,6 +593,7 @@ fn chain_stages(
     if let Some((spec, bandwidth_hz)) = filter {
         out.push(
             InverseFilterConfig {
+                delay_s: None,
                 filter: Some(spec),
                 zpk: None,
                 bandwidth_hz,

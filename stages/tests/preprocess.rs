@@ -60,6 +60,7 @@ fn kuka_axis3_chain_recovers_the_truth() {
     assert!((p.start_s - 12.0).abs() < 1e-9, "{}", p.start_s);
     let bw = 20.0;
     let ifc = InverseFilterConfig {
+        delay_s: None,
         filter: cfg.measurement.filter,
         zpk: None,
         bandwidth_hz: bw,

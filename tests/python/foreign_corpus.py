@@ -35,12 +35,66 @@ CASES = {
     "ramps_1p5": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=1.5, ramp_in=0.5, ramp_out=0.5),
     "ramps_2p5": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=2.5, ramp_in=0.5, ramp_out=0.5),
     "jointwise": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=4, moving=[1], ramp_out=1.0, rest=16.0),
+    # A gripper in the robot file (robot.urdf: the URDF with a revolute
+    # wrist-mounted gripper and a prismatic finger on it) that the log does
+    # not hold: held at their zero while the arm moves.
+    "gripper": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=5, gripper=True),
+    # A lab's shape: a move from a rest pose to the start (larger than the
+    # excitation) and a second still, the ramp-in, the periods, a ramp-down
+    # and rest; the effort logged late by a fraction of a sample or more.
+    "lab_delay_0p5": dict(
+        filter=("cheby1", 8, 40.0, 0.5), friction="sign", periods=5, premove=4.0, ramp_out=10.0, rest=8.0, delay=0.5
+    ),
+    "lab_delay_3": dict(filter=("cheby1", 6, 35.0, 1.0), friction="sign", periods=4, premove=3.0, rest=5.0, delay=3.0),
+    # A joint-wise record whose other joints first move from rest to the
+    # pose they are then held at.
+    "jointwise_premove": dict(
+        filter=("butter", 4, 30.0, None), friction="sign", periods=4, moving=[3], premove=3.0, ramp_out=1.0, rest=8.0
+    ),
+    # A start-up transient (a decaying 2 Hz ring of the position loop) on
+    # 1.5 periods, no ramps.
+    "transient_1p5": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=1.5, ramp_in=0.0, transient=0.05),
+    "lab_2p5": dict(
+        filter=("butter", 4, 30.0, None), friction="sign", periods=2.5, premove=4.0, ramp_in=0.5, ramp_out=0.5, rest=6.0
+    ),
 }
+
+# What "gripper" adds to the URDF: a revolute gripper on tool0 and a
+# prismatic finger on it, each with a body the arm carries.
+GRIPPER = """
+  <link name="gripper_link">
+    <inertial><origin xyz="0.01 -0.02 0.07" rpy="0 0 0"/><mass value="1.2"/>
+      <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.003" iyz="0" izz="0.002"/></inertial>
+  </link>
+  <joint name="gripper_joint" type="revolute">
+    <parent link="tool0"/><child link="gripper_link"/><origin xyz="0 0 0.01" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-3.14" upper="3.14" effort="5" velocity="2"/>
+  </joint>
+  <link name="finger_link">
+    <inertial><origin xyz="0 0.01 0.02" rpy="0 0 0"/><mass value="0.3"/>
+      <inertia ixx="0.0002" ixy="0" ixz="0" iyy="0.0002" iyz="0" izz="0.0001"/></inertial>
+  </link>
+  <joint name="finger_joint" type="prismatic">
+    <parent link="gripper_link"/><child link="finger_link"/><origin xyz="0 0 0.12" rpy="0 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="20" velocity="0.1"/>
+  </joint>
+"""
 
 
 def main(urdf, out, case):
     spec = CASES[case]
-    model = pin.buildModelFromUrdf(urdf)
+    if spec.get("gripper"):
+        text = open(urdf).read()
+        at = text.rindex("</robot>")
+        # Mesh paths stay resolvable: the URDF is written where it was.
+        urdf = f"{out}/robot.urdf"
+        with open(urdf, "w") as f:
+            f.write(text[:at] + GRIPPER + text[at:])
+    full = pin.buildModelFromUrdf(urdf)
+    # The gripper held at its zero: the arm carries it as one body.
+    arm_ids = [i for i in range(1, full.njoints) if full.names[i] not in ("gripper_joint", "finger_joint")]
+    locked = [i for i in range(1, full.njoints) if i not in arm_ids]
+    model = pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full
     data = model.createData()
     nq = model.nq
     names = [model.names[i] for i in range(1, model.njoints)]
@@ -59,17 +113,20 @@ def main(urdf, out, case):
         return q, qd, qdd
 
     period = 1 / f0
+    # Before the ramp-in: a move from the rest pose and a second still.
+    premove = spec.get("premove", 0.0)
+    pre = premove + 1.0 if premove > 0 else 0.0
     ramp_in = spec.get("ramp_in", period)
     ramp_out = spec.get("ramp_out", 0.0)
     rest = spec.get("rest", 0.0)
     moving = spec.get("moving", list(range(nq)))
     held = [j for j in range(nq) if j not in moving]
     a[held], b[held] = 0.0, 0.0
-    total = ramp_in + spec["periods"] * period + ramp_out + rest
+    total = pre + ramp_in + spec["periods"] * period + ramp_out + rest
     t = np.arange(int(round(total * FS * FINE))) / (FS * FINE)
     # The excitation starts at full phase when the ramp-in ends; before it,
     # it is faded in by a smooth window, after the periods faded out.
-    q, qd, qdd = excitation(t - ramp_in)
+    q, qd, qdd = excitation(t - pre - ramp_in)
 
     def window(x, length):  # quintic 0 -> 1 over [0, length], and its derivatives
         r = np.clip(x / length, 0, 1) if length > 0 else (x >= 0).astype(float)
@@ -80,8 +137,8 @@ def main(urdf, out, case):
             np.where(inside, 60 * r * (1 - r) * (1 - 2 * r) / max(length, 1e-12) ** 2, 0),
         )
 
-    up, upd, updd = window(t, ramp_in)
-    end = ramp_in + spec["periods"] * period
+    up, upd, updd = window(t - pre, ramp_in)
+    end = pre + ramp_in + spec["periods"] * period
     down, downd, downdd = window(end + ramp_out - t, ramp_out) if ramp_out > 0 else window(end - t + 1e-12, 0)
     downd, downdd = -downd, downdd
     g = up * down
@@ -92,6 +149,23 @@ def main(urdf, out, case):
         g[:, None] * qd + gd[:, None] * q,
         g[:, None] * qdd + 2 * gd[:, None] * qd + gdd[:, None] * q,
     )
+    if spec.get("transient"):
+        # The loop rings at the start: 2 Hz, decaying in 1 s, on every joint.
+        x = np.clip(t - pre, 0, None)
+        ring = spec["transient"] * np.exp(-x) * np.sin(2 * np.pi * 2.0 * x)
+        ringd = spec["transient"] * np.exp(-x) * (2 * np.pi * 2.0 * np.cos(2 * np.pi * 2.0 * x) - np.sin(2 * np.pi * 2.0 * x))
+        ringdd = spec["transient"] * np.exp(-x) * (
+            (1 - (2 * np.pi * 2.0) ** 2) * np.sin(2 * np.pi * 2.0 * x) - 2 * (2 * np.pi * 2.0) * np.cos(2 * np.pi * 2.0 * x)
+        )
+        q, qd, qdd = q + ring[:, None], qd + ringd[:, None], qdd + ringdd[:, None]
+    if premove > 0:
+        # From a rest pose 1.2 rad from the start on every joint (more than
+        # the excitation's reach), to the start, in a quintic.
+        rest_pose = 1.2 * np.where(np.arange(nq) % 2 == 0, 1.0, -1.0)
+        w, wd, wdd = window(t, premove)
+        q += (1 - w)[:, None] * rest_pose
+        qd -= wd[:, None] * rest_pose
+        qdd -= wdd[:, None] * rest_pose
     fv = rng.uniform(0.3, 1.5, nq)
     fc = rng.uniform(0.2, 1.8, nq)
     tau = np.empty_like(q)
@@ -106,7 +180,8 @@ def main(urdf, out, case):
     if held:
         # A stiff position loop (5000 N·m/rad) holds them: they sag by the
         # change of their gravity load as the moving joint swings.
-        q[:, held] -= (tau[:, held] - tau[0, held]) / 5000.0
+        start = int(round(pre * FS * FINE))
+        q[:, held] -= (tau[:, held] - tau[start, held]) / 5000.0
     filt = None
     if spec["filter"]:
         family, order, cutoff, ripple = spec["filter"]
@@ -120,6 +195,11 @@ def main(urdf, out, case):
         sys_ = signal.lti(num, den)
         tau = np.stack([signal.lsim(sys_, tau[:, j], t)[1] for j in range(nq)], axis=1)
         filt = dict(family=family, order=order, cutoff_hz=cutoff, ripple_db=ripple)
+    late = int(round(spec.get("delay", 0.0) * FINE))
+    if late:
+        # The effort logged late: each sample holds the torque of `delay`
+        # samples before (the first held at the start's).
+        tau = np.concatenate([np.repeat(tau[:1], late, axis=0), tau[:-late]])
     logged = slice(0, None, FINE)
     t, q, tau = t[logged], q[logged], tau[logged]
     tau = tau + rng.normal(0, NOISE, tau.shape)
@@ -141,6 +221,8 @@ def main(urdf, out, case):
         harmonics=harmonics,
         periods=spec["periods"],
         ramp_in_s=ramp_in,
+        premove_s=premove,
+        effort_delay_s=spec.get("delay", 0.0) / FS,
         ramp_out_s=ramp_out,
         rest_s=rest,
         moving=[names[j] for j in moving],
@@ -151,6 +233,7 @@ def main(urdf, out, case):
         offset_Nm=spec.get("offset", 0.0),
         effort_noise_std_Nm=NOISE,
         encoder_counts_per_rev=COUNTS,
+        locked={full.names[i]: 0.0 for i in locked},
     )
     if held:
         # The joint-wise (decoupled) model of each moving joint, the others

@@ -41,8 +41,9 @@ pub struct LineSystem {
     period_s: f64,
     /// The sums over the lines of the active columns.
     sums: LineSums,
-    /// The columns' lines, `[(joint · cols + col) · lines + line]`.
-    columns: Vec<Complex64>,
+    /// The columns' lines, `[(joint · cols + col) · lines + line]`,
+    /// shared by the system's delayed copies.
+    columns: std::sync::Arc<Vec<Complex64>>,
     /// Per half and joint, the torque mean's lines.
     torque: [Vec<Vec<Complex64>>; 2],
     /// Per joint, 1/σ² of one torque sample.
@@ -265,12 +266,56 @@ impl LineSystem {
             joints,
             period_s,
             sums,
-            columns,
+            columns: std::sync::Arc::new(columns),
             torque: halves,
             weight,
             periods: counts,
             band_samples,
         })
+    }
+
+    /// The same system with the torque advanced by `delay_s` (an effort
+    /// channel logged that late against the positions): line l of every
+    /// joint's torque turned by e^{+j2πf_l·delay}. The columns' sums are
+    /// shared and the torque's energy is unchanged, so a delay costs one
+    /// pass over the cross terms.
+    pub fn delayed(&self, delay_s: f64) -> LineSystem {
+        let turn: Vec<Complex64> = (0..self.lines)
+            .map(|l| Complex64::from_polar(1.0, std::f64::consts::TAU * l as f64 / self.period_s * delay_s))
+            .collect();
+        let mut sums = LineSums {
+            active: self.sums.active.clone(),
+            starts: self.sums.starts.clone(),
+            gram: self.sums.gram.clone(),
+            gram_starts: self.sums.gram_starts.clone(),
+            cross: self.sums.cross.clone(),
+            energy: self.sums.energy,
+        };
+        for cross in &mut sums.cross {
+            for l in 0..self.lines {
+                for v in &mut cross[sums.starts[l]..sums.starts[l + 1]] {
+                    *v *= turn[l];
+                }
+            }
+        }
+        let torque = self.torque.clone().map(|half| {
+            half.into_iter()
+                .map(|j| j.iter().zip(&turn).map(|(b, t)| b * t).collect())
+                .collect()
+        });
+        LineSystem {
+            lines: self.lines,
+            samples: self.samples,
+            cols: self.cols,
+            joints: self.joints,
+            period_s: self.period_s,
+            sums,
+            columns: self.columns.clone(),
+            torque,
+            weight: self.weight.clone(),
+            periods: self.periods,
+            band_samples: self.band_samples,
+        }
     }
 
     /// The columns' lines it was made from, `[(joint · cols + col) · lines + line]`.

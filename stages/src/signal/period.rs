@@ -47,10 +47,41 @@ pub enum NoPeriod {
     NoReturn { best: f64 },
 }
 
+/// Parts of a record (fractions of its samples) searched for a period when
+/// the whole record shows none: the middle first, then either end's.
+const STRETCHES: [(f64, f64); 5] = [(0.15, 0.85), (0.25, 1.0), (0.0, 0.75), (0.3, 0.9), (0.1, 0.7)];
+
 /// The period of `q` (per joint, sampled at `t`, seconds), or why there is
 /// none: the record is not periodic, or holds less than `MIN_CYCLES`
-/// periods.
+/// periods. A periodic stretch between other motions (a move from a rest
+/// pose larger than the excitation, rest after) dominates the whole
+/// record's autocorrelation only when it is most of it: where the whole
+/// shows no period, the same search runs within parts of the record, the
+/// self-similarity of the stretch alone; its `cycles` count the whole
+/// record.
 pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
+    let whole = infer_whole(t, q);
+    if whole.is_ok() || t.len() < 64 {
+        return whole;
+    }
+    let n = t.len();
+    let span = t[n - 1] - t[0];
+    STRETCHES
+        .iter()
+        .find_map(|&(a, b)| {
+            let (from, to) = ((a * n as f64) as usize, (b * n as f64) as usize);
+            let part: Vec<Vec<f64>> = q.iter().map(|c| c[from..to].to_vec()).collect();
+            infer_whole(&t[from..to], &part).ok()
+        })
+        .map(|p| PeriodEstimate {
+            cycles: span / p.period_s,
+            ..p
+        })
+        .ok_or(whole.expect_err("the whole record has none"))
+}
+
+/// [`infer_period`] on the whole of `t` and `q`.
+fn infer_whole(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
     let n = t.len();
     if n < 16 {
         return Err(NoPeriod::TooFewSamples(n));

@@ -812,7 +812,7 @@ fn steady_periods(
     }
     let slack = steady_to - steady_from - kept * n;
     let from = if steady_to < m {
-        steady_from + slack / 2
+        steadiest(q, steady_from, slack, kept, n)
     } else {
         steady_to - kept * n
     };
@@ -822,6 +822,43 @@ fn steady_periods(
         kept,
         stretch: (steady_from, steady_to),
     })
+}
+
+/// Where `kept` whole periods of `n` samples start in a stretch from
+/// `start` with `slack` samples to spare: centred (a ramp that starts at a
+/// rest point repeats a little into it, at both ends alike), unless
+/// another placement makes the periods differ from each other by 10 %
+/// less (a ramp-in's tail or a stop inside the stretch's edge periods:
+/// their average would not be a period of one motion).
+fn steadiest(q: &[&[f64]], start: usize, slack: usize, kept: usize, n: usize) -> usize {
+    let centre = start + slack / 2;
+    if kept < 2 || slack == 0 {
+        return centre;
+    }
+    // The periods' spread about their mean, on a few hundred points of
+    // each period.
+    let stride = (n / 256).max(1);
+    let spread = |from: usize| -> f64 {
+        let mut sum = 0.0;
+        for c in q {
+            for i in (0..n).step_by(stride) {
+                let mean = (0..kept).map(|k| c[from + k * n + i]).sum::<f64>() / kept as f64;
+                sum += (0..kept).map(|k| (c[from + k * n + i] - mean).powi(2)).sum::<f64>();
+            }
+        }
+        sum
+    };
+    let steps = slack.min(40);
+    let (best, least) = (0..=steps)
+        .map(|k| start + k * slack / steps)
+        .map(|from| (from, spread(from)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("one placement at least");
+    if least < 0.9 * spread(centre) {
+        best
+    } else {
+        centre
+    }
 }
 
 /// Per joint and harmonic of `trajectory` below Nyquist: the recorded

@@ -43,6 +43,12 @@ pub struct InverseFilterConfig {
     pub zpk: Option<Zpk>,
     /// Lines above this frequency are zeroed, Hz.
     pub bandwidth_hz: f64,
+    /// How late the effort channel is against the positions, s (a
+    /// controller that logs the previous cycle's torque): undone with the
+    /// filter, as the phase e^{−j2πf·delay} it adds. Alone (no filter) it
+    /// is the only thing undone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_s: Option<f64>,
 }
 
 /// An analog filter's frequency response, f in Hz.
@@ -65,7 +71,14 @@ impl InverseFilterConfig {
                     out.push(Problem::new("zpk.poles", "must lie in the left half-plane"));
                 }
             }
-            _ => out.push(Problem::new("filter", "give exactly one of `filter` and `zpk`")),
+            (None, None) if self.delay_s.is_some() => {}
+            _ => out.push(Problem::new(
+                "filter",
+                "give exactly one of `filter` and `zpk` (or neither, with `delay_s` alone)",
+            )),
+        }
+        if let Some(d) = self.delay_s.filter(|d| !d.is_finite()) {
+            out.push(Problem::new("delay_s", format!("must be finite, not {d}")));
         }
         if !(self.bandwidth_hz > 0.0 && self.bandwidth_hz.is_finite()) {
             out.push(Problem::new(
@@ -81,7 +94,7 @@ impl InverseFilterConfig {
         if let Some(p) = self.settings_problems().into_iter().next() {
             return Err(Error::setting(p.key, "valid", p.message));
         }
-        Ok(match (&self.filter, &self.zpk) {
+        let filter: Response = match (&self.filter, &self.zpk) {
             (Some(spec), _) => {
                 let f = AnalogFilter::new(*spec).map_err(|e| Error::setting("filter", "a realisable filter", e))?;
                 Box::new(move |hz| f.response(hz))
@@ -97,7 +110,11 @@ impl InverseFilterConfig {
                     num * gain / den
                 })
             }
-            (None, None) => unreachable!("problems() refuses a config with neither"),
+            (None, None) => Box::new(|_| Complex64::new(1.0, 0.0)),
+        };
+        Ok(match self.delay_s.filter(|d| *d != 0.0) {
+            None => filter,
+            Some(d) => Box::new(move |hz| filter(hz) * delay(hz, d)),
         })
     }
 }
@@ -129,6 +146,11 @@ impl Component for InverseFilterConfig {
             spectra: ctx.spectra.clone(),
         }))
     }
+}
+
+/// The response of a delay of `d` seconds at `hz`: e^{−j2πf·d}.
+pub fn delay(hz: f64, d: f64) -> Complex64 {
+    Complex64::from_polar(1.0, -std::f64::consts::TAU * hz * d)
 }
 
 /// The built `inverse_filter` stage: the filter's response, made once.

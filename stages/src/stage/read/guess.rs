@@ -113,6 +113,34 @@ fn channel(header: &[String], joints: &[String], table: &[(&str, &str)]) -> Opti
     None
 }
 
+/// The joints (of `joints`) that a column of `header` names as a position
+/// or encoder channel by the joint's name (`q_{joint}`, `{joint}_pos_rad`,
+/// …): what a log with named columns holds.
+pub fn named_joints(header: &[String], joints: &[String]) -> Vec<String> {
+    joints
+        .iter()
+        .filter(|j| {
+            [POSITION, COUNTS]
+                .iter()
+                .any(|t| channel(header, std::slice::from_ref(*j), t).is_some_and(|c| by_name(&c, j)))
+        })
+        .cloned()
+        .collect()
+}
+
+/// Whether a one-joint channel's column names the joint (not a number).
+fn by_name(c: &Channel, joint: &str) -> bool {
+    let name = match &c.column {
+        Some(Column::Name(t)) => super::column_name(t, 0, joint),
+        Some(Column::Each(cols)) => match cols.first() {
+            Some(OneColumn::Name(n)) => n.clone(),
+            _ => return false,
+        },
+        _ => return false,
+    };
+    name.to_ascii_lowercase().contains(&joint.to_ascii_lowercase())
+}
+
 /// `q{index}_rad` or `q_{joint}` when the names follow one, else the list.
 fn template(names: &[String], joints: &[String]) -> Column {
     let first = &names[0];

@@ -781,6 +781,30 @@ fn summary_notes(maps: &[(std::path::PathBuf, bytes::Bytes)], seen: usize) -> Ve
 const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
+/// The joint names an MCAP log's position messages carry (the last
+/// message's; JointState and its kin), None when they carry none (JSON
+/// arrays): what `robotid identify` matches the robot's joints against.
+pub(crate) fn mcap_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
+    let maps: Vec<(std::path::PathBuf, bytes::Bytes)> = bag_files(path)?
+        .into_iter()
+        .map(|f| crate::formats::mapped(&f).map(|m| (f, m)))
+        .collect::<Result<_>>()?;
+    let pos = wanted(&cfg.position, "/joint_states", "position");
+    // No joints asked for: every message matches, its names kept.
+    let mut series = [Series::new(0)];
+    let mut metadata = BTreeMap::new();
+    read_messages(
+        &maps,
+        &[&pos],
+        &mut series,
+        &[],
+        &path.display().to_string(),
+        &mut metadata,
+    )?;
+    let [s] = series;
+    Ok((!s.names.is_empty()).then_some(s.names))
+}
+
 pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     let path = log.path();
     let source = path.display().to_string();

@@ -11,7 +11,7 @@ mod mcap;
 mod parquet;
 mod text;
 
-pub use guess::{guess_read, headerless_layouts, NoColumn};
+pub use guess::{guess_read, headerless_layouts, named_joints, NoColumn};
 
 use std::path::Path;
 
@@ -319,6 +319,16 @@ pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
             ))
         }
         _ => Ok(None),
+    }
+}
+
+/// The joint names an MCAP log's position messages carry (JointState and
+/// its kin); None for other formats and for messages without names.
+pub fn log_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
+    if Log::File(path).format() == "mcap" {
+        mcap::mcap_joint_names(path, cfg)
+    } else {
+        Ok(None)
     }
 }
 
