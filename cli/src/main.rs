@@ -71,6 +71,10 @@ enum Command {
     Model(cmd::model::Args),
     /// Print the Arrow schema of a robotid table kind.
     Schema(cmd::schema::Args),
+    /// Keep a checksum beside each recording (`<file>.sha256`), or check
+    /// the one kept: every reader then refuses a recording changed since
+    /// (text logs have no checksum of their own).
+    Checksum(cmd::checksum::Args),
 }
 
 /// `robotid dataset`: the other binary's exit code is this one's.
@@ -123,6 +127,7 @@ fn main() -> ExitCode {
         Command::Check(a) => return forward(std::iter::once("compare".into()).chain(a.args)),
         Command::Model(a) => cmd::model::run(a),
         Command::Schema(a) => cmd::schema::run(a),
+        Command::Checksum(a) => cmd::checksum::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -40,6 +40,25 @@ fn edit(from: &Path, to: &Path, pairs: &[(&str, &str)]) {
     std::fs::write(to, text).unwrap();
 }
 
+/// The table `from` with one cell of a number column set, written to `to`
+/// by robotid's own writer (its content checksum made anew, as a tool
+/// editing it would).
+fn with_cell(from: &Path, to: &Path, column: &str, row: usize, value: f64) {
+    let batch = robotid_stages::formats::parquet::read_parquet(from).unwrap();
+    let i = batch.schema().index_of(column).unwrap();
+    let mut columns = batch.columns().to_vec();
+    let mut v: Vec<f64> = columns[i]
+        .as_any()
+        .downcast_ref::<arrow::array::Float64Array>()
+        .unwrap()
+        .values()
+        .to_vec();
+    v[row] = value;
+    columns[i] = std::sync::Arc::new(arrow::array::Float64Array::from(v));
+    let batch = arrow::array::RecordBatch::try_new(batch.schema(), columns).unwrap();
+    robotid_stages::formats::parquet::write_parquet(to, &batch).unwrap();
+}
+
 #[test]
 fn every_class_of_bad_input_is_refused_cleanly() {
     let ws = workspace(&["kuka_axis3"]);
@@ -398,19 +417,7 @@ fn every_class_of_bad_input_is_refused_cleanly() {
     // A parameters table holding inf (written with a valid CRC): report
     // spun in its axis code, predict and validate gave NaN.
     let inf = w.join("inf.parquet");
-    let batch = robotid_stages::formats::parquet::read_parquet(&params).unwrap();
-    let i = batch.schema().index_of("value").unwrap();
-    let mut columns = batch.columns().to_vec();
-    let mut v: Vec<f64> = columns[i]
-        .as_any()
-        .downcast_ref::<arrow::array::Float64Array>()
-        .unwrap()
-        .values()
-        .to_vec();
-    v[0] = f64::INFINITY;
-    columns[i] = std::sync::Arc::new(arrow::array::Float64Array::from(v));
-    let batch = arrow::array::RecordBatch::try_new(batch.schema(), columns).unwrap();
-    robotid_stages::formats::parquet::write_parquet(&inf, &batch).unwrap();
+    with_cell(&params, &inf, "value", 0, f64::INFINITY);
     let regressor = s(&out.join("kuka_axis3/regressor.parquet"));
     for (name, args) in [
         (
@@ -437,21 +444,7 @@ fn every_class_of_bad_input_is_refused_cleanly() {
     // predict on kinematics with a NaN position (the table's checksum
     // made anew): a NaN torque was written, "samples predicted".
     let nan = w.join("nan_kinematics.parquet");
-    let batch = robotid_stages::formats::parquet::read_parquet(&out.join("kuka_axis3/kinematics.parquet")).unwrap();
-    let i = batch.schema().index_of("q_a3").unwrap();
-    let mut columns = batch.columns().to_vec();
-    let mut v: Vec<f64> = columns[i]
-        .as_any()
-        .downcast_ref::<arrow::array::Float64Array>()
-        .unwrap()
-        .values()
-        .to_vec();
-    v[17] = f64::NAN;
-    columns[i] = std::sync::Arc::new(arrow::array::Float64Array::from(v));
-    let mut schema = (*batch.schema()).clone();
-    schema.metadata.remove(robotid_schemas::metadata::CONTENT_CRC32);
-    let batch = arrow::array::RecordBatch::try_new(std::sync::Arc::new(schema), columns).unwrap();
-    robotid_stages::formats::parquet::write_parquet(&nan, &batch).unwrap();
+    with_cell(&out.join("kuka_axis3/kinematics.parquet"), &nan, "q_a3", 17, f64::NAN);
     cases.push(Case {
         name: "predict on a NaN position",
         args: vec![

@@ -182,3 +182,32 @@ fn check_runs_the_dataset_comparison_beside_it() {
         assert!(stderr.contains("cargo build -p robotid-dataset"), "{stderr}");
     }
 }
+
+/// `robotid checksum` keeps `<file>.sha256` beside a recording, says when it
+/// matches, and refuses (exit 1) one changed since.
+#[test]
+fn checksum_keeps_and_checks_a_recordings_sha256() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("lab.csv");
+    std::fs::write(&log, "time,q_a3,torque_a3\n0,0.1,1.5\n0.01,0.2,1.6\n").unwrap();
+    let checksum = || {
+        Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .args(["checksum", log.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let o = checksum();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let kept = std::fs::read_to_string(dir.path().join("lab.csv.sha256")).unwrap();
+    assert!(kept.ends_with("  lab.csv\n") && kept.len() == 64 + 2 + 7 + 1, "{kept}");
+    let o = checksum();
+    assert!(String::from_utf8_lossy(&o.stdout).contains("matches"));
+    std::fs::write(&log, "time,q_a3,torque_a3\n0,0.1,1.5\n0.01,0.2,1.7\n").unwrap();
+    let o = checksum();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("changed since"));
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("lab.csv.sha256")).unwrap(),
+        kept
+    );
+}

@@ -500,6 +500,8 @@ method = "fourier_fit"
 harmonics = [1, 2, 3, 4, 5]
 [[stage]]
 kind = "regressor"
+[output]
+tables = ["regressor"]
 "#,
                 urdf.display(),
                 csv.display()
@@ -565,6 +567,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/foreign_corpus.py");
     let tmp = tempfile::tempdir().unwrap();
     let mut summary = Vec::new();
+    let mut pooled = (0, 0);
     // Refused: a friction the model lacks; 1.5 periods between ramps, and
     // a start-up transient on 1.5 periods (one steady period: nothing to
     // score the filter on, the residue over 3× the floor).
@@ -672,11 +675,29 @@ fn the_foreign_corpus_is_identified_or_refused() {
             found * fs,
             late * fs
         ));
-        assert!(
-            within as f64 >= 0.85 * p.names.len() as f64,
-            "{case}: {within} of {} within 2 std:\n{said}",
-            p.names.len()
-        );
+        // Per case ≥ 85 %; a decoupled model's 6 parameters may have one
+        // outside (with 95 % intervals, two or more outside happen 3 % of
+        // the time, one 23 %).
+        let n = p.names.len();
+        let needed = if n < 10 {
+            n - 1
+        } else {
+            (0.85 * n as f64).ceil() as usize
+        };
+        assert!(within >= needed, "{case}: {within} of {n} within 2 std:\n{said}");
+        pooled.0 += within;
+        pooled.1 += n;
     }
+    // Pooled over the cases identified: the intervals hold the truth about
+    // as often as 95 % intervals should, and are not bought by inflation
+    // (at most 99 % within 2 std).
+    let share = pooled.0 as f64 / pooled.1 as f64;
+    summary.push(format!(
+        "pooled: {}/{} within 2 std ({:.1} %)",
+        pooled.0,
+        pooled.1,
+        100.0 * share
+    ));
     eprintln!("{}", summary.join("\n"));
+    assert!((0.85..=0.99).contains(&share), "{share}");
 }

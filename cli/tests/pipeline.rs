@@ -188,6 +188,105 @@ fn lint_reports_every_problem_with_its_place() {
     );
 }
 
+/// What `run` refused only after reading the data (or ran to garbage),
+/// `lint` refuses first, each with its place: bands and harmonics beyond
+/// the Nyquist frequency (the MCAP summary's rate, 150 Hz), channels given
+/// the other format's way, an MCAP topic or JointState field the file has
+/// not, another robot's reference trajectory, a pipeline that writes
+/// nothing. The bad-input campaign's lint holes.
+#[test]
+fn lint_refuses_what_run_would() {
+    let ws = workspace(&["kuka_axis3"]);
+    let w = ws.path();
+    let base = std::fs::read_to_string(w.join("pipelines/kuka_axis3.toml")).unwrap();
+    let lint = |name: &str, text: &str| {
+        let file = w.join(format!("pipelines/{name}.toml"));
+        std::fs::write(&file, text).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .arg("lint")
+            .arg(&file)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            format!(
+                "{}{}",
+                String::from_utf8_lossy(&o.stdout),
+                String::from_utf8_lossy(&o.stderr)
+            ),
+        )
+    };
+    let (code, said) = lint("good", &base);
+    assert_eq!(code, Some(0), "{said}");
+    std::fs::write(w.join("recordings/tiny.csv"), "time,q_a3,torque_a3\n0,0,0\n0.01,0,0\n").unwrap();
+    let edit = |pairs: &[(&str, &str)]| {
+        pairs.iter().fold(base.clone(), |t, (a, b)| {
+            assert!(t.contains(a), "no `{a}`");
+            t.replacen(a, b, 1)
+        })
+    };
+    let nothing = format!(
+        "{}[output]\ntables = []\n",
+        base.split("[[stage]]\nkind = \"estimate\"").next().unwrap()
+    );
+    let cases: Vec<(&str, String, &str)> = vec![
+        (
+            "differentiation band beyond Nyquist",
+            edit(&[("bandwidth_hz = 15.0", "bandwidth_hz = 90.0")]),
+            "`bandwidth_hz`: 90 Hz is beyond the Nyquist frequency, 75",
+        ),
+        (
+            "inverse filter beyond Nyquist",
+            edit(&[("cutoff_hz = 20.0", "cutoff_hz = 120.0")]),
+            "`filter.cutoff_hz`: 120 Hz is beyond the Nyquist",
+        ),
+        (
+            "harmonics beyond the record",
+            edit(&[
+                ("kind = \"align\"", "kind = \"align\"\nperiod_s = 10.0"),
+                ("kind = \"noise\"", "kind = \"noise\"\nharmonics = [1, 2, 900]"),
+            ]),
+            "harmonic 900 of the 10 s period",
+        ),
+        (
+            "a column on an MCAP log",
+            edit(&[("[read]\n", "[read]\nposition = { column = 3 }\n")]),
+            "[read] position: `column` on the MCAP log",
+        ),
+        (
+            "a time column on an MCAP log",
+            edit(&[("[read]\n", "[read]\ntime = { column = \"time_s\" }\n")]),
+            "[read] time: `column` on the MCAP log",
+        ),
+        (
+            "an MCAP topic the file has not",
+            edit(&[("/motor_current", "/motor_currents")]),
+            "topic `/motor_currents` is not in",
+        ),
+        (
+            "a JointState field",
+            edit(&[("[read]\n", "[read]\nposition = { field = \"positions\" }\n")]),
+            "a JointState has position, velocity and effort",
+        ),
+        (
+            "a topic on a CSV log",
+            edit(&[("../recordings/kuka_axis3/kuka_axis3.mcap", "../recordings/tiny.csv")]),
+            "[read] effort: `topic` or `field` on",
+        ),
+        (
+            "another robot's trajectory",
+            edit(&[("../sims/kuka_axis3.toml", "../sims/arm3.toml")]),
+            "holds a trajectory of 3 joints; robot `kuka_ir361_axis3` has 1",
+        ),
+        ("a pipeline that writes nothing", nothing, "the pipeline writes nothing"),
+    ];
+    for (i, (name, text, says)) in cases.iter().enumerate() {
+        let (code, said) = lint(&format!("case{i}"), text);
+        assert_eq!(code, Some(1), "{name}: lint passed:\n{said}");
+        assert!(said.contains(says), "{name}: no `{says}` in\n{said}");
+    }
+}
+
 #[test]
 fn real_kuka_lwr4_recordings_run_and_say_what_they_could_not_do() {
     if robotid_tests::realdata("kuka_lwr4").is_none() {

@@ -165,7 +165,7 @@ impl TableDiff {
 #[derive(Debug, Clone, Default)]
 pub struct Report {
     pub tables: Vec<TableDiff>,
-    /// Tables only in one tree, or unreadable.
+    /// Tables only in one tree.
     pub problems: Vec<String>,
 }
 
@@ -230,7 +230,9 @@ pub fn compare(a: &Path, b: &Path, tol: &Tolerances) -> Result<Report> {
                     report.tables.push(t);
                 }
             }
-            Err(e) => report.problems.push(format!("{}: {e}", f.display())),
+            // A table that cannot be read is an error (exit 2), not a
+            // difference (exit 1): docs/dataset.md.
+            Err(e) => return Err(e),
         }
     }
     if !tol.columns.is_empty() && report.problems.is_empty() && report.tables.iter().all(|t| t.columns.is_empty()) {

@@ -238,7 +238,7 @@ fn read_settings(
                 log,
                 format!(
                     "{e}; the log has {}: give the columns with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
-                    header.join(", ")
+                    header.iter().map(|h| robotid_stages::stage::read::shown(h)).collect::<Vec<_>>().join(", ")
                 ),
             )
         })?;

@@ -28,8 +28,8 @@ use robotid_stages::stage::estimate::{Outcome as Estimated, Part, Reducer};
 use robotid_stages::stage::read::Log;
 use robotid_stages::stage::{Chain, Context, PeriodsUse, Product, Stage};
 
-use crate::error::{Error, Result};
-use crate::plan::{lint, parse, Plan, Resolved, StageConfig};
+use crate::error::{Error, Problems, Result};
+use crate::plan::{lint, output_problems, parse, Plan, Resolved, StageConfig};
 use crate::run::{run_recordings, tables_of, Observer, Quiet, RecordingResult, RunOptions};
 
 /// A parsed pipeline file.
@@ -97,14 +97,23 @@ impl Pipeline {
         Self::from_toml(&plan.to_toml()?, &plan.file)
     }
 
-    /// Step 2, context: every problem knowable without reading samples.
+    /// Step 2, context: every problem knowable without reading samples,
+    /// for a run into a folder (it must write something there).
     pub fn lint(&self) -> Result<Resolved> {
-        Ok(lint(&self.plan)?)
+        let nothing = output_problems(&self.plan);
+        match lint(&self.plan) {
+            Ok(r) if nothing.is_empty() => Ok(r),
+            Ok(_) => Err(Problems(nothing).into()),
+            Err(Problems(mut all)) => {
+                all.extend(nothing);
+                Err(Problems(all).into())
+            }
+        }
     }
 
-    /// Lints, then builds every stage once.
+    /// Lints (as for a run in memory), then builds every stage once.
     pub fn build(&self) -> Result<Built> {
-        let resolved = self.lint()?;
+        let resolved = lint(&self.plan)?;
         self.build_with(resolved)
     }
 
@@ -299,6 +308,10 @@ impl Built {
     /// shown every recording's result as soon as all are through; with
     /// `opts.plot` it draws each recording's pictures and the run's report.
     pub fn run_with(&self, opts: &RunOptions, observer: &dyn Observer) -> Result<RunReport> {
+        let nothing = output_problems(&self.plan);
+        if !nothing.is_empty() {
+            return Err(Problems(nothing).into());
+        }
         let started = Instant::now();
         let staging = crate::output::prepare(&opts.out, opts.plot.as_deref(), &self.logs)?;
         let staged = RunOptions {

@@ -540,6 +540,9 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
         };
     }
     problems.extend(check_chain(plan, model.as_ref(), start, provenance));
+    if start == Product::Raw {
+        problems.extend(source_problems(plan, &logs));
+    }
     if problems.is_empty() {
         Ok(Resolved { model, logs, start })
     } else {
@@ -547,7 +550,87 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
     }
 }
 
-/// The logs a source names, sorted: a file, every log file in a folder, or
+/// A pipeline run into a folder must write something there: one with no
+/// tables and no `estimate` ran and wrote nothing, silently. (Pipelines
+/// run in memory, as identify's probes, need neither.)
+pub fn output_problems(plan: &Plan) -> Vec<Placed> {
+    if plan.tables.is_empty() && !plan.stages.iter().any(|s| matches!(s, StageConfig::Estimate(_))) {
+        vec![Placed {
+            file: plan.file.clone(),
+            place: Place::Key("output.tables".into()),
+            message: "the pipeline writes nothing: list the tables to write under [output], or end it with an `estimate` stage".into(),
+        }]
+    } else {
+        Vec::new()
+    }
+}
+
+/// What the logs refuse before a sample is read: the `[read]` settings
+/// their format or summary does not have (`read::log_problems`), and the
+/// stages' bands and harmonics beyond the Nyquist frequency of the rate
+/// declared (`align.sample_rate_hz`) or told by an MCAP summary.
+fn source_problems(plan: &Plan, logs: &[PathBuf]) -> Vec<Placed> {
+    use robotid_stages::stage::read::{log_problems, log_rate};
+    let at = |place: Place, message: String| Placed {
+        file: plan.file.clone(),
+        place,
+        message,
+    };
+    let mut out = Vec::new();
+    for log in logs {
+        out.extend(
+            log_problems(log, &plan.read)
+                .into_iter()
+                .map(|p| at(Place::Read(p.key), p.message)),
+        );
+    }
+    let declared = plan.stages.iter().find_map(|s| match s {
+        StageConfig::Align(a) => Some((a.sample_rate_hz, a.period_s)),
+        _ => None,
+    });
+    let (rate, period) = declared.unwrap_or((None, None));
+    let Some((fs, whose)) = rate.map(|r| (r, "align.sample_rate_hz".to_string())).or_else(|| {
+        logs.iter()
+            .find_map(|l| log_rate(l, &plan.read).map(|r| (r, format!("the rate of {}", l.display()))))
+    }) else {
+        return out;
+    };
+    // A rate from message counts is a float's hair off the nominal one.
+    let fs = (fs * 1e6).round() / 1e6;
+    let nyquist = 0.5 * fs;
+    let beyond = |hz: f64| hz > nyquist * (1.0 + 1e-9);
+    let said = format!("beyond the Nyquist frequency, {nyquist} Hz ({whose}, {fs} Hz)");
+    for (i, s) in plan.stages.iter().enumerate() {
+        let mut bands: Vec<(&str, f64)> = Vec::new();
+        let mut harmonics: Option<&Vec<u32>> = None;
+        match s {
+            StageConfig::InverseFilter(c) => {
+                bands.push(("bandwidth_hz", c.bandwidth_hz));
+                bands.extend(c.filter.as_ref().map(|f| ("filter.cutoff_hz", f.cutoff_hz)));
+            }
+            StageConfig::Differentiate(c) => {
+                bands.extend(c.bandwidth_hz.map(|b| ("bandwidth_hz", b)));
+                harmonics = c.harmonics.as_ref();
+            }
+            StageConfig::Noise(c) => harmonics = c.harmonics.as_ref(),
+            _ => {}
+        }
+        for (key, hz) in bands.into_iter().filter(|(_, hz)| beyond(*hz)) {
+            out.push(at(plan.place(i, key), format!("{hz} Hz is {said}")));
+        }
+        if let (Some(h), Some(p)) = (harmonics, period) {
+            if let Some(top) = h.iter().max().filter(|&&top| beyond(top as f64 / p)) {
+                out.push(at(
+                    plan.place(i, "harmonics"),
+                    format!("harmonic {top} of the {p} s period, {} Hz, is {said}", *top as f64 / p),
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// The logs a source names, sorted: a file, every log file in a folder, or/// The logs a source names, sorted: a file, every log file in a folder, or
 /// the matches of a glob. A file of an extension no reader takes is refused.
 pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
     let full = plan.base_dir().join(&plan.source);

@@ -69,6 +69,44 @@ fn a_flipped_bit_is_refused_or_harmless() {
     assert!(refused > 250);
 }
 
+/// Every bit of the embedded Arrow schema (`ARROW:schema`, base64 in the
+/// footer) flipped in turn: refused with a message for a person, never a
+/// dump of the flatbuffer's fields (`UnionVariant { variant: … }`).
+#[test]
+fn a_flipped_arrow_schema_is_refused_plainly() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.parquet");
+    write_parquet(&path, &table(100)).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let key = b"ARROW:schema";
+    let at = bytes
+        .windows(key.len())
+        .rposition(|w| w == key)
+        .expect("an Arrow schema")
+        + key.len();
+    let flipped = dir.path().join("flipped.parquet");
+    let mut refused = 0;
+    // The value follows its thrift header: the next 240 bytes are inside it.
+    for i in at + 8..(at + 248).min(bytes.len() - 8) {
+        for bit in [0, 3, 6] {
+            let mut b = bytes.clone();
+            b[i] ^= 1 << bit;
+            std::fs::write(&flipped, &b).unwrap();
+            if let Err(e) = read_parquet(&flipped) {
+                let e = e.to_string();
+                refused += 1;
+                assert!(e.contains("flipped.parquet"), "{e}");
+                assert!(
+                    !e.contains("UnionVariant") && !e.contains("{ ") && e.lines().count() == 1,
+                    "byte {i} bit {bit}: {e}"
+                );
+            }
+        }
+    }
+    println!("{refused} flips of the Arrow schema refused, each in one plain line");
+    assert!(refused > 100, "{refused}");
+}
+
 /// A file written by pyarrow with page checksums, one byte of a data page
 /// changed: refused by the reader's CRC check.
 #[test]

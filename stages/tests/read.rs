@@ -204,6 +204,28 @@ fn bad_inputs_name_file_channel_and_sample() {
         matches!(&e, Error::Data { source_name, channel, msg, .. } if source_name.ends_with("missing.csv") && channel.contains("current_j3") && msg.contains("missing column")),
         "{e}"
     );
+    // A checksum kept beside the recording (`robotid checksum`): read while
+    // it matches, refused once a digit changed.
+    let p = dir.path().join("kept.csv");
+    std::fs::write(&p, &csv).unwrap();
+    let sha = robotid_stages::stage::read::hash_recording(&p).unwrap();
+    std::fs::write(dir.path().join("kept.csv.sha256"), format!("{sha}  kept.csv\n")).unwrap();
+    read(&p, &cfg, Some(&model)).unwrap();
+    let digit = lines[7].split(',').nth(1).unwrap().to_string();
+    let flipped = digit.replacen(|c: char| c.is_ascii_digit() && c != '9', "9", 1);
+    assert_ne!(digit, flipped);
+    std::fs::write(&p, csv.replacen(&digit, &flipped, 1)).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(
+        e.contains("kept.csv") && e.contains("do not match") && e.contains("kept.csv.sha256"),
+        "{e}"
+    );
+
+    // A zero-width space in a column's name: shown escaped, not invisible.
+    let p = dir.path().join("invisible.csv");
+    std::fs::write(&p, csv.replacen("current_j3", "current_j3\u{200b}", 1)).unwrap();
+    let e = err_of(read(&p, &cfg, Some(&model)));
+    assert!(e.contains("current_j3\\u{200b}"), "{e}");
 
     // Unknown unit: refused when the pipeline is checked.
     let c = ReadConfig {

@@ -1,3 +1,4 @@
+pub mod checksum;
 pub mod dataset;
 pub mod estimate;
 pub mod excite;

@@ -306,6 +306,21 @@ pub(crate) fn open(path: &Path) -> Result<ParquetRecordBatchReaderBuilder<bytes:
     open_bytes(path, super::mapped(path)?)
 }
 
+/// A reader's error for a person: arrow's failure to decode the embedded
+/// Arrow schema holds a Rust dump of the flatbuffer's fields, said here
+/// as what it means; anything else on one line.
+fn plain(e: impl std::fmt::Display) -> String {
+    let s = e.to_string();
+    if s.contains("UnionVariant") || s.contains("Unable to get root as") || s.contains("flatbuffer") {
+        return "corrupt: its embedded Arrow schema (the `ARROW:schema` key of its metadata) does not decode".into();
+    }
+    let line = s.lines().next().unwrap_or_default();
+    match line.char_indices().nth(300) {
+        Some((at, _)) => format!("{}…", &line[..at]),
+        None => line.to_string(),
+    }
+}
+
 /// The same over a file's bytes, `path` naming it in errors.
 pub(crate) fn open_bytes(path: &Path, file: bytes::Bytes) -> Result<ParquetRecordBatchReaderBuilder<bytes::Bytes>> {
     use super::thrift::{Refusal, Walk};
@@ -332,7 +347,7 @@ pub(crate) fn open_bytes(path: &Path, file: bytes::Bytes) -> Result<ParquetRecor
             budget = w.budget();
         }
     }
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file.clone()).map_err(|e| fmt(e.to_string()))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file.clone()).map_err(|e| fmt(plain(e)))?;
     for rg in builder.metadata().row_groups() {
         for c in rg.columns() {
             let (start, len) = c.byte_range();

@@ -155,8 +155,23 @@ impl Component for AlignConfig {
             out.push(Problem::new("", "the data is already aligned"));
         }
         if let Some(rel) = &self.reference_trajectory {
-            if let Err(e) = reference_trajectory(&ctx.base_dir.join(rel)) {
-                out.push(Problem::new("reference_trajectory", e.to_string()));
+            match reference_trajectory(&ctx.base_dir.join(rel)) {
+                Err(e) => out.push(Problem::new("reference_trajectory", e.to_string())),
+                // Another robot's trajectory: one position per joint.
+                Ok(f) => {
+                    if let Some(m) = ctx.model.filter(|m| m.dof() != f.q0.len()) {
+                        out.push(Problem::new(
+                            "reference_trajectory",
+                            format!(
+                                "{} holds a trajectory of {} joints; robot `{}` has {}: is it this robot's?",
+                                rel.display(),
+                                f.q0.len(),
+                                m.name,
+                                m.dof()
+                            ),
+                        ));
+                    }
+                }
             }
         }
         out

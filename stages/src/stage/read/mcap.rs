@@ -781,6 +781,47 @@ fn summary_notes(maps: &[(std::path::PathBuf, bytes::Bytes)], seen: usize) -> Ve
 const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
+/// The topics an MCAP log's summary lists, each with its schema's name;
+/// None without a readable summary (the messages then tell, at the read).
+pub(crate) fn mcap_topics(path: &Path) -> Result<Option<Vec<(String, String)>>> {
+    let mut topics = Vec::new();
+    for f in bag_files(path)? {
+        let map = crate::formats::mapped(&f)?;
+        let Ok(Some(summary)) = mcap::read::Summary::read(&map) else {
+            return Ok(None);
+        };
+        topics.extend(summary.channels.values().map(|c| {
+            (
+                c.topic.clone(),
+                c.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
+            )
+        }));
+    }
+    topics.sort();
+    topics.dedup();
+    Ok(Some(topics))
+}
+
+/// The rate of an MCAP log's messages on `topic`, Hz, from its summary's
+/// statistics (one file; None without them): what `lint` checks the
+/// stages' bands against before any message is read.
+pub(crate) fn mcap_rate(path: &Path, topic: &str) -> Option<f64> {
+    if path.is_dir() {
+        return None;
+    }
+    let map = crate::formats::mapped(path).ok()?;
+    let summary = mcap::read::Summary::read(&map).ok()??;
+    let stats = summary.stats.as_ref()?;
+    let id = summary
+        .channels
+        .iter()
+        .find(|(_, c)| c.topic == topic)
+        .map(|(id, _)| *id)?;
+    let count = *stats.channel_message_counts.get(&id)? as f64;
+    let span = stats.message_end_time.checked_sub(stats.message_start_time)? as f64 * 1e-9;
+    (count > 1.0 && span > 0.0).then(|| (count - 1.0) / span)
+}
+
 /// The joint names an MCAP log's position messages carry (the last
 /// message's; JointState and its kin), None when they carry none (JSON
 /// arrays): what `robotid identify` matches the robot's joints against.

@@ -322,6 +322,115 @@ pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
     }
 }
 
+/// A name from a log as a message shows it: characters that print as
+/// nothing or move the text (a zero-width space, a control character, a
+/// byte-order mark) escaped as `\u{200b}`, so that `q_a3` and `q_a3\u{200b}`
+/// do not look the same.
+pub fn shown(name: &str) -> String {
+    if name.chars().all(|c| !c.is_control() && !invisible(c)) {
+        return name.to_string();
+    }
+    name.chars()
+        .map(|c| {
+            if c.is_control() || invisible(c) {
+                format!("\\u{{{:x}}}", c as u32)
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
+}
+
+/// Format characters that print as nothing (Unicode Cf: zero-width
+/// spaces and joiners, direction marks, the byte-order mark, soft hyphen).
+fn invisible(c: char) -> bool {
+    matches!(c, '\u{ad}' | '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2060}'..='\u{2064}' | '\u{feff}')
+}
+
+/// The rate a log's positions are sampled at, Hz, when it can be told
+/// without reading them (an MCAP summary's statistics); None otherwise.
+pub fn log_rate(path: &Path, cfg: &ReadConfig) -> Option<f64> {
+    if Log::File(path).format() != "mcap" {
+        return None;
+    }
+    let topic = cfg
+        .position
+        .as_ref()
+        .and_then(|c| c.topic.clone())
+        .unwrap_or_else(|| "/joint_states".into());
+    mcap::mcap_rate(path, &topic)
+}
+
+/// What the read settings ask of a log that its format or its summary
+/// refuses before a sample is read (what `lint` checks): columns on an
+/// MCAP log, topics and fields on a text or Parquet one, an MCAP topic
+/// the file does not have, a JointState field that is not one.
+pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
+    let name = path.display();
+    let mcap = Log::File(path).format() == "mcap";
+    let mut out = Vec::new();
+    for (key, ch) in cfg.channels() {
+        let Some(c) = ch else { continue };
+        if mcap && c.column.is_some() {
+            out.push(Problem::new(
+                key,
+                format!("`column` on the MCAP log {name}: its channels are given by `topic` and `field`"),
+            ));
+        }
+        if !mcap && (c.topic.is_some() || c.field.is_some()) {
+            out.push(Problem::new(
+                key,
+                format!("`topic` or `field` on {name}, a table of columns: give its channel by `column`"),
+            ));
+        }
+    }
+    if !mcap {
+        return out;
+    }
+    let Ok(Some(topics)) = mcap::mcap_topics(path) else {
+        return out;
+    };
+    let wanted = [
+        ("position", &cfg.position, "/joint_states", "position"),
+        ("effort", &cfg.effort, "/joint_states", "effort"),
+    ]
+    .into_iter()
+    .chain(
+        cfg.reference
+            .iter()
+            .map(|_| ("reference", &cfg.reference, "/joint_reference", "position")),
+    );
+    for (key, ch, topic, field) in wanted {
+        let c = ch.as_ref();
+        let topic = c.and_then(|c| c.topic.clone()).unwrap_or_else(|| topic.into());
+        let field = c.and_then(|c| c.field.clone()).unwrap_or_else(|| field.into());
+        match topics.iter().find(|(t, _)| *t == topic) {
+            None => out.push(Problem::new(
+                key,
+                format!(
+                    "topic `{topic}` is not in {name}, which has {}",
+                    topics
+                        .iter()
+                        .map(|(t, s)| format!("{t} ({s})"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            )),
+            Some((_, schema))
+                if schema == "sensor_msgs/msg/JointState"
+                    && !["position", "velocity", "effort"].contains(&field.as_str()) =>
+            {
+                out.push(Problem::new(
+                    key,
+                    format!("field `{field}` of `{topic}` in {name}: a JointState has position, velocity and effort"),
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    out
+}
+
 /// The joint names an MCAP log's position messages carry (JointState and
 /// its kin); None for other formats and for messages without names.
 pub fn log_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
@@ -421,6 +530,9 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
         })?;
     let ext = log.format();
     let (cols, bytes_hash) = columns_of(log, &ext, cfg, &joints)?;
+    if let Log::File(p) = log {
+        verify_checksum(p, &bytes_hash)?;
+    }
     let source = path.display().to_string();
     let units = Units {
         cfg,
@@ -746,6 +858,35 @@ pub fn hash_recording(path: &Path) -> Result<String> {
     }
     let parts = files.iter().map(|f| hash_file(f)).collect::<Result<String>>()?;
     Ok(crate::formats::sha256_hex(parts.as_bytes()))
+}
+
+/// Where a recording's checksum is kept (`robotid checksum`): beside it,
+/// `<name>.sha256`, in `sha256sum`'s format.
+pub fn checksum_path(path: &Path) -> std::path::PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".sha256");
+    path.with_file_name(name)
+}
+
+/// A recording whose checksum file is beside it must hold the bytes it
+/// was written for: text has no checksum of its own, and a flipped digit
+/// reads as another number.
+fn verify_checksum(path: &Path, sha256: &str) -> Result<()> {
+    let file = checksum_path(path);
+    let Ok(text) = std::fs::read_to_string(&file) else {
+        return Ok(());
+    };
+    let kept = text.split_whitespace().next().unwrap_or_default();
+    if kept.eq_ignore_ascii_case(sha256) {
+        return Ok(());
+    }
+    Err(Error::Format {
+        path: path.to_path_buf(),
+        msg: format!(
+            "its bytes do not match {} (SHA-256 {sha256}, kept {kept}): the recording changed after its checksum was made; restore it, or make the checksum anew with `robotid checksum` if the change is meant",
+            file.display()
+        ),
+    })
 }
 
 /// SHA-256 of a file, streamed (not read whole: an hour's recording is

@@ -49,9 +49,10 @@ impl Header<'_> {
                 header.len()
             )
         } else {
-            format!("missing column; the log has: {}", header.join(", "))
+            let names: Vec<String> = header.iter().map(|h| super::shown(h)).collect();
+            format!("missing column; the log has: {}", names.join(", "))
         };
-        self.err(col, msg)
+        self.err(&super::shown(col), msg)
     }
 
     fn by_index(&self, kind: &str, i: usize) -> Result<String> {
