@@ -266,7 +266,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_default()
     };
     // A floor from one period's non-excited lines (nothing repeats to take
-    // it from) may hold real content or miss noise: said, not refused on.
+    // it from) may hold real content or miss noise: said with the refusal.
+    // (Not refusing there exported a start-up transient's fit as a model.)
     let reliable = designs[..ident.len()].iter().all(|d| d.repeated);
     // One read of the tables: the estimate and its physical fit reduce the
     // same parts.
@@ -274,13 +275,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let reducer = super::estimate::reducer(&ols_args)?;
     let parts = robotid::tables::parts(&reducer, id_tables)?;
     let ols = robotid::tables::reduce(&reducer, &parts, &parameters, Some(&mark))?;
-    let inadequate = verdict(&ols.estimate);
-    if let Some(v) = inadequate.as_ref().filter(|_| !reliable) {
-        eprintln!(
-            "warning: {v}\n(not refused: the noise floor comes from the non-excited lines of a single steady period, not from the spread of several; the table is marked)"
-        );
-    }
-    let inadequate = inadequate.filter(|_| reliable);
+    let inadequate = verdict(&ols.estimate).map(|v| {
+        if reliable {
+            v
+        } else {
+            format!("{v}\n(the noise floor comes from the non-excited lines of a single steady period, not from the spread of several: the start of the record may not be steady; record two whole periods or more)")
+        }
+    });
     // Not periodic: no floor to judge the fit against, which is said.
     let unjudged: Vec<String> = ols
         .estimate

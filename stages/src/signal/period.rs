@@ -60,7 +60,7 @@ const STRETCHES: [(f64, f64); 5] = [(0.15, 0.85), (0.25, 1.0), (0.0, 0.75), (0.3
 /// self-similarity of the stretch alone; its `cycles` count the whole
 /// record.
 pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
-    let whole = infer_whole(t, q);
+    let whole = infer_whole(t, q, MATCH);
     if whole.is_ok() || t.len() < 64 {
         return whole;
     }
@@ -71,7 +71,11 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPerio
         .find_map(|&(a, b)| {
             let (from, to) = ((a * n as f64) as usize, (b * n as f64) as usize);
             let part: Vec<Vec<f64>> = q.iter().map(|c| c[from..to].to_vec()).collect();
-            infer_whole(&t[from..to], &part).ok()
+            // Parts are searched more strictly: a record of point-to-point
+            // moves has parts that look alike (the example validation
+            // record's best part matches itself 4e-2 of its spread; a
+            // periodic stretch to its noise, under 1e-20 simulated).
+            infer_whole(&t[from..to], &part, MATCH_IN_PART).ok()
         })
         .map(|p| PeriodEstimate {
             cycles: span / p.period_s,
@@ -80,8 +84,15 @@ pub fn infer_period(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPerio
         .ok_or(whole.expect_err("the whole record has none"))
 }
 
-/// [`infer_period`] on the whole of `t` and `q`.
-fn infer_whole(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
+/// How much less the channels must differ one period on than half a
+/// period on (mean squares) for a period to be accepted: on the whole
+/// record, and within a part of it.
+const MATCH: f64 = 0.05;
+const MATCH_IN_PART: f64 = 1e-3;
+
+/// [`infer_period`] on the whole of `t` and `q`, a period accepted when
+/// the channels match themselves one period on within `bound`.
+fn infer_whole(t: &[f64], q: &[Vec<f64>], bound: f64) -> Result<PeriodEstimate, NoPeriod> {
     let n = t.len();
     if n < 16 {
         return Err(NoPeriod::TooFewSamples(n));
@@ -125,7 +136,7 @@ fn infer_whole(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
     let first = coarse_period(&x.x, dt, 0.5)
         .and_then(|c| refine(&x, &grid, dt, c, (m / 4, m), 0.01, 1.0))
         .and_then(|p| settle(&x, &grid, dt, p, (m / 4, m)))
-        .and_then(|s| accept(&x, &grid, dt, s));
+        .and_then(|s| accept(&x, &grid, dt, s, bound));
     let e = match first {
         Ok(p) if span >= 2.0 * p.period_s => {
             return Ok(PeriodEstimate {
@@ -143,7 +154,7 @@ fn infer_whole(t: &[f64], q: &[Vec<f64>]) -> Result<PeriodEstimate, NoPeriod> {
     let second = coarse_period(&x.x, dt, 0.8)
         .and_then(|c| refine(&x, &grid, dt, c, (0, m), 0.05, 0.75))
         .and_then(|p| settle(&x, &grid, dt, p, (0, m)))
-        .and_then(|s| accept(&x, &grid, dt, s));
+        .and_then(|s| accept(&x, &grid, dt, s, bound));
     match second {
         Ok(p) if span >= MIN_CYCLES * p.period_s && span < 2.0 * p.period_s => Ok(PeriodEstimate {
             cycles: span / p.period_s,
@@ -247,6 +258,7 @@ fn accept(
     grid: &[f64],
     dt: f64,
     (p, range): (PeriodEstimate, (usize, usize)),
+    bound: f64,
 ) -> Result<PeriodEstimate, NoPeriod> {
     if !(p.std_s < 1e-3 * p.period_s) {
         return Err(NoPeriod::Uncertain {
@@ -254,7 +266,7 @@ fn accept(
             std_s: p.std_s,
         });
     }
-    check(x, grid, dt, p.period_s, range)?;
+    check(x, grid, dt, p.period_s, range, bound)?;
     Ok(p)
 }
 
@@ -327,11 +339,12 @@ fn settle(
 pub const MIN_CYCLES: f64 = 1.25;
 
 /// `period` if the channels match themselves one period on (from grid
-/// points `range`) far better than half a period on, as periodic ones do.
-fn check(x: &Channels, grid: &[f64], dt: f64, period: f64, range: (usize, usize)) -> Result<f64, NoPeriod> {
+/// points `range`) far better than half a period on (`bound` of it), as
+/// periodic ones do.
+fn check(x: &Channels, grid: &[f64], dt: f64, period: f64, range: (usize, usize), bound: f64) -> Result<f64, NoPeriod> {
     let d0 = mismatch(x, grid, dt, range, period);
     let half = mismatch(x, grid, dt, range, 0.5 * period);
-    if d0 < 0.05 * half {
+    if d0 < bound * half {
         Ok(period)
     } else {
         Err(NoPeriod::Mismatch {
