@@ -222,37 +222,89 @@ fn a_least_squares_estimate_is_not_exported() {
     assert!(!out.join("identified.urdf").exists() && !out.join("identified.xml").exists());
 }
 
+/// `from`'s table with the metadata value under `key` changed by `edit`,
+/// written to `to` by robotid's writer (its checksum made anew, as a tool
+/// editing it would).
+fn with_metadata(from: &Path, to: &Path, key: &str, edit: impl FnOnce(&str) -> String) {
+    use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+    let batch = read_parquet(from).unwrap();
+    let mut md = batch.schema().metadata().clone();
+    let value = edit(&md[key]);
+    md.insert(key.to_string(), value);
+    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
+    write_parquet(
+        to,
+        &arrow::array::RecordBatch::try_new(schema, batch.columns().to_vec()).unwrap(),
+    )
+    .unwrap();
+}
+
+/// `robotid export` of the UR5 example's `parameters` in `formats` to `stem`.
+fn export_ur5(ws: &Path, parameters: &Path, formats: &str, stem: &Path) -> std::process::Output {
+    robotid(&[
+        "export",
+        "--robot",
+        &ws.join("robots/ur5.toml").display().to_string(),
+        "-p",
+        &parameters.display().to_string(),
+        "--format",
+        formats,
+        "-o",
+        &stem.display().to_string(),
+    ])
+}
+
+/// What the estimate's own checks found travels with its table: a
+/// physical estimate whose adequacy says a joint's residue is 40× the
+/// noise floor (as `estimate --physical` warned of swapped channels) is
+/// exported with that said again.
+#[test]
+fn export_says_what_the_estimate_warned_of() {
+    let ws = workspace(&["ur5"]);
+    let out = ur5_identified(ws.path(), true);
+    let edited = out.join("warned.parquet");
+    let mut joint = String::new();
+    with_metadata(
+        &out.join("parameters.parquet"),
+        &edited,
+        robotid_schemas::metadata::ADEQUACY,
+        |a| {
+            let mut adequacy: Vec<serde_json::Value> = serde_json::from_str(a).unwrap();
+            adequacy[1]["ratio"] = serde_json::json!(40.0);
+            joint = adequacy[1]["joint"].as_str().unwrap().to_string();
+            serde_json::to_string(&adequacy).unwrap()
+        },
+    );
+    let o = export_ur5(ws.path(), &edited, "urdf", &out.join("warned"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: the estimate's residue is over") && err.contains(&format!("{joint} 40.0×")),
+        "{err}"
+    );
+}
+
 /// A physical estimate whose table says a link's ixx is 1e30 (written with
 /// a valid checksum, as a tool editing it would): export refuses it, naming
 /// the link and the value, and writes nothing (it wrote a URDF breaking
 /// the triangle inequality).
 #[test]
 fn an_impossible_body_is_not_exported() {
-    use robotid_schemas::metadata::PHYSICAL_STANDARD;
-    use robotid_stages::formats::parquet::{read_parquet, write_parquet};
     let ws = workspace(&["ur5"]);
     let out = ur5_identified(ws.path(), true);
-    let batch = read_parquet(&out.join("parameters.parquet")).unwrap();
-    let mut md = batch.schema().metadata().clone();
-    let mut standard: Vec<f64> = serde_json::from_str(&md[PHYSICAL_STANDARD]).unwrap();
-    standard[0] = 1e30; // XX of the first link
-    md.insert(PHYSICAL_STANDARD.to_string(), serde_json::to_string(&standard).unwrap());
-    let schema = std::sync::Arc::new(batch.schema().as_ref().clone().with_metadata(md));
     let edited = out.join("edited.parquet");
-    let batch = arrow::array::RecordBatch::try_new(schema, batch.columns().to_vec()).unwrap();
-    write_parquet(&edited, &batch).unwrap();
+    with_metadata(
+        &out.join("parameters.parquet"),
+        &edited,
+        robotid_schemas::metadata::PHYSICAL_STANDARD,
+        |s| {
+            let mut standard: Vec<f64> = serde_json::from_str(s).unwrap();
+            standard[0] = 1e30; // XX of the first link
+            serde_json::to_string(&standard).unwrap()
+        },
+    );
     let stem = out.join("identified");
-    let o = robotid(&[
-        "export",
-        "--robot",
-        &ws.path().join("robots/ur5.toml").display().to_string(),
-        "-p",
-        &edited.display().to_string(),
-        "--format",
-        "urdf,mjcf,sidecar",
-        "-o",
-        &stem.display().to_string(),
-    ]);
+    let o = export_ur5(ws.path(), &edited, "urdf,mjcf,sidecar", &stem);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "exit 0: {err}");
     assert!(err.contains("1e30") && err.contains("shoulder"), "{err}");

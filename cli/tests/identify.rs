@@ -542,6 +542,8 @@ fn identify_is_atomic_and_keeps_the_users_files() {
     assert_eq!(o.status.code(), Some(1), "{said}");
     assert!(said.contains(&format!("process {}", std::process::id())), "{said}");
     drop(hold);
+    // A user's file beside the folders identify writes, through the kills.
+    std::fs::write(dir.path().join("lab-notes.txt"), b"arm 3, warm").unwrap();
     let (mut none, mut all) = (0, 0);
     let mut seed: u64 = 0x1de4_71f7;
     for trial in 0..24 {
@@ -573,5 +575,13 @@ fn identify_is_atomic_and_keeps_the_users_files() {
             assert_eq!(seen, files, "trial {trial}: a partial identify output");
         }
     }
+    assert_eq!(std::fs::read(dir.path().join("lab-notes.txt")).unwrap(), b"arm 3, warm");
+    let beside: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(beside.is_empty(), "left beside the folders: {beside:?}");
     println!("24 kill -9s during identify: {none} left nothing, {all} everything, 0 partial");
 }
