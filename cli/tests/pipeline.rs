@@ -193,7 +193,7 @@ fn lint_reports_every_problem_with_its_place() {
 /// the Nyquist frequency (the MCAP summary's rate, 150 Hz), channels given
 /// the other format's way, an MCAP topic or JointState field the file has
 /// not, another robot's reference trajectory, a pipeline that writes
-/// nothing. The bad-input campaign's lint holes.
+/// nothing. The bad-input campaign's 11 lint holes.
 #[test]
 fn lint_refuses_what_run_would() {
     let ws = workspace(&["kuka_axis3"]);
@@ -262,6 +262,11 @@ fn lint_refuses_what_run_would() {
             "an MCAP topic the file has not",
             edit(&[("/motor_current", "/motor_currents")]),
             "topic `/motor_currents` is not in",
+        ),
+        (
+            "an MCAP field the file has not",
+            edit(&[("field = \"current\"", "field = \"currents\"")]),
+            "field `currents` is not in `/motor_current`",
         ),
         (
             "a JointState field",

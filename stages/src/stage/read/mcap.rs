@@ -781,25 +781,55 @@ fn summary_notes(maps: &[(std::path::PathBuf, bytes::Bytes)], seen: usize) -> Ve
 const MAX_CHUNK_RATIO: u64 = 2000;
 const MAX_CHUNK_BYTES: u64 = 1 << 33;
 
-/// The topics an MCAP log's summary lists, each with its schema's name;
-/// None without a readable summary (the messages then tell, at the read).
-pub(crate) fn mcap_topics(path: &Path) -> Result<Option<Vec<(String, String)>>> {
-    let mut topics = Vec::new();
+/// A topic an MCAP log's summary lists: its schema's name, and the
+/// fields of its message where the schema says them (`ros2msg`).
+pub(crate) struct Topic {
+    pub topic: String,
+    pub schema: String,
+    pub fields: Option<Vec<String>>,
+}
+
+/// The topics an MCAP log's summary lists; None without a readable summary
+/// (the messages then tell, at the read).
+pub(crate) fn mcap_topics(path: &Path) -> Result<Option<Vec<Topic>>> {
+    let mut topics: Vec<Topic> = Vec::new();
     for f in bag_files(path)? {
         let map = crate::formats::mapped(&f)?;
         let Ok(Some(summary)) = mcap::read::Summary::read(&map) else {
             return Ok(None);
         };
-        topics.extend(summary.channels.values().map(|c| {
-            (
-                c.topic.clone(),
-                c.schema.as_ref().map(|s| s.name.clone()).unwrap_or_default(),
-            )
-        }));
+        for c in summary.channels.values() {
+            if topics.iter().any(|t| t.topic == c.topic) {
+                continue;
+            }
+            let schema = c.schema.as_ref();
+            topics.push(Topic {
+                topic: c.topic.clone(),
+                schema: schema.map(|s| s.name.clone()).unwrap_or_default(),
+                fields: schema.and_then(|s| schema_fields(&s.encoding, &s.data)),
+            });
+        }
     }
-    topics.sort();
-    topics.dedup();
+    topics.sort_by(|a, b| a.topic.cmp(&b.topic));
     Ok(Some(topics))
+}
+
+/// The top-level field names a schema declares: a ROS 2 message
+/// definition's, or a JSON schema's properties; None for other encodings.
+fn schema_fields(encoding: &str, data: &[u8]) -> Option<Vec<String>> {
+    match encoding {
+        "ros2msg" => Some(
+            crate::formats::cdr::schema_fields(&String::from_utf8_lossy(data))
+                .into_iter()
+                .map(|(_, name)| name)
+                .collect(),
+        ),
+        "jsonschema" => {
+            let v: serde_json::Value = serde_json::from_slice(data).ok()?;
+            Some(v.get("properties")?.as_object()?.keys().cloned().collect())
+        }
+        _ => None,
+    }
 }
 
 /// The rate of an MCAP log's messages on `topic`, Hz, from its summary's

@@ -404,20 +404,20 @@ pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
         let c = ch.as_ref();
         let topic = c.and_then(|c| c.topic.clone()).unwrap_or_else(|| topic.into());
         let field = c.and_then(|c| c.field.clone()).unwrap_or_else(|| field.into());
-        match topics.iter().find(|(t, _)| *t == topic) {
+        match topics.iter().find(|t| t.topic == topic) {
             None => out.push(Problem::new(
                 key,
                 format!(
                     "topic `{topic}` is not in {name}, which has {}",
                     topics
                         .iter()
-                        .map(|(t, s)| format!("{t} ({s})"))
+                        .map(|t| format!("{} ({})", t.topic, t.schema))
                         .collect::<Vec<_>>()
                         .join(", ")
                 ),
             )),
-            Some((_, schema))
-                if schema == "sensor_msgs/msg/JointState"
+            Some(t)
+                if t.schema == "sensor_msgs/msg/JointState"
                     && !["position", "velocity", "effort"].contains(&field.as_str()) =>
             {
                 out.push(Problem::new(
@@ -425,6 +425,17 @@ pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
                     format!("field `{field}` of `{topic}` in {name}: a JointState has position, velocity and effort"),
                 ))
             }
+            Some(mcap::Topic {
+                schema,
+                fields: Some(fields),
+                ..
+            }) if !fields.contains(&field) => out.push(Problem::new(
+                key,
+                format!(
+                    "field `{field}` is not in `{topic}` of {name}: its {schema} has {}",
+                    fields.join(", ")
+                ),
+            )),
             Some(_) => {}
         }
     }
