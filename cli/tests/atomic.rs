@@ -24,6 +24,19 @@ fn visible(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         .collect()
 }
 
+/// `robotid run PIPELINE --out OUT`, killed (SIGKILL) `after` its start.
+fn run_killed(pipeline: &Path, out: &Path, after: std::time::Duration) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_robotid"))
+        .args(["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(after);
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
 /// The hidden entries of a folder: what a commit may leave beside `--out`.
 fn hidden_in(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
@@ -166,16 +179,7 @@ fn killed_runs_leave_the_old_outputs_or_the_new() {
     let trials = 20;
     for k in 0..trials {
         // Spread the kills over the whole run, commit included.
-        let at = full.mul_f64((k as f64 + 0.5) / trials as f64 * 1.1);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_robotid"))
-            .args(["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        std::thread::sleep(at);
-        let _ = child.kill(); // SIGKILL
-        let _ = child.wait();
+        run_killed(&pipeline, &out, full.mul_f64((k as f64 + 0.5) / trials as f64 * 1.1));
         // What a reader sees right after the kill: the old set or the new
         // one (the folders exchanged in one step), never a mixture.
         let seen = visible(&out);
@@ -418,16 +422,7 @@ fn a_run_never_removes_or_overwrites_the_users_files() {
         seed ^= seed << 13;
         seed ^= seed >> 7;
         seed ^= seed << 17;
-        let at = full.mul_f64((seed % 1000) as f64 / 1000.0 * 1.1);
-        let mut child = Command::new(env!("CARGO_BIN_EXE_robotid"))
-            .args(["run", pipeline.to_str().unwrap(), "--out", out.to_str().unwrap()])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        std::thread::sleep(at);
-        let _ = child.kill();
-        let _ = child.wait();
+        run_killed(&pipeline, &out, full.mul_f64((seed % 1000) as f64 / 1000.0 * 1.1));
         let now = bytes_of(&out);
         for (k, v) in &user {
             assert_eq!(now.get(k), Some(v), "trial {trial}: the user's {k} changed");
