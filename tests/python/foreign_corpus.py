@@ -57,6 +57,8 @@ CASES = {
     "lab_2p5": dict(
         filter=("butter", 4, 30.0, None), friction="sign", periods=2.5, premove=4.0, ramp_in=0.5, ramp_out=0.5, rest=6.0
     ),
+    # The gripper case as a ROS 2 bag: JointState messages naming the arm's joints.
+    "gripper_mcap": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=5, gripper=True, form="mcap"),
 }
 
 # What "gripper" adds to the URDF: a revolute gripper on tool0 and a
@@ -81,6 +83,29 @@ GRIPPER = """
 """
 
 
+def write_mcap(path, names, t, q, tau):
+    """/joint_states as a ROS 2 arm logs it (mcap-ros2-support's writer,
+    CDR JointState), stamped from an epoch in integer nanoseconds."""
+    from mcap_ros2.writer import Writer
+
+    from mcap_write import SCHEMA
+
+    with open(path, "wb") as f:
+        w = Writer(f)
+        schema = w.register_msgdef("sensor_msgs/msg/JointState", SCHEMA)
+        for k in range(len(t)):
+            ns = 1_700_000_000_000_000_000 + int(round(t[k] * 1e9))
+            msg = {
+                "header": {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": ""},
+                "name": names,
+                "position": q[k].tolist(),
+                "velocity": [],
+                "effort": tau[k].tolist(),
+            }
+            w.write_message(topic="/joint_states", schema=schema, message=msg, log_time=ns, publish_time=ns)
+        w.finish()
+
+
 def main(urdf, out, case):
     spec = CASES[case]
     if spec.get("gripper"):
@@ -98,6 +123,7 @@ def main(urdf, out, case):
     data = model.createData()
     nq = model.nq
     names = [model.names[i] for i in range(1, model.njoints)]
+    # Seeded by the case's place: new cases go last, so the others keep theirs.
     rng = np.random.default_rng(list(CASES).index(case) + 1)
     f0, harmonics = 0.1, 5
     w = 2 * np.pi * f0 * np.arange(1, harmonics + 1)
@@ -211,6 +237,8 @@ def main(urdf, out, case):
     table = np.column_stack([t, q, tau])
     if spec.get("form") == "txt":
         np.savetxt(f"{out}/excitation.txt", table, fmt="%.9g", delimiter=" ")
+    elif spec.get("form") == "mcap":
+        write_mcap(f"{out}/excitation.mcap", names, t, q, tau)
     else:
         header = ",".join(["time_s"] + [f"{n}_pos_rad" for n in names] + [f"{n}_effort_Nm" for n in names])
         np.savetxt(f"{out}/excitation.csv", table, fmt="%.9g", delimiter=",", header=header, comments="")
