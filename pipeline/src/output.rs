@@ -103,17 +103,21 @@ impl Staging {
         // Every collision with a user's path refused before anything moves.
         let staged = staged_entries(&self.dir, &control)?;
         refuse_collisions(&self.out, &staged, &ours)?;
-        if let (Some(staged), Some(target)) = (&plots, &self.plot) {
-            refuse_collisions(target, &staged_entries(staged, &[])?, &written(target))?;
-        }
+        let pictures = match (&plots, &self.plot) {
+            (Some(staged), Some(target)) => {
+                let (entries, ours) = (staged_entries(staged, &[])?, written(target));
+                refuse_collisions(target, &entries, &ours)?;
+                Some((staged, target, entries, ours))
+            }
+            _ => None,
+        };
         let stale: Vec<String> = listed(&self.out)
             .into_iter()
             .filter(|rel| !self.dir.join(rel).exists())
             .collect();
         record_written(&self.dir, &self.out, &staged, &ours, &stale)?;
-        if let (Some(staged), Some(target)) = (&plots, &self.plot) {
-            let entries = staged_entries(staged, &[])?;
-            record_written(staged, target, &entries, &written(target), &[])?;
+        if let Some((staged, target, entries, ours)) = &pictures {
+            record_written(staged, target, entries, ours, &[])?;
         }
         let plots_swapped = match (&plots, &self.plot) {
             (Some(staged), Some(target)) => exchange(staged, target, &[], &[]),
@@ -229,7 +233,6 @@ fn record_written(
             .filter(|rel| !stale.iter().any(|s| Path::new(s) == rel.as_path()) && target.join(rel).is_file())
             .cloned(),
     );
-    files.remove(Path::new(WRITTEN));
     let text: String = files.iter().map(|f| format!("{}\n", f.display())).collect();
     let path = staged.join(WRITTEN);
     std::fs::write(&path, text).map_err(io(&path))
@@ -246,10 +249,9 @@ fn written(out: &Path) -> std::collections::BTreeSet<PathBuf> {
         .map(Path::to_path_buf)
         .chain(listed(out).into_iter().map(PathBuf::from))
         .collect();
-    if is_manifest(&out.join(MANIFEST)) {
+    if manifest(&out.join(MANIFEST)).is_some() {
         files.insert(PathBuf::from(MANIFEST));
     }
-    files.insert(PathBuf::from(WRITTEN));
     files
 }
 
@@ -438,10 +440,6 @@ fn manifest(path: &Path) -> Option<serde_json::Value> {
     let text = std::fs::read_to_string(path).ok()?;
     let m = serde_json::from_str::<serde_json::Value>(&text).ok()?;
     m["robotid_version"].is_string().then_some(m)
-}
-
-fn is_manifest(path: &Path) -> bool {
-    manifest(path).is_some()
 }
 
 /// Moves a file or folder tree to `to`, file by file (replacing files,
