@@ -499,21 +499,14 @@ fn unheld_locked(
             positions: Default::default(),
         },
     )?;
+    // Written as `[lock]`: the pipeline file's model is this one.
     let locked: Vec<(String, f64)> = locked_model
         .locked
         .iter()
         .filter(|(j, _)| missing.contains(j))
         .cloned()
         .collect();
-    // The pipeline states them as `[lock]`: the same model from its file.
-    let model = robotid_stages::dynamics::load_robot_with(
-        robot,
-        &robotid_stages::dynamics::Locks {
-            keep: None,
-            positions: locked.iter().cloned().collect(),
-        },
-    )?;
-    Ok((model, locked))
+    Ok((locked_model, locked))
 }
 
 /// A design before its period: the recording read, its rate, the filter
