@@ -60,6 +60,10 @@ pub struct Design {
     pub wide_band: bool,
     /// Whole steady periods averaged (0: not periodic).
     pub periods: usize,
+    /// The relative error of the chosen model on held-out periods (fitted
+    /// on the even periods, predicting the odd ones, and the reverse):
+    /// None with fewer than two steady periods.
+    pub held_out_relative: Option<f64>,
     /// The noise floor comes from samples that repeat: two periods or
     /// more, or one and a steady stretch beyond it (1.5 periods between
     /// ramps). Else from one period's non-excited lines, or none.
@@ -99,6 +103,7 @@ impl Design {
             delay_s: None,
             wide_band: false,
             periods: 0,
+            held_out_relative: None,
             repeated: false,
             joint_wise: None,
             period_s: None,
@@ -562,6 +567,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         )
     };
     let mut wide_band = first.map(|d| d.wide_band);
+    let mut held_out_relative = None;
     if own_regressor {
         let (wide, said, choice) = best_band(
             &Scoring {
@@ -579,6 +585,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
             torques_stage.as_ref(),
         )?;
         wide_band = Some(wide);
+        held_out_relative = choice.relative;
         findings.push(("differentiate".into(), said));
         apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
     }
@@ -601,6 +608,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         periodic: true,
         wide_band: wide_band.unwrap_or(false),
         periods: steady_periods,
+        held_out_relative,
         repeated,
         joint_wise: held_at,
         period_s: Some(period),
@@ -1153,8 +1161,10 @@ struct ModelChoice {
     /// prefer it, and why (None: not tried).
     friction: FrictionTerms,
     friction_said: Option<String>,
-    /// The held-out score of the choice (None: fewer than two periods).
+    /// The held-out score of the choice and its relative error (None:
+    /// fewer than two periods).
     score: Option<f64>,
+    relative: Option<f64>,
     /// The relative improvement one choice needs over a simpler one.
     margin: f64,
 }
@@ -1172,6 +1182,7 @@ impl ModelChoice {
             transition_said: "0, sign(q̇): fewer than two steady periods to score another on".into(),
             held_out_said: "not scored: fewer than two steady periods".into(),
             score: None,
+            relative: None,
             friction,
             friction_said: None,
             margin,
@@ -1258,10 +1269,12 @@ fn choose_model(
         transition: Some(pick.0),
         transition_said,
         held_out_said: format!(
-            "{:.3}× the noise floor: fitted on the even periods and scored on the odd ones, and the reverse (per joint: {per_joint})",
-            score.ratio
+            "{:.3}× the noise floor, relative error {:.2} %: fitted on the even periods and scored on the odd ones, and the reverse (per joint: {per_joint})",
+            score.ratio,
+            100.0 * score.relative
         ),
         score: Some(score.ratio),
+        relative: Some(score.relative),
         friction,
         friction_said,
         margin,

@@ -20,6 +20,7 @@ pub mod run;
 pub mod summaries;
 pub mod tables;
 pub mod validation;
+pub mod verdict;
 
 pub use error::{Error, Problems, Result};
 pub use pipeline::{Built, Pipeline, RunReport};

@@ -406,6 +406,14 @@ pub fn html(
     // The verdicts first: is the model adequate where it was fitted, and
     // on every data set shown?
     h.push_str("<h2>Verdicts</h2>\n");
+    // identify's own, first: identified, with its model error and the rule
+    // that decided, or refused and why.
+    if let Some(v) = params.metadata.get(metadata::INADEQUATE) {
+        h.push_str(&format!("<p class=\"warn\"><b>Not identified:</b> {}</p>\n", esc(v)));
+    }
+    if let Some(v) = params.metadata.get(metadata::VERDICT) {
+        h.push_str(&format!("<p><b>identify:</b> {}</p>\n", esc(v)));
+    }
     let set_stats = verdicts_html(&mut h, params, sets, physical)?;
     if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
         h.push_str(&bodies_html(&ph.bodies));

@@ -105,10 +105,14 @@ pub const IMPOSSIBLE: &str = "robotid.estimate.impossible";
 pub const ADEQUACY: &str = "robotid.estimate.adequacy";
 /// Present when the covariance was widened by the excess residual variance
 /// of the joints where model error dominates: which joints, and why.
-/// Set by `robotid identify --accept-inadequate` on a fit whose residue
-/// is over 3× the noise floor: the joints, their ratios and the causes it
+/// Set by `robotid identify` on a fit it refuses (written with
+/// `--accept-inadequate`, or marked in the refused folder): the cause it
 /// measured. Intervals of such a table are not at their nominal level.
 pub const INADEQUATE: &str = "robotid.identify.inadequate";
+/// identify's verdict on the fit, one paragraph: adequate, or the model
+/// error per joint as a share of the torque, with the rule and the
+/// relative error that decided (`robotid::verdict`).
+pub const VERDICT: &str = "robotid.identify.verdict";
 pub const WIDENED: &str = "robotid.estimate.covariance_widened";
 /// Base parameters whose standard deviation exceeds their a-priori size
 /// (robot file), with both.

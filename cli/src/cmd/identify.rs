@@ -25,12 +25,22 @@ pub struct Args {
     #[arg(long)]
     pub print_pipeline: bool,
     /// Write the estimate, its physical fit and the exports even when the
-    /// fit's residue is over 3× the noise floor on some joint (the tables
-    /// are marked `robotid.identify.inadequate`); without it identify
-    /// writes the estimate and the report marked so, no export, and exits
-    /// with code 3.
+    /// fit is refused (the tables are marked `robotid.identify.inadequate`);
+    /// without it a refused fit gives the estimate and the report marked
+    /// so, no export, and exit code 3.
     #[arg(long)]
     pub accept_inadequate: bool,
+    /// The held-out relative error refused above, % of the measured torque
+    /// (measured on the --validate recordings, else on held-out periods,
+    /// else in sample). Under it a fit whose residue is above the noise
+    /// floor is identified with its model error said per joint; a friction
+    /// the model lacks, measured, is refused whatever the tolerance.
+    #[arg(long, default_value_t = 100.0 * robotid::verdict::DEFAULT_TOLERANCE, value_name = "PERCENT")]
+    pub tolerance: f64,
+    /// Refuse any fit whose residue is over 3× the noise floor on a joint:
+    /// for simulated and regression data, whose model is exact.
+    #[arg(long)]
+    pub strict: bool,
     /// Where the channels are, for every recording: a TOML file with a
     /// `[read]` table as in a pipeline file (columns by name or number,
     /// units, `header`, `separator`, `torque_per_amp`; docs/pipeline-file.md).
@@ -42,11 +52,6 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', num_args = 1.., allow_negative_numbers = true)]
     pub torque_per_amp: Vec<f64>,
 }
-
-/// A fit whose residue is over this many times the noise floor on some
-/// joint is not identified: the model, the declarations or the channels
-/// disagree with the data.
-pub const REFUSE_RATIO: f64 = 3.0;
 
 /// The exit code of an identification refused as inadequate.
 pub const INADEQUATE_EXIT: u8 = 3;
@@ -62,16 +67,6 @@ impl std::fmt::Display for Inadequate {
 }
 
 impl std::error::Error for Inadequate {}
-
-/// The joints whose fit residue is over [`REFUSE_RATIO`]× the noise floor,
-/// with their ratios.
-fn over_floor(est: &robotid_stages::estimation::Estimate) -> Vec<(String, f64)> {
-    est.adequacy
-        .iter()
-        .filter_map(|a| Some((a.joint.clone(), a.ratio()?)))
-        .filter(|(_, r)| !(*r <= REFUSE_RATIO))
-        .collect()
-}
 
 /// The process working inside a folder until dropped, then back where it
 /// was (before the commit: a folder is not exchanged under a process that
@@ -234,14 +229,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let joined = |ts: &[PathBuf]| ts.iter().map(|t| rel(t)).collect::<Vec<_>>().join(" ");
 
     let parameters = work.join("parameters.parquet");
-    // Over 3× the noise floor on a joint: the joints, their ratios and what
-    // identify measured on the way, for the table and the message.
+    // What identify measured on the way, said with a refusal.
     let causes: String = designs[0]
         .findings
         .iter()
         .filter(|(k, _)| {
             [
                 "inverse_filter",
+                "effort_delay",
                 "differentiate",
                 "coulomb_transition_rad_s",
                 "friction",
@@ -251,19 +246,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })
         .map(|(k, v)| format!("\n  {k}: {v}"))
         .collect();
-    let verdict = |est: &robotid_stages::estimation::Estimate| -> Option<String> {
-        let bad = over_floor(est);
-        (!bad.is_empty()).then(|| {
-            format!(
-                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {}: the model, a declaration or a channel disagrees with the data. Most likely causes, as measured: an anti-alias filter other than the one undone, a channel scaled, reversed or in other units, friction other than viscous + Coulomb, or joints held by brakes or a gripper the robot file does not have. What identify found:{causes}",
-                bad.iter().map(|(j, r)| format!("{j} ({r:.1}×)")).collect::<Vec<_>>().join(", ")
-            )
-        })
+    let policy = robotid::verdict::Policy {
+        tolerance: args.tolerance / 100.0,
+        strict: args.strict,
+    };
+    // The rows the verdict reads: the identification's (its residue by
+    // speed) and the validation's (the held-out relative error).
+    let id_rows = robotid::tables::load_system(id_tables)?;
+    let val_rows = (!val_tables.is_empty())
+        .then(|| robotid::tables::load_system(val_tables))
+        .transpose()?;
+    // Held-out periods of every identification recording, pooled by their
+    // worst; none where a recording has fewer than two steady periods.
+    let periods_relative = designs[..ident.len()]
+        .iter()
+        .map(|d| d.held_out_relative)
+        .collect::<Option<Vec<f64>>>()
+        .map(|r| r.into_iter().fold(0.0, f64::max));
+    let judged = std::cell::OnceCell::new();
+    let judge = |est: &robotid_stages::estimation::Estimate| -> robotid::verdict::Verdict {
+        use robotid::verdict::Measured;
+        let held_out = match &val_rows {
+            Some(v) if v.names == est.names => {
+                let residue = &v.b - &v.a * &est.values;
+                Some((
+                    (residue.norm_squared() / v.b.norm_squared()).sqrt(),
+                    Measured::Validation,
+                ))
+            }
+            _ => periods_relative.map(|r| (r, Measured::HeldOutPeriods)),
+        };
+        robotid::verdict::judge(policy, est, &id_rows, held_out)
     };
     let mark = |o: &robotid_stages::stage::estimate::Outcome| {
-        verdict(&o.estimate)
-            .map(|v| vec![(robotid_schemas::metadata::INADEQUATE.to_string(), v)])
-            .unwrap_or_default()
+        let v = judged.get_or_init(|| judge(&o.estimate));
+        let mut md = vec![(robotid_schemas::metadata::VERDICT.to_string(), v.said())];
+        if let Some(why) = &v.refused {
+            md.push((robotid_schemas::metadata::INADEQUATE.to_string(), why.clone()));
+        }
+        md
     };
     // A floor from one period's non-excited lines (nothing repeats to take
     // it from) may hold real content or miss noise: said with the refusal.
@@ -275,11 +296,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let reducer = super::estimate::reducer(&ols_args)?;
     let parts = robotid::tables::parts(&reducer, id_tables)?;
     let ols = robotid::tables::reduce(&reducer, &parts, &parameters, Some(&mark))?;
-    let inadequate = verdict(&ols.estimate).map(|v| {
-        if reliable {
-            v
+    let verdict = judged.get_or_init(|| judge(&ols.estimate));
+    let inadequate = verdict.refused.as_ref().map(|why| {
+        let why = format!("{why}. What identify found:{causes}");
+        if reliable || verdict.over_floor().is_empty() {
+            why
         } else {
-            format!("{v}\n(the noise floor comes from the non-excited lines of a single steady period, not from the spread of several: the start of the record may not be steady; record two whole periods or more)")
+            format!("{why}\n(the noise floor comes from the non-excited lines of a single steady period, not from the spread of several: the start of the record may not be steady; record two whole periods or more)")
         }
     });
     // Not periodic: no floor to judge the fit against, which is said.
@@ -299,6 +322,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let level = if inadequate.is_some() { None } else { Some(0.95) };
     print!("{}", super::estimate::summary_at(&ols.estimate, 0.95, level));
     print!("{}", super::estimate::findings(&ols));
+    println!("verdict: {}", verdict.said());
     println!("parameters in {}", out.join("parameters.parquet").display());
     writeln!(
         script,
@@ -348,6 +372,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
         Ok(())
     };
+    if let (Some(why), true) = (&inadequate, args.accept_inadequate) {
+        println!("refused, written anyway (--accept-inadequate): {why}");
+    }
     if let Some(why) = inadequate.filter(|_| !args.accept_inadequate) {
         report(&mut script, false)?;
         let sh = work.join("identify.sh");

@@ -62,6 +62,9 @@ pub struct Score {
     pub ratio: f64,
     /// The same per joint (NaN for a joint whose rows do not enter).
     pub per_joint: Vec<f64>,
+    /// The held-out relative error: the held-out residue's energy over the
+    /// measured torque's, square-rooted, pooled over the joints.
+    pub relative: f64,
     /// The parameters fitted on all periods.
     pub theta: DVector<f64>,
 }
@@ -370,12 +373,14 @@ impl LineSystem {
     pub fn score(&self, h: &[Complex64]) -> Option<Score> {
         let (ratio, g, r, theta) = self.held_out(h)?;
         let n = self.samples as f64;
-        let per_joint = (0..self.joints)
+        // Per joint: its ratio, and its held-out residue's and measured
+        // torque's energy (for the relative error).
+        let joints: Vec<(f64, f64, f64)> = (0..self.joints)
             .map(|j| {
                 if self.weight[j] == 0.0 {
-                    return f64::NAN;
+                    return (f64::NAN, 0.0, 0.0);
                 }
-                let mut ratio = 0.0;
+                let (mut ratio, mut residue, mut measured) = (0.0, 0.0, 0.0);
                 for (fit, on) in [(0, 1), (1, 0)] {
                     let t = &theta[fit];
                     let mut rss = 0.0;
@@ -384,19 +389,25 @@ impl LineSystem {
                         for c in 0..self.cols {
                             p += self.columns[(j * self.cols + c) * self.lines + l] * t[c];
                         }
-                        rss += multiplicity(l, self.samples) * (self.torque[on][j][l] - h[l] * p).norm_sqr();
+                        let m = multiplicity(l, self.samples);
+                        rss += m * (self.torque[on][j][l] - h[l] * p).norm_sqr();
+                        measured += m * self.torque[on][j][l].norm_sqr();
                     }
                     let floor = self.band_samples * n / (self.weight[j] * self.periods[on] as f64);
                     ratio += 0.5 * rss / floor;
+                    residue += rss;
                 }
-                ratio
+                (ratio, residue, measured)
             })
             .collect();
+        let per_joint = joints.iter().map(|j| j.0).collect();
+        let (residue, measured) = joints.iter().fold((0.0, 0.0), |(r, m), j| (r + j.1, m + j.2));
         let total = (&r[0] * self.periods[0] as f64 + &r[1] * self.periods[1] as f64)
             / (self.periods[0] + self.periods[1]) as f64;
         Some(Score {
             ratio,
             per_joint,
+            relative: (residue / measured).sqrt(),
             theta: solve_scaled(&g, &total)?,
         })
     }
