@@ -101,7 +101,11 @@ impl Stage for Noise {
                 .notes
                 .push(format!("noise: per-sample variances from the {how}"));
         }
-        for c in &summary {
+        // One period's non-excited lines hold the dynamics' own harmonics
+        // (the Coulomb steps'), strongest low in the band: their tilt says
+        // nothing of the filter.
+        let periods = chain.periods()?.periods;
+        for c in summary.iter().filter(|_| periods >= 2) {
             let Some(r) = c.band_edge_ratio.filter(|_| c.band_edge_tilted) else {
                 continue;
             };
@@ -215,7 +219,7 @@ fn noise_metadata(
             "time_domain".to_string()
         } else if let Some(periods) = stretch {
             format!(
-                "repeat for torques (half the mean square difference of the steady stretch of {periods:.2} periods and itself one period on, its windows within 4× the median's); fit_residual for positions (least-squares Fourier fit over the stretch)",
+                "repeat for torques (half the mean square difference of the steady stretch of {periods:.2} periods and itself one period on, its windows within 4× the lower quartile's); fit_residual for positions (least-squares Fourier fit over the stretch)",
             )
         } else {
             "frequency_domain (one period)".to_string()
@@ -247,9 +251,12 @@ fn stretch_variances(p: &Periods, s: &Stretch, harmonics: &[u32]) -> (Vec<Vec<f6
 
 /// The per-sample noise variance of `x`, whose samples repeat `n` later
 /// over its last `len − n`: half the mean square difference, over the
-/// windows (a twentieth of the overlap) within 4× the median window's. The
-/// ends of a steady stretch can hold a ramp whose positions repeat within
-/// the tolerance but whose torques do not; the windows leave them out.
+/// windows (a twentieth of the overlap) within 4× the lower quartile's.
+/// The ends of a steady stretch can hold a ramp or a start-up transient
+/// whose positions repeat within the tolerance but whose torques do not,
+/// over half the overlap when the stretch is short: the quartile, not the
+/// median, stays with the windows that hold noise alone (each within ±9 %
+/// of their mean over 250 samples), and leaves those out.
 fn repeat_variance(x: &[f64], n: usize) -> f64 {
     let overlap = x.len().saturating_sub(n);
     if overlap == 0 {
@@ -269,7 +276,7 @@ fn repeat_variance(x: &[f64], n: usize) -> f64 {
         .collect();
     let mut sorted = windows.clone();
     sorted.sort_by(f64::total_cmp);
-    let limit = 4.0 * sorted[sorted.len() / 2];
+    let limit = 4.0 * sorted[sorted.len() / 4];
     let kept: Vec<f64> = windows.into_iter().filter(|&v| v <= limit).collect();
     0.5 * kept.iter().sum::<f64>() / kept.len() as f64
 }
