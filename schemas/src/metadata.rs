@@ -66,6 +66,10 @@ pub const DIFFERENTIATION: &str = "robotid.differentiation";
 /// low-pass lets through (the mean of |H|⁴ up to Nyquist): a record that
 /// does not repeat is judged against the excitation's floor times it.
 pub const TORQUE_NOISE_GAIN: &str = "robotid.torque_noise_gain";
+/// A band-limited regressor's share of one period's lines (2k + 1 of N):
+/// white noise keeps that share of its variance in the band, and the
+/// columns lie in it, so a covariance from the residual divides by it.
+pub const BAND_NOISE_SHARE: &str = "robotid.regressor.band_noise_share";
 /// Defaults a stage chose where the pipeline file is silent, with why.
 pub const DEFAULTS: &str = "robotid.defaults";
 /// Prefix of what `robotid identify` inferred from the data (`[inferred]`

@@ -59,6 +59,12 @@ CASES = {
     ),
     # The gripper case as a ROS 2 bag: JointState messages naming the arm's joints.
     "gripper_mcap": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=5, gripper=True, form="mcap"),
+    # Torque sensors at 1 kHz, no anti-alias filter, 1.6 periods between a
+    # ramp-up and a ramp-down, the position loop's tracking error on the
+    # motion, logged as headerless whitespace text.
+    "sensors_1k_1p6": dict(
+        filter=None, friction="sign", periods=1.6, ramp_in=3.0, ramp_out=3.0, fs=1000.0, tracking=2e-4, form="txt"
+    ),
 }
 
 # What "gripper" adds to the URDF: a revolute gripper on tool0 and a
@@ -149,7 +155,8 @@ def main(urdf, out, case):
     held = [j for j in range(nq) if j not in moving]
     a[held], b[held] = 0.0, 0.0
     total = pre + ramp_in + spec["periods"] * period + ramp_out + rest
-    t = np.arange(int(round(total * FS * FINE))) / (FS * FINE)
+    fs = spec.get("fs", FS)
+    t = np.arange(int(round(total * fs * FINE))) / (fs * FINE)
     # The excitation starts at full phase when the ramp-in ends; before it,
     # it is faded in by a smooth window, after the periods faded out.
     q, qd, qdd = excitation(t - pre - ramp_in)
@@ -175,6 +182,19 @@ def main(urdf, out, case):
         g[:, None] * qd + gd[:, None] * q,
         g[:, None] * qdd + 2 * gd[:, None] * qd + gdd[:, None] * q,
     )
+    if spec.get("tracking"):
+        # The position loop's tracking error: periodic (the reference is),
+        # spread over harmonics 6-60 (0.6-6 Hz) and falling with them, near
+        # the encoder's count at the top.
+        hs = np.arange(6, 61)
+        amp = spec["tracking"] * 6.0 / hs * rng.uniform(0.5, 1.0, (nq, len(hs)))
+        phase = rng.uniform(0, 2 * np.pi, (nq, len(hs)))
+        x = t - pre - ramp_in
+        arg = 2 * np.pi * f0 * np.multiply.outer(x, hs)[:, None, :] + phase[None]
+        wh = 2 * np.pi * f0 * hs
+        q = q + g[:, None] * (amp * np.sin(arg)).sum(axis=2)
+        qd = qd + g[:, None] * (amp * wh * np.cos(arg)).sum(axis=2)
+        qdd = qdd - g[:, None] * (amp * wh**2 * np.sin(arg)).sum(axis=2)
     if spec.get("transient"):
         # The loop rings at the start: 2 Hz, decaying in 1 s, on every joint.
         x = np.clip(t - pre, 0, None)
@@ -206,7 +226,7 @@ def main(urdf, out, case):
     if held:
         # A stiff position loop (5000 N·m/rad) holds them: they sag by the
         # change of their gravity load as the moving joint swings.
-        start = int(round(pre * FS * FINE))
+        start = int(round(pre * fs * FINE))
         q[:, held] -= (tau[:, held] - tau[start, held]) / 5000.0
     filt = None
     if spec["filter"]:
@@ -244,13 +264,13 @@ def main(urdf, out, case):
         np.savetxt(f"{out}/excitation.csv", table, fmt="%.9g", delimiter=",", header=header, comments="")
     truth = dict(
         joints=names,
-        fs_hz=FS,
+        fs_hz=fs,
         f0_hz=f0,
         harmonics=harmonics,
         periods=spec["periods"],
         ramp_in_s=ramp_in,
         premove_s=premove,
-        effort_delay_s=spec.get("delay", 0.0) / FS,
+        effort_delay_s=spec.get("delay", 0.0) / fs,
         ramp_out_s=ramp_out,
         rest_s=rest,
         moving=[names[j] for j in moving],

@@ -436,7 +436,17 @@ impl Summary {
             }
             (cov, dof)
         } else {
-            (inverse_normal * residual_variance, dof)
+            // Band-limited rows (one period: nothing repeats to take the
+            // spread from) hold the band's share of white noise, the
+            // columns all of their part in it: Cov θ = σ²·(AᵀA)⁻¹ with σ²
+            // the noise's whole variance, the residual's over that share.
+            let share = self
+                .metadata
+                .get(robotid_schemas::metadata::BAND_NOISE_SHARE)
+                .and_then(|s| s.parse::<f64>().ok())
+                .filter(|s| *s > 0.0 && *s <= 1.0)
+                .unwrap_or(1.0);
+            (inverse_normal * (residual_variance / share), dof)
         }
     }
 }

@@ -128,9 +128,12 @@ impl Component for RegressorConfig {
     }
 
     fn reads_periods(&self) -> PeriodsUse {
-        match self.projection {
-            Some(_) => PeriodsUse::All,
-            None => PeriodsUse::Torque,
+        // A projection reads the positions; a band limit, where a steady
+        // stretch lies against the kept period (`kept_period`).
+        if self.projection.is_some() || self.band_limit_hz.is_some() {
+            PeriodsUse::All
+        } else {
+            PeriodsUse::Torque
         }
     }
 
@@ -219,6 +222,23 @@ pub struct Regressor {
 impl Stage for Regressor {
     fn run(&self, chain: &mut Chain) -> Result<()> {
         let kin = chain.kinematics()?;
+        // A Fourier fit over a steady stretch of one period and more: with
+        // a band limit, its period at the kept one's phase, whose torque
+        // is whole (the stretch's is inverse-filtered approximately near
+        // its ends).
+        let kept;
+        let kin = match chain.periods.as_ref() {
+            Some(p) if self.cfg.band_limit_hz.is_some() && p.samples_per_period != kin.time.len() => {
+                match kept_period(kin, p) {
+                    Some(k) => {
+                        kept = k;
+                        &kept
+                    }
+                    None => kin,
+                }
+            }
+            _ => kin,
+        };
         let one_period = chain
             .periods
             .as_ref()
@@ -246,6 +266,7 @@ impl Stage for Regressor {
             )),
             None => None,
         };
+        let samples = kin.time.len() as f64;
         let mut rows = regressor_rows(
             kin,
             chain.noise.as_ref(),
@@ -257,6 +278,13 @@ impl Stage for Regressor {
             &chain.name,
             chain.lean,
         )?;
+        if let Some((b, period)) = band {
+            let lines = 2.0 * (b * period).floor() + 1.0;
+            rows.metadata.insert(
+                metadata::BAND_NOISE_SHARE.into(),
+                format!("{:e}", (lines / samples).min(1.0)),
+            );
+        }
         chain.report.notes.push(format!(
             "regressor: {} rows, {} base parameters, condition number {:.3e} (column-normalised)",
             rows.system.rows(),
@@ -276,6 +304,31 @@ impl Stage for Regressor {
         chain.regressor = Some(rows);
         Ok(())
     }
+}
+
+/// Of kinematics fitted over the steady stretch of `p` (one kept period),
+/// the kept period: the fit is periodic, so its samples from the kept
+/// period's start on are that period's, with the kept period's torque.
+fn kept_period(kin: &Kinematics, p: &crate::stage::Periods) -> Option<Kinematics> {
+    let s = p.stretch.as_ref().filter(|_| p.periods == 1)?;
+    let n = p.samples_per_period;
+    let from = ((p.start_s - s.start_s) * p.sample_rate_hz()).round();
+    if !(from >= 0.0) || from as usize + n > kin.time.len() {
+        return None;
+    }
+    let from = from as usize;
+    let cut = |c: &[Vec<f64>]| c.iter().map(|v| v[from..from + n].to_vec()).collect::<Vec<_>>();
+    let mut metadata = kin.metadata.clone();
+    metadata.insert(metadata::PERIOD_START_S.into(), p.start_s.to_string());
+    Some(Kinematics {
+        joints: kin.joints.clone(),
+        time: kin.time[..n].to_vec(),
+        q: cut(&kin.q),
+        qd: cut(&kin.qd),
+        qdd: cut(&kin.qdd),
+        torque: Some(p.torque.clone()),
+        metadata,
+    })
 }
 
 /// The measured torques against the robot file's prediction for the same
