@@ -329,7 +329,13 @@ fn verdicts_html(
 /// The parameters, rounded to their uncertainty, with their intervals.
 fn parameters_html(h: &mut String, params: &Parameters, expressions: &[String], level: f64, t: f64) {
     h.push_str("<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th>");
-    h.push_str(&format!("<th>{:.1} % interval</th><th>unit</th></tr>\n", 100.0 * level));
+    // A fit identify refused has intervals of no known level.
+    let header = if params.metadata.contains_key(metadata::INADEQUATE) {
+        "interval (level unknown: not identified)".to_string()
+    } else {
+        format!("{:.1} % interval", 100.0 * level)
+    };
+    h.push_str(&format!("<th>{header}</th><th>unit</th></tr>\n"));
     for i in 0..params.names.len() {
         let (v, s) = (params.values[i], params.std[i]);
         let (value, std) = rounded(v, s);
