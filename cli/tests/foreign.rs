@@ -589,7 +589,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
     // Hz for 30, wrists 1.4–1.7× the floor, 41 of 54 within 2 std: held to
     // 1.8× and 75 %); a start-up transient before 1.5 periods identified
     // (its floor taken from a stretch the transient's torque is in: the
-    // ratios under 0.5×).
+    // ratios under 0.5×, which the verdict says cannot judge the fit).
     let refused = ["stribeck"];
     let short = |case: &str| case == "ramps_1p5";
     for case in [
@@ -651,6 +651,12 @@ fn the_foreign_corpus_is_identified_or_refused() {
             assert!(
                 said.contains("a friction the model lacks is measured"),
                 "{case}: the cause is named:\n{said}"
+            );
+        }
+        if case == "transient_1p5" {
+            assert!(
+                said.contains("holds more than noise"),
+                "{case}: a floor over the fit's residue is said:\n{said}"
             );
         }
         if case.starts_with("gripper") {

@@ -27,6 +27,10 @@ pub const DEFAULT_TOLERANCE: f64 = 0.05;
 /// model error: 4–29 %; a white residue: under 4 %.)
 pub const FRICTION_SHARE: f64 = 0.5;
 
+/// A fit's residue under this share of the noise floor: the floor is
+/// suspect ([`Verdict::floor_suspect`]).
+pub const SUSPECT_RATIO: f64 = 0.5;
+
 /// The speeds (rad/s or m/s) below which the static-friction shapes tried
 /// fade: Stribeck velocities of real drives span them.
 const STRIBECK_SPEEDS: [f64; 4] = [0.01, 0.03, 0.1, 0.3];
@@ -112,8 +116,35 @@ impl Verdict {
             .collect()
     }
 
+    /// The joints whose noise floor is over twice the fit's residue: no
+    /// fit of a few parameters to thousands of rows beats the noise so;
+    /// the floor holds more than noise (a transient or a ramp in the
+    /// stretch it came from) and cannot judge the fit there.
+    pub fn floor_suspect(&self) -> Vec<&JointFigures> {
+        self.joints
+            .iter()
+            .filter(|j| j.ratio.is_some_and(|r| r < SUSPECT_RATIO))
+            .collect()
+    }
+
     /// What the verdict says, one paragraph (refused or not).
     pub fn said(&self) -> String {
+        let suspect = self.floor_suspect();
+        if suspect.is_empty() {
+            return self.judged();
+        }
+        format!(
+            "{}; the noise floor is over twice the fit's residue on {}: it holds more than noise (a transient or a ramp in the stretch it came from) and cannot judge the fit there",
+            self.judged(),
+            suspect
+                .iter()
+                .map(|j| format!("{} ({:.2}×)", j.joint, j.ratio.unwrap_or(f64::NAN)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    }
+
+    fn judged(&self) -> String {
         let (rel, measured) = self.relative;
         let rule = if self.policy.strict {
             format!("--strict: refused over {REFUSE_RATIO}× the noise floor on any joint")
@@ -347,6 +378,12 @@ mod tests {
         let said = verdict(lax, 50.0, None, 0.02).said();
         assert!(
             said.starts_with("model error dominates: j1 3.00 % (50.0× the floor)"),
+            "{said}"
+        );
+        assert!(!said.contains("more than noise"), "{said}");
+        let said = verdict(lax, 0.3, None, 0.02).said();
+        assert!(
+            said.starts_with("adequate") && said.contains("twice the fit's residue on j1 (0.30×)"),
             "{said}"
         );
     }
