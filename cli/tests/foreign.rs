@@ -580,8 +580,6 @@ fn the_foreign_corpus_is_identified_or_refused() {
     };
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/foreign_corpus.py");
     let tmp = tempfile::tempdir().unwrap();
-    let mut summary = Vec::new();
-    let mut pooled = (0, 0);
     // Refused: a friction the model lacks. Fewer than two periods are
     // scored on the steady stretch's first and last whole periods: 1.6
     // periods between ramps from torque sensors at 1 kHz identified; 1.5
@@ -592,7 +590,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
     // ratios under 0.5×, which the verdict says cannot judge the fit).
     let refused = ["stribeck"];
     let short = |case: &str| case == "ramps_1p5";
-    for case in [
+    let cases = [
         "butter4_20",
         "bessel6_40",
         "cheby1_6_25",
@@ -610,7 +608,10 @@ fn the_foreign_corpus_is_identified_or_refused() {
         "jointwise_premove",
         "transient_1p5",
         "sensors_1k_1p6",
-    ] {
+    ];
+    // One case: what the summary says of it, and its (within, of) when
+    // identified.
+    let one = |case: &str| -> (String, Option<(usize, usize)>) {
         let dir = tmp.path().join(case);
         std::fs::create_dir_all(&dir).unwrap();
         let made = Command::new(robotid_tests::python())
@@ -674,8 +675,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
         if refused.contains(&case) {
             assert_eq!(o.status.code(), Some(3), "{case}: not refused:\n{said}");
             assert!(worst > 3.0 && said.contains("not identified"), "{case}:\n{said}");
-            summary.push(format!("{case}: refused, worst {worst:.2}×"));
-            continue;
+            return (format!("{case}: refused, worst {worst:.2}×"), None);
         }
         assert_eq!(o.status.code(), Some(0), "{case}: not identified:\n{said}");
         assert!(
@@ -724,12 +724,12 @@ fn the_foreign_corpus_is_identified_or_refused() {
         let within = (0..p.names.len())
             .filter(|&i| ((p.values[i] - truth[i]) / p.std[i]).abs() <= 2.0)
             .count();
-        summary.push(format!(
+        let line = format!(
             "{case}: identified, {within}/{} within 2 std, worst {worst:.2}×, delay {:.3} samples (truth {:.3})",
             p.names.len(),
             found * fs,
             late * fs
-        ));
+        );
         // Per case ≥ 85 %; a decoupled model's 6 parameters may have one
         // outside (with 95 % intervals, two or more outside happen 3 % of
         // the time, one 23 %).
@@ -742,9 +742,29 @@ fn the_foreign_corpus_is_identified_or_refused() {
             (0.85 * n as f64).ceil() as usize
         };
         assert!(within >= needed, "{case}: {within} of {n} within 2 std:\n{said}");
-        pooled.0 += within;
-        pooled.1 += n;
-    }
+        (line, Some((within, n)))
+    };
+    // Two cases at a time (each a Python generator, then identify): the
+    // corpus is most of this binary's time.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let done = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                let Some(case) = cases.get(i) else { break };
+                let outcome = one(case);
+                done.lock().unwrap().push((i, outcome));
+            });
+        }
+    });
+    let mut done = done.into_inner().unwrap();
+    done.sort_by_key(|d| d.0);
+    let mut summary: Vec<String> = done.iter().map(|d| d.1 .0.clone()).collect();
+    let pooled = done
+        .iter()
+        .filter_map(|d| d.1 .1)
+        .fold((0, 0), |a, (w, n)| (a.0 + w, a.1 + n));
     // Pooled over the cases identified: the intervals hold the truth about
     // as often as 95 % intervals should, and are not bought by inflation
     // (at most 99 % within 2 std).
