@@ -970,8 +970,11 @@ fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) -> Result<(
     // predicts held-out periods better by the score's spread; with
     // fewer than two periods nothing can be scored, and the wider band
     // keeps whatever motion the torques show.
-    let pick = match tried.iter().map(|t| t.2.score).collect::<Option<Vec<f64>>>() {
-        Some(scores) if scores.len() == 2 => usize::from(scores[1] < scores[0] * (1.0 - tried[1].2.margin)),
+    // A band whose scores were not taken (a steady stretch's two periods
+    // far apart under it) loses to one that was scored.
+    let pick = match (tried.first().and_then(|t| t.2.score), tried.get(1).map(|t| t.2.score)) {
+        (Some(a), Some(Some(b))) => usize::from(b < a * (1.0 - tried[1].2.margin)),
+        (Some(_), Some(None)) => 0,
         _ => tried.len() - 1,
     };
     let scores: String = tried

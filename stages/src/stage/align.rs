@@ -492,6 +492,37 @@ fn steady_stretch(
     }
 }
 
+/// A stretch's ends, moved in past a ramp's last part: within the steady
+/// tolerance, its positions still differ from themselves a period on, and
+/// a Fourier fit over the stretch takes the ramp's accelerations for the
+/// periodic motion's (1.5 periods between 0.5 s ramps: 1.4-1.7x the noise
+/// floor on the wrists with 0.2 s of ramp in the stretch, 0.85-1.05x
+/// without). The ends are where runs of 16 samples differ within 4x the
+/// stretch's median run, or within 0.1 % of the positions' spread.
+fn settled_ends(q: &[&[f64]], (from, to): (usize, usize), n: usize, scale: f64) -> (usize, usize) {
+    const RUN: usize = 16;
+    if to < from + n + RUN {
+        return (from, to);
+    }
+    let d: Vec<f64> = (from..to - n)
+        .map(|k| q.iter().map(|c| (c[k] - c[k + n]).powi(2)).sum::<f64>())
+        .collect();
+    let runs: Vec<f64> = d.windows(RUN).map(|w| w.iter().sum::<f64>() / RUN as f64).collect();
+    let mut sorted = runs.clone();
+    sorted.sort_by(f64::total_cmp);
+    let floor = q.len() as f64 * (1e-3 * scale).powi(2);
+    let limit = (4.0 * sorted[sorted.len() / 2]).max(floor);
+    match (
+        runs.iter().position(|r| *r <= limit),
+        runs.iter().rposition(|r| *r <= limit),
+    ) {
+        // The last run compared ends at from + last + RUN − 1; its
+        // partner a period on is the stretch's last sample.
+        (Some(first), Some(last)) => (from + first, (from + last + RUN + n).min(to)),
+        _ => (from, to),
+    }
+}
+
 /// How far each kept period's positions are from the last one's (RMS,
 /// relative to the positions' spread `scale`): drift or a transient.
 fn period_change(q: &[&[f64]], from: usize, kept: usize, n: usize, scale: f64) -> Vec<f64> {
@@ -607,7 +638,7 @@ fn align_all(raw: &RawSamples, cfg: &AlignConfig, source: &str) -> Result<Period
     let Steady { from, to, kept, .. } = steady;
     report.transient_periods = whole - kept;
     report.period_change = period_change(&q, from, kept, n, scale);
-    let stretch = short_stretch(&q, &torque, &steady, (n, grid0, dt), &mut report.notes);
+    let stretch = short_stretch(&q, &torque, &steady, (n, grid0, dt, scale), &mut report.notes);
     let keep = |c: Vec<&[f64]>| c.par_iter().map(|v| v[from..to].to_vec()).collect::<Vec<_>>();
     let start = grid0 + from as f64 * dt;
     report.dropped_s = start - t[0];
@@ -642,11 +673,18 @@ fn short_stretch(
     q: &[&[f64]],
     torque: &[&[f64]],
     steady: &Steady,
-    (n, grid0, dt): (usize, f64, f64),
+    (n, grid0, dt, scale): (usize, f64, f64, f64),
     notes: &mut Vec<String>,
 ) -> Option<Stretch> {
     let kept = steady.kept;
-    let (steady_from, steady_to) = steady.stretch;
+    // Never past the kept period: the stretch holds it.
+    let (steady_from, steady_to) = match kept {
+        1 => {
+            let (a, b) = settled_ends(q, steady.stretch, n, scale);
+            (a.min(steady.from), b.max(steady.to))
+        }
+        _ => steady.stretch,
+    };
     let stretch = (kept < 2 && steady_to - steady_from >= kept * n + n / 10).then(|| {
         let cut = |c: &[&[f64]]| c.iter().map(|v| v[steady_from..steady_to].to_vec()).collect::<Vec<_>>();
         notes.push(format!(
