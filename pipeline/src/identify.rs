@@ -967,11 +967,10 @@ fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) -> Result<(
         tried.push((wide, said.clone(), choice));
     }
     // The Fourier fit or the positions' band unless the torques' band
-    // predicts held-out periods better by the score's spread; with
-    // fewer than two periods nothing can be scored, and the wider band
-    // keeps whatever motion the torques show.
-    // A band whose scores were not taken (a steady stretch's two periods
-    // far apart under it) loses to one that was scored.
+    // predicts held-out periods better by the score's spread; a band
+    // whose scores were not taken (a steady stretch's two periods far
+    // apart under it) loses to one that was; with nothing scored (one
+    // period alone) the wider band keeps whatever motion the torques show.
     let pick = match (tried.first().and_then(|t| t.2.score), tried.get(1).map(|t| t.2.score)) {
         (Some(a), Some(Some(b))) => usize::from(b < a * (1.0 - tried[1].2.margin)),
         (Some(_), Some(None)) => 0,

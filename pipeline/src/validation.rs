@@ -44,6 +44,20 @@ impl JointResidue {
     }
 }
 
+/// The relative error pooled over every row of `stats`:
+/// √(Σ squared residue / Σ squared torque); joints without rows (a
+/// joint-wise record's held ones) add nothing.
+pub fn relative_error(stats: &[JointResidue]) -> f64 {
+    let sum = |f: &dyn Fn(&JointResidue) -> f64| {
+        stats
+            .iter()
+            .filter(|r| r.rows > 0)
+            .map(|r| r.rows as f64 * f(r))
+            .sum::<f64>()
+    };
+    (sum(&|r| r.msr) / sum(&|r| r.measured_rms.powi(2))).sqrt()
+}
+
 /// Residue statistics per joint of `sys` for torques `predicted`.
 pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
     let residue = &sys.b - predicted;

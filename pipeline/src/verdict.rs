@@ -14,6 +14,8 @@ use nalgebra::{DMatrix, DVector};
 use robotid_stages::dynamics::ParameterKind;
 use robotid_stages::estimation::{Estimate, System};
 
+use crate::validation;
+
 /// `strict`: a fit whose residue is over this many times the noise floor
 /// on some joint is refused.
 pub const REFUSE_RATIO: f64 = 3.0;
@@ -179,34 +181,35 @@ impl Verdict {
 /// with the relative error measured on held-out data where there is some
 /// (`held_out`: pooled, and where); else in sample.
 pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64, Measured)>) -> Verdict {
-    let residue = &sys.b - &sys.a * &est.values;
-    let mut joints = Vec::new();
-    let (mut residue_energy, mut measured_energy) = (0.0, 0.0);
-    for (j, joint) in sys.joints.iter().enumerate() {
-        let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == j).collect();
-        if rows.is_empty() {
-            continue;
-        }
-        let n = rows.len() as f64;
-        let msr = rows.iter().map(|&i| residue[i].powi(2)).sum::<f64>() / n;
-        let ms = rows.iter().map(|&i| sys.b[i].powi(2)).sum::<f64>() / n;
-        residue_energy += msr * n;
-        measured_energy += ms * n;
-        let adequacy = est.adequacy.iter().find(|a| &a.joint == joint);
-        let floor = adequacy.and_then(|a| a.noise_floor).unwrap_or(0.0);
-        let ratio = adequacy.and_then(|a| a.ratio());
-        let over = ratio.is_some_and(|r| !(r <= REFUSE_RATIO));
-        joints.push(JointFigures {
-            joint: joint.clone(),
-            ratio,
-            model_error: ((msr - floor).max(0.0) / ms).sqrt(),
-            friction_share: over
-                .then(|| velocity(sys, joint, &rows))
-                .flatten()
-                .map(|v| friction_share(&v, &rows.iter().map(|&i| residue[i]).collect::<Vec<_>>())),
-        });
-    }
-    let relative = held_out.unwrap_or(((residue_energy / measured_energy).sqrt(), Measured::InSample));
+    let predicted = &sys.a * &est.values;
+    let stats = validation::residues(sys, &predicted);
+    let residue = &sys.b - &predicted;
+    let joints = stats
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.rows > 0)
+        .map(|(j, s)| {
+            let adequacy = est.adequacy.iter().find(|a| a.joint == s.joint);
+            let floor = adequacy.and_then(|a| a.noise_floor).unwrap_or(0.0);
+            let ratio = adequacy.and_then(|a| a.ratio());
+            let over = ratio.is_some_and(|r| !(r <= REFUSE_RATIO));
+            // The residue's shape by speed, only where the floor rule fails.
+            let friction_share = over
+                .then(|| {
+                    let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == j).collect();
+                    let r: Vec<f64> = rows.iter().map(|&i| residue[i]).collect();
+                    velocity(sys, &s.joint, &rows).map(|v| friction_share(&v, &r))
+                })
+                .flatten();
+            JointFigures {
+                joint: s.joint.clone(),
+                ratio,
+                model_error: (s.msr - floor).max(0.0).sqrt() / s.measured_rms,
+                friction_share,
+            }
+        })
+        .collect();
+    let relative = held_out.unwrap_or((validation::relative_error(&stats), Measured::InSample));
     let mut verdict = Verdict {
         policy,
         joints,

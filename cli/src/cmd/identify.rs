@@ -268,11 +268,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         use robotid::verdict::Measured;
         let held_out = match &val_rows {
             Some(v) if v.names == est.names => {
-                let residue = &v.b - &v.a * &est.values;
-                Some((
-                    (residue.norm_squared() / v.b.norm_squared()).sqrt(),
-                    Measured::Validation,
-                ))
+                let stats = robotid::validation::residues(v, &(&v.a * &est.values));
+                Some((robotid::validation::relative_error(&stats), Measured::Validation))
             }
             _ => periods_relative.map(|r| (r, Measured::HeldOutPeriods)),
         };
