@@ -426,6 +426,7 @@ pub fn html(
     }
     for (key, what) in [
         (metadata::WIDENED, "Intervals widened"),
+        (metadata::ROBUST, "Intervals robust to model error"),
         (metadata::IMPOSSIBLE, "Physically impossible values"),
         (metadata::OUTLIERS, "Recordings that fit far worse than the others"),
     ] {

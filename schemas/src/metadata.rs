@@ -107,8 +107,6 @@ pub const IMPOSSIBLE: &str = "robotid.estimate.impossible";
 /// Per joint, the fit's residue against the noise floor and the verdict
 /// (JSON: joint, rows, msr, noise_floor, ratio, verdict).
 pub const ADEQUACY: &str = "robotid.estimate.adequacy";
-/// Present when the covariance was widened by the excess residual variance
-/// of the joints where model error dominates: which joints, and why.
 /// Set by `robotid identify` on a fit it refuses (written with
 /// `--accept-inadequate`, or marked in the refused folder): the cause it
 /// measured. Intervals of such a table are not at their nominal level.
@@ -117,7 +115,13 @@ pub const INADEQUATE: &str = "robotid.identify.inadequate";
 /// error per joint as a share of the torque, with the rule and the
 /// relative error that decided (`robotid::verdict`).
 pub const VERDICT: &str = "robotid.identify.verdict";
+/// Present when the covariance was widened by the excess residual variance
+/// of the joints where model error dominates: which joints, and why.
 pub const WIDENED: &str = "robotid.estimate.covariance_widened";
+/// Present when `covariance = "robust"` replaced the covariance by the
+/// sandwich robust to a correlated residue: which joints, its bandwidth
+/// and degrees of freedom.
+pub const ROBUST: &str = "robotid.estimate.covariance_robust";
 /// Base parameters whose standard deviation exceeds their a-priori size
 /// (robot file), with both.
 pub const UNIDENTIFIED: &str = "robotid.estimate.unidentified";

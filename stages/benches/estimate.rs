@@ -86,7 +86,7 @@ fn physical(c: &mut Criterion) {
         b.iter(|| physically_consistent(&names, &prior, &map, &est, &cov, &[], None).unwrap())
     });
     g.bench_function("bootstrap_200", |b| {
-        b.iter(|| bootstrap_covariance(&names, &prior, &map, &est, &cov, &[], 1e-3).unwrap())
+        b.iter(|| bootstrap_covariance(&names, &prior, &map, &est, [&cov, &cov], &[], 1e-3).unwrap())
     });
     g.finish();
 }

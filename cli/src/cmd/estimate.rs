@@ -20,7 +20,9 @@ pub struct Args {
     #[arg(long, default_value_t = 0.95)]
     pub confidence: f64,
     /// Covariance: auto (spectrum for tables of one averaged period, periods
-    /// when the tables carry them), spectrum, periods or residual.
+    /// when the tables carry them), spectrum, periods, residual, or robust
+    /// (auto's, or where model error dominates a joint the sandwich robust
+    /// to a residue correlated in time: what identify uses).
     #[arg(long, default_value = "auto")]
     pub covariance: String,
     /// A parameters table whose parameters are taken as known (friction
@@ -108,7 +110,8 @@ pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
         "periods" => Covariance::Periods,
         "spectrum" => Covariance::Spectrum,
         "residual" => Covariance::Residual,
-        c => anyhow::bail!("--covariance: `{c}` is not auto, spectrum, periods or residual"),
+        "robust" => Covariance::Robust,
+        c => anyhow::bail!("--covariance: `{c}` is not auto, spectrum, periods, residual or robust"),
     };
     let cfg = EstimateConfig {
         method,
@@ -186,6 +189,12 @@ pub fn adequacy(est: &Estimate) -> String {
             "intervals widened: model error dominates on {} (over {}× the floor); the periods' spread sees only the noise, so the excess residual variance is added to it\n",
             bad.join(", "),
             robotid_stages::estimation::ADEQUATE_RATIO
+        ));
+    } else if !bad.is_empty() && est.covariance_from == robotid_stages::estimation::Covariance::Robust {
+        s.push_str(&format!(
+            "model error dominates on {}: the intervals are robust to it (a sandwich over the residue's correlation in time, {} degrees of freedom), not the noise's\n",
+            bad.join(", "),
+            est.dof
         ));
     } else if !bad.is_empty() && est.covariance_from == robotid_stages::estimation::Covariance::Bootstrap {
         s.push_str(&format!(

@@ -323,7 +323,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("parameters in {}", out.join("parameters.parquet").display());
     writeln!(
         script,
-        "robotid estimate {} --robot {} -o parameters.parquet",
+        "robotid estimate {} --robot {} --covariance robust -o parameters.parquet",
         joined(id_tables),
         robot.display()
     )?;
@@ -465,10 +465,10 @@ fn physical_fit(
             })?;
             writeln!(
                 script,
-                "robotid estimate {} --robot {} --physical{} -o parameters_physical.parquet",
+                "robotid estimate {} --robot {} --physical --covariance {} -o parameters_physical.parquet",
                 joined(id_tables),
                 robot.display(),
-                if residual_cov { " --covariance residual" } else { "" }
+                if residual_cov { "residual" } else { "robust" }
             )?;
             if !val_tables.is_empty() {
                 writeln!(
@@ -498,7 +498,9 @@ fn estimate_args(tables: &[PathBuf], robot: Option<&Path>, physical: bool, out: 
         regressors: tables.to_vec(),
         method: "ols".into(),
         confidence: 0.95,
-        covariance: "auto".into(),
+        // Auto's where the model is right; robust to the model error that
+        // real robots always have where it dominates.
+        covariance: "robust".into(),
         known: None,
         physical,
         robot: robot.map(Path::to_path_buf),

@@ -85,7 +85,8 @@ pub fn stacked_least_squares(sys: &System, weights: Option<&DVector<f64>>, covar
         // The stacked system has no noise spectrum: the periods' spread.
         Covariance::Periods | Covariance::Spectrum => true,
         Covariance::Residual | Covariance::Bootstrap => false,
-        Covariance::Auto => have_periods,
+        // The rows' sandwich is the reduce's (`estimate` stage), over auto's.
+        Covariance::Auto | Covariance::Robust => have_periods,
     };
     let (mut cov, dof) = if use_periods {
         period_covariance(sys, weights, &s.inverse_normal)

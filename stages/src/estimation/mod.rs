@@ -16,6 +16,7 @@ mod least_squares;
 mod ml;
 mod physical;
 pub mod projection;
+mod robust;
 pub mod spectral;
 mod summary;
 mod system;
@@ -35,6 +36,7 @@ pub use physical::{
     bootstrap_covariance, held_out_prior_weight, is_inertial, link_bounds, physically_consistent, prior_scales,
     pseudo_inertia, Ellipsoid, LinkBound, PhysicalFit, BOOTSTRAP_DRAWS, MASS_FACTOR,
 };
+pub use robust::{robust_covariance, Robust};
 pub use summary::{Halves, KnownPart, Summary, MAX_CONDITION};
 pub use system::{
     block_rows, columns_of, row_weights, Known, RowBlocks, System, BLOCK_SAMPLES, PARAMETER_COLUMN, PERIOD_TORQUE,
@@ -102,6 +104,12 @@ pub enum Covariance {
     /// The physically consistent estimate's: a parametric bootstrap of its
     /// fit (reported, not a setting).
     Bootstrap,
+    /// `auto`'s where every joint's residue is at its noise floor; where
+    /// model error dominates some joint, the sandwich robust to a residue
+    /// correlated in time (`robust::robust_covariance`, Bartlett kernel
+    /// over twice its correlation length), which `auto` would hold as
+    /// white noise. Keeps the rows until the reduce.
+    Robust,
 }
 
 impl Covariance {
@@ -112,6 +120,7 @@ impl Covariance {
             Covariance::Residual => "residual",
             Covariance::Spectrum => "spectrum",
             Covariance::Bootstrap => "bootstrap",
+            Covariance::Robust => "robust",
         }
     }
 }

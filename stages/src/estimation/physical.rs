@@ -369,21 +369,25 @@ pub const BOOTSTRAP_DRAWS: usize = 200;
 /// count), each draw fitted with the same λ, the base values' spread
 /// taken. Where a constraint is active the spread is narrower than Σ's
 /// (a parameter held at its bound moves less), and the distribution is
-/// not Gaussian there; elsewhere it is Σ.
+/// not Gaussian there; elsewhere it is Σ. `covariances` are the fit's
+/// metric and the Σ drawn from: the same, except where the base estimate's
+/// intervals are robust to model error (`Covariance::Robust`): the fit
+/// keeps the noise's metric, the draws take the robust spread.
 pub fn bootstrap_covariance(
     names: &[String],
     prior: &[f64],
     map: &DMatrix<f64>,
     base_estimate: &DVector<f64>,
-    base_covariance: &DMatrix<f64>,
+    covariances: [&DMatrix<f64>; 2],
     bounds: &[LinkBound],
     prior_weight: f64,
 ) -> Result<DMatrix<f64>> {
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
+    let [base_covariance, spread] = covariances;
     let problem = Problem::new(names, prior, map, base_estimate, base_covariance, bounds)?;
     let nb = base_estimate.len();
-    let chol = base_covariance
+    let chol = spread
         .clone()
         .cholesky()
         .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive definite"))?;
@@ -911,7 +915,7 @@ mod tests {
         assert!(bound.ellipsoid.unwrap().holds_com(&fit.standard), "{:?}", fit.standard);
         assert!(fit.min_eigen[0] > -1e-8, "{:?}", fit.min_eigen);
         // The bootstrap keeps to them too: its draws' spread is finite.
-        let cov_b = bootstrap_covariance(&names, &prior, &map, &pushed, &cov, &[bound], 1e-6).unwrap();
+        let cov_b = bootstrap_covariance(&names, &prior, &map, &pushed, [&cov, &cov], &[bound], 1e-6).unwrap();
         assert!(cov_b.iter().all(|v| v.is_finite()));
     }
 }

@@ -380,7 +380,8 @@ impl Summary {
             && self.spectrum_moments.len() == self.period_moments.len()
             && self.spectrum_moments.iter().all(Option::is_some);
         let covariance = match asked {
-            Covariance::Auto if have_spectrum => Covariance::Spectrum,
+            // The rows' sandwich is the reduce's (`estimate` stage), over auto's.
+            Covariance::Auto | Covariance::Robust if have_spectrum => Covariance::Spectrum,
             Covariance::Spectrum if !have_spectrum => {
                 return Err(Error::missing(
                     "the torque of every period, over one averaged period",
@@ -398,7 +399,7 @@ impl Summary {
             }
             Covariance::Periods | Covariance::Spectrum => true,
             Covariance::Residual | Covariance::Bootstrap => false,
-            Covariance::Auto => have_periods,
+            Covariance::Auto | Covariance::Robust => have_periods,
         };
         Ok((covariance, use_periods))
     }

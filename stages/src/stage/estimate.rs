@@ -18,9 +18,9 @@ use super::{Chain, Component, Context, LintContext, PeriodsUse, Problem, Product
 use crate::dynamics::{parameter_names, standard_parameters, BaseRegressor, Model, ModelKind};
 use crate::estimation::{
     bootstrap_covariance, essential_parameters, held_out_prior_weight, input_noise, link_bounds, maximum_likelihood,
-    parameters_from_table, parameters_table, physically_consistent, row_weights, unidentified, Covariance, Essential,
-    Estimate, Estimator, Halves, InputNoise, Known, MlOptions, Options, PhysicalFit, Summary, System, Unidentified,
-    Weights, BOOTSTRAP_DRAWS,
+    parameters_from_table, parameters_table, physically_consistent, robust_covariance, row_weights, unidentified,
+    Covariance, Essential, Estimate, Estimator, Halves, InputNoise, Known, MlOptions, Options, PhysicalFit, Summary,
+    System, Unidentified, Weights, BOOTSTRAP_DRAWS,
 };
 use crate::formats::parquet::read_parquet;
 use crate::stage::regressor::RegressorConfig;
@@ -106,6 +106,12 @@ impl EstimateConfig {
         }
         if let Some(w) = self.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
             out.push(Problem::new("prior_weight", format!("must be > 0 and finite, not {w}")));
+        }
+        if self.method == Estimator::Ml && self.covariance == Covariance::Robust {
+            out.push(Problem::new(
+                "covariance",
+                "\"robust\" is least squares' (maximum likelihood models the noise it weighs): use auto, periods or residual",
+            ));
         }
         if self.prior_weight.is_some() && !self.physical {
             out.push(Problem::new(
@@ -444,11 +450,11 @@ impl Stage for Reducer {
                 rows: Some((sys, Some(noise))),
                 config,
             }
-        } else if self.known.is_some() {
+        } else if self.known.is_some() || self.cfg.covariance == Covariance::Robust {
             let sys = fix(rows.whole())?;
             Part {
                 summary: Summary::of(&sys, weights(&sys)?.as_ref())?,
-                rows: None,
+                rows: (self.cfg.covariance == Covariance::Robust).then_some((sys, None)),
                 config,
             }
         } else {
@@ -523,6 +529,7 @@ impl Reducer {
         base: Option<&BaseRegressor>,
         summary: &Summary,
         est: &mut Estimate,
+        metric: &nalgebra::DMatrix<f64>,
         md: &mut BTreeMap<String, String>,
     ) -> Result<PhysicalFit> {
         if self.model.is_none() {
@@ -534,7 +541,7 @@ impl Reducer {
             Estimator::Ml => None,
             _ => summary.halves(&est.values),
         };
-        let (fit, covariance, note) = physical_fit(base, est, halves.as_ref(), self.cfg.prior_weight)?;
+        let (fit, covariance, note) = physical_fit(base, est, metric, halves.as_ref(), self.cfg.prior_weight)?;
         est.values = fit.base.clone();
         est.covariance = covariance;
         est.covariance_from = Covariance::Bootstrap;
@@ -574,6 +581,14 @@ impl Reducer {
                 maximum_likelihood(&sys, &w, &noise, &MlOptions::default())?
             }
         };
+        // The physical fit measures distance in the noise's metric; a robust
+        // covariance's shape rests on few blocks (measured on the LWR4+:
+        // its fit in the robust metric predicted file 3 at 8.7 % against 5.7 %).
+        let metric = est.covariance.clone();
+        let robust = match self.cfg.covariance {
+            Covariance::Robust => self.robust(parts, &mut est)?,
+            _ => None,
+        };
         let essential = matches!(self.cfg.method, Estimator::Ols | Estimator::Wls)
             .then(|| essential_parameters(&summary, ESSENTIAL_MAX_RELATIVE_STD));
         // The base regressor of the recordings' configuration, built once
@@ -598,7 +613,7 @@ impl Reducer {
         ));
         let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
         let physical = match self.cfg.physical {
-            true => Some(self.physical(base.as_deref(), &summary, &mut est, &mut md)?),
+            true => Some(self.physical(base.as_deref(), &summary, &mut est, &metric, &mut md)?),
             false => None,
         };
         for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
@@ -619,6 +634,9 @@ impl Reducer {
         }
         md.extend(provenance.iter().map(|(k, v)| (k.clone(), v.clone())));
         md.extend(estimate_notes(&est, &summary.expressions));
+        if let Some(said) = robust {
+            md.insert(metadata::ROBUST.into(), said);
+        }
         let table = parameters_table(&est, self.cfg.confidence, &summary.expressions, &md)?;
         Ok(Outcome {
             estimate: est,
@@ -630,6 +648,37 @@ impl Reducer {
             unidentified,
             essential,
         })
+    }
+
+    /// `covariance = "robust"`: where model error dominates some joint, the
+    /// sandwich of the kept rows replaces auto's covariance (and its
+    /// widening), said; None where every joint is at its floor.
+    fn robust(&self, parts: &[Part], est: &mut Estimate) -> Result<Option<String>> {
+        let inadequate: Vec<String> = est.inadequate().iter().map(|a| a.joint.clone()).collect();
+        if inadequate.is_empty() {
+            return Ok(None);
+        }
+        let systems: Vec<&System> = parts.iter().filter_map(|p| p.rows.as_ref().map(|r| &r.0)).collect();
+        let sys = System::stack(&systems)?;
+        let w = match self.cfg.method {
+            Estimator::Wls => Some(row_weights(&sys, self.cfg.weights)?),
+            _ => None,
+        };
+        let r = robust_covariance(&sys, &est.values, w.as_ref())?;
+        let rate = sys.time.windows(2).map(|t| t[1] - t[0]).find(|d| *d > 0.0);
+        let said = format!(
+            "model error dominates on {}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom), not the {} covariance, which holds model error as white noise",
+            inadequate.join(", "),
+            r.bandwidth,
+            rate.map(|d| format!(", {:.0} ms", 1e3 * d * r.bandwidth as f64)).unwrap_or_default(),
+            r.dof,
+            est.covariance_from.name(),
+        );
+        est.covariance = r.covariance;
+        est.dof = r.dof;
+        est.covariance_from = Covariance::Robust;
+        est.widened = false;
+        Ok(Some(said))
     }
 
     /// The map step without a chain: one recording's part from its system
@@ -649,7 +698,7 @@ impl Reducer {
         let config = RegressorConfig::of_metadata(&sys.metadata).ok();
         Ok(Part {
             summary: Summary::of(&sys, w.as_ref())?,
-            rows: None,
+            rows: (self.cfg.covariance == Covariance::Robust).then_some((sys, None)),
             config,
         })
     }
@@ -702,9 +751,13 @@ fn physical_fit_applies<'a>(base: &'a BaseRegressor, est: &Estimate) -> Result<&
     Ok(map)
 }
 
+/// `metric`: the covariance the fit measures distance in (the estimate's,
+/// or auto's where the estimate's is robust to model error); the bootstrap
+/// draws from the estimate's.
 fn physical_fit(
     base: &BaseRegressor,
     est: &Estimate,
+    metric: &nalgebra::DMatrix<f64>,
     halves: Option<&Halves>,
     prior_weight: Option<f64>,
 ) -> Result<(PhysicalFit, nalgebra::DMatrix<f64>, String)> {
@@ -716,7 +769,7 @@ fn physical_fit(
     let (weight, chosen) = match (prior_weight, halves) {
         (Some(w), _) => (Some(w), None),
         (None, Some(h)) => {
-            let (w, curve) = held_out_prior_weight(&names, &prior, map, &est.covariance, &bounds, h)?;
+            let (w, curve) = held_out_prior_weight(&names, &prior, map, metric, &bounds, h)?;
             // At the grid's top the robot file's inertials hold all but
             // what the data contradict: said, as the edge of a search.
             let edge = curve.last().is_some_and(|(top, _)| *top == w);
@@ -736,7 +789,7 @@ fn physical_fit(
         }
         (None, None) => (None, None),
     };
-    let mut fit = physically_consistent(&names, &prior, map, &est.values, &est.covariance, &bounds, weight)?;
+    let mut fit = physically_consistent(&names, &prior, map, &est.values, metric, &bounds, weight)?;
     if chosen.is_some() {
         fit.chosen = chosen;
     }
@@ -759,7 +812,7 @@ fn physical_fit(
         &prior,
         map,
         &est.values,
-        &est.covariance,
+        [metric, &est.covariance],
         &bounds,
         fit.prior_weight,
     )?;
