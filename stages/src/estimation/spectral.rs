@@ -348,14 +348,28 @@ impl LineSystem {
         let cols = self.cols;
         let mut full = DMatrix::zeros(cols, cols);
         let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
+        // The pair (c, d ≥ c) summed into column c's rows d: contiguous in
+        // the column-major storage (a search's hot loop), then mirrored.
+        let lower = full.as_mut_slice();
         for l in 0..self.lines {
             let s = h[l].norm_sqr();
             let on = &self.sums.active[self.sums.starts[l]..self.sums.starts[l + 1]];
-            let mut y = self.sums.gram[self.sums.gram_starts[l]..].iter();
+            let mut y = &self.sums.gram[self.sums.gram_starts[l]..];
+            // Active columns in one run (the common case): a slice's axpy.
+            let run = on.last().is_some_and(|&e| (e - on[0]) as usize + 1 == on.len());
             for (i, &c) in on.iter().enumerate() {
-                for &d in &on[i..] {
-                    full[(c as usize, d as usize)] += s * y.next().expect("one per pair");
+                let column = &mut lower[c as usize * cols..(c as usize + 1) * cols];
+                let (pairs, rest) = y.split_at(on.len() - i);
+                if run {
+                    for (v, g) in column[c as usize..c as usize + pairs.len()].iter_mut().zip(pairs) {
+                        *v += s * g;
+                    }
+                } else {
+                    for (&d, g) in on[i..].iter().zip(pairs) {
+                        column[d as usize] += s * g;
+                    }
                 }
+                y = rest;
                 for half in 0..2 {
                     r[half][c as usize] += (h[l].conj() * self.sums.cross[half][self.sums.starts[l] + i]).re;
                 }
@@ -363,7 +377,7 @@ impl LineSystem {
         }
         for c in 0..cols {
             for d in c + 1..cols {
-                full[(d, c)] = full[(c, d)];
+                full[(c, d)] = full[(d, c)];
             }
         }
         (full, r)
