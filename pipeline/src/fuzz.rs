@@ -1,6 +1,6 @@
 //! Entry points for the fuzz targets (fuzz/, scripts/fuzz.sh) and for
 //! replaying their seeds and every crash they found
-//! (pipeline/tests/fuzz_regressions.rs): each takes arbitrary bytes and
+//! (pipeline/tests/suite/fuzz_regressions.rs): each takes arbitrary bytes and
 //! must return, never panic, abort or hang. The log readers take the bytes
 //! as they are; the robot and simulation files are read from a scratch
 //! file (in RAM where /dev/shm exists).

@@ -8,7 +8,7 @@
 //! a dataset `robotid-dataset`'s.
 
 pub mod error;
-// The fuzz targets' entry points (fuzz/, pipeline/tests/fuzz_regressions.rs):
+// The fuzz targets' entry points (fuzz/, pipeline/tests/suite/fuzz_regressions.rs):
 // public for them, not part of the library's API.
 #[doc(hidden)]
 pub mod fuzz;

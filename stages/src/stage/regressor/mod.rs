@@ -52,7 +52,7 @@ pub struct RegressorConfig {
     /// have energy above it that the torque lost. The columns are computed
     /// on a grid 16 times finer first, so that those edges do not alias into
     /// the band (with exact sign friction, the residual then reaches the
-    /// noise floor; tests/band_limit.rs). Periodic kinematics only, Hz.
+    /// noise floor; tests/suite/band_limit.rs). Periodic kinematics only, Hz.
     pub band_limit_hz: Option<f64>,
     /// Closed-loop data: the Projection Method (`estimation/projection.rs`)
     /// with a non-causal FIR of taps −m1..m2 from the references to the

@@ -1,0 +1,11 @@
+//! The cli crate's integration tests, one binary: each file a module
+//! (linked once rather than once per file; fixtures made once per run).
+//! Tests that count a process's allocations keep binaries of their own.
+
+mod atomic;
+mod bad_inputs;
+mod cli;
+mod export;
+mod foreign;
+mod identify;
+mod pipeline;

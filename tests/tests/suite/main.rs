@@ -1,0 +1,7 @@
+//! The tests crate's integration tests, one binary: each file a module
+//! (linked once rather than once per file; fixtures made once per run).
+//! Tests that count a process's allocations keep binaries of their own.
+
+mod fixtures;
+mod mcap_python;
+mod pinocchio;
