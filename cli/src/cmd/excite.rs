@@ -47,7 +47,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .parent()
         .unwrap_or(std::path::Path::new("."))
         .join(&cfg.robot);
-    let model = load_robot(&cfg.robot).map_err(anyhow::Error::msg)?;
+    let model = load_robot(&cfg.robot)?;
     cfg.validate(&model)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
     let bar = ProgressBar::new(cfg.starts as u64);
@@ -64,7 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(n) => rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(run),
         None => run(),
     }
-    .map_err(anyhow::Error::msg)?;
+    ?;
     bar.finish_and_clear();
     let out = args.out.clone().unwrap_or_else(|| {
         let stem = args.config.file_stem().unwrap_or_default();
@@ -112,7 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             toml::to_string(&doc)?
         ),
     )
-    .map_err(anyhow::Error::msg)?;
+    ?;
     // Coefficients as Parquet.
     let f = &d.trajectory;
     let (mut joint, mut harmonic, mut a, mut b, mut q0) = (vec![], vec![], vec![], vec![], vec![]);
@@ -155,7 +155,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &out.join("coefficients.parquet"),
         &RecordBatch::try_new(Arc::new(schema), cols)?,
     )
-    .map_err(anyhow::Error::msg)?;
+    ?;
     // The sampled trajectory as a kinematics table.
     let n = model.dof();
     let samples = cfg.samples();
@@ -193,8 +193,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         ee.push(end_effector_position(&model, &mut data, &q));
     }
-    write_parquet(&out.join("trajectory.parquet"), &kin.to_record_batch()?).map_err(anyhow::Error::msg)?;
-    let pictures = robotid_report::plot::plot_excitation(&out, &kin, &ee).map_err(anyhow::Error::msg)?;
+    write_parquet(&out.join("trajectory.parquet"), &kin.to_record_batch()?)?;
+    let pictures = robotid_report::plot::plot_excitation(&out, &kin, &ee)?;
     println!(
         "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
         toml_path.display(),

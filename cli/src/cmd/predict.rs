@@ -24,7 +24,7 @@ pub struct Args {
 /// the regressor configuration the parameters carry.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (params, model, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
-    let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
+    let batch = read_parquet(&args.kinematics)?;
     let mut kin =
         Kinematics::from_record_batch(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.kinematics.display()))?;
     if kin.joints != model.joint_names() {
@@ -56,7 +56,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     kin.metadata.insert(metadata::TORQUE.into(), "predicted".into());
     kin.metadata
         .insert(metadata::PARAMETERS_FILE.into(), args.parameters.display().to_string());
-    write_parquet(&args.out, &kin.to_record_batch().map_err(anyhow::Error::msg)?).map_err(anyhow::Error::msg)?;
+    write_parquet(&args.out, &kin.to_record_batch()?)?;
     println!("{} samples × {n} joints predicted into {}", samples, args.out.display());
     Ok(())
 }

@@ -32,7 +32,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let batch = read_parquet(&args.parameters).map_err(anyhow::Error::msg)?;
+    let batch = read_parquet(&args.parameters)?;
     let params = parameters_from_table(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
     let expressions: Vec<String> = batch
         .column_by_name("expression")
@@ -60,7 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let physical_params = match &args.physical {
         Some(p) => Some(
-            parameters_from_table(&read_parquet(p).map_err(anyhow::Error::msg)?)
+            parameters_from_table(&read_parquet(p)?)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
         ),
         None => None,
@@ -82,8 +82,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &sets,
         physical.as_ref(),
     )
-    .map_err(anyhow::Error::msg)?;
-    robotid_report::plot::write_text(&args.out, &page).map_err(anyhow::Error::msg)?;
+    ?;
+    robotid_report::plot::write_text(&args.out, &page)?;
     println!("report in {}", args.out.display());
     Ok(())
 }

@@ -41,7 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "asymmetric" => FrictionTerms::Asymmetric,
         f => anyhow::bail!("--friction: `{f}` is not symmetric or asymmetric"),
     };
-    let batch = read_parquet(&args.kinematics).map_err(anyhow::Error::msg)?;
+    let batch = read_parquet(&args.kinematics)?;
     let kin =
         Kinematics::from_record_batch(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.kinematics.display()))?;
     let cfg = SweepConfig {
@@ -62,8 +62,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print!("{}", super::estimate::summary(&gf.estimate, args.confidence));
     let mut md = kin.metadata.clone();
     md.insert(metadata::DEDICATED.into(), "sweeps".into());
-    let table = parameters_table(&gf.estimate, args.confidence, &gf.estimate.names, &md).map_err(anyhow::Error::msg)?;
-    write_parquet(&args.out, &table).map_err(anyhow::Error::msg)?;
+    let table = parameters_table(&gf.estimate, args.confidence, &gf.estimate.names, &md)?;
+    write_parquet(&args.out, &table)?;
     println!("parameters in {}", args.out.display());
     Ok(())
 }

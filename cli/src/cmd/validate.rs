@@ -28,7 +28,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let params = parameters_from_table(&read_parquet(&args.parameters).map_err(anyhow::Error::msg)?)
+    let params = parameters_from_table(&read_parquet(&args.parameters)?)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
     let sys = load_system(&args.regressors)?;
     if sys.names != params.names {
@@ -73,7 +73,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|s| s.joint.as_str())
         .collect();
     if let Some(dir) = &args.plot {
-        let files = robotid_report::plot::plot_validation(dir, &sys, &predicted, &stats).map_err(anyhow::Error::msg)?;
+        let files = robotid_report::plot::plot_validation(dir, &sys, &predicted, &stats)?;
         println!(
             "pictures and report: {}",
             files
