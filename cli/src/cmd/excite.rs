@@ -63,8 +63,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let d = match args.threads {
         Some(n) => rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(run),
         None => run(),
-    }
-    ?;
+    }?;
     bar.finish_and_clear();
     let out = args.out.clone().unwrap_or_else(|| {
         let stem = args.config.file_stem().unwrap_or_default();
@@ -154,8 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write_parquet(
         &out.join("coefficients.parquet"),
         &RecordBatch::try_new(Arc::new(schema), cols)?,
-    )
-    ?;
+    )?;
     // The sampled trajectory as a kinematics table.
     let n = model.dof();
     let samples = cfg.samples();

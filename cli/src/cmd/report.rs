@@ -59,10 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         });
     }
     let physical_params = match &args.physical {
-        Some(p) => Some(
-            parameters_from_table(&read_parquet(p)?)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?,
-        ),
+        Some(p) => Some(parameters_from_table(&read_parquet(p)?).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?),
         None => None,
     };
     let physical = match (&physical_params, &args.physical) {
@@ -81,8 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &args.parameters.display().to_string(),
         &sets,
         physical.as_ref(),
-    )
-    ?;
+    )?;
     robotid_report::plot::write_text(&args.out, &page)?;
     println!("report in {}", args.out.display());
     Ok(())

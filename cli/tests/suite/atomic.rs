@@ -12,9 +12,7 @@ use std::time::Instant;
 use robotid::output::{prepare, LOCK, STAGING, WRITTEN};
 use robotid_tests::{bytes_of, workspace};
 
-fn robotid(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap()
-}
+use super::robotid;
 
 /// The files a reader sees: everything but the run's hidden bookkeeping.
 fn visible(dir: &Path) -> BTreeMap<String, Vec<u8>> {

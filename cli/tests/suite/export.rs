@@ -6,24 +6,10 @@
 //! exported in `pipeline.rs`, after its estimate is checked.
 
 use std::path::Path;
-use std::process::Command;
 
 use robotid_tests::{export_checked_in_simulators, panda_urdf, workspace};
 
-fn robotid(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap()
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = robotid(args);
-    assert!(
-        o.status.success(),
-        "{args:?}: {}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
+use super::{ok, robotid};
 
 /// The stages that end a pipeline with a physically consistent estimate.
 const IDENTIFY: &str = r#"

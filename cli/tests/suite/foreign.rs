@@ -6,24 +6,14 @@
 //! them, each refused.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_tests::{example_urdf, foreign};
 
-fn robotid(args: &[&Path]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap()
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use super::{robotid, text};
 
 /// The truth's base parameters: the URDF's inertials (the simulator's
 /// own) through robotid's base map, the friction of `truth.json`, no

@@ -12,16 +12,7 @@ use robotid_stages::formats::parquet::read_parquet;
 use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
 use robotid_tests::{fixture, realdata};
 
-fn robotid(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_robotid")).args(args).output().unwrap();
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "robotid {args:?}:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    text
-}
+use super::ok;
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -144,12 +135,12 @@ fn identify_finds_random_excitations() {
         assert_eq!(d.harmonics, sets, "case {case}, period {period} s:\n{}", d.text);
 
         let out = dir.path().join("id");
-        robotid(&["identify", s(&csv), "--robot", s(&robot), "--out", s(&out)]);
+        ok(&["identify", s(&csv), "--robot", s(&robot), "--out", s(&out)]);
         let pipeline = out.join("pipelines/arm3.toml");
         assert_eq!(std::fs::read_to_string(&pipeline).unwrap(), d.text);
         // The same pipeline run by hand: the same tables, byte for byte.
         let again = dir.path().join("again");
-        robotid(&["run", s(&pipeline), "--out", s(&again)]);
+        ok(&["run", s(&pipeline), "--out", s(&again)]);
         for t in ["period_mean", "noise", "kinematics", "regressor"] {
             let f = format!("arm3/{t}.parquet");
             assert!(
@@ -166,9 +157,9 @@ fn identify_finds_random_excitations() {
         assert_ne!(text, d.text);
         std::fs::write(&explicit, text.split("[inferred]").next().unwrap()).unwrap();
         let ex = dir.path().join("ex");
-        robotid(&["run", s(&explicit), "--out", s(&ex)]);
+        ok(&["run", s(&explicit), "--out", s(&ex)]);
         let ex_params = dir.path().join("ex.parquet");
-        robotid(&["estimate", s(&ex.join("arm3/regressor.parquet")), "-o", s(&ex_params)]);
+        ok(&["estimate", s(&ex.join("arm3/regressor.parquet")), "-o", s(&ex_params)]);
         let (names, v1, sd) = parameters(&out.join("parameters.parquet"));
         let (names2, v2, _) = parameters(&ex_params);
         assert_eq!(names, names2);
@@ -213,7 +204,7 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let out = tmp.path().join("id");
     let f = |n: u32| dir.join(format!("measurements_{n}.csv"));
     let robot = dir.join("kuka_lwr4.urdf");
-    let text = robotid(&[
+    let text = ok(&[
         "identify",
         s(&f(1)),
         "--robot",
@@ -296,8 +287,8 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     );
     let hand = tmp.path().join("hand");
     let (id, ho) = (hand.join("id"), hand.join("held"));
-    robotid(&["run", s(&fixture("pipelines/kuka_lwr4_identify.toml")), "--out", s(&id)]);
-    robotid(&["run", s(&fixture("pipelines/kuka_lwr4_heldout.toml")), "--out", s(&ho)]);
+    ok(&["run", s(&fixture("pipelines/kuka_lwr4_identify.toml")), "--out", s(&id)]);
+    ok(&["run", s(&fixture("pipelines/kuka_lwr4_heldout.toml")), "--out", s(&ho)]);
     let theirs = held_out(&id.join("parameters.parquet"), &held(&ho, "measurements_{n}"));
     for ((joint, a), (_, b)) in ours.iter().zip(&theirs) {
         println!("{joint}: held-out MSR {a:.4} (identify) against {b:.4} (hand-written)");
@@ -321,7 +312,7 @@ fn real_kuka_lwr4_repeats_agree_within_the_robust_intervals() {
     let fit = |n: u32| -> (PathBuf, PathBuf) {
         let out = tmp.path().join(format!("id{n}"));
         let file = dir.join(format!("measurements_{n}.csv"));
-        let text = robotid(&[
+        let text = ok(&[
             "identify",
             s(&file),
             "--robot",
@@ -347,7 +338,7 @@ fn real_kuka_lwr4_repeats_agree_within_the_robust_intervals() {
         .enumerate()
         .map(|(i, t)| {
             let out = tmp.path().join(format!("white{i}.parquet"));
-            robotid(&["estimate", s(t), "--covariance", "residual", "-o", s(&out)]);
+            ok(&["estimate", s(t), "--covariance", "residual", "-o", s(&out)]);
             out
         })
         .collect();
@@ -374,7 +365,7 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
         w.join("recordings/kuka_axis3_validation/kuka_axis3_validation.mcap"),
     );
     let out = w.join("id");
-    let text = robotid(&[
+    let text = ok(&[
         "identify",
         s(&rec),
         "--robot",
@@ -398,8 +389,8 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
         &[out.join("kuka_axis3_validation/kuka_axis3_validation/regressor.parquet")],
     );
     let (id, ho) = (w.join("hand_id"), w.join("hand_val"));
-    robotid(&["run", s(&w.join("pipelines/kuka_axis3.toml")), "--out", s(&id)]);
-    robotid(&["run", s(&w.join("pipelines/validation.toml")), "--out", s(&ho)]);
+    ok(&["run", s(&w.join("pipelines/kuka_axis3.toml")), "--out", s(&id)]);
+    ok(&["run", s(&w.join("pipelines/validation.toml")), "--out", s(&ho)]);
     let theirs = held_out(
         &id.join("parameters.parquet"),
         &[ho.join("kuka_axis3_validation/regressor.parquet")],
@@ -483,7 +474,7 @@ fn joint_wise_recordings_give_the_decoupled_model() {
     let mut args = vec!["identify"];
     args.extend(logs.iter().map(|l| s(l)));
     args.extend(["--robot", s(&robot), "--out", s(&out)]);
-    let text = robotid(&args);
+    let text = ok(&args);
     assert!(text.contains("only j1 moves"), "{text}");
     let (names, values, _) = parameters(&out.join("parameters.parquet"));
     let value = |n: &str| {
@@ -516,9 +507,9 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
     let template = std::fs::read_to_string(fixture("bench/ur5_130s_sim.toml")).unwrap();
     std::fs::write(&sim, template.replace("ROBOT", s(&robot))).unwrap();
     let rec = dir.path().join("rec");
-    robotid(&["simulate", s(&sim), "--out", s(&rec)]);
+    ok(&["simulate", s(&sim), "--out", s(&rec)]);
     let out = dir.path().join("id");
-    let text = robotid(&[
+    let text = ok(&[
         "identify",
         s(&rec.join("ur5.mcap")),
         "--robot",
