@@ -1,24 +1,20 @@
-//! Executes a built pipeline over its recordings, in parallel (rayon),
-//! telling an [`Observer`] how each goes. A recording's tables are written, atomically, only
-//! after its whole chain succeeded; a failing recording leaves no file.
-//! Every recording is processed on its own, so the output bytes do not
-//! depend on the number of threads.
+//! What a run of a built pipeline is told and gives (`Built::run_recordings`
+//! executes it, in parallel): its options, the [`Observer`] told how each
+//! recording goes, each recording's outcome, and its tables, written
+//! atomically only after its whole chain succeeded (a failing recording
+//! leaves no file). Every recording is processed on its own, so the output
+//! bytes do not depend on the number of threads.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use arrow::array::RecordBatch;
-use rayon::prelude::*;
-use robotid_schemas::{metadata, Kinematics, PeriodMean, TableKind};
-use robotid_stages::formats::parquet::{read_parquet, write_parquet};
+use robotid_schemas::TableKind;
+use robotid_stages::formats::parquet::write_parquet;
 use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::Part;
-use robotid_stages::stage::read::{read_log, Log};
 use robotid_stages::stage::regressor::{r_factor_table, RegressorRows};
-use robotid_stages::stage::{Chain, Product, Report};
-
-use crate::pipeline::Built;
+use robotid_stages::stage::{Chain, Report};
 
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -113,148 +109,6 @@ pub fn recording_names(logs: &[PathBuf]) -> Vec<String> {
             }
         })
         .collect()
-}
-
-/// Every recording of `built`, in parallel.
-pub fn run_recordings(built: &Built, opts: &RunOptions, observer: &dyn Observer) -> Vec<RecordingResult> {
-    let names = recording_names(&built.logs);
-    let work = || {
-        built
-            .logs
-            .par_iter()
-            .zip(names.par_iter())
-            .map(|(log, name)| {
-                observer.started(name, built.stages.len() + 2);
-                let outcome = run_one(built, log, name, opts, observer);
-                observer.finished(name, outcome.is_ok());
-                RecordingResult {
-                    source: log.clone(),
-                    name: name.clone(),
-                    outcome,
-                }
-            })
-            .collect::<Vec<_>>()
-    };
-    match opts.threads {
-        Some(n) => match rayon::ThreadPoolBuilder::new().num_threads(n).build() {
-            Ok(pool) => pool.install(work),
-            Err(_) => work(),
-        },
-        None => work(),
-    }
-}
-
-/// The chain a log starts: raw samples, or a table of an earlier run.
-pub fn start_chain(built: &Built, log: Log, name: &str) -> robotid_stages::Result<Chain> {
-    let path = log.path();
-    let source = path.display().to_string();
-    let mut chain = Chain::new(&source, name);
-    let placed = |e: robotid_schemas::SchemaError| robotid_stages::Error::Decode {
-        path: path.to_path_buf(),
-        source: Box::new(e),
-    };
-    match built.start {
-        Product::Raw => {
-            let mut raw = read_log(log, &built.plan.read, built.model.as_deref())?;
-            if let Some(n) = raw.metadata.remove(metadata::READ_NOTES) {
-                chain.report.notes.push(n);
-            }
-            chain.report.samples = raw.len();
-            chain.report.source_sha256 = raw.metadata.get(metadata::SOURCE_SHA256).cloned();
-            chain.raw = Some(raw);
-        }
-        Product::PeriodMean => {
-            chain.report.source_sha256 = Some(log.sha256()?);
-            let m = PeriodMean::from_record_batch(&chain_table(log)?).map_err(placed)?;
-            chain.facts.period_s = m.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse().ok());
-            chain.mean = Some(m);
-        }
-        Product::Kinematics => {
-            chain.report.source_sha256 = Some(log.sha256()?);
-            let k = Kinematics::from_record_batch(&chain_table(log)?).map_err(placed)?;
-            chain.facts.period_s = k
-                .metadata
-                .get(metadata::PERIOD_S)
-                .filter(|_| k.metadata.get(metadata::DIFFERENTIATION).map(String::as_str) != Some("filtered"))
-                .and_then(|v| v.parse().ok());
-            chain.kinematics = Some(k);
-        }
-        other => {
-            return Err(robotid_stages::Error::Format {
-                path: path.to_path_buf(),
-                msg: format!("a pipeline cannot start from {other}"),
-            })
-        }
-    }
-    Ok(chain)
-}
-
-/// A table of an earlier run, from its file or its bytes.
-fn chain_table(log: Log) -> robotid_stages::Result<RecordBatch> {
-    match log {
-        Log::File(path) => read_parquet(path),
-        Log::Bytes { name, bytes, .. } => robotid_stages::formats::parquet::read_parquet_bytes(name, bytes.clone()),
-    }
-}
-
-/// Hands the allocator's free pages back to the system. glibc keeps freed
-/// blocks under its dynamic mmap threshold (up to 32 MB: an hour's column
-/// vectors) in its heap; between the stages and the tables a run has freed
-/// the raw and aligned samples, and the tables need fresh memory.
-fn release_free_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: malloc_trim only returns free memory; it is thread-safe.
-    unsafe {
-        libc::malloc_trim(0);
-    }
-}
-
-fn run_one(
-    built: &Built,
-    log: &Path,
-    name: &str,
-    opts: &RunOptions,
-    observer: &dyn Observer,
-) -> crate::Result<Outcome> {
-    let progress = |stage| observer.step(name, stage);
-    // Only the pictures read the aligned periods past their stages: without
-    // them, they are freed as soon as no stage reads them (an hour at 1 kHz:
-    // 350 MB).
-    let mut chain = match opts.plot {
-        Some(_) => built.run_log(log, name, progress)?,
-        None => built.run_log_for_tables(log, name, progress)?,
-    };
-    release_free_memory();
-    // Sinks: only now, with every stage done.
-    let t = Instant::now();
-    observer.step(name, "write");
-    let dir = opts.out.join(name);
-    let mut outcome = Outcome::default();
-    // The regressor rows move into their table unless the report keeps them.
-    let regressor = match opts.plot {
-        Some(_) => chain.regressor.clone(),
-        None => chain.regressor.take(),
-    };
-    outcome.files = write_tables(&chain, regressor, &built.plan.tables, &built.provenance(), &dir)?;
-    chain.report.timings.push(("write".into(), t.elapsed().as_secs_f64()));
-    if let Some(plot_dir) = &opts.plot {
-        let t = Instant::now();
-        let dir = plot_dir.join(name);
-        // Excited harmonics: the noise stage's, else the recording's.
-        let from_stage = built.plan.stages.iter().find_map(|s| match s {
-            crate::plan::StageConfig::Noise(c) => c.harmonics.clone(),
-            _ => None,
-        });
-        let h = chain.harmonics(from_stage.as_ref()).unwrap_or_default();
-        outcome
-            .files
-            .extend(observer.pictures(&dir, &chain, &h, &built.context.spectra)?);
-        chain.report.timings.push(("plot".into(), t.elapsed().as_secs_f64()));
-        outcome.regressor = chain.regressor.take();
-    }
-    outcome.part = chain.estimate.take();
-    outcome.report = std::mem::take(&mut chain.report);
-    Ok(outcome)
 }
 
 /// The requested tables of a finished chain, with the run's provenance.

@@ -11,6 +11,51 @@ pub use rustfft::num_complex::Complex64;
 pub use spectral_filter::{apply_spectral, apply_table, derivative_gain, extended_len, gain_table};
 pub use spectrum::{naive_dft, Spectra};
 
+/// The least-squares fit by QR of
+/// q(t) ≈ c + Σ_h a_h cos(hω₀t) + b_h sin(hω₀t), evaluated with its
+/// analytic derivatives at `time`. Returns (q, q̇, q̈). The obvious twin
+/// of the `differentiate` stage's `fourier_fit` (its DFT lines), and the
+/// noise stage's fit of a stretch that is not whole periods.
+pub fn fourier_least_squares(
+    time: &[f64],
+    q: &[f64],
+    period_s: f64,
+    harmonics: &[u32],
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let w0 = 2.0 * std::f64::consts::PI / period_s;
+    let cols = 1 + 2 * harmonics.len();
+    let a = nalgebra::DMatrix::from_fn(time.len(), cols, |i, c| {
+        if c == 0 {
+            return 1.0;
+        }
+        let w = w0 * harmonics[(c - 1) / 2] as f64;
+        if (c - 1) % 2 == 0 {
+            (w * time[i]).cos()
+        } else {
+            (w * time[i]).sin()
+        }
+    });
+    let b = nalgebra::DVector::from_column_slice(q);
+    // Least squares by QR: R·c = Qᵀ·b.
+    let qr = a.qr();
+    let coef = qr
+        .r()
+        .solve_upper_triangular(&(qr.q().transpose() * &b))
+        .expect("full-rank harmonic basis");
+    let (mut p, mut v, mut acc) = (vec![coef[0]; time.len()], vec![0.0; time.len()], vec![0.0; time.len()]);
+    for (h, &hn) in harmonics.iter().enumerate() {
+        let w = w0 * hn as f64;
+        let (ca, cb) = (coef[1 + 2 * h], coef[2 + 2 * h]);
+        for i in 0..time.len() {
+            let (s, c) = (w * time[i]).sin_cos();
+            p[i] += ca * c + cb * s;
+            v[i] += w * (-ca * s + cb * c);
+            acc[i] += -w * w * (ca * c + cb * s);
+        }
+    }
+    (p, v, acc)
+}
+
 /// The minimum of a unimodal `f` on [a, b], by golden section until the
 /// interval is `rel` of its midpoint; one evaluation per step.
 pub fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, rel: f64) -> f64 {

@@ -5,8 +5,8 @@
 //!   finite Fourier series at the excited harmonics (plus the mean), then
 //!   analytic derivatives. On a uniform grid over one period the harmonic
 //!   basis is orthogonal, so the least-squares coefficients are the DFT
-//!   lines at those harmonics (2X_h/N); `fit_reference` keeps the explicit
-//!   least-squares solution as the obvious twin. The positions written are
+//!   lines at those harmonics (2X_h/N); `signal::fourier_least_squares` keeps
+//!   the explicit least-squares solution as the obvious twin. The positions written are
 //!   the fitted ones: a very selective noise filter.
 //! - `dft` (Approach II): every line up to `bandwidth_hz` (default: all but
 //!   Nyquist) multiplied by jω and −ω²; lines above are zeroed, and the
@@ -99,7 +99,7 @@ impl Component for DifferentiateConfig {
     fn problems(&self) -> Vec<Problem> {
         let mut out = self.settings_problems();
         if self.method == Differentiation::FourierFit {
-            out.extend(super::noise::harmonics_settings(self.harmonics.as_ref()));
+            out.extend(super::harmonics_settings(self.harmonics.as_ref()));
         } else if self.harmonics.is_some() {
             out.push(Problem::new("harmonics", "applies to method = \"fourier_fit\""));
         }
@@ -108,7 +108,7 @@ impl Component for DifferentiateConfig {
 
     fn lint(&self, ctx: &LintContext) -> Vec<Problem> {
         match self.method {
-            Differentiation::FourierFit => super::noise::harmonics_from_source(self.harmonics.as_ref(), ctx),
+            Differentiation::FourierFit => super::harmonics_from_source(self.harmonics.as_ref(), ctx),
             _ => Vec::new(),
         }
     }
@@ -285,7 +285,7 @@ pub fn fit_stretch(p: &super::Periods, s: &super::Stretch, harmonics: &[u32]) ->
     let time: Vec<f64> = (0..s.len()).map(|k| k as f64 / fs).collect();
     let (mut q, mut qd, mut qdd) = (Vec::new(), Vec::new(), Vec::new());
     for col in &s.q {
-        let (a, b, c) = fit_reference(&time, col, p.period_s, harmonics);
+        let (a, b, c) = crate::signal::fourier_least_squares(&time, col, p.period_s, harmonics);
         q.push(a);
         qd.push(b);
         qdd.push(c);
@@ -305,44 +305,6 @@ pub fn fit_stretch(p: &super::Periods, s: &super::Stretch, harmonics: &[u32]) ->
         torque: Some(s.torque.clone()),
         metadata: md,
     }
-}
-
-/// The obvious twin of `fourier_fit`: the least-squares fit by QR of
-/// q(t) ≈ c + Σ_h a_h cos(hω₀t) + b_h sin(hω₀t), evaluated with its
-/// analytic derivatives at `time`. Returns (q, q̇, q̈).
-pub fn fit_reference(time: &[f64], q: &[f64], period_s: f64, harmonics: &[u32]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let w0 = 2.0 * std::f64::consts::PI / period_s;
-    let cols = 1 + 2 * harmonics.len();
-    let a = nalgebra::DMatrix::from_fn(time.len(), cols, |i, c| {
-        if c == 0 {
-            return 1.0;
-        }
-        let w = w0 * harmonics[(c - 1) / 2] as f64;
-        if (c - 1) % 2 == 0 {
-            (w * time[i]).cos()
-        } else {
-            (w * time[i]).sin()
-        }
-    });
-    let b = nalgebra::DVector::from_column_slice(q);
-    // Least squares by QR: R·c = Qᵀ·b.
-    let qr = a.qr();
-    let coef = qr
-        .r()
-        .solve_upper_triangular(&(qr.q().transpose() * &b))
-        .expect("full-rank harmonic basis");
-    let (mut p, mut v, mut acc) = (vec![coef[0]; time.len()], vec![0.0; time.len()], vec![0.0; time.len()]);
-    for (h, &hn) in harmonics.iter().enumerate() {
-        let w = w0 * hn as f64;
-        let (ca, cb) = (coef[1 + 2 * h], coef[2 + 2 * h]);
-        for i in 0..time.len() {
-            let (s, c) = (w * time[i]).sin_cos();
-            p[i] += ca * c + cb * s;
-            v[i] += w * (-ca * s + cb * c);
-            acc[i] += -w * w * (ca * c + cb * s);
-        }
-    }
-    (p, v, acc)
 }
 
 /// Non-periodic records (Swevers' validation data): positions and torques

@@ -75,3 +75,23 @@ pub trait Component {
     /// Precomputes what does not depend on the recording.
     fn build(&self, ctx: &Context) -> Result<Box<dyn Stage>>;
 }
+
+/// Problems of a stage's `harmonics`: empty, or holding 0.
+pub fn harmonics_settings(h: Option<&Vec<u32>>) -> Vec<Problem> {
+    match h {
+        Some(h) if h.is_empty() => vec![Problem::new("harmonics", "is empty: list the excited harmonic numbers")],
+        Some(h) if h.contains(&0) => vec![Problem::new("harmonics", "harmonic numbers start at 1 (0 is the mean)")],
+        _ => Vec::new(),
+    }
+}
+
+/// `harmonics` absent where the source cannot supply them.
+pub fn harmonics_from_source(h: Option<&Vec<u32>>, ctx: &LintContext) -> Vec<Problem> {
+    match h {
+        None if ctx.provenance == Some(false) => vec![Problem::new(
+            "harmonics",
+            "the source does not say which harmonics were excited (no robotid provenance): give harmonics",
+        )],
+        _ => Vec::new(),
+    }
+}

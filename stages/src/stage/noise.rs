@@ -21,7 +21,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use super::ChannelNoise;
-use super::{Chain, Component, Context, LintContext, Periods, Problem, Product, Stage, Stretch};
+use super::{
+    harmonics_from_source, harmonics_settings, Chain, Component, Context, LintContext, Periods, Problem, Product,
+    Stage, Stretch,
+};
 use crate::Result;
 
 use crate::signal::Spectra;
@@ -57,26 +60,6 @@ impl Component for NoiseConfig {
             harmonics: self.harmonics.clone(),
             spectra: ctx.spectra.clone(),
         }))
-    }
-}
-
-/// Problems of a stage's `harmonics`: empty, or holding 0.
-pub fn harmonics_settings(h: Option<&Vec<u32>>) -> Vec<Problem> {
-    match h {
-        Some(h) if h.is_empty() => vec![Problem::new("harmonics", "is empty: list the excited harmonic numbers")],
-        Some(h) if h.contains(&0) => vec![Problem::new("harmonics", "harmonic numbers start at 1 (0 is the mean)")],
-        _ => Vec::new(),
-    }
-}
-
-/// `harmonics` absent where the source cannot supply them.
-pub fn harmonics_from_source(h: Option<&Vec<u32>>, ctx: &LintContext) -> Vec<Problem> {
-    match h {
-        None if ctx.provenance == Some(false) => vec![Problem::new(
-            "harmonics",
-            "the source does not say which harmonics were excited (no robotid provenance): give harmonics",
-        )],
-        _ => Vec::new(),
     }
 }
 
@@ -242,7 +225,7 @@ fn stretch_variances(p: &Periods, s: &Stretch, harmonics: &[u32]) -> (Vec<Vec<f6
     let dof = m.saturating_sub(1 + 2 * harmonics.len()).max(1);
     (0..p.joints.len())
         .map(|j| {
-            let (fit, _, _) = crate::stage::differentiate::fit_reference(&time, &s.q[j], p.period_s, harmonics);
+            let (fit, _, _) = crate::signal::fourier_least_squares(&time, &s.q[j], p.period_s, harmonics);
             let v = s.q[j].iter().zip(&fit).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / dof as f64;
             (vec![v; n], vec![repeat_variance(&s.torque[j], n); n])
         })

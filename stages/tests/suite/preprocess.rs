@@ -7,11 +7,12 @@ use std::collections::BTreeMap;
 
 use robotid_schemas::TorqueChannel;
 use robotid_stages::dynamics::{self, Model};
+use robotid_stages::signal::fourier_least_squares;
 use robotid_stages::signal::{AnalogFilter, Spectra};
 use robotid_stages::simulation::{simulate, SimConfig, Simulation};
 use robotid_stages::stage::align::{align, AlignConfig};
 use robotid_stages::stage::average::average;
-use robotid_stages::stage::differentiate::{differentiate, fit_reference, Differentiation as Method};
+use robotid_stages::stage::differentiate::{differentiate, Differentiation as Method};
 use robotid_stages::stage::inverse_filter::{inverse_filter_periods, InverseFilterConfig};
 use robotid_stages::stage::noise::noise;
 
@@ -137,7 +138,7 @@ fn kuka_axis3_chain_recovers_the_truth() {
     let period = 10.0;
     let fit = differentiate(&mean, period, Method::FourierFit, &harmonics, None, &spectra);
     let dft = differentiate(&mean, period, Method::Dft, &harmonics, Some(2.0), &spectra);
-    let (rq, rqd, rqdd) = fit_reference(&mean.time, &mean.q[0], period, &harmonics);
+    let (rq, rqd, rqdd) = fourier_least_squares(&mean.time, &mean.q[0], period, &harmonics);
     assert!(
         rms(&fit.q[0], &rq) < 1e-12 && rms(&fit.qd[0], &rqd) < 1e-12 && rms(&fit.qdd[0], &rqdd) < 1e-11,
         "DFT fit = least squares"
