@@ -439,12 +439,9 @@ impl Table {
                 })?;
             Ok(a.values().to_vec())
         };
-        let expressions = match batch
-            .column_by_name("expression")
-            .and_then(|a| a.as_any().downcast_ref::<StringArray>())
-        {
-            Some(e) => (0..e.len()).map(|i| e.value(i).to_string()).collect(),
-            None => names.to_vec(),
+        let expressions = match robotid_stages::estimation::expressions_of(batch) {
+            e if e.is_empty() => names.to_vec(),
+            e => e,
         };
         Ok(Table {
             ci_low: f("ci_low")?,

@@ -205,8 +205,6 @@ fn readable(json: &str) -> String {
     }
 }
 
-/// The report's HTML. `expressions` are the parameters' regrouping
-/// expressions (the table's `expression` column).
 /// The verdict table's columns: per data set (the fit's own first, from
 /// the estimate's metadata) and joint, the residue over the noise floor
 /// and the verdict; each data set's prediction and residues.
@@ -327,7 +325,7 @@ fn verdicts_html(
 }
 
 /// The parameters, rounded to their uncertainty, with their intervals.
-fn parameters_html(h: &mut String, params: &Parameters, expressions: &[String], level: f64, t: f64) {
+fn parameters_html(h: &mut String, params: &Parameters, level: f64, t: f64) {
     h.push_str("<h2>Parameters</h2>\n<table>\n<tr><th>parameter</th><th>regroups</th><th>value</th><th>std</th>");
     // A fit identify refused has intervals of no known level.
     let header = if params.metadata.contains_key(metadata::INADEQUATE) {
@@ -344,7 +342,7 @@ fn parameters_html(h: &mut String, params: &Parameters, expressions: &[String], 
         h.push_str(&format!(
             "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{value}</td><td>{std}</td><td>[{lo}, {hi}]</td><td class=\"l\">{}</td></tr>\n",
             esc(&params.names[i]),
-            esc(expressions.get(i).map(String::as_str).unwrap_or("")),
+            esc(params.expressions.get(i).map(String::as_str).unwrap_or("")),
             esc(&params.units[i])
         ));
     }
@@ -392,13 +390,9 @@ fn made_html(h: &mut String, params: &Parameters, source: &str, dof: usize, leve
     }
 }
 
-pub fn html(
-    params: &Parameters,
-    expressions: &[String],
-    source: &str,
-    sets: &[DataSet],
-    physical: Option<&Physical>,
-) -> Result<String> {
+/// The report's HTML: the estimate `params` (read from `source`), each
+/// data set's fit, and the physical estimate's bodies.
+pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Option<&Physical>) -> Result<String> {
     let md = |k: &str| params.metadata.get(k).map(String::as_str).unwrap_or("-");
     let level: f64 = md(metadata::ESTIMATE_CONFIDENCE).parse().unwrap_or(0.95);
     let dof: usize = md(metadata::ESTIMATE_DOF).parse().unwrap_or(1);
@@ -434,7 +428,7 @@ pub fn html(
             h.push_str(&format!("<p class=\"warn\"><b>{what}:</b> {}</p>\n", esc(v)));
         }
     }
-    parameters_html(&mut h, params, expressions, level, t);
+    parameters_html(&mut h, params, level, t);
     made_html(&mut h, params, source, dof, level, t);
     h.push_str("</table>\n");
     for (set, (predicted, stats)) in sets.iter().zip(&set_stats) {
@@ -474,14 +468,8 @@ pub fn write_run_report(
     results: &[robotid::RecordingResult],
     dir: &std::path::Path,
 ) -> Result<std::path::PathBuf> {
-    use arrow::array::{Array, StringArray};
     let batch = robotid_stages::formats::parquet::read_parquet(parameters)?;
     let params = robotid_stages::estimation::parameters_from_table(&batch)?;
-    let expressions: Vec<String> = batch
-        .column_by_name("expression")
-        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
-        .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
-        .unwrap_or_default();
     let systems: Vec<&System> = results
         .iter()
         .filter_map(|r| Some(&r.outcome.as_ref().ok()?.regressor.as_ref()?.system))
@@ -495,7 +483,6 @@ pub fn write_run_report(
     let sys = System::stack(&systems)?;
     let page = html(
         &params,
-        &expressions,
         &shown.display().to_string(),
         &[DataSet {
             title: "Excitation data",

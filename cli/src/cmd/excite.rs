@@ -1,10 +1,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use anyhow::Context;
-use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
-use arrow::datatypes::{DataType, Field, Schema};
 use indicatif::{ProgressBar, ProgressStyle};
 use robotid_schemas::{metadata, Kinematics};
 use robotid_stages::dynamics::{end_effector_position, load_robot, Data};
@@ -114,45 +111,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ?;
     // Coefficients as Parquet.
     let f = &d.trajectory;
-    let (mut joint, mut harmonic, mut a, mut b, mut q0) = (vec![], vec![], vec![], vec![], vec![]);
-    for (j, jn) in model.joint_names().iter().enumerate() {
-        for (l, h) in f.harmonic_numbers().iter().enumerate() {
-            joint.push(jn.clone());
-            harmonic.push(*h as i64);
-            a.push(f.a[j][l]);
-            b.push(f.b[j][l]);
-            q0.push(f.q0[j]);
-        }
-    }
-    let unit = |u: &str| BTreeMap::from([(metadata::UNIT.to_string(), u.to_string())]);
-    let md = BTreeMap::from([
-        (metadata::TABLE.to_string(), "excitation_coefficients".to_string()),
-        (metadata::PERIOD_S.to_string(), f.period().to_string()),
-        (metadata::BASE_FREQUENCY_HZ.to_string(), f.base_frequency_hz.to_string()),
-        (metadata::CONDITION_NUMBER.to_string(), d.condition.to_string()),
-        (
-            metadata::FORMULA.to_string(),
-            "q(t) = q0 + Σ (a sin(kωt) − b cos(kωt))/(kω)".to_string(),
-        ),
-    ]);
-    let schema = Schema::new(vec![
-        Field::new("joint", DataType::Utf8, false),
-        Field::new("harmonic", DataType::Int64, false).with_metadata(unit("1")),
-        Field::new("a", DataType::Float64, false).with_metadata(unit("rad/s")),
-        Field::new("b", DataType::Float64, false).with_metadata(unit("rad/s")),
-        Field::new("q0", DataType::Float64, false).with_metadata(unit("rad")),
-    ])
-    .with_metadata(md);
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(joint)),
-        Arc::new(Int64Array::from(harmonic)),
-        Arc::new(Float64Array::from(a)),
-        Arc::new(Float64Array::from(b)),
-        Arc::new(Float64Array::from(q0)),
-    ];
     write_parquet(
         &out.join("coefficients.parquet"),
-        &RecordBatch::try_new(Arc::new(schema), cols)?,
+        &d.coefficients_table(&model.joint_names())?,
     )?;
     // The sampled trajectory as a kinematics table.
     let n = model.dof();

@@ -1,6 +1,5 @@
 use std::path::PathBuf;
 
-use arrow::array::{Array, StringArray};
 use robotid_report::report::{html, DataSet};
 use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;
@@ -34,11 +33,6 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let batch = read_parquet(&args.parameters)?;
     let params = parameters_from_table(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
-    let expressions: Vec<String> = batch
-        .column_by_name("expression")
-        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
-        .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
-        .unwrap_or_default();
     let excitation = (!args.excitation.is_empty())
         .then(|| load_system(&args.excitation))
         .transpose()?;
@@ -74,7 +68,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let page = html(
         &params,
-        &expressions,
         &args.parameters.display().to_string(),
         &sets,
         physical.as_ref(),

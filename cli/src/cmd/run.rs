@@ -95,16 +95,7 @@ pub fn run_pipeline(pipeline: Pipeline, args: Args, shown: &std::path::Path) -> 
                 println!("    residue of {name}: {msr:.4e} over {rows} rows");
             }
         }
-        let expressions: Vec<String> = est
-            .table
-            .column_by_name("expression")
-            .and_then(|c| c.as_any().downcast_ref::<arrow::array::StringArray>())
-            .map(|c| {
-                (0..arrow::array::Array::len(c))
-                    .map(|i| c.value(i).to_string())
-                    .collect()
-            })
-            .unwrap_or_default();
+        let expressions = robotid_stages::estimation::expressions_of(&est.table);
         for (name, value, z) in est.estimate.impossible(&expressions) {
             println!(
                 "warning: {name} = {value:.6} is physically impossible (below zero by {:.1} standard deviations): the model or the data is at fault; `physical = true` forces consistency",

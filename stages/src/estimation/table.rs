@@ -29,6 +29,9 @@ pub use robotid_schemas::metadata::ESTIMATE_METHOD as METHOD;
 pub struct Parameters {
     pub names: Vec<String>,
     pub units: Vec<String>,
+    /// Each base parameter's expression in the standard ones (the
+    /// optional `expression` column; empty when the table has none).
+    pub expressions: Vec<String>,
     pub values: DVector<f64>,
     pub std: DVector<f64>,
     pub covariance: DMatrix<f64>,
@@ -100,6 +103,15 @@ pub fn parameters_table(
     Ok(batch)
 }
 
+/// A parameters table's `expression` column (empty when it has none).
+pub fn expressions_of(batch: &RecordBatch) -> Vec<String> {
+    batch
+        .column_by_name("expression")
+        .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+        .map(|c| (0..c.len()).map(|i| c.value(i).to_string()).collect())
+        .unwrap_or_default()
+}
+
 /// Reads a `parameters` table back.
 pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
     let schema = batch.schema();
@@ -139,6 +151,7 @@ pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
     }
     Ok(Parameters {
         units: s("unit")?,
+        expressions: expressions_of(batch),
         values,
         std: f("std")?,
         names,

@@ -129,6 +129,57 @@ pub struct Design {
 }
 
 impl Design {
+    /// The trajectory's coefficients as a table (`robotid excite`'s
+    /// `coefficients.parquet`): a row per joint (`joints`, the model's
+    /// order) and harmonic, with units, the period and the series' formula.
+    pub fn coefficients_table(&self, joints: &[String]) -> crate::Result<arrow::array::RecordBatch> {
+        use arrow::array::{ArrayRef, Float64Array, Int64Array, RecordBatch, StringArray};
+        use arrow::datatypes::{DataType, Field, Schema};
+        use robotid_schemas::metadata;
+        use std::collections::BTreeMap;
+        use std::sync::Arc;
+        let f = &self.trajectory;
+        let (mut joint, mut harmonic, mut a, mut b, mut q0) = (vec![], vec![], vec![], vec![], vec![]);
+        for (j, jn) in joints.iter().enumerate() {
+            for (l, h) in f.harmonic_numbers().iter().enumerate() {
+                joint.push(jn.clone());
+                harmonic.push(*h as i64);
+                a.push(f.a[j][l]);
+                b.push(f.b[j][l]);
+                q0.push(f.q0[j]);
+            }
+        }
+        let unit = |u: &str| BTreeMap::from([(metadata::UNIT.to_string(), u.to_string())]);
+        let md = BTreeMap::from([
+            (metadata::TABLE.to_string(), "excitation_coefficients".to_string()),
+            (metadata::PERIOD_S.to_string(), f.period().to_string()),
+            (metadata::BASE_FREQUENCY_HZ.to_string(), f.base_frequency_hz.to_string()),
+            (metadata::CONDITION_NUMBER.to_string(), self.condition.to_string()),
+            (
+                metadata::FORMULA.to_string(),
+                "q(t) = q0 + Σ (a sin(kωt) − b cos(kωt))/(kω)".to_string(),
+            ),
+        ]);
+        let field = |name: &str, t: DataType, u: &str| Field::new(name, t, false).with_metadata(unit(u));
+        let schema = Schema::new(vec![
+            Field::new("joint", DataType::Utf8, false),
+            field("harmonic", DataType::Int64, "1"),
+            field("a", DataType::Float64, "rad/s"),
+            field("b", DataType::Float64, "rad/s"),
+            field("q0", DataType::Float64, "rad"),
+        ])
+        .with_metadata(md);
+        let cols: Vec<ArrayRef> = vec![
+            Arc::new(StringArray::from(joint)),
+            Arc::new(Int64Array::from(harmonic)),
+            Arc::new(Float64Array::from(a)),
+            Arc::new(Float64Array::from(b)),
+            Arc::new(Float64Array::from(q0)),
+        ];
+        Ok(RecordBatch::try_new(Arc::new(schema), cols)
+            .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?)
+    }
+
     /// Constraints within 1 % of their bound.
     pub fn active(&self) -> Vec<&str> {
         self.constraints
