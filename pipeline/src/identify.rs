@@ -36,6 +36,68 @@ use crate::Pipeline;
 /// the default first, then what real arms repeat to.
 const STEADY_LADDER: [f64; 5] = [0.01, 0.02, 0.03, 0.05, 0.1];
 
+/// What identify found, by kind: printed one line each, and written in
+/// the pipeline file's `[inferred]` under its [`Found::key`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Found {
+    /// How the log was read.
+    Read,
+    /// Joints the log does not hold, locked.
+    Locked,
+    /// A declaration its data contradict.
+    Conflict,
+    /// The sampling rate.
+    SampleRate,
+    /// The anti-alias filter undone.
+    InverseFilter,
+    /// The effort channel's delay, undone.
+    EffortDelay,
+    /// Not periodic, and why.
+    Periodic,
+    /// The excitation period.
+    Period,
+    /// The steady periods.
+    Steady,
+    /// The excited harmonics.
+    Harmonics,
+    /// Joints held still.
+    Held,
+    /// The joint a joint-wise record moves.
+    JointWise,
+    /// The kinematics' method and band.
+    Differentiate,
+    /// The friction model.
+    Friction,
+    /// The Coulomb term's transition speed.
+    CoulombTransition,
+    /// The held-out score that chose.
+    HeldOut,
+}
+
+impl Found {
+    /// Its key in `[inferred]` and in what identify prints.
+    pub fn key(self) -> &'static str {
+        match self {
+            Found::Read => "read",
+            Found::Locked => "locked",
+            Found::Conflict => "conflict",
+            Found::SampleRate => "sample_rate_hz",
+            Found::InverseFilter => "inverse_filter",
+            Found::EffortDelay => "effort_delay",
+            Found::Periodic => "periodic",
+            Found::Period => "period_s",
+            Found::Steady => "steady",
+            Found::Harmonics => "harmonics",
+            Found::Held => "held",
+            Found::JointWise => "joint_wise",
+            Found::Differentiate => "differentiate",
+            Found::Friction => "friction",
+            Found::CoulombTransition => "coulomb_transition_rad_s",
+            Found::HeldOut => "held_out",
+        }
+    }
+}
+
 /// A pipeline designed from a recording.
 #[derive(Debug, Clone)]
 pub struct Design {
@@ -44,7 +106,7 @@ pub struct Design {
     /// …and as its file is written.
     pub text: String,
     /// What was found, one line each (also in the file's `[inferred]`).
-    pub findings: Vec<(String, String)>,
+    pub findings: Vec<(Found, String)>,
     pub periodic: bool,
     /// Its regressor stage (the tables of one identification share one).
     pub regressor: RegressorConfig,
@@ -86,13 +148,13 @@ impl Design {
     fn finish(
         mut plan: Plan,
         tables: Vec<TableKind>,
-        findings: Vec<(String, String)>,
+        findings: Vec<(Found, String)>,
         regressor: RegressorConfig,
         inverse: Option<(FilterSpec, f64)>,
     ) -> Result<Design> {
         plan.stages.push(StageConfig::Regressor(regressor.clone()));
         plan.tables = tables;
-        plan.inferred = findings.iter().cloned().collect();
+        plan.inferred = findings.iter().map(|(k, v)| (k.key().to_string(), v.clone())).collect();
         Ok(Design {
             text: file_text(&plan)?,
             plan,
@@ -327,8 +389,9 @@ fn roughness(q: &[Vec<f64>]) -> f64 {
 }
 
 /// The sample rate from the stamps: the mean step over the record, a whole
-/// number of hertz when it is one within 0.1 %; and its uncertainty.
-fn sample_rate(raw: &RawSamples) -> (f64, String) {
+/// number of hertz when it is one within 0.1 %; and its uncertainty. A
+/// declared rate its stamps contradict is a `conflict` finding.
+fn sample_rate(raw: &RawSamples, findings: &mut Vec<(Found, String)>) -> (f64, String) {
     let t = &raw.time;
     let n = t.len();
     let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
@@ -343,10 +406,13 @@ fn sample_rate(raw: &RawSamples) -> (f64, String) {
     {
         // Dropped samples lower the stamps' rate: only a faster one conflicts.
         let said = if rate > r * (1.0 + 1e-3) + 4.0 * std {
-            eprintln!(
-                "warning: the recording declares {} = {r} Hz, but its stamps' mean step gives {rate:.4} ± {std:.1e} Hz",
-                metadata::SAMPLE_RATE_HZ
-            );
+            findings.push((
+                Found::Conflict,
+                format!(
+                    "the recording declares {} = {r} Hz, but its stamps' mean step gives {rate:.4} ± {std:.1e} Hz",
+                    metadata::SAMPLE_RATE_HZ
+                ),
+            ));
             format!(
                 "{r} Hz (the recording's {}; its stamps say {rate:.4} ± {std:.1e} Hz)",
                 metadata::SAMPLE_RATE_HZ
@@ -398,7 +464,7 @@ pub fn design_with(
     let (model, locked) = unheld_locked(log, robot, first, stated)?;
     let joints = model.joint_names();
     let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
-    let mut findings: Vec<(String, String)> = Vec::new();
+    let mut findings: Vec<(Found, String)> = Vec::new();
     let mut plan = Plan::draft(
         &log.with_extension("toml"),
         Some(robot.to_path_buf()),
@@ -412,17 +478,17 @@ pub fn design_with(
             .collect::<Vec<_>>()
             .join(", ");
         findings.push((
-            "locked".into(),
+            Found::Locked,
             format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'"),
         ));
         plan.lock.extend(locked);
     }
-    findings.extend(layout_said(&layout, &read_cfg)?.map(|said| ("read".into(), said)));
-    let (fs, fs_said) = sample_rate(&raw);
+    findings.extend(layout_said(&layout, &read_cfg)?.map(|said| (Found::Read, said)));
+    let (fs, fs_said) = sample_rate(&raw, &mut findings);
     let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
     if let Some(d) = first.and_then(|d| d.delay_s) {
         findings.push((
-            "effort_delay".into(),
+            Found::EffortDelay,
             format!(
                 "{:.3} samples ({:.3} ms) late, the identification recording's, undone",
                 d * fs,
@@ -434,17 +500,17 @@ pub fn design_with(
         Some(d) => d.regressor.clone(),
         None => identify_regressor(inverse.map(|(_, b)| b)),
     };
-    findings.push(("sample_rate_hz".into(), fs_said));
-    let period = period_of(log, &raw, &mut findings);
+    findings.push((Found::SampleRate, fs_said));
+    let period = period_of(&raw, &mut findings);
     let (period, period_said) = match period {
         Ok(p) => p,
         Err(why) => {
-            findings.push(("periodic".into(), format!("no: {why}")));
+            findings.push((Found::Periodic, format!("no: {why}")));
             let delay = first.and_then(|d| d.delay_s);
             return non_periodic(plan, findings, &raw, fs, &regressor, (inverse.as_ref(), delay));
         }
     };
-    findings.push(("period_s".into(), period_said));
+    findings.push((Found::Period, period_said));
     periodic(
         Draft {
             log,
@@ -524,7 +590,7 @@ struct Draft<'a> {
     raw: RawSamples,
     fs: f64,
     plan: Plan,
-    findings: Vec<(String, String)>,
+    findings: Vec<(Found, String)>,
     regressor: RegressorConfig,
     inverse: Option<(FilterSpec, f64)>,
 }
@@ -551,12 +617,12 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
     let (steady_periods, repeated) = (p.periods, p.periods >= 2 || p.stretch.is_some());
-    findings.push(("steady".into(), steady_said(p, tol)));
+    findings.push((Found::Steady, steady_said(p, tol)));
     let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
     let moving = joint_wise(log, period, &joints, &sets, &mut findings)?;
     let held_at = moving.map(|m| held_positions(m, &joints, &mean.q));
     same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
-    findings.push(("harmonics".into(), harmonics_said));
+    findings.push((Found::Harmonics, harmonics_said));
     let (positions_stage, torques_stage) = bands(period, mean, &joints, &sets, &union);
     let stages_after = |inverse: Option<&(FilterSpec, f64)>, delay: Option<f64>, differentiate: &StageConfig| {
         stages_after(
@@ -586,7 +652,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         )?;
         wide_band = Some(wide);
         held_out_relative = choice.relative;
-        findings.push(("differentiate".into(), said));
+        findings.push((Found::Differentiate, said));
         apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
     }
     // Validation recordings take the identification's rule.
@@ -595,7 +661,7 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         _ => &positions_stage,
     };
     if !own_regressor {
-        findings.push(("differentiate".into(), said.clone()));
+        findings.push((Found::Differentiate, said.clone()));
     }
     plan.stages = stages_after(inverse.as_ref(), delay, differentiate);
     let tables = vec![
@@ -714,7 +780,7 @@ fn excited(
     p: &robotid_stages::stage::Periods,
     mean_q: &[Vec<f64>],
     joints: &[String],
-    findings: &mut Vec<(String, String)>,
+    findings: &mut Vec<(Found, String)>,
 ) -> (Vec<Vec<u32>>, Vec<u32>, String) {
     // The excitation's lines: the reference's when the log has one (the
     // commanded lines exactly), else the positions'.
@@ -752,7 +818,7 @@ fn excited(
     }
     if !held.is_empty() {
         findings.push((
-            "held".into(),
+            Found::Held,
             format!(
                 "{}: their strongest line is under {} % of the most moving joint's ({widest:.3} rad): a sag under load or an encoder's flicker, taken as held still",
                 held.join(", "),
@@ -780,28 +846,28 @@ fn apply_choice(
     fs: f64,
     (inverse, delay): (&mut Option<(FilterSpec, f64)>, &mut Option<f64>),
     regressor: &mut RegressorConfig,
-    findings: &mut Vec<(String, String)>,
+    findings: &mut Vec<(Found, String)>,
 ) {
     *delay = choice.delay_s;
-    findings.push(("effort_delay".into(), choice.delay_said));
+    findings.push((Found::EffortDelay, choice.delay_said));
     if inverse.is_none() {
         if let Some(spec) = choice.filter {
             let band = (0.8 * spec.cutoff_hz).min(0.4 * fs);
             *inverse = Some((spec, band));
             regressor.band_limit_hz = Some(band);
         }
-        findings.retain(|(k, _)| k != "inverse_filter");
-        findings.push(("inverse_filter".into(), choice.filter_said));
+        findings.retain(|(k, _)| *k != Found::InverseFilter);
+        findings.push((Found::InverseFilter, choice.filter_said));
     }
     if let Some(v) = choice.transition.filter(|v| *v > 0.0) {
         regressor.coulomb_transition_rad_s = Some(v);
     }
     regressor.friction = choice.friction;
     if let Some(said) = choice.friction_said {
-        findings.push(("friction".into(), said));
+        findings.push((Found::Friction, said));
     }
-    findings.push(("coulomb_transition_rad_s".into(), choice.transition_said));
-    findings.push(("held_out".into(), choice.held_out_said));
+    findings.push((Found::CoulombTransition, choice.transition_said));
+    findings.push((Found::HeldOut, choice.held_out_said));
 }
 
 /// The joint that moves when it is the only one (the others held: a
@@ -813,7 +879,7 @@ fn joint_wise(
     period: f64,
     joints: &[String],
     sets: &[Vec<u32>],
-    findings: &mut Vec<(String, String)>,
+    findings: &mut Vec<(Found, String)>,
 ) -> Result<Option<usize>> {
     let still: Vec<&str> = sets
         .iter()
@@ -824,7 +890,7 @@ fn joint_wise(
     if joints.len() > 1 && still.len() == joints.len() - 1 {
         let m = sets.iter().position(|h| !h.is_empty()).expect("one moves");
         findings.push((
-            "joint_wise".into(),
+            Found::JointWise,
             format!(
                 "only {} moves: a joint-wise experiment (Bona §3), the decoupled model from its rows only",
                 joints[m]
@@ -1003,7 +1069,7 @@ fn declared_filter(
     raw: &RawSamples,
     fs: f64,
     first: Option<&Design>,
-    findings: &mut Vec<(String, String)>,
+    findings: &mut Vec<(Found, String)>,
 ) -> Result<Option<(FilterSpec, f64)>> {
     let filter: Option<FilterSpec> = raw
         .metadata
@@ -1018,14 +1084,14 @@ fn declared_filter(
     let inverse = inverse.or_else(|| first.and_then(|d| d.inverse));
     match &inverse {
         Some((f, band)) if inherited => findings.push((
-            "inverse_filter".into(),
+            Found::InverseFilter,
             format!(
                 "{}, the identification recording's (this one declares none), undone up to {band:.2} Hz",
                 describe(f)
             ),
         )),
         Some((f, band)) => findings.push((
-            "inverse_filter".into(),
+            Found::InverseFilter,
             format!(
                 "{} order {} at {} Hz (the recording's {}), undone up to {band:.2} Hz",
                 toml::Value::try_from(f.family)?,
@@ -1035,7 +1101,7 @@ fn declared_filter(
             ),
         )),
         None => findings.push((
-            "inverse_filter".into(),
+            Found::InverseFilter,
             "none: the recording declares no anti-alias filter; if the effort went through one, add an `inverse_filter` stage (docs/pipeline-file.md)".into(),
         )),
     }
@@ -1046,9 +1112,8 @@ fn declared_filter(
 /// `findings`), else the one its positions repeat with, and how it was
 /// found; or why there is none.
 fn period_of(
-    log: &Path,
     raw: &RawSamples,
-    findings: &mut Vec<(String, String)>,
+    findings: &mut Vec<(Found, String)>,
 ) -> std::result::Result<(f64, String), robotid_stages::signal::period::NoPeriod> {
     match raw.metadata.get(metadata::PERIOD_S).and_then(|v| v.parse::<f64>().ok()) {
         Some(p) => {
@@ -1062,8 +1127,7 @@ fn period_of(
                         ten_digits(e.period_s),
                         e.std_s
                     );
-                    eprintln!("warning: {}: {w}", log.display());
-                    findings.push(("conflict".into(), w));
+                    findings.push((Found::Conflict, w));
                 }
             }
             Ok((p, format!("{p} s (the recording's {})", metadata::PERIOD_S)))
@@ -1089,7 +1153,7 @@ fn steady(
     plan: &Plan,
     raw: &RawSamples,
     (period, fs): (f64, f64),
-    findings: &[(String, String)],
+    findings: &[(Found, String)],
 ) -> Result<(f64, Chain)> {
     // The steady periods: align with the default tolerance, then looser.
     let mut last_err = None;
@@ -1107,7 +1171,7 @@ fn steady(
     found.ok_or_else(|| {
         let conflict = findings
             .iter()
-            .find(|(k, _)| k == "conflict")
+            .find(|(k, _)| *k == Found::Conflict)
             .map(|(_, w)| format!(" ({w})"))
             .unwrap_or_default();
         refuse(
@@ -1841,7 +1905,7 @@ fn position_step(q: &[Vec<f64>]) -> Option<f64> {
 
 fn non_periodic(
     mut plan: Plan,
-    mut findings: Vec<(String, String)>,
+    mut findings: Vec<(Found, String)>,
     raw: &RawSamples,
     fs: f64,
     regressor: &RegressorConfig,
@@ -1866,7 +1930,7 @@ fn non_periodic(
         if v > regressor.coulomb_transition_rad_s.unwrap_or(0.0) {
             regressor.coulomb_transition_rad_s = Some(v);
             findings.push((
-                "coulomb_transition_rad_s".into(),
+                Found::CoulombTransition,
                 format!(
                     "{v:.3e}: the filtered velocity's resolution (position step {step:.3e} rad × 2π × {cutoff} Hz); slower is rest to this chain, where sign(q̇) would flip on the filter's ringing"
                 ),
@@ -1874,7 +1938,7 @@ fn non_periodic(
         }
     }
     findings.push((
-        "differentiate".into(),
+        Found::Differentiate,
         format!(
             "filtered, 2nd-order Butterworth at {cutoff} Hz (Swevers' 5 Hz data filter, or 4× the {reach:.3} Hz holding 99.99 % of the positions' power when higher; at most fs/8)"
         ),

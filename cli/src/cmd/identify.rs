@@ -2,7 +2,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context as _};
-use robotid::identify::{absolute, design_with, Design};
+use robotid::identify::{absolute, design_with, Design, Found};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -185,7 +185,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             if d.periodic { "periodic" } else { "not periodic" }
         );
         for (k, v) in &d.findings {
-            println!("  {k}: {v}");
+            println!("  {}: {v}", k.key());
+            // A declaration the data contradict: a warning too.
+            if *k == Found::Conflict {
+                eprintln!("warning: {}: {v}", log.display());
+            }
         }
         designs.push(d);
     }
@@ -234,17 +238,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .findings
         .iter()
         .filter(|(k, _)| {
-            [
-                "inverse_filter",
-                "effort_delay",
-                "differentiate",
-                "coulomb_transition_rad_s",
-                "friction",
-                "held_out",
-            ]
-            .contains(&k.as_str())
+            matches!(
+                k,
+                Found::InverseFilter
+                    | Found::EffortDelay
+                    | Found::Differentiate
+                    | Found::CoulombTransition
+                    | Found::Friction
+                    | Found::HeldOut
+            )
         })
-        .map(|(k, v)| format!("\n  {k}: {v}"))
+        .map(|(k, v)| format!("\n  {}: {v}", k.key()))
         .collect();
     let policy = robotid::verdict::Policy {
         tolerance: args.tolerance / 100.0,
@@ -539,12 +543,12 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> robotid::Resul
     println!("  locked: {said}: no joint-wise record moves them (each gets its own record to be identified)");
     for d in designs.iter_mut() {
         d.plan.lock.extend(locked.iter().cloned());
-        d.findings.push(("locked".into(), said.clone()));
-        let all = match d.plan.inferred.get("locked") {
+        d.findings.push((Found::Locked, said.clone()));
+        let all = match d.plan.inferred.get(Found::Locked.key()) {
             Some(before) => format!("{before}; {said}"),
             None => said.clone(),
         };
-        d.plan.inferred.insert("locked".into(), all);
+        d.plan.inferred.insert(Found::Locked.key().into(), all);
         d.text = robotid::identify::file_text(&d.plan)?;
     }
     Ok(())
