@@ -85,8 +85,15 @@ pub fn robust_covariance(sys: &System, theta: &DVector<f64>, w: Option<&DVector<
         }
         blocks += n / l;
     }
+    let mut covariance = &g * omega * &g;
+    // Known parameters' uncertainty, as least squares adds it:
+    // θ = G·(b − A_k θ_k) adds G·AᵀWA_k·C_k·A_kᵀWA·G.
+    if let Some((a_k, c_k)) = &sys.known {
+        let g_ak = &g * wa.tr_mul(a_k);
+        covariance += &g_ak * c_k * g_ak.transpose();
+    }
     Ok(Robust {
-        covariance: &g * omega * &g,
+        covariance,
         bandwidth,
         dof: blocks.saturating_sub(1).max(1),
     })
@@ -109,24 +116,15 @@ fn correlation_length(sys: &System, residue: &DVector<f64>, by_sample: &[BTreeMa
     }
     let shortest = series.iter().map(Vec::len).min().unwrap_or(1);
     let cap = (shortest / 3).max(1);
-    let autocovariance = |lag: usize| -> f64 {
-        series
-            .iter()
-            .map(|s| {
-                let mean = s.iter().sum::<f64>() / s.len() as f64;
-                s.iter()
-                    .zip(&s[lag..])
-                    .map(|(a, b)| (a - mean) * (b - mean))
-                    .sum::<f64>()
-                    / s.len() as f64
-            })
-            .sum()
-    };
-    let zero = autocovariance(0);
-    if !(zero > 0.0) {
+    for s in &mut series {
+        let mean = s.iter().sum::<f64>() / s.len() as f64;
+        s.iter_mut().for_each(|x| *x -= mean);
+    }
+    let acf = crate::signal::summed_autocovariance(series.iter().map(Vec::as_slice));
+    if !(acf.first().is_some_and(|a| *a > 0.0)) {
         return 1;
     }
-    (2 * (1..=cap).find(|&l| autocovariance(l) <= 0.0).unwrap_or(cap)).min(cap)
+    (2 * (1..=cap).find(|&l| acf[l] <= 0.0).unwrap_or(cap)).min(cap)
 }
 
 #[cfg(test)]

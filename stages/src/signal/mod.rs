@@ -56,6 +56,32 @@ pub fn fourier_least_squares(
     (p, v, acc)
 }
 
+/// Σ over `series` of Σ_t x(t)·x(t + l), for lags l below the longest
+/// series' length: by FFT, each zero-padded to twice that length's power of
+/// two (no wrap-around), the sums added in order.
+pub fn summed_autocovariance<'a>(series: impl IntoIterator<Item = &'a [f64]> + Clone) -> Vec<f64> {
+    let len = series.clone().into_iter().map(<[f64]>::len).max().unwrap_or(0);
+    let size = (2 * len).next_power_of_two();
+    let mut planner = realfft::RealFftPlanner::<f64>::new();
+    let (fwd, inv) = (planner.plan_fft_forward(size), planner.plan_fft_inverse(size));
+    let mut acf = vec![0.0; size];
+    let mut buf = vec![0.0; size];
+    let mut spec = fwd.make_output_vec();
+    for x in series {
+        buf.iter_mut().for_each(|b| *b = 0.0);
+        buf[..x.len()].copy_from_slice(x);
+        // Buffers of the plans' own sizes: the transforms cannot fail.
+        fwd.process(&mut buf, &mut spec).expect("sized by the plan");
+        spec.iter_mut().for_each(|s| *s *= s.conj());
+        // The inverse only fails on a DC or Nyquist line with an imaginary
+        // part, which |X|² has not.
+        inv.process(&mut spec, &mut buf).expect("a real power spectrum");
+        acf.iter_mut().zip(&buf).for_each(|(a, b)| *a += b);
+    }
+    acf.truncate(len);
+    acf
+}
+
 /// The minimum of a unimodal `f` on [a, b], by golden section until the
 /// interval is `rel` of its midpoint; one evaluation per step.
 pub fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, rel: f64) -> f64 {

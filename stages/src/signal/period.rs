@@ -454,25 +454,8 @@ fn coarse_period(x: &[Vec<f64>], dt: f64, reach: f64) -> Result<f64, NoPeriod> {
     // At most 2¹⁶ points: decimated (the period is refined afterwards).
     let step = m.div_ceil(1 << 16);
     let len = m.div_ceil(step);
-    let size = (2 * len).next_power_of_two();
-    let mut planner = RealFftPlanner::<f64>::new();
-    let (fwd, inv) = (planner.plan_fft_forward(size), planner.plan_fft_inverse(size));
-    let mut acf = vec![0.0; size];
-    let mut buf = vec![0.0; size];
-    let mut spec = fwd.make_output_vec();
-    for c in x {
-        buf.iter_mut().for_each(|b| *b = 0.0);
-        for (b, v) in buf.iter_mut().zip(c.iter().step_by(step)) {
-            *b = *v;
-        }
-        // Buffers of the plans' own sizes: the transforms cannot fail.
-        fwd.process(&mut buf, &mut spec).expect("sized by the plan");
-        spec.iter_mut().for_each(|s| *s *= s.conj());
-        // The inverse only fails on a DC or Nyquist line with an imaginary
-        // part, which |X|² has not.
-        inv.process(&mut spec, &mut buf).expect("a real power spectrum");
-        acf.iter_mut().zip(&buf).for_each(|(a, b)| *a += b);
-    }
+    let decimated: Vec<Vec<f64>> = x.iter().map(|c| c.iter().step_by(step).copied().collect()).collect();
+    let acf = super::summed_autocovariance(decimated.iter().map(Vec::as_slice));
     // Unbiased: each lag's sum over its overlap.
     let r: Vec<f64> = (0..(reach * len as f64) as usize)
         .map(|l| acf[l] / (len - l) as f64 / acf[0] * len as f64)
