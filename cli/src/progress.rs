@@ -19,6 +19,8 @@ pub struct Bars<F: Fn(&[RecordingResult]) + Sync> {
     by_name: Mutex<HashMap<String, ProgressBar>>,
     plots: Option<robotid_report::Plots>,
     recorded: F,
+    /// The spinner of a step with nothing to count.
+    spinner: Mutex<Option<ProgressBar>>,
 }
 
 impl<F: Fn(&[RecordingResult]) + Sync> Bars<F> {
@@ -33,6 +35,7 @@ impl<F: Fn(&[RecordingResult]) + Sync> Bars<F> {
             by_name: Mutex::new(HashMap::new()),
             plots: plot.then_some(robotid_report::Plots),
             recorded,
+            spinner: Mutex::new(None),
         }
     }
 
@@ -42,6 +45,19 @@ impl<F: Fn(&[RecordingResult]) + Sync> Bars<F> {
 }
 
 impl<F: Fn(&[RecordingResult]) + Sync> Observer for Bars<F> {
+    fn busy(&self, what: Option<&str>) {
+        let mut spinner = self.spinner.lock().expect("not poisoned");
+        if let Some(s) = spinner.take() {
+            s.finish_and_clear();
+        }
+        if let Some(what) = what.filter(|_| std::io::IsTerminal::is_terminal(&std::io::stderr())) {
+            let s = ProgressBar::new_spinner();
+            s.set_message(what.to_string());
+            s.enable_steady_tick(std::time::Duration::from_millis(120));
+            *spinner = Some(s);
+        }
+    }
+
     fn started(&self, name: &str, steps: usize) {
         let bar = self.bars.add(ProgressBar::new(steps as u64));
         bar.set_style(self.style.clone());

@@ -136,6 +136,15 @@ pub enum Error {
         expected: Vec<String>,
         found: Vec<String>,
     },
+    /// An estimate's settings out of range: the option and why.
+    #[error("estimate setting `{key}`: {message}")]
+    Settings { key: String, message: String },
+    /// Regressor tables made for another parameter set than the estimate's.
+    #[error("the regressor tables' parameters {tables:?} are not the estimate's {estimate:?}: make them with the same regressor configuration")]
+    OtherParameters { tables: Vec<String>, estimate: Vec<String> },
+    /// Validation recordings whose torque runs against the prediction.
+    #[error("{recordings}: the measured torque runs against the identified model's prediction on {}: a reversed channel, or two joints' columns swapped, in the recording; fix the log", joints.join(", "))]
+    Reversed { recordings: String, joints: Vec<String> },
     /// Pictures or a report could not be made.
     #[error("{what}: {msg}")]
     Output { what: String, msg: String },

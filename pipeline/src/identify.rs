@@ -107,7 +107,8 @@ pub struct Design {
     pub text: String,
     /// What was found, one line each (also in the file's `[inferred]`).
     pub findings: Vec<(Found, String)>,
-    pub periodic: bool,
+    /// What repeats in the record.
+    pub excitation: Excitation,
     /// Its regressor stage (the tables of one identification share one).
     pub regressor: RegressorConfig,
     /// The anti-alias filter undone (declared, found in the spectrum, or
@@ -120,28 +121,50 @@ pub struct Design {
     /// The kinematics keep the torques' lines beyond the excited ones (the
     /// identification's choice, which validation recordings follow).
     pub wide_band: bool,
-    /// Whole steady periods averaged (0: not periodic).
-    pub periods: usize,
-    /// The relative error of the chosen model on held-out periods (fitted
-    /// on the even periods, predicting the odd ones, and the reverse):
-    /// None with fewer than two steady periods.
-    pub held_out_relative: Option<f64>,
-    /// The noise floor comes from samples that repeat: two periods or
-    /// more, or one and a steady stretch beyond it (1.5 periods between
-    /// ramps). Else from one period's non-excited lines, or none.
-    pub repeated: bool,
-    /// The excitation period, s (periodic records).
-    pub period_s: Option<f64>,
-    /// The excited harmonics of each joint (periodic records), and their
-    /// union, which the stages use.
-    pub harmonics: Vec<Vec<u32>>,
-    pub union: Vec<u32>,
     /// A joint-wise record: the joint that moves, and the held ones at
     /// their mean positions (rad).
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
 }
 
+/// What repeats in a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Excitation {
+    /// Not periodic: filtered and differentiated in time, no noise floor
+    /// of its own.
+    NonPeriodic,
+    Periodic(Periodic),
+}
+
+/// A periodic record's excitation, as found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Periodic {
+    /// The excitation period, s.
+    pub period_s: f64,
+    /// Whole steady periods averaged.
+    pub periods: usize,
+    /// The relative error of the chosen model on held-out periods (fitted
+    /// on the even periods, predicting the odd ones, and the reverse):
+    /// None with fewer than two steady periods, and for validation records.
+    pub held_out_relative: Option<f64>,
+    /// The noise floor comes from samples that repeat: two periods or
+    /// more, or one and a steady stretch beyond it (1.5 periods between
+    /// ramps). Else from one period's non-excited lines.
+    pub repeated: bool,
+    /// The excited harmonics of each joint, and their union, which the
+    /// stages use.
+    pub harmonics: Vec<Vec<u32>>,
+    pub union: Vec<u32>,
+}
+
 impl Design {
+    /// The periodic excitation, if the record is periodic.
+    pub fn periodic(&self) -> Option<&Periodic> {
+        match &self.excitation {
+            Excitation::Periodic(p) => Some(p),
+            Excitation::NonPeriodic => None,
+        }
+    }
+
     /// The design of `plan` (its stages up to the regressor's), writing
     /// `tables`, as a non-periodic record's: a periodic one sets its own
     /// periods, band and harmonics.
@@ -159,18 +182,12 @@ impl Design {
             text: file_text(&plan)?,
             plan,
             findings,
-            periodic: false,
+            excitation: Excitation::NonPeriodic,
             regressor,
             inverse,
             delay_s: None,
             wide_band: false,
-            periods: 0,
-            held_out_relative: None,
-            repeated: false,
             joint_wise: None,
-            period_s: None,
-            harmonics: Vec::new(),
-            union: Vec::new(),
         })
     }
 }
@@ -671,15 +688,16 @@ fn periodic(d: Draft, period: f64) -> Result<Design> {
         TableKind::Regressor,
     ];
     Ok(Design {
-        periodic: true,
+        excitation: Excitation::Periodic(Periodic {
+            period_s: period,
+            periods: steady_periods,
+            held_out_relative,
+            repeated,
+            harmonics: sets,
+            union,
+        }),
         wide_band: wide_band.unwrap_or(false),
-        periods: steady_periods,
-        held_out_relative,
-        repeated,
         joint_wise: held_at,
-        period_s: Some(period),
-        harmonics: sets,
-        union,
         delay_s: delay,
         ..Design::finish(plan, tables, findings, regressor, inverse)?
     })

@@ -30,6 +30,9 @@ pub struct RunOptions {
 /// line's progress bars and plots (the `robotid-report` crate draws
 /// them); [`Quiet`] for none. Called from the workers: `Sync`.
 pub trait Observer: Sync {
+    /// A step with nothing to count begins (`Some(what)`) or ends (`None`):
+    /// `identify`'s physical fit.
+    fn busy(&self, _what: Option<&str>) {}
     /// A recording starts: `steps` steps (the read, its stages, the write).
     fn started(&self, _name: &str, _steps: usize) {}
     /// A step of a recording begins.

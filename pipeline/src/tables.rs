@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use robotid_stages::dynamics::{load_robot, BaseRegressor, Model};
 use robotid_stages::estimation::{parameters_from_table, Parameters, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
-use robotid_stages::stage::estimate::{Outcome, Part, Reducer};
+use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part, Reducer};
 use robotid_stages::stage::regressor::RegressorConfig;
 
 use crate::error::{Error, Result};
@@ -82,6 +82,35 @@ pub fn load_system(paths: &[PathBuf]) -> Result<System> {
     Ok(System::from_tables(&tables)?)
 }
 
+/// The parameters table at `path`.
+pub fn read_parameters(path: &Path) -> Result<Parameters> {
+    parameters_from_table(&read_parquet(path)?).map_err(|source| Error::Table {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The reduce step of `cfg`, its a-priori model the robot file's when
+/// given (the physical fit's prior; the sizes that flag parameters the
+/// data cannot tell).
+pub fn reducer(cfg: &EstimateConfig, robot: Option<&Path>) -> Result<Reducer> {
+    if let Some(p) = cfg.settings_problems().into_iter().next() {
+        return Err(Error::Settings {
+            key: p.key,
+            message: p.message,
+        });
+    }
+    let model = match robot {
+        Some(r) => Some(std::sync::Arc::new(load_robot(r)?)),
+        None => None,
+    };
+    Ok(cfg.reducer(&robotid_stages::stage::Context {
+        base_dir: PathBuf::from("."),
+        model,
+        ..Default::default()
+    })?)
+}
+
 /// A parameters table with the robot it was identified for and the base
 /// regressor rebuilt from the regressor configuration it carries; refused
 /// when the robot does not give the table's base parameters.
@@ -90,7 +119,7 @@ pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model,
         path: parameters.to_path_buf(),
         source,
     };
-    let params = parameters_from_table(&read_parquet(parameters)?).map_err(in_table)?;
+    let params = read_parameters(parameters)?;
     let cfg = RegressorConfig::of_metadata(&params.metadata).map_err(in_table)?;
     let model = load_robot(robot)?;
     let base = cfg.base_regressor(&model)?;

@@ -2,8 +2,57 @@
 //! statistics (mean squared residue, its ratio to the noise floor, shape
 //! against a Gaussian).
 
+use std::path::{Path, PathBuf};
+
 use nalgebra::DVector;
-use robotid_stages::estimation::System;
+use robotid_stages::estimation::{Parameters, System};
+
+use crate::error::{Error, Result};
+
+/// Identified parameters checked on recordings: the tables, the predicted
+/// torque and the residues per joint (a non-repeating record's floor
+/// borrowed from the excitation's, [`borrow_floor`]).
+pub struct Validated {
+    pub parameters: Parameters,
+    pub sys: System,
+    pub predicted: DVector<f64>,
+    pub stats: Vec<JointResidue>,
+}
+
+/// The parameters table at `parameters` validated on the regressor tables
+/// `regressors`; refused when the tables are of another parameter set, or
+/// when a joint's measured torque runs against the prediction (a reversed
+/// or swapped channel reads as model error, and is not one).
+pub fn validate(parameters: &Path, regressors: &[PathBuf]) -> Result<Validated> {
+    let parameters = crate::tables::read_parameters(parameters)?;
+    let sys = crate::tables::load_system(regressors)?;
+    if sys.names != parameters.names {
+        return Err(Error::OtherParameters {
+            tables: sys.names.clone(),
+            estimate: parameters.names.clone(),
+        });
+    }
+    let predicted = &sys.a * &parameters.values;
+    let mut stats = residues(&sys, &predicted);
+    borrow_floor(&mut stats, &parameters.metadata, &sys.metadata);
+    let reversed: Vec<String> = stats
+        .iter()
+        .filter(|s| s.reversed())
+        .map(|s| format!("{} (correlation {:.2})", s.joint, s.correlation))
+        .collect();
+    if !reversed.is_empty() {
+        return Err(Error::Reversed {
+            recordings: sys.recordings.join(", "),
+            joints: reversed,
+        });
+    }
+    Ok(Validated {
+        parameters,
+        sys,
+        predicted,
+        stats,
+    })
+}
 
 /// Residue statistics of one joint.
 pub struct JointResidue {

@@ -458,6 +458,69 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
     Ok(h)
 }
 
+/// A report asked for: the files it is made of and where it goes.
+#[derive(Clone, Debug)]
+pub struct Page {
+    /// The parameters table reported.
+    pub parameters: std::path::PathBuf,
+    /// Regressor tables of the excitation data (the estimate's own).
+    pub excitation: Vec<std::path::PathBuf>,
+    /// Regressor tables of validation recordings.
+    pub validation: Vec<std::path::PathBuf>,
+    /// A physically consistent estimate of the same parameters, and the
+    /// robot file whose bodies its own are shown against.
+    pub physical: Option<std::path::PathBuf>,
+    pub robot: Option<std::path::PathBuf>,
+    /// The HTML page written (self-contained: pictures inline).
+    pub out: std::path::PathBuf,
+}
+
+/// The report of `page`, written to `page.out`.
+pub fn write(page: &Page) -> Result<()> {
+    let params = robotid::tables::read_parameters(&page.parameters)?;
+    let load = |tables: &[std::path::PathBuf]| {
+        (!tables.is_empty())
+            .then(|| robotid::tables::load_system(tables))
+            .transpose()
+    };
+    let (excitation, validation) = (load(&page.excitation)?, load(&page.validation)?);
+    let mut sets = Vec::new();
+    if let Some(sys) = &excitation {
+        sets.push(DataSet {
+            title: "Excitation data",
+            sys,
+        });
+    }
+    if let Some(sys) = &validation {
+        sets.push(DataSet {
+            title: "Validation data",
+            sys,
+        });
+    }
+    let physical_params = page
+        .physical
+        .as_deref()
+        .map(robotid::tables::read_parameters)
+        .transpose()?;
+    let physical = match (&physical_params, &page.physical) {
+        (Some(params), Some(path)) => Some(Physical {
+            params,
+            bodies: match &page.robot {
+                Some(r) => bodies(r, path)?,
+                None => Vec::new(),
+            },
+        }),
+        _ => None,
+    };
+    let text = html(
+        &params,
+        &page.parameters.display().to_string(),
+        &sets,
+        physical.as_ref(),
+    )?;
+    crate::plot::write_text(&page.out, &text)
+}
+
 /// The report of a run with an `estimate` stage: its parameters against
 /// the regressor tables of its own recordings, as `<dir>/report.html`.
 /// `shown`: where the parameters table will be once the run commits (the

@@ -4,7 +4,6 @@ use anyhow::bail;
 use robotid::tables::{parts, reduce, Marks};
 use robotid_stages::estimation::{Covariance, Estimate, Estimator};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Reducer};
-use robotid_stages::stage::Context;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -64,27 +63,31 @@ pub fn print_outcome(args: &Args, out: &Outcome) {
     if let Some(k) = &args.known {
         println!("known ({}): {}", k.display(), out.known.join(", "));
     }
-    print!("{}", summary(&out.estimate, args.confidence));
-    print!("{}", findings(out));
+    print!("{}", outcome_text(out, args.confidence, &args.out));
+}
+
+/// An estimate's outcome as text, its table at `table`.
+pub fn outcome_text(out: &Outcome, confidence: f64, table: &std::path::Path) -> String {
+    let mut s = summary(&out.estimate, confidence) + &findings(out);
     if let Some(fit) = &out.physical {
-        println!(
-            "physically consistent: prior weight {:e}{}",
+        s.push_str(&format!(
+            "physically consistent: prior weight {:e}{}\n",
             fit.prior_weight,
             fit.chosen.as_ref().map(|c| format!(" {c}")).unwrap_or_default()
-        );
+        ));
         for (l, b) in fit.bounds.iter().enumerate() {
             let m = fit.standard[10 * l + 9];
             if (m - b.mass.0).abs() <= 1e-6 * b.mass.0 || (m - b.mass.1).abs() <= 1e-6 * b.mass.1 {
-                println!(
-                    "  link {} (from the base): {m:.4} kg, held at its mass bound {:.4}–{:.4} kg (5× either way of the robot file's); the data would move it further",
+                s.push_str(&format!(
+                    "  link {} (from the base): {m:.4} kg, held at its mass bound {:.4}–{:.4} kg (5× either way of the robot file's); the data would move it further\n",
                     l + 1,
                     b.mass.0,
                     b.mass.1
-                );
+                ));
             }
         }
     }
-    println!("parameters in {}", args.out.display());
+    s + &format!("parameters in {}\n", table.display())
 }
 
 /// The estimate of `args`, its table written to `args.out` with
@@ -125,15 +128,7 @@ pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
     if let Some(p) = cfg.settings_problems().first() {
         bail!("--{}: {}", p.key, p.message);
     }
-    let model = match &args.robot {
-        Some(r) => Some(std::sync::Arc::new(robotid_stages::dynamics::load_robot(r)?)),
-        None => None,
-    };
-    Ok(cfg.reducer(&Context {
-        base_dir: PathBuf::from("."),
-        model,
-        ..Default::default()
-    })?)
+    Ok(robotid::tables::reducer(&cfg, args.robot.as_deref())?)
 }
 
 /// What the reduce found beside the estimate: parameters not identified

@@ -1,11 +1,6 @@
 use std::path::PathBuf;
 
-use robotid_report::report::{html, DataSet};
-use robotid_stages::estimation::parameters_from_table;
-use robotid_stages::formats::parquet::read_parquet;
-
-use robotid::tables::load_system;
-
+use robotid_report::report::{write, Page};
 #[derive(clap::Args)]
 pub struct Args {
     /// Identified parameters (`parameters.parquet`).
@@ -31,48 +26,14 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let batch = read_parquet(&args.parameters)?;
-    let params = parameters_from_table(&batch).map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
-    let excitation = (!args.excitation.is_empty())
-        .then(|| load_system(&args.excitation))
-        .transpose()?;
-    let validation = (!args.validation.is_empty())
-        .then(|| load_system(&args.validation))
-        .transpose()?;
-    let mut sets = Vec::new();
-    if let Some(s) = &excitation {
-        sets.push(DataSet {
-            title: "Excitation data",
-            sys: s,
-        });
-    }
-    if let Some(s) = &validation {
-        sets.push(DataSet {
-            title: "Validation data",
-            sys: s,
-        });
-    }
-    let physical_params = match &args.physical {
-        Some(p) => Some(parameters_from_table(&read_parquet(p)?).map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?),
-        None => None,
-    };
-    let physical = match (&physical_params, &args.physical) {
-        (Some(params), Some(path)) => Some(robotid_report::report::Physical {
-            params,
-            bodies: match &args.robot {
-                Some(r) => robotid_report::report::bodies(r, path)?,
-                None => Vec::new(),
-            },
-        }),
-        _ => None,
-    };
-    let page = html(
-        &params,
-        &args.parameters.display().to_string(),
-        &sets,
-        physical.as_ref(),
-    )?;
-    robotid_report::plot::write_text(&args.out, &page)?;
+    write(&Page {
+        parameters: args.parameters,
+        excitation: args.excitation,
+        validation: args.validation,
+        physical: args.physical,
+        robot: args.robot,
+        out: args.out.clone(),
+    })?;
     println!("report in {}", args.out.display());
     Ok(())
 }

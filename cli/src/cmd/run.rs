@@ -122,7 +122,7 @@ pub fn run_pipeline(pipeline: Pipeline, args: Args, shown: &std::path::Path) -> 
 
 /// The recordings' table (with their notes, and timings when asked); how
 /// many failed.
-fn print_recordings(recordings: &[robotid::RecordingResult], timings: bool) -> usize {
+pub fn print_recordings(recordings: &[robotid::RecordingResult], timings: bool) -> usize {
     println!(
         "{:<28} {:>8} {:>9} {:>10} {:>10} {:>12} {:>12}  status",
         "recording", "samples", "periods", "dropped s", "jitter s", "var tau time", "var tau freq"

@@ -1,11 +1,8 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
+use robotid::validation::{Validated, Verdict};
 use robotid_schemas::metadata;
-use robotid_stages::estimation::parameters_from_table;
-use robotid_stages::formats::parquet::read_parquet;
-
-use robotid::tables::load_system;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -28,52 +25,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let params = parameters_from_table(&read_parquet(&args.parameters)?)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.parameters.display()))?;
-    let sys = load_system(&args.regressors)?;
-    if sys.names != params.names {
-        bail!(
-            "the regressor tables' parameters {:?} are not the estimate's {:?}: make them with the same regressor configuration",
-            sys.names,
-            params.names
-        );
-    }
-    let predicted = &sys.a * &params.values;
-    let mut stats = robotid::validation::residues(&sys, &predicted);
-    robotid::validation::borrow_floor(&mut stats, &params.metadata, &sys.metadata);
-    println!(
-        "validation of {} ({} method) on {}",
-        args.parameters.display(),
-        params
-            .metadata
-            .get(metadata::ESTIMATE_METHOD)
-            .map(String::as_str)
-            .unwrap_or("?"),
-        sys.recordings.join(", ")
-    );
-    print!("{}", robotid_report::validation::table(&stats));
-    print!("{}", robotid_report::validation::per_recording(&sys, &predicted));
-    // A channel reversed (or two swapped) in the validation recordings
-    // reads as model error; it is not one, and no verdict is given on it.
-    let reversed: Vec<String> = stats
-        .iter()
-        .filter(|s| s.reversed())
-        .map(|s| format!("{} (correlation {:.2})", s.joint, s.correlation))
-        .collect();
-    if !reversed.is_empty() {
-        bail!(
-            "{}: the measured torque runs against the identified model's prediction on {}: a reversed channel, or two joints' columns swapped, in the recording; fix the log",
-            sys.recordings.join(", "),
-            reversed.join(", ")
-        );
-    }
-    let inadequate: Vec<&str> = stats
-        .iter()
-        .filter(|s| s.verdict() == robotid::validation::Verdict::ModelErrorDominates)
-        .map(|s| s.joint.as_str())
-        .collect();
+    let v = robotid::validation::validate(&args.parameters, &args.regressors)?;
+    print!("{}", said(&v, &args.parameters));
     if let Some(dir) = &args.plot {
-        let files = robotid_report::plot::plot_validation(dir, &sys, &predicted, &stats)?;
+        let files = robotid_report::plot::plot_validation(dir, &v.sys, &v.predicted, &v.stats)?;
         println!(
             "pictures and report: {}",
             files
@@ -83,27 +38,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .join(", ")
         );
     }
-    let over: Vec<String> = stats
+    if let Some(msg) = inadequate(&v).filter(|_| args.fail_on_inadequate) {
+        bail!("{msg}");
+    }
+    Ok(())
+}
+
+/// The joints whose model error dominates the noise, said; None if none.
+fn inadequate(v: &Validated) -> Option<String> {
+    let joints: Vec<&str> = v
+        .stats
         .iter()
-        .filter(|s| s.verdict() == robotid::validation::Verdict::OverBorrowedFloor)
+        .filter(|s| s.verdict() == Verdict::ModelErrorDominates)
+        .map(|s| s.joint.as_str())
+        .collect();
+    (!joints.is_empty()).then(|| {
+        format!(
+            "the model error dominates the noise on joint(s) {} (mean squared residue over {}× the noise floor)",
+            joints.join(", "),
+            robotid::validation::ADEQUATE_RATIO
+        )
+    })
+}
+
+/// A validation as text: what was validated on what, the residues per
+/// joint and recording, and the verdicts.
+pub fn said(v: &Validated, parameters: &Path) -> String {
+    let mut s = format!(
+        "validation of {} ({} method) on {}\n",
+        parameters.display(),
+        v.parameters
+            .metadata
+            .get(metadata::ESTIMATE_METHOD)
+            .map(String::as_str)
+            .unwrap_or("?"),
+        v.sys.recordings.join(", ")
+    );
+    s.push_str(&robotid_report::validation::table(&v.stats));
+    s.push_str(&robotid_report::validation::per_recording(&v.sys, &v.predicted));
+    let over: Vec<String> = v
+        .stats
+        .iter()
+        .filter(|s| s.verdict() == Verdict::OverBorrowedFloor)
         .map(|s| format!("{} ({:.1}×)", s.joint, s.msr / s.noise_floor.unwrap_or(f64::NAN)))
         .collect();
     if !over.is_empty() {
-        println!(
-            "verdict: the residue is over the excitation's noise floor on {}: model error, or this chain's own (a record that does not repeat is low-pass filtered, and its Coulomb steps at reversals with it), which a borrowed floor cannot tell apart; validate on a periodic recording to judge the model alone",
+        s.push_str(&format!(
+            "verdict: the residue is over the excitation's noise floor on {}: model error, or this chain's own (a record that does not repeat is low-pass filtered, and its Coulomb steps at reversals with it), which a borrowed floor cannot tell apart; validate on a periodic recording to judge the model alone\n",
             over.join(", ")
-        );
+        ));
     }
-    if !inadequate.is_empty() {
-        let msg = format!(
-            "the model error dominates the noise on joint(s) {} (mean squared residue over {}× the noise floor)",
-            inadequate.join(", "),
-            robotid::validation::ADEQUATE_RATIO
-        );
-        if args.fail_on_inadequate {
-            bail!("{msg}");
-        }
-        println!("verdict: {msg}");
+    if let Some(msg) = inadequate(v) {
+        s.push_str(&format!("verdict: {msg}\n"));
     }
-    Ok(())
+    s
 }

@@ -1,0 +1,207 @@
+//! `identify` as one library call: from recordings and a robot file to a
+//! validated model — the pipelines designed from the data
+//! ([`robotid::identify`]), run, the estimate judged against the noise
+//! floor and held-out data (the refusal policy, [`robotid::verdict`]), its
+//! physically consistent fit, the report and the exports — returned typed
+//! as an [`Identification`] for the command line to print, for Python and
+//! for Ray. Everything is written into a staging folder that appears as
+//! the output folder at once when identify ends, refused or not.
+
+mod script;
+mod work;
+
+use std::path::{Path, PathBuf};
+
+use robotid::identify::Design;
+use robotid::validation::Validated;
+use robotid::verdict::{Policy, Verdict};
+use robotid::RunReport;
+use robotid_report::export::Exported;
+use robotid_stages::stage::estimate::Outcome;
+use robotid_stages::stage::read::ReadConfig;
+
+pub use work::identify;
+
+/// What to identify, and how strictly.
+#[derive(Clone, Debug)]
+pub struct Request {
+    /// Recordings of the excitation, periodic or not; the parameters are
+    /// estimated from all of them.
+    pub recordings: Vec<PathBuf>,
+    /// The robot file (TOML or URDF).
+    pub robot: PathBuf,
+    /// Held-out recordings to validate the identified model on.
+    pub validate: Vec<PathBuf>,
+    /// The output folder (default `out/identify/<first recording's name>`):
+    /// it must not exist or be empty.
+    pub out: Option<PathBuf>,
+    /// Where the channels are, for every recording (a pipeline file's
+    /// `[read]` table); None: found in the logs.
+    pub read: Option<ReadConfig>,
+    /// The drives' joint torque per ampere, N·m/A: one per joint, one for
+    /// all, or none (the robot file's drives, or torque channels).
+    pub torque_per_amp: Vec<f64>,
+    /// The refusal policy: the held-out relative error tolerated, and
+    /// whether any joint over 3× its noise floor is refused.
+    pub policy: Policy,
+    /// Write the physical fit and the exports even when the fit is refused.
+    pub accept_inadequate: bool,
+    /// Worker threads of the pipeline runs (default: one per core); the
+    /// outputs do not depend on it.
+    pub threads: Option<usize>,
+}
+
+impl Request {
+    /// The request of `recordings` of `robot` with every default: no
+    /// validation recordings, the default policy.
+    pub fn new(recordings: Vec<PathBuf>, robot: PathBuf) -> Request {
+        Request {
+            recordings,
+            robot,
+            validate: Vec::new(),
+            out: None,
+            read: None,
+            torque_per_amp: Vec::new(),
+            policy: Policy {
+                tolerance: robotid::verdict::DEFAULT_TOLERANCE,
+                strict: false,
+            },
+            accept_inadequate: false,
+            threads: None,
+        }
+    }
+}
+
+/// What a recording is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    Excitation,
+    Validation,
+}
+
+impl Role {
+    pub fn name(self) -> &'static str {
+        match self {
+            Role::Excitation => "excitation",
+            Role::Validation => "validation",
+        }
+    }
+}
+
+/// One recording and the pipeline designed for it.
+#[derive(Debug)]
+pub struct Recording {
+    pub role: Role,
+    /// Its name in the output folder (the file's stem, made unique).
+    pub name: String,
+    pub log: PathBuf,
+    pub design: Design,
+}
+
+/// One recording's pipeline run: what the robot file said on the way
+/// and the run's report.
+pub struct Ran {
+    /// The robot file's warnings.
+    pub warnings: Vec<String>,
+    /// The joints the robot file's model locks, said.
+    pub locked: Option<String>,
+    pub report: RunReport,
+}
+
+/// The physically consistent estimate (what the exports need), or why
+/// there is none.
+pub enum Physical {
+    /// Refused, and not written anyway.
+    Refused,
+    /// Joint-wise records give the decoupled model, not the links' bodies.
+    JointWise,
+    /// The fit failed: why.
+    Failed(String),
+    Fitted {
+        outcome: Box<Outcome>,
+        /// The fit with the estimate's covariance failed (why): made with
+        /// the residual's.
+        fallback: Option<String>,
+        /// Its validation on the held-out recordings.
+        validation: Option<Box<Validated>>,
+        export: Exported,
+    },
+}
+
+/// What `identify` found and wrote.
+pub struct Identification {
+    /// The output folder, as the request named it.
+    pub out: PathBuf,
+    pub recordings: Vec<Recording>,
+    /// Joints no joint-wise record moves, locked where they were held.
+    pub locked: Option<String>,
+    pub runs: Vec<Ran>,
+    /// The least-squares estimate (`parameters.parquet`).
+    pub estimate: Box<Outcome>,
+    pub verdict: Verdict,
+    /// Why the fit is refused, with what identify found on the way; None:
+    /// identified.
+    pub refused: Option<String>,
+    /// Joints with no noise floor to judge the fit against (records that
+    /// do not repeat): the residue said, unjudged.
+    pub unjudged: Vec<String>,
+    /// The estimate validated on the held-out recordings.
+    pub validation: Option<Box<Validated>>,
+    pub physical: Physical,
+}
+
+impl Identification {
+    /// The files it wrote, under [`Identification::out`].
+    pub fn path(&self, file: impl AsRef<Path>) -> PathBuf {
+        self.out.join(file)
+    }
+
+    /// Refused and not written anyway: the command line's exit code 3.
+    pub fn is_refused(&self) -> bool {
+        self.refused.is_some() && matches!(self.physical, Physical::Refused)
+    }
+}
+
+/// Why identify did not run to a verdict.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Robotid(Box<robotid::Error>),
+    #[error(transparent)]
+    Stage(#[from] robotid_stages::Error),
+    #[error(transparent)]
+    Export(#[from] robotid_report::export::ExportError),
+    /// A request identify cannot take: what, and why.
+    #[error("{0}")]
+    Request(String),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Recordings whose pipeline failed: nothing was written.
+    #[error("{} recording(s) failed; nothing was written:{}", failed.len(), failed.iter().map(|(n, e)| format!("\n  {n}: {e}")).collect::<String>())]
+    Failed { failed: Vec<(String, String)> },
+    /// The held-out recordings could not validate the estimate.
+    #[error("validating on {files}")]
+    Validation {
+        files: String,
+        #[source]
+        source: Box<robotid::Error>,
+    },
+}
+
+impl From<robotid::Error> for Error {
+    fn from(e: robotid::Error) -> Self {
+        Error::Robotid(Box::new(e))
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// `identify` with nothing shown: [`identify`] told to
+/// [`robotid::Quiet`].
+pub fn identify_quietly(request: &Request) -> Result<Identification> {
+    identify(request, &robotid::Quiet)
+}

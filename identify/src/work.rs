@@ -1,0 +1,563 @@
+//! The workflow behind [`identify`], one step per function.
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use robotid::identify::{absolute, design_with, Design, Found};
+use robotid::validation::Validated;
+use robotid::verdict::{Measured, Verdict};
+use robotid::{Observer, RunOptions};
+use robotid_report::export::{Export, Format};
+use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
+use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
+
+use crate::script::Script;
+use crate::{Error, Identification, Physical, Ran, Recording, Request, Result, Role};
+
+/// Identifies the robot of `request` (see the crate's documentation),
+/// `observer` told of each pipeline's steps and of the physical fit. A
+/// refused fit is an [`Identification`] whose `refused` says why, its
+/// files written and marked; errors are for what could not be judged.
+pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
+    let paths = Paths::of(request)?;
+    // Everything is written into a staging folder and appears at once when
+    // identify ends, refused or not (robotid::output): a kill or a failure
+    // leaves the folder as it was. One identify or run at a time holds it.
+    let staging = robotid::output::prepare(&absolute_path(&paths.out)?, None, &paths.all)?;
+    if holds_anything(&paths.out) {
+        return Err(Error::Request(format!(
+            "{}: the output folder is not empty; give another with --out, or remove it",
+            paths.out.display()
+        )));
+    }
+    let (recordings, locked) = design_all(request, &paths)?;
+    // From here identify works inside its staging folder, every output
+    // named relative to it: the files that name each other (the report,
+    // the exports, the estimate's provenance) hold paths that stay right
+    // when the folder appears as `out`, and when it is moved.
+    let inside = Inside::enter(staging.staged_out())?;
+    let mut script = Script::new(&paths.robot);
+    let runs = run_pipelines(request, &paths.out, &recordings, &mut script, observer)?;
+    let tables: Vec<PathBuf> = recordings
+        .iter()
+        .map(|r| Path::new(&r.name).join(&r.name).join("regressor.parquet"))
+        .collect();
+    let (id_tables, val_tables) = tables.split_at(paths.identifying);
+    let judged = estimate(request, &paths, &recordings, id_tables, val_tables)?;
+    script.estimate(id_tables, None);
+    let validation = match val_tables {
+        [] => None,
+        tables => Some(Box::new(validate("parameters.parquet", tables, &paths.held)?)),
+    };
+    script.validate("parameters.parquet", val_tables);
+    let physical = if judged.refused.is_some() && !request.accept_inadequate {
+        std::fs::write(
+            "INADEQUATE.txt",
+            format!("{}\n", judged.refused.as_deref().unwrap_or_default()),
+        )
+        .map_err(io(&paths.out.join("INADEQUATE.txt")))?;
+        Physical::Refused
+    } else if recordings.iter().any(|r| r.design.joint_wise.is_some()) {
+        // The model for simulators needs every link a real body; the
+        // decoupled model of joint-wise records has none to fit.
+        Physical::JointWise
+    } else {
+        physical_fit(
+            &judged.parts,
+            &paths.robot,
+            (id_tables, val_tables),
+            &mut script,
+            observer,
+        )?
+    };
+    let fitted = matches!(physical, Physical::Fitted { .. });
+    robotid_report::report::write(&robotid_report::report::Page {
+        parameters: "parameters.parquet".into(),
+        excitation: id_tables.to_vec(),
+        validation: val_tables.to_vec(),
+        physical: fitted.then(|| "parameters_physical.parquet".into()),
+        robot: fitted.then(|| paths.robot.clone()),
+        out: "report.html".into(),
+    })?;
+    script.report(id_tables, val_tables, fitted);
+    std::fs::write("identify.sh", script.text()).map_err(io(&paths.out.join("identify.sh")))?;
+    drop(inside);
+    staging.commit()?;
+    Ok(Identification {
+        out: paths.out,
+        recordings,
+        locked,
+        runs,
+        estimate: Box::new(judged.outcome),
+        verdict: judged.verdict,
+        refused: judged.refused,
+        unjudged: judged.unjudged,
+        validation,
+        physical,
+    })
+}
+
+/// The request's files made absolute and checked.
+struct Paths {
+    robot: PathBuf,
+    /// The identification recordings, then the validation ones.
+    all: Vec<PathBuf>,
+    identifying: usize,
+    held: Vec<PathBuf>,
+    names: Vec<String>,
+    out: PathBuf,
+}
+
+impl Paths {
+    fn of(request: &Request) -> Result<Paths> {
+        let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<robotid::Result<Vec<_>>>();
+        let robot = absolute(&request.robot)?;
+        let mut all = absolutes(&request.recordings)?;
+        let held = absolutes(&request.validate)?;
+        let identifying = all.len();
+        all.extend(held.iter().cloned());
+        if identifying == 0 {
+            return Err(Error::Request("no recording to identify from".into()));
+        }
+        let names = robotid::run::recording_names(&all);
+        let out = request
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("out/identify").join(&names[0]));
+        if out.exists() && !out.is_dir() {
+            return Err(Error::Request(format!(
+                "{}: --out is a file, not a folder; give a folder",
+                out.display()
+            )));
+        }
+        if all.iter().any(|p| absolute(&out).is_ok_and(|o| p.starts_with(o))) {
+            return Err(Error::Request(format!(
+                "{}: the output folder holds the recordings",
+                out.display()
+            )));
+        }
+        // The same data under two names would count twice: the intervals
+        // shrink by √2, and a validation on its own excitation proves nothing.
+        if let Some((first, again)) = robotid::tables::same_bytes(&all)? {
+            return Err(Error::Request(format!(
+                "{} and {} hold the same bytes: one recording given twice (its rows would count twice and the intervals shrink by √2, or it would validate itself)",
+                first.display(),
+                again.display()
+            )));
+        }
+        Ok(Paths {
+            robot,
+            all,
+            identifying,
+            held,
+            names,
+            out,
+        })
+    }
+}
+
+/// The drives' gains of the request, one per joint.
+fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
+    let joints = robotid_stages::dynamics::load_robot(robot)?.joint_names().len();
+    let gains = match request.torque_per_amp[..] {
+        [] => return Ok(None),
+        [k] => vec![k; joints],
+        ref k if k.len() == joints => k.to_vec(),
+        ref k => {
+            return Err(Error::Request(format!(
+                "--torque-per-amp: {} values for {joints} joints: give one per joint, or one for all",
+                k.len()
+            )))
+        }
+    };
+    match gains.iter().find(|k| !(k.is_finite() && **k != 0.0)) {
+        Some(k) => Err(Error::Request(format!(
+            "--torque-per-amp: {k} N·m/A is not a drive's gain"
+        ))),
+        None => Ok(Some(gains)),
+    }
+}
+
+/// Every recording's pipeline designed; all take the first one's
+/// regressor stage, so that their tables share one parameter set.
+fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Recording>, Option<String>)> {
+    let gains = gains(request, &paths.robot)?;
+    let mut designs: Vec<Design> = Vec::new();
+    for log in &paths.all {
+        // Its errors name the recording.
+        let d = design_with(
+            log,
+            &paths.robot,
+            designs.first(),
+            request.read.as_ref(),
+            gains.as_deref(),
+        )?;
+        designs.push(d);
+    }
+    let locked = lock_unrecorded(&mut designs, paths.identifying)?;
+    let recordings = designs
+        .into_iter()
+        .enumerate()
+        .map(|(i, design)| Recording {
+            role: if i < paths.identifying {
+                Role::Excitation
+            } else {
+                Role::Validation
+            },
+            name: paths.names[i].clone(),
+            log: paths.all[i].clone(),
+            design,
+        })
+        .collect();
+    Ok((recordings, locked))
+}
+
+/// Joint-wise records that move only some joints give no parameter of the
+/// others: those joints are locked where the records held them (said), so
+/// that the estimate is of the joints that moved. Validation records (after
+/// the first `identifying`) are locked alike: one parameter set.
+fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<String>> {
+    let Some(all) = designs[..identifying]
+        .iter()
+        .map(|d| d.joint_wise.as_ref())
+        .collect::<Option<Vec<_>>>()
+    else {
+        return Ok(None);
+    };
+    let moved: Vec<&str> = all.iter().map(|(m, _)| m.as_str()).collect();
+    let Some((_, held)) = all.first() else { return Ok(None) };
+    let locked: Vec<(String, f64)> = held
+        .iter()
+        .filter(|(j, _)| !moved.contains(&j.as_str()))
+        .cloned()
+        .collect();
+    if locked.is_empty() {
+        return Ok(None);
+    }
+    let said = locked
+        .iter()
+        .map(|(j, q)| format!("{j} at {q:.4} rad"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    for d in designs.iter_mut() {
+        d.plan.lock.extend(locked.iter().cloned());
+        d.findings.push((Found::Locked, said.clone()));
+        let all = match d.plan.inferred.get(Found::Locked.key()) {
+            Some(before) => format!("{before}; {said}"),
+            None => said.clone(),
+        };
+        d.plan.inferred.insert(Found::Locked.key().into(), all);
+        d.text = robotid::identify::file_text(&d.plan)?;
+    }
+    Ok(Some(said))
+}
+
+/// Each recording's pipeline written to `pipelines/` and run into its
+/// folder (inside the staging folder); `out` is where they will appear.
+fn run_pipelines(
+    request: &Request,
+    out: &Path,
+    recordings: &[Recording],
+    script: &mut Script,
+    observer: &dyn Observer,
+) -> Result<Vec<Ran>> {
+    std::fs::create_dir_all("pipelines").map_err(io(out))?;
+    let mut runs = Vec::new();
+    for r in recordings {
+        // Written staged, read as the file it will be: what the tables and
+        // the manifest say of it names its final place.
+        let rel = Path::new("pipelines").join(format!("{}.toml", r.name));
+        std::fs::write(&rel, &r.design.text).map_err(io(&out.join(&rel)))?;
+        let built = robotid::Pipeline::from_toml(&r.design.text, out.join(&rel))?.build()?;
+        let warnings: Vec<String> = built.model.iter().flat_map(|m| m.warnings.clone()).collect();
+        let locked = built.model.as_ref().filter(|m| !m.locked.is_empty()).map(|m| {
+            let l: Vec<String> = m.locked.iter().map(|(j, x)| format!("{j} at {x}")).collect();
+            format!("robot `{}`: {} moving joints; locked {}", m.name, m.dof(), l.join(", "))
+        });
+        let report = built.run_with(
+            &RunOptions {
+                out: PathBuf::from(&r.name),
+                threads: request.threads,
+                plot: None,
+            },
+            observer,
+        )?;
+        let failed: Vec<(String, String)> = report
+            .recordings
+            .iter()
+            .filter_map(|x| Some((x.name.clone(), x.outcome.as_ref().err()?.to_string())))
+            .collect();
+        if !failed.is_empty() {
+            return Err(Error::Failed { failed });
+        }
+        script.run(&r.name);
+        runs.push(Ran {
+            warnings,
+            locked,
+            report,
+        });
+    }
+    Ok(runs)
+}
+
+/// The least-squares estimate, judged.
+struct Judged {
+    /// The tables' rows reduced once: the estimate and its physical fit
+    /// share them.
+    parts: Vec<Part>,
+    outcome: Outcome,
+    verdict: Verdict,
+    refused: Option<String>,
+    unjudged: Vec<String>,
+}
+
+/// What the verdict reads: the identification's rows (its residue by
+/// speed) and the validation's (the held-out relative error), else the
+/// held-out periods' relative error.
+struct Judge {
+    policy: robotid::verdict::Policy,
+    id_rows: System,
+    val_rows: Option<System>,
+    periods_relative: Option<f64>,
+}
+
+impl Judge {
+    fn verdict(&self, est: &Estimate) -> Verdict {
+        let held_out = match &self.val_rows {
+            Some(v) if v.names == est.names => {
+                let stats = robotid::validation::residues(v, &(&v.a * &est.values));
+                Some((robotid::validation::relative_error(&stats), Measured::Validation))
+            }
+            _ => self.periods_relative.map(|r| (r, Measured::HeldOutPeriods)),
+        };
+        robotid::verdict::judge(self.policy, est, &self.id_rows, held_out)
+    }
+}
+
+/// The estimate (`parameters.parquet`, marked with its verdict), and why
+/// it is refused.
+fn estimate(
+    request: &Request,
+    paths: &Paths,
+    recordings: &[Recording],
+    id_tables: &[PathBuf],
+    val_tables: &[PathBuf],
+) -> Result<Judged> {
+    let identifying = &recordings[..paths.identifying];
+    let judge = Judge {
+        policy: request.policy,
+        id_rows: robotid::tables::load_system(id_tables)?,
+        val_rows: (!val_tables.is_empty())
+            .then(|| robotid::tables::load_system(val_tables))
+            .transpose()?,
+        // Held-out periods of every identification recording, pooled by
+        // their worst; none where one has fewer than two steady periods.
+        periods_relative: identifying
+            .iter()
+            .map(|r| r.design.periodic().and_then(|p| p.held_out_relative))
+            .collect::<Option<Vec<f64>>>()
+            .map(|r| r.into_iter().fold(0.0, f64::max)),
+    };
+    let judged = std::cell::OnceCell::new();
+    let mark = |o: &Outcome| {
+        let v: &Verdict = judged.get_or_init(|| judge.verdict(&o.estimate));
+        let mut md = vec![(robotid_schemas::metadata::VERDICT.to_string(), v.said())];
+        if let Some(why) = &v.refused {
+            md.push((robotid_schemas::metadata::INADEQUATE.to_string(), why.clone()));
+        }
+        md
+    };
+    let reducer = robotid::tables::reducer(&estimate_config(Covariance::Robust, false), Some(&paths.robot))?;
+    let parts = robotid::tables::parts(&reducer, id_tables)?;
+    let outcome = robotid::tables::reduce(&reducer, &parts, Path::new("parameters.parquet"), Some(&mark))?;
+    judged.get_or_init(|| judge.verdict(&outcome.estimate));
+    let verdict = judged.into_inner().expect("judged above");
+    // A floor from one period's non-excited lines (nothing repeats to take
+    // it from) may hold real content or miss noise: said with the refusal.
+    // (Not refusing there exported a start-up transient's fit as a model.)
+    let reliable = identifying
+        .iter()
+        .all(|r| r.design.periodic().is_some_and(|p| p.repeated));
+    let refused = verdict.refused.as_ref().map(|why| {
+        let why = format!("{why}. What identify found:{}", causes(&recordings[0].design));
+        if reliable || verdict.over_floor().is_empty() {
+            why
+        } else {
+            format!("{why}\n(the noise floor comes from the non-excited lines of a single steady period, not from the spread of several: the start of the record may not be steady; record two whole periods or more)")
+        }
+    });
+    // Not periodic: no floor to judge the fit against, which is said.
+    let unjudged = outcome
+        .estimate
+        .adequacy
+        .iter()
+        .filter(|a| a.noise_floor.is_none())
+        .map(|a| format!("{} {:.3e} (N·m)²", a.joint, a.msr))
+        .collect();
+    Ok(Judged {
+        parts,
+        outcome,
+        verdict,
+        refused,
+        unjudged,
+    })
+}
+
+/// What identify measured on the way, said with a refusal.
+fn causes(design: &Design) -> String {
+    design
+        .findings
+        .iter()
+        .filter(|(k, _)| {
+            matches!(
+                k,
+                Found::InverseFilter
+                    | Found::EffortDelay
+                    | Found::Differentiate
+                    | Found::CoulombTransition
+                    | Found::Friction
+                    | Found::HeldOut
+            )
+        })
+        .map(|(k, v)| format!("\n  {}: {v}", k.key()))
+        .collect()
+}
+
+/// identify's estimates: least squares, 95 % intervals, the robot file's
+/// a-priori sizes; `covariance` robust (auto's where the model is right,
+/// robust to the model error real robots have where it dominates).
+fn estimate_config(covariance: Covariance, physical: bool) -> EstimateConfig {
+    EstimateConfig {
+        method: Estimator::Ols,
+        confidence: 0.95,
+        covariance,
+        known: None,
+        physical,
+        prior_weight: None,
+        ..Default::default()
+    }
+}
+
+/// `parameters` validated on the held-out `tables` (of `held`).
+fn validate(parameters: &str, tables: &[PathBuf], held: &[PathBuf]) -> Result<Validated> {
+    robotid::validation::validate(Path::new(parameters), tables).map_err(|source| Error::Validation {
+        files: held
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        source: Box::new(source),
+    })
+}
+
+/// The physically consistent estimate, validated, and the exports.
+fn physical_fit(
+    parts: &[Part],
+    robot: &Path,
+    (id_tables, val_tables): (&[PathBuf], &[PathBuf]),
+    script: &mut Script,
+    observer: &dyn Observer,
+) -> Result<Physical> {
+    let physical = Path::new("parameters_physical.parquet");
+    let fit = |covariance| -> Result<Outcome> {
+        let reducer = robotid::tables::reducer(&estimate_config(covariance, true), Some(robot))?;
+        observer.busy(Some(
+            "physical fit: the prior weight on held-out periods, then the bootstrap's semidefinite programs",
+        ));
+        let outcome = robotid::tables::reduce(&reducer, parts, physical, None);
+        observer.busy(None);
+        Ok(outcome?)
+    };
+    // The spread across few periods can leave the covariance singular
+    // (arm3, 4 periods, 25 parameters): then the residual's is used.
+    let (outcome, fallback) = match fit(Covariance::Robust) {
+        Ok(o) => (o, None),
+        Err(first) => match fit(Covariance::Residual) {
+            Ok(o) => (o, Some(chain(&first))),
+            Err(e) => return Ok(Physical::Failed(chain(&e))),
+        },
+    };
+    // The model simulators get is the physical one: validated too.
+    let validation = match val_tables {
+        [] => None,
+        tables => Some(Box::new(robotid::validation::validate(physical, tables)?)),
+    };
+    let export = robotid_report::export::export(&Export {
+        robot: robot.to_path_buf(),
+        parameters: physical.to_path_buf(),
+        formats: vec![Format::Urdf, Format::Mjcf, Format::Sidecar],
+        out: "identified".into(),
+        prior_weight: None,
+        force: false,
+    })?;
+    script.estimate(id_tables, Some(if fallback.is_some() { "residual" } else { "robust" }));
+    script.validate("parameters_physical.parquet", val_tables);
+    script.export();
+    Ok(Physical::Fitted {
+        outcome: Box::new(outcome),
+        fallback,
+        validation,
+        export,
+    })
+}
+
+/// Serialises identify's time inside its staging folder: the working
+/// folder is the process's, one identify at a time in a process holds it.
+static WORKING_FOLDER: Mutex<()> = Mutex::new(());
+
+/// The process working inside a folder until dropped, then back where it
+/// was (before the commit: a folder is not exchanged under a process that
+/// works inside it).
+struct Inside {
+    back: PathBuf,
+    _held: std::sync::MutexGuard<'static, ()>,
+}
+
+impl Inside {
+    fn enter(dir: &Path) -> Result<Inside> {
+        let held = WORKING_FOLDER.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let back = std::env::current_dir().map_err(io(Path::new(".")))?;
+        std::env::set_current_dir(dir).map_err(io(dir))?;
+        Ok(Inside { back, _held: held })
+    }
+}
+
+impl Drop for Inside {
+    fn drop(&mut self) {
+        let _ = std::env::set_current_dir(&self.back);
+    }
+}
+
+/// `p` made absolute against the working folder (it need not exist).
+fn absolute_path(p: &Path) -> Result<PathBuf> {
+    std::path::absolute(p).map_err(io(p))
+}
+
+/// Whether `out` holds anything of the user's (robotid's own hidden
+/// bookkeeping aside): identify writes only into an empty folder.
+fn holds_anything(out: &Path) -> bool {
+    std::fs::read_dir(out)
+        .map(|d| {
+            d.flatten()
+                .any(|e| !e.file_name().to_string_lossy().starts_with(".robotid"))
+        })
+        .unwrap_or(true)
+}
+
+fn io(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// An error with its causes, as one line.
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        s.push_str(&format!(": {c}"));
+        cause = c.source();
+    }
+    s
+}
