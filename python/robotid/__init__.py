@@ -9,6 +9,12 @@ regressor rows and an estimate. From Python:
     parts = [p.summarize(r) for r in p.recordings]   # one row each
     parameters = robotid.solve(robotid.merge(parts), p)
 
+Or from recordings and a robot file alone, as `robotid identify` (the same
+files in `out`, the verdict and tables returned):
+
+    result = robotid.identify(["excitation.mcap"], "robot.urdf", validate=["validation.mcap"], out="out/id")
+    result.identified, result.refused, result.parameters  # pyarrow.Table
+
 `summarize` is the map and `merge` the reduce of identification: summaries
 merge in any grouping, on any machine, and solve to the parameters
 `robotid run` estimates from the same recordings (robotid.ray runs it on a
@@ -22,7 +28,7 @@ from typing import Sequence, Union
 
 import pyarrow as pa
 
-from ._robotid import Pipeline, RobotidError, __version__, merge
+from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge
 
 # Pickled by this name (a Ray worker's error reaches the driver so), it
 # comes back as this very class, its file, channel, sample and stage kept.
@@ -40,4 +46,4 @@ def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
     return pipeline.solve(summaries)
 
 
-__all__ = ["Pipeline", "RobotidError", "merge", "solve", "__version__"]
+__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "solve", "__version__"]

@@ -47,3 +47,32 @@ class Pipeline:
 
 def merge(summaries: Summaries) -> pa.RecordBatch:
     """Summaries merged, in order, into one row."""
+
+class Identification:
+    """What `identify` found and wrote (its output folder, typed)."""
+
+    out: str
+    identified: bool
+    refused: Optional[str]
+    verdict: str
+    relative_error: float
+    measured: str
+    recordings: List[Dict[str, object]]
+    parameters: pa.Table
+    physical: Optional[pa.Table]
+    exports: List[str]
+
+def identify(
+    recordings: Sequence[Union[str, PathLike]],
+    robot: Union[str, PathLike],
+    validate: Sequence[Union[str, PathLike]] = (),
+    out: Optional[Union[str, PathLike]] = None,
+    tolerance: float = 0.05,
+    strict: bool = False,
+    accept_inadequate: bool = False,
+    torque_per_amp: Sequence[float] = (),
+    threads: Optional[int] = None,
+) -> Identification:
+    """From recordings and a robot file to a validated model, as `robotid
+    identify`: the same files in `out`, byte for byte. A refused fit is a
+    result (`identified` False, `refused` the cause), not an error."""

@@ -280,6 +280,133 @@ impl Pipeline {
     }
 }
 
+/// `e` of identify as a Python exception.
+fn py_identify_error(e: robotid_identify::Error) -> PyErr {
+    match e {
+        robotid_identify::Error::Robotid(e) => py_error(*e),
+        robotid_identify::Error::Stage(e) => py_error(robotid::Error::Stage(e)),
+        e => {
+            let err = RobotidError::new_err(e.to_string());
+            Python::attach(|py| {
+                let value = err.value(py);
+                for key in ["file", "channel", "sample", "stage"] {
+                    let _ = value.setattr(key, py.None());
+                }
+            });
+            err
+        }
+    }
+}
+
+/// What `identify` found and wrote (`robotid identify`'s output folder,
+/// typed): `identified` False with `refused` saying why when the fit is
+/// refused (the folder then holds the estimate and report marked so).
+#[pyclass(frozen, get_all, module = "robotid")]
+struct Identification {
+    /// The output folder.
+    out: PathBuf,
+    identified: bool,
+    refused: Option<String>,
+    /// The verdict, as the parameters table's metadata says it.
+    verdict: String,
+    /// The relative error that decided, and where it was measured.
+    relative_error: f64,
+    measured: String,
+    /// Per recording: role, name, log, periodic, findings, pipeline.
+    recordings: Py<PyList>,
+    /// `parameters.parquet` (least squares) as written.
+    parameters: Py<PyAny>,
+    /// `parameters_physical.parquet` when the physical fit was made.
+    physical: Option<Py<PyAny>>,
+    /// The exports written (URDF, MJCF, sidecar).
+    exports: Vec<PathBuf>,
+}
+
+#[pymethods]
+impl Identification {
+    fn __repr__(&self) -> String {
+        format!(
+            "Identification({:?}, {})",
+            self.out.display().to_string(),
+            self.refused
+                .as_ref()
+                .map_or("identified".to_string(), |_| "refused".to_string())
+        )
+    }
+}
+
+/// A parquet table the identification wrote, as pyarrow.
+fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
+    let batch = robotid_stages::formats::parquet::read_parquet(path).map_err(|e| py_error(robotid::Error::Stage(e)))?;
+    Ok(table(py, batch)?.unbind())
+}
+
+/// From recordings and a robot file to a validated model, as `robotid
+/// identify` (the same files, byte for byte).
+#[pyfunction]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn identify(
+    py: Python<'_>,
+    recordings: Vec<PathBuf>,
+    robot: PathBuf,
+    validate: Vec<PathBuf>,
+    out: Option<PathBuf>,
+    tolerance: f64,
+    strict: bool,
+    accept_inadequate: bool,
+    torque_per_amp: Vec<f64>,
+    threads: Option<usize>,
+) -> PyResult<Identification> {
+    use robotid_identify::{Physical, Request};
+    let request = Request {
+        validate,
+        out,
+        torque_per_amp,
+        policy: robotid::verdict::Policy { tolerance, strict },
+        accept_inadequate,
+        threads,
+        ..Request::new(recordings, robot)
+    };
+    let id = py
+        .detach(|| robotid_identify::identify_quietly(&request))
+        .map_err(py_identify_error)?;
+    let listed = PyList::empty(py);
+    for r in &id.recordings {
+        let d = PyDict::new(py);
+        d.set_item("role", r.role.name())?;
+        d.set_item("name", &r.name)?;
+        d.set_item("log", &r.log)?;
+        d.set_item("periodic", r.design.periodic().is_some())?;
+        let found = PyDict::new(py);
+        for (k, v) in &r.design.findings {
+            found.set_item(k.key(), v)?;
+        }
+        d.set_item("findings", found)?;
+        d.set_item("pipeline", &r.design.text)?;
+        listed.append(d)?;
+    }
+    let (physical, exports) = match &id.physical {
+        Physical::Fitted { export, .. } => (
+            Some(written(py, &id.path("parameters_physical.parquet"))?),
+            export.files.iter().map(|f| id.path(f)).collect(),
+        ),
+        _ => (None, Vec::new()),
+    };
+    Ok(Identification {
+        identified: !id.is_refused(),
+        refused: id.refused.clone(),
+        verdict: id.verdict.said(),
+        relative_error: id.verdict.relative.0,
+        measured: id.verdict.relative.1.said().to_string(),
+        recordings: listed.unbind(),
+        parameters: written(py, &id.path("parameters.parquet"))?,
+        physical,
+        exports,
+        out: id.out,
+    })
+}
+
 /// Summaries merged, in order, into one row.
 #[pyfunction]
 fn merge<'py>(py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
@@ -292,6 +419,8 @@ fn merge<'py>(py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<
 fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Pipeline>()?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_class::<Identification>()?;
     m.add("RobotidError", m.py().get_type::<RobotidError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -1,0 +1,91 @@
+"""`robotid.identify` against `robotid identify`: the same library call, so
+the same files byte for byte, and the same verdict."""
+
+import pathlib
+import shutil
+import sysconfig
+
+import pyarrow.parquet as pq
+import pytest
+
+import robotid
+from conftest import robotid as cli
+
+SHARED = pathlib.Path(__file__).resolve().parents[3] / "shared"
+
+
+def files(root: pathlib.Path) -> dict:
+    """Every file under `root` (robotid's hidden bookkeeping aside) by its
+    path relative to it."""
+    return {
+        p.relative_to(root): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and not any(part.startswith(".robotid") for part in p.relative_to(root).parts)
+    }
+
+
+def identify_both(tmp_path, recordings, robot, validate, exit_code=0):
+    """identify from the command line and from Python into the same
+    folder (paths are written into the tables): both folders' files and
+    the Python result."""
+    out = tmp_path / "out"
+    args = [*recordings, "--robot", robot, "--out", out]
+    if validate:
+        args += ["--validate", *validate]
+    done = cli("identify", *args, check=False)
+    assert done.returncode == exit_code, done.stderr
+    by_cli = files(out)
+    shutil.rmtree(out)
+    result = robotid.identify(recordings, robot, validate=validate, out=out)
+    return by_cli, files(out), result
+
+
+def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path):
+    rec = examples / "recordings"
+    by_cli, by_python, result = identify_both(
+        tmp_path,
+        [rec / "kuka_axis3" / "kuka_axis3.mcap"],
+        examples / "robots" / "kuka_axis3.toml",
+        [rec / "kuka_axis3_validation" / "kuka_axis3_validation.mcap"],
+    )
+    assert sorted(by_cli) == sorted(by_python)
+    for f in ["parameters.parquet", "parameters_physical.parquet", "report.html", "identify.sh", "identified.urdf"]:
+        assert pathlib.Path(f) in by_cli, f
+    different = [str(p) for p in by_cli if by_cli[p] != by_python[p]]
+    assert different == []
+    assert result.identified and result.refused is None
+    assert [r["role"] for r in result.recordings] == ["excitation", "validation"]
+    assert result.recordings[0]["periodic"]
+    assert result.recordings[0]["pipeline"] == (tmp_path / "out" / "pipelines" / "kuka_axis3.toml").read_text()
+    # The tables given are the files written.
+    assert result.parameters.equals(pq.read_table(tmp_path / "out" / "parameters.parquet"))
+    assert result.physical is not None
+    assert sorted(p.suffix for p in map(pathlib.Path, result.exports)) == [".json", ".parquet", ".urdf", ".xml"]
+    assert 0 < result.relative_error < 0.05, result.relative_error
+    assert result.measured == "on the validation recordings"
+
+
+def test_a_refused_identification_is_a_result_with_the_cause(tmp_path):
+    """A foreign recording (made without robotid) under a tolerance no
+    model meets: refused by both (exit 3 from the command line), the same
+    files either way, and the cause in the result."""
+    case = SHARED / "foreign" / "ur5"
+    if not case.exists():
+        pytest.skip(f"{case} is absent (the foreign recordings sit beside the repository)")
+    urdf = (
+        pathlib.Path(sysconfig.get_paths()["purelib"])
+        / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+    )
+    if not urdf.is_file():
+        pytest.skip(f"{urdf}: example-robot-data is not installed (scripts/test.sh installs it)")
+    out = tmp_path / "out"
+    done = cli("identify", case / "excitation.mcap", "--robot", urdf, "--out", out, "--tolerance", "0.01", check=False)
+    assert done.returncode == 3, done.stderr
+    by_cli = files(out)
+    shutil.rmtree(out)
+    result = robotid.identify([case / "excitation.mcap"], urdf, out=out, tolerance=1e-4)
+    assert files(out) == by_cli
+    assert not result.identified
+    assert "over the tolerance 0.0 %" in result.refused, result.refused
+    assert (out / "INADEQUATE.txt").read_text() == result.refused + "\n"
+    assert result.physical is None and result.exports == []
