@@ -2,11 +2,12 @@
 //! recordings simulated once per test binary, workspaces laid out as
 //! `fixtures/` is, the Python interpreter of the cross-checks.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
 use robotid_stages::dynamics::load_robot;
+use robotid_stages::formats::sha256_hex;
 use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
 
 /// The repository's `fixtures/` folder.
@@ -43,24 +44,104 @@ pub fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
-/// The folder holding the simulation `sim` of `fixtures/sims/`, simulated
-/// on first use in this test binary and kept until it exits.
+/// The folder holding the simulation `sim` of `fixtures/sims/`: made once
+/// and kept in the disk cache ([`cached`]), keyed by the simulation file,
+/// its robot file and the checksums pinned in `fixtures/recordings.sha256`;
+/// only files equal to the pinned ones are cached (the fixtures test
+/// checks that the simulator still makes them).
 pub fn simulated(sim: &str) -> PathBuf {
-    static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    static DONE: OnceLock<Mutex<HashMap<String, PathBuf>>> = OnceLock::new();
-    let root = ROOT.get_or_init(|| tempfile::tempdir().unwrap()).path();
-    let mut done = DONE.get_or_init(Default::default).lock().unwrap();
-    if let Some(p) = done.get(sim) {
-        return p.clone();
-    }
     let path = fixture("sims").join(format!("{sim}.toml"));
     let (cfg, text) = SimConfig::load(&path).unwrap();
-    let model = load_robot(&cfg.robot).unwrap();
-    let result = simulate(&cfg, &model, &provenance(&path, &text, &cfg.robot).unwrap()).unwrap();
-    let dir = root.join(sim);
-    write_simulation(&dir, &cfg.output.name, &cfg.output.formats, &result, &model).unwrap();
-    done.insert(sim.to_string(), dir.clone());
+    let pinned = std::fs::read_to_string(fixture("recordings.sha256")).unwrap();
+    let robot = std::fs::read(&cfg.robot).unwrap();
+    cached(
+        &format!("sim-{sim}"),
+        &[text.as_bytes(), &robot, pinned.as_bytes()],
+        |dir| {
+            let model = load_robot(&cfg.robot).unwrap();
+            let result = simulate(&cfg, &model, &provenance(&path, &text, &cfg.robot).unwrap()).unwrap();
+            let written = write_simulation(dir, &cfg.output.name, &cfg.output.formats, &result, &model).unwrap();
+            for f in written.files {
+                let name = f.file_name().unwrap().to_string_lossy();
+                let line = format!("{}  ./{sim}/{name}", sha256_hex(&std::fs::read(&f).unwrap()));
+                assert!(
+                    pinned.lines().any(|l| l == line),
+                    "{sim}/{name} is not the pinned recording: run `bash fixtures/regenerate.sh` after an intended change"
+                );
+            }
+        },
+    )
+}
+
+/// A folder of files made by `make`, kept across test binaries and runs in
+/// `<target>/robotid-test-cache/<what>-<key>`, the key the SHA-256 of
+/// `inputs` (everything the files depend on). Each file's checksum is kept
+/// beside them and checked on every use: a file changed or missing is made
+/// again. Made in a private folder and renamed into place, so that test
+/// processes running at once never see half a folder.
+pub fn cached(what: &str, inputs: &[&[u8]], make: impl FnOnce(&Path)) -> PathBuf {
+    use sha2::{Digest, Sha256};
+    let mut key = Sha256::new();
+    for i in inputs {
+        key.update((i.len() as u64).to_le_bytes());
+        key.update(i);
+    }
+    let key = hex::encode(key.finalize());
+    let root = cache_root();
+    let dir = root.join(format!("{what}-{}", &key[..16]));
+    // Checked once per process.
+    static CHECKED: OnceLock<Mutex<HashSet<PathBuf>>> = OnceLock::new();
+    let mut checked = CHECKED.get_or_init(Default::default).lock().unwrap();
+    if checked.contains(&dir) || intact(&dir) {
+        checked.insert(dir.clone());
+        return dir;
+    }
+    std::fs::create_dir_all(&root).unwrap();
+    let fresh = tempfile::tempdir_in(&root).unwrap();
+    make(fresh.path());
+    let sums: String = bytes_of(fresh.path())
+        .iter()
+        .map(|(f, b)| format!("{}  {f}\n", sha256_hex(b)))
+        .collect();
+    std::fs::write(fresh.path().join(CHECKSUMS), sums).unwrap();
+    let made = fresh.keep();
+    if !intact(&dir) {
+        let _ = std::fs::remove_dir_all(&dir);
+        if std::fs::rename(&made, &dir).is_ok() {
+            checked.insert(dir.clone());
+            return dir;
+        }
+    }
+    // Another process put an intact copy in place first.
+    let _ = std::fs::remove_dir_all(&made);
+    assert!(intact(&dir), "{}: the test cache is not intact", dir.display());
+    checked.insert(dir.clone());
     dir
+}
+
+/// The checksums of a cached folder's files.
+const CHECKSUMS: &str = ".sha256";
+
+/// Whether every file a cached folder lists is there with its checksum.
+fn intact(dir: &Path) -> bool {
+    let Ok(sums) = std::fs::read_to_string(dir.join(CHECKSUMS)) else {
+        return false;
+    };
+    !sums.is_empty()
+        && sums.lines().all(|l| {
+            l.split_once("  ")
+                .is_some_and(|(sum, f)| std::fs::read(dir.join(f)).is_ok_and(|b| sha256_hex(&b) == sum))
+        })
+}
+
+/// `<target>/robotid-test-cache`, the target folder the test binary runs from
+/// (`<target>/debug/deps/<binary>`).
+fn cache_root() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    exe.ancestors()
+        .nth(3)
+        .map(|t| t.join("robotid-test-cache"))
+        .unwrap_or_else(|| std::env::temp_dir().join("robotid-test-cache"))
 }
 
 /// A temporary folder laid out as `fixtures/`: robots/, pipelines/ and

@@ -569,6 +569,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
         return;
     };
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/foreign_corpus.py");
+    let requirements = script.with_file_name("requirements.txt");
     let tmp = tempfile::tempdir().unwrap();
     // Refused: a friction the model lacks. Fewer than two periods are
     // scored on the steady stretch's first and last whole periods: 1.6
@@ -601,25 +602,32 @@ fn the_foreign_corpus_is_identified_or_refused() {
     // One case: what the summary says of it, and its (within, of) when
     // identified.
     let one = |case: &str| -> (String, Option<(usize, usize)>) {
-        let dir = tmp.path().join(case);
-        std::fs::create_dir_all(&dir).unwrap();
-        let made = Command::new(robotid_tests::python())
-            .arg(&script)
-            .args([&urdf, &dir])
-            .arg(case)
-            .output()
-            .unwrap();
-        assert!(
-            made.status.success(),
-            "{case}: {}",
-            String::from_utf8_lossy(&made.stderr)
+        // Made once, kept in the test cache keyed by the generator, the
+        // URDF, the case and the test venv's requirements.
+        let inputs = [&script, &urdf, &requirements].map(|f| std::fs::read(f).unwrap());
+        let dir = robotid_tests::cached(
+            &format!("corpus-{case}"),
+            &[&inputs[0], &inputs[1], &inputs[2], case.as_bytes()],
+            |dir| {
+                let made = Command::new(robotid_tests::python())
+                    .arg(&script)
+                    .args([&urdf, dir])
+                    .arg(case)
+                    .output()
+                    .unwrap();
+                assert!(
+                    made.status.success(),
+                    "{case}: {}",
+                    String::from_utf8_lossy(&made.stderr)
+                );
+            },
         );
         let log = ["excitation.csv", "excitation.txt", "excitation.mcap"]
             .iter()
             .map(|f| dir.join(f))
             .find(|f| f.is_file())
             .unwrap();
-        let out = dir.join("id");
+        let out = tmp.path().join(case);
         // The case's own robot file where it has one (a gripper added).
         let robot = Some(dir.join("robot.urdf"))
             .filter(|r| r.is_file())
