@@ -1,7 +1,6 @@
 //! The workflow behind [`identify`], one step per function.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 use robotid::identify::{absolute, design_with, Design, Found};
 use robotid::validation::Validated;
@@ -31,28 +30,28 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         )));
     }
     let (recordings, locked) = design_all(request, &paths)?;
-    // From here identify works inside its staging folder, every output
-    // named relative to it: the files that name each other (the report,
-    // the exports, the estimate's provenance) hold paths that stay right
-    // when the folder appears as `out`, and when it is moved.
-    let inside = Inside::enter(staging.staged_out())?;
+    // Every output is written into the staging folder and named relative
+    // to it: the files that name each other (the report, the exports, the
+    // estimate's provenance) hold paths that stay right when the folder
+    // appears as `out`, and when it is moved.
+    let staged = staging.staged_out();
     let mut script = Script::new(&paths.robot);
-    let runs = run_pipelines(request, &paths.out, &recordings, &mut script, observer)?;
+    let runs = run_pipelines(request, (staged, &paths.out), &recordings, &mut script, observer)?;
     let tables: Vec<PathBuf> = recordings
         .iter()
         .map(|r| Path::new(&r.name).join(&r.name).join("regressor.parquet"))
         .collect();
     let (id_tables, val_tables) = tables.split_at(paths.identifying);
-    let judged = estimate(request, &paths, &recordings, id_tables, val_tables)?;
+    let judged = estimate(request, (staged, &paths), &recordings, id_tables, val_tables)?;
     script.estimate(id_tables, None);
     let validation = match val_tables {
         [] => None,
-        tables => Some(Box::new(validate("parameters.parquet", tables, &paths.held)?)),
+        tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
     let physical = if judged.refused.is_some() && !request.accept_inadequate {
         std::fs::write(
-            "INADEQUATE.txt",
+            staged.join("INADEQUATE.txt"),
             format!("{}\n", judged.refused.as_deref().unwrap_or_default()),
         )
         .map_err(io(&paths.out.join("INADEQUATE.txt")))?;
@@ -64,7 +63,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     } else {
         physical_fit(
             &judged.parts,
-            &paths.robot,
+            (staged, &paths.robot),
             (id_tables, val_tables),
             &mut script,
             observer,
@@ -78,10 +77,10 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         physical: fitted.then(|| "parameters_physical.parquet".into()),
         robot: fitted.then(|| paths.robot.clone()),
         out: "report.html".into(),
+        within: staged.to_path_buf(),
     })?;
     script.report(id_tables, val_tables, fitted);
-    std::fs::write("identify.sh", script.text()).map_err(io(&paths.out.join("identify.sh")))?;
-    drop(inside);
+    std::fs::write(staged.join("identify.sh"), script.text()).map_err(io(&paths.out.join("identify.sh")))?;
     staging.commit()?;
     Ok(Identification {
         out: paths.out,
@@ -256,18 +255,18 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<
 /// folder (inside the staging folder); `out` is where they will appear.
 fn run_pipelines(
     request: &Request,
-    out: &Path,
+    (staged, out): (&Path, &Path),
     recordings: &[Recording],
     script: &mut Script,
     observer: &dyn Observer,
 ) -> Result<Vec<Ran>> {
-    std::fs::create_dir_all("pipelines").map_err(io(out))?;
+    std::fs::create_dir_all(staged.join("pipelines")).map_err(io(out))?;
     let mut runs = Vec::new();
     for r in recordings {
         // Written staged, read as the file it will be: what the tables and
         // the manifest say of it names its final place.
         let rel = Path::new("pipelines").join(format!("{}.toml", r.name));
-        std::fs::write(&rel, &r.design.text).map_err(io(&out.join(&rel)))?;
+        std::fs::write(staged.join(&rel), &r.design.text).map_err(io(&out.join(&rel)))?;
         let built = robotid::Pipeline::from_toml(&r.design.text, out.join(&rel))?.build()?;
         let warnings: Vec<String> = built.model.iter().flat_map(|m| m.warnings.clone()).collect();
         let locked = built.model.as_ref().filter(|m| !m.locked.is_empty()).map(|m| {
@@ -276,7 +275,7 @@ fn run_pipelines(
         });
         let report = built.run_with(
             &RunOptions {
-                out: PathBuf::from(&r.name),
+                out: staged.join(&r.name),
                 threads: request.threads,
                 plot: None,
             },
@@ -338,7 +337,7 @@ impl Judge {
 /// it is refused.
 fn estimate(
     request: &Request,
-    paths: &Paths,
+    (staged, paths): (&Path, &Paths),
     recordings: &[Recording],
     id_tables: &[PathBuf],
     val_tables: &[PathBuf],
@@ -346,9 +345,9 @@ fn estimate(
     let identifying = &recordings[..paths.identifying];
     let judge = Judge {
         policy: request.policy,
-        id_rows: robotid::tables::load_system(id_tables)?,
+        id_rows: robotid::tables::load_system(staged, id_tables)?,
         val_rows: (!val_tables.is_empty())
-            .then(|| robotid::tables::load_system(val_tables))
+            .then(|| robotid::tables::load_system(staged, val_tables))
             .transpose()?,
         // Held-out periods of every identification recording, pooled by
         // their worst; none where one has fewer than two steady periods.
@@ -363,13 +362,13 @@ fn estimate(
         let v: &Verdict = judged.get_or_init(|| judge.verdict(&o.estimate));
         let mut md = vec![(robotid_schemas::metadata::VERDICT.to_string(), v.said())];
         if let Some(why) = &v.refused {
-            md.push((robotid_schemas::metadata::INADEQUATE.to_string(), why.clone()));
+            md.push((robotid_schemas::metadata::INADEQUATE.to_string(), why.to_string()));
         }
         md
     };
     let reducer = robotid::tables::reducer(&estimate_config(Covariance::Robust, false), Some(&paths.robot))?;
-    let parts = robotid::tables::parts(&reducer, id_tables)?;
-    let outcome = robotid::tables::reduce(&reducer, &parts, Path::new("parameters.parquet"), Some(&mark))?;
+    let parts = robotid::tables::parts(&reducer, staged, id_tables)?;
+    let outcome = robotid::tables::reduce(&reducer, &parts, &staged.join("parameters.parquet"), Some(&mark))?;
     judged.get_or_init(|| judge.verdict(&outcome.estimate));
     let verdict = judged.into_inner().expect("judged above");
     // A floor from one period's non-excited lines (nothing repeats to take
@@ -439,8 +438,8 @@ fn estimate_config(covariance: Covariance, physical: bool) -> EstimateConfig {
 }
 
 /// `parameters` validated on the held-out `tables` (of `held`).
-fn validate(parameters: &str, tables: &[PathBuf], held: &[PathBuf]) -> Result<Validated> {
-    robotid::validation::validate(Path::new(parameters), tables).map_err(|source| Error::Validation {
+fn validate(staged: &Path, parameters: &str, tables: &[PathBuf], held: &[PathBuf]) -> Result<Validated> {
+    robotid::validation::validate(staged, Path::new(parameters), tables).map_err(|source| Error::Validation {
         files: held
             .iter()
             .map(|p| p.display().to_string())
@@ -453,7 +452,7 @@ fn validate(parameters: &str, tables: &[PathBuf], held: &[PathBuf]) -> Result<Va
 /// The physically consistent estimate, validated, and the exports.
 fn physical_fit(
     parts: &[Part],
-    robot: &Path,
+    (staged, robot): (&Path, &Path),
     (id_tables, val_tables): (&[PathBuf], &[PathBuf]),
     script: &mut Script,
     observer: &dyn Observer,
@@ -464,7 +463,7 @@ fn physical_fit(
         observer.busy(Some(
             "physical fit: the prior weight on held-out periods, then the bootstrap's semidefinite programs",
         ));
-        let outcome = robotid::tables::reduce(&reducer, parts, physical, None);
+        let outcome = robotid::tables::reduce(&reducer, parts, &staged.join(physical), None);
         observer.busy(None);
         Ok(outcome?)
     };
@@ -480,7 +479,7 @@ fn physical_fit(
     // The model simulators get is the physical one: validated too.
     let validation = match val_tables {
         [] => None,
-        tables => Some(Box::new(robotid::validation::validate(physical, tables)?)),
+        tables => Some(Box::new(robotid::validation::validate(staged, physical, tables)?)),
     };
     let export = robotid_report::export::export(&Export {
         robot: robot.to_path_buf(),
@@ -489,6 +488,7 @@ fn physical_fit(
         out: "identified".into(),
         prior_weight: None,
         force: false,
+        within: staged.to_path_buf(),
     })?;
     script.estimate(id_tables, Some(if fallback.is_some() { "residual" } else { "robust" }));
     script.validate("parameters_physical.parquet", val_tables);
@@ -499,33 +499,6 @@ fn physical_fit(
         validation,
         export,
     })
-}
-
-/// Serialises identify's time inside its staging folder: the working
-/// folder is the process's, one identify at a time in a process holds it.
-static WORKING_FOLDER: Mutex<()> = Mutex::new(());
-
-/// The process working inside a folder until dropped, then back where it
-/// was (before the commit: a folder is not exchanged under a process that
-/// works inside it).
-struct Inside {
-    back: PathBuf,
-    _held: std::sync::MutexGuard<'static, ()>,
-}
-
-impl Inside {
-    fn enter(dir: &Path) -> Result<Inside> {
-        let held = WORKING_FOLDER.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        let back = std::env::current_dir().map_err(io(Path::new(".")))?;
-        std::env::set_current_dir(dir).map_err(io(dir))?;
-        Ok(Inside { back, _held: held })
-    }
-}
-
-impl Drop for Inside {
-    fn drop(&mut self) {
-        let _ = std::env::set_current_dir(&self.back);
-    }
 }
 
 /// `p` made absolute against the working folder (it need not exist).

@@ -31,9 +31,12 @@ pub fn same_bytes(paths: &[PathBuf]) -> Result<Option<(&Path, &Path)>> {
 /// The map step of a pipeline's `estimate` stage over regressor tables:
 /// each folded into its summary. Parts do not depend on the covariance or
 /// the physical fit: one read serves an estimate and its physical fit. A
-/// table given twice is refused (its rows would count twice).
-pub fn parts(reducer: &Reducer, regressors: &[PathBuf]) -> Result<Vec<Part>> {
-    if let Some((first, again)) = same_bytes(regressors)? {
+/// table given twice is refused (its rows would count twice). The tables
+/// are read `within` a folder and named as given (relative paths stay
+/// right when the folder moves; `Path::new("")`: the working folder).
+pub fn parts(reducer: &Reducer, within: &Path, regressors: &[PathBuf]) -> Result<Vec<Part>> {
+    let read: Vec<PathBuf> = regressors.iter().map(|p| within.join(p)).collect();
+    if let Some((first, again)) = same_bytes(&read)? {
         return Err(Error::SameRecording {
             first: first.to_path_buf(),
             again: again.to_path_buf(),
@@ -41,8 +44,9 @@ pub fn parts(reducer: &Reducer, regressors: &[PathBuf]) -> Result<Vec<Part>> {
     }
     regressors
         .iter()
-        .map(|p| {
-            let sys = System::from_tables(&[(p.display().to_string(), read_parquet(p)?)])?;
+        .zip(&read)
+        .map(|(name, p)| {
+            let sys = System::from_tables(&[(name.display().to_string(), read_parquet(p)?)])?;
             Ok(reducer.part_of(sys)?)
         })
         .collect()
@@ -73,11 +77,12 @@ pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks
     Ok(outcome)
 }
 
-/// Regressor tables stacked into one system, each named by its path.
-pub fn load_system(paths: &[PathBuf]) -> Result<System> {
+/// Regressor tables stacked into one system, read `within` a folder and
+/// each named by its path as given.
+pub fn load_system(within: &Path, paths: &[PathBuf]) -> Result<System> {
     let mut tables = Vec::new();
     for p in paths {
-        tables.push((p.display().to_string(), read_parquet(p)?));
+        tables.push((p.display().to_string(), read_parquet(&within.join(p))?));
     }
     Ok(System::from_tables(&tables)?)
 }

@@ -20,12 +20,13 @@ pub struct Validated {
 }
 
 /// The parameters table at `parameters` validated on the regressor tables
-/// `regressors`; refused when the tables are of another parameter set, or
-/// when a joint's measured torque runs against the prediction (a reversed
-/// or swapped channel reads as model error, and is not one).
-pub fn validate(parameters: &Path, regressors: &[PathBuf]) -> Result<Validated> {
-    let parameters = crate::tables::read_parameters(parameters)?;
-    let sys = crate::tables::load_system(regressors)?;
+/// `regressors` (both read `within` a folder, named as given); refused when
+/// the tables are of another parameter set, or when a joint's measured
+/// torque runs against the prediction (a reversed or swapped channel reads
+/// as model error, and is not one).
+pub fn validate(within: &Path, parameters: &Path, regressors: &[PathBuf]) -> Result<Validated> {
+    let parameters = crate::tables::read_parameters(&within.join(parameters))?;
+    let sys = crate::tables::load_system(within, regressors)?;
     if sys.names != parameters.names {
         return Err(Error::OtherParameters {
             tables: sys.names.clone(),

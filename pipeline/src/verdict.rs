@@ -106,7 +106,60 @@ pub struct Verdict {
     /// it was measured.
     pub relative: (f64, Measured),
     /// Why the fit is refused; None: identified.
-    pub refused: Option<String>,
+    pub refused: Option<Refusal>,
+}
+
+/// Why a fit is refused, with the figures that decided.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Refusal {
+    /// `--strict`: these joints' residues are over [`REFUSE_RATIO`]× the
+    /// floor (joint, ratio).
+    OverFloor(Vec<(String, f64)>),
+    /// A friction the model lacks: functions of each joint's own velocity
+    /// explain most of its residue (joint, share, ratio).
+    MissingFriction(Vec<(String, f64, f64)>),
+    /// The relative error, where it was measured, over the tolerance.
+    OverTolerance {
+        relative: f64,
+        measured: Measured,
+        tolerance: f64,
+    },
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refusal::OverFloor(joints) => write!(
+                f,
+                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {} (--strict)",
+                joints
+                    .iter()
+                    .map(|(j, r)| format!("{j} ({r:.1}×)"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Refusal::MissingFriction(joints) => write!(
+                f,
+                "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; robotid's friction models (viscous and Coulomb, asymmetric, a smooth turn-over) do not hold it. Excite the joints above the speeds where it fades, or take the estimate as it is with --accept-inadequate",
+                joints
+                    .iter()
+                    .map(|(j, share, r)| format!("{j} ({:.0} % of a residue {r:.1}× the noise floor)", 100.0 * share))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Refusal::OverTolerance {
+                relative,
+                measured,
+                tolerance,
+            } => write!(
+                f,
+                "the relative error {:.2} % {} is over the tolerance {:.1} % (--tolerance)",
+                100.0 * relative,
+                measured.said(),
+                100.0 * tolerance
+            ),
+        }
+    }
 }
 
 impl Verdict {
@@ -221,45 +274,28 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
 }
 
 /// Why `v` is refused under its policy, or None.
-fn refusal(v: &Verdict) -> Option<String> {
+fn refusal(v: &Verdict) -> Option<Refusal> {
     let over = v.over_floor();
+    let ratio = |j: &JointFigures| j.ratio.unwrap_or(f64::NAN);
     if v.policy.strict {
-        return (!over.is_empty()).then(|| {
-            format!(
-                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {} (--strict)",
-                over.iter()
-                    .map(|j| format!("{} ({:.1}×)", j.joint, j.ratio.unwrap_or(f64::NAN)))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        });
+        return (!over.is_empty())
+            .then(|| Refusal::OverFloor(over.iter().map(|j| (j.joint.clone(), ratio(j))).collect()));
     }
-    let friction: Vec<String> = over
+    let friction: Vec<(String, f64, f64)> = over
         .iter()
         .filter_map(|j| {
             let share = j.friction_share.filter(|s| *s >= FRICTION_SHARE)?;
-            Some(format!(
-                "{} ({:.0} % of a residue {:.1}× the noise floor)",
-                j.joint,
-                100.0 * share,
-                j.ratio.unwrap_or(f64::NAN)
-            ))
+            Some((j.joint.clone(), share, ratio(j)))
         })
         .collect();
     if !friction.is_empty() {
-        return Some(format!(
-            "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; robotid's friction models (viscous and Coulomb, asymmetric, a smooth turn-over) do not hold it. Excite the joints above the speeds where it fades, or take the estimate as it is with --accept-inadequate",
-            friction.join(", ")
-        ));
+        return Some(Refusal::MissingFriction(friction));
     }
-    let (rel, measured) = v.relative;
-    (!(rel <= v.policy.tolerance)).then(|| {
-        format!(
-            "the relative error {:.2} % {} is over the tolerance {:.1} % (--tolerance)",
-            100.0 * rel,
-            measured.said(),
-            100.0 * v.policy.tolerance
-        )
+    let (relative, measured) = v.relative;
+    (!(relative <= v.policy.tolerance)).then_some(Refusal::OverTolerance {
+        relative,
+        measured,
+        tolerance: v.policy.tolerance,
     })
 }
 
@@ -364,7 +400,7 @@ mod tests {
     fn each_rule_refuses_past_its_edge_and_says_the_figure() {
         let lax = Policy::default();
         let strict = Policy { strict: true, ..lax };
-        let refused = |v: Verdict| refusal(&v);
+        let refused = |v: Verdict| refusal(&v).map(|r| r.to_string());
         assert_eq!(refused(verdict(lax, 50.0, Some(0.2), 0.049)), None);
         let why = refused(verdict(lax, 50.0, Some(0.2), 0.051)).unwrap();
         assert!(why.contains("5.10 %") && why.contains("tolerance 5.0 %"), "{why}");

@@ -45,6 +45,9 @@ pub struct Export {
     pub prior_weight: Option<f64>,
     /// Write bodies outside their bounds all the same (said in the sidecar).
     pub force: bool,
+    /// The folder `parameters` is read and `out` written in, both named as
+    /// given (`""`: the working folder).
+    pub within: PathBuf,
 }
 
 /// What an export did.
@@ -93,8 +96,9 @@ pub enum ExportError {
 type Result<T, E = ExportError> = std::result::Result<T, E>;
 
 /// Every file made, written (each atomically).
-fn write_outputs(files: &[(PathBuf, Output)]) -> Result<()> {
+fn write_outputs(within: &Path, files: &[(PathBuf, Output)]) -> Result<()> {
     for (path, out) in files {
+        let path = &within.join(path);
         match out {
             Output::Text(text) => write_atomic(path, |w| {
                 use std::io::Write;
@@ -185,7 +189,7 @@ pub fn export(args: &Export) -> Result<Exported> {
     if let Some(w) = args.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
         return Err(ExportError::PriorWeight(w));
     }
-    let (params, _, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
+    let (params, _, base) = robotid::tables::identified(&args.robot, &args.within.join(&args.parameters))?;
     let Some(map) = base.map() else {
         return Err(ExportError::Decoupled);
     };
@@ -235,7 +239,7 @@ pub fn export(args: &Export) -> Result<Exported> {
             Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(to_urdf(&identified, &note)))),
             Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
             Format::Sidecar => {
-                let batch = read_parquet(&args.parameters)?;
+                let batch = read_parquet(&args.within.join(&args.parameters))?;
                 let table = Table::of(&batch, &params.names, &args.parameters)?;
                 let side = Sidecar {
                     args,
@@ -254,7 +258,7 @@ pub fn export(args: &Export) -> Result<Exported> {
             }
         }
     }
-    write_outputs(&files)?;
+    write_outputs(&args.within, &files)?;
     Ok(Exported {
         how: fit.said,
         warnings,
@@ -507,7 +511,7 @@ impl Sidecar<'_> {
         );
         m.insert(
             "parameters_sha256".into(),
-            sha256_hex(&bytes(&self.args.parameters)?).into(),
+            sha256_hex(&bytes(&self.args.within.join(&self.args.parameters))?).into(),
         );
         m.insert("robot_file".into(), self.args.robot.display().to_string().into());
         m.insert("robot_sha256".into(), sha256_hex(&bytes(&self.args.robot)?).into());

@@ -473,14 +473,18 @@ pub struct Page {
     pub robot: Option<std::path::PathBuf>,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
+    /// The folder the paths above are read and written in, named in the
+    /// page as given (`""`: the working folder).
+    pub within: std::path::PathBuf,
 }
 
 /// The report of `page`, written to `page.out`.
 pub fn write(page: &Page) -> Result<()> {
-    let params = robotid::tables::read_parameters(&page.parameters)?;
+    let within = |p: &std::path::Path| page.within.join(p);
+    let params = robotid::tables::read_parameters(&within(&page.parameters))?;
     let load = |tables: &[std::path::PathBuf]| {
         (!tables.is_empty())
-            .then(|| robotid::tables::load_system(tables))
+            .then(|| robotid::tables::load_system(&page.within, tables))
             .transpose()
     };
     let (excitation, validation) = (load(&page.excitation)?, load(&page.validation)?);
@@ -500,13 +504,13 @@ pub fn write(page: &Page) -> Result<()> {
     let physical_params = page
         .physical
         .as_deref()
-        .map(robotid::tables::read_parameters)
+        .map(|p| robotid::tables::read_parameters(&within(p)))
         .transpose()?;
     let physical = match (&physical_params, &page.physical) {
         (Some(params), Some(path)) => Some(Physical {
             params,
             bodies: match &page.robot {
-                Some(r) => bodies(r, path)?,
+                Some(r) => bodies(r, &within(path))?,
                 None => Vec::new(),
             },
         }),
@@ -518,7 +522,7 @@ pub fn write(page: &Page) -> Result<()> {
         &sets,
         physical.as_ref(),
     )?;
-    crate::plot::write_text(&page.out, &text)
+    crate::plot::write_text(&within(&page.out), &text)
 }
 
 /// The report of a run with an `estimate` stage: its parameters against

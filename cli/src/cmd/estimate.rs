@@ -94,7 +94,7 @@ pub fn outcome_text(out: &Outcome, confidence: f64, table: &std::path::Path) -> 
 /// `marks` added to the table's metadata.
 pub fn estimate(args: &Args, marks: Option<Marks>) -> anyhow::Result<Outcome> {
     let reducer = reducer(args)?;
-    let parts = parts(&reducer, &args.regressors)?;
+    let parts = parts(&reducer, std::path::Path::new(""), &args.regressors)?;
     Ok(reduce(&reducer, &parts, &args.out, marks)?)
 }
 

@@ -66,6 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out: args.out,
         prior_weight: args.prior_weight,
         force: args.force,
+        within: PathBuf::new(),
     })?;
     println!("{}", done.how);
     for w in &done.warnings {

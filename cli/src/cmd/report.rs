@@ -33,6 +33,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         physical: args.physical,
         robot: args.robot,
         out: args.out.clone(),
+        within: PathBuf::new(),
     })?;
     println!("report in {}", args.out.display());
     Ok(())

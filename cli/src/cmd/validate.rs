@@ -25,7 +25,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let v = robotid::validation::validate(&args.parameters, &args.regressors)?;
+    let v = robotid::validation::validate(Path::new(""), &args.parameters, &args.regressors)?;
     print!("{}", said(&v, &args.parameters));
     if let Some(dir) = &args.plot {
         let files = robotid_report::plot::plot_validation(dir, &v.sys, &v.predicted, &v.stats)?;

@@ -569,18 +569,7 @@ impl Reducer {
         for p in &parts[1..] {
             summary.merge(&p.summary)?;
         }
-        let mut est = match self.cfg.method {
-            Estimator::Ols | Estimator::Wls => summary.solve(self.cfg.covariance)?,
-            Estimator::Ml => {
-                let systems: Vec<&System> = parts.iter().filter_map(|p| p.rows.as_ref().map(|r| &r.0)).collect();
-                let sys = System::stack(&systems)?;
-                let noise = InputNoise::stack(parts.iter().filter_map(|p| p.rows.as_ref().and_then(|r| r.1.clone())))
-                    .ok_or_else(|| Error::missing("the input noise", "method = \"ml\" needs it"))?;
-                sys.validate()?;
-                let w = row_weights(&sys, self.cfg.weights)?;
-                maximum_likelihood(&sys, &w, &noise, &MlOptions::default())?
-            }
-        };
+        let mut est = self.solve(parts, &summary)?;
         // The physical fit measures distance in the noise's metric; a robust
         // covariance's shape rests on few blocks (measured on the LWR4+:
         // its fit in the robust metric predicted file 3 at 8.7 % against 5.7 %).
@@ -648,6 +637,23 @@ impl Reducer {
             unidentified,
             essential,
         })
+    }
+
+    /// The estimate of the merged `summary`: least squares from it alone,
+    /// maximum likelihood from the parts' rows and input noise.
+    fn solve(&self, parts: &[Part], summary: &Summary) -> Result<Estimate> {
+        match self.cfg.method {
+            Estimator::Ols | Estimator::Wls => summary.solve(self.cfg.covariance),
+            Estimator::Ml => {
+                let systems: Vec<&System> = parts.iter().filter_map(|p| p.rows.as_ref().map(|r| &r.0)).collect();
+                let sys = System::stack(&systems)?;
+                let noise = InputNoise::stack(parts.iter().filter_map(|p| p.rows.as_ref().and_then(|r| r.1.clone())))
+                    .ok_or_else(|| Error::missing("the input noise", "method = \"ml\" needs it"))?;
+                sys.validate()?;
+                let w = row_weights(&sys, self.cfg.weights)?;
+                maximum_likelihood(&sys, &w, &noise, &MlOptions::default())
+            }
+        }
     }
 
     /// `covariance = "robust"`: where model error dominates some joint, the

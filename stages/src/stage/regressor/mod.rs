@@ -219,6 +219,39 @@ pub struct Regressor {
     spectra: Spectra,
 }
 
+impl Regressor {
+    /// The band limit and the period it is counted in: only on the
+    /// kinematics of one averaged period (`samples` long) of a periodic
+    /// record.
+    fn band(&self, chain: &Chain, samples: usize) -> Result<Option<(f64, f64)>> {
+        let one_period = chain.periods.as_ref().is_none_or(|p| p.samples_per_period == samples);
+        if self.cfg.band_limit_hz.is_some() && !one_period {
+            return Err(Error::setting(
+                "band_limit_hz",
+                "used on the kinematics of one averaged period",
+                format!("kinematics over {} samples, not one period: drop it", samples),
+            ));
+        }
+        let band = match self.cfg.band_limit_hz {
+            Some(b) => Some((
+                b,
+                chain
+                    .facts
+                    .period_s
+                    .filter(|_| chain.facts.differentiation != Some(super::differentiate::Differentiation::Filtered))
+                    .ok_or_else(|| {
+                        Error::missing(
+                            "one averaged period",
+                            "band_limit_hz applies to periodic kinematics (this record is not periodic)",
+                        )
+                    })?,
+            )),
+            None => None,
+        };
+        Ok(band)
+    }
+}
+
 impl Stage for Regressor {
     fn run(&self, chain: &mut Chain) -> Result<()> {
         let kin = chain.kinematics()?;
@@ -239,33 +272,7 @@ impl Stage for Regressor {
             }
             _ => kin,
         };
-        let one_period = chain
-            .periods
-            .as_ref()
-            .is_none_or(|p| p.samples_per_period == kin.time.len());
-        if self.cfg.band_limit_hz.is_some() && !one_period {
-            return Err(Error::setting(
-                "band_limit_hz",
-                "used on the kinematics of one averaged period",
-                format!("kinematics over {} samples, not one period: drop it", kin.time.len()),
-            ));
-        }
-        let band = match self.cfg.band_limit_hz {
-            Some(b) => Some((
-                b,
-                chain
-                    .facts
-                    .period_s
-                    .filter(|_| chain.facts.differentiation != Some(super::differentiate::Differentiation::Filtered))
-                    .ok_or_else(|| {
-                        Error::missing(
-                            "one averaged period",
-                            "band_limit_hz applies to periodic kinematics (this record is not periodic)",
-                        )
-                    })?,
-            )),
-            None => None,
-        };
+        let band = self.band(chain, kin.time.len())?;
         let samples = kin.time.len() as f64;
         let mut rows = regressor_rows(
             kin,

@@ -1,0 +1,223 @@
+//! The pipeline of each kind of record: a periodic one (aligned, averaged,
+//! differentiated at its lines or in its band) and one that does not
+//! repeat (filtered, differentiated in time).
+
+use super::*;
+
+/// The design of a periodic record with `period`: its steady periods, the
+/// harmonics excited, whether one joint moves, and (for an identification
+/// recording) the band, filter and Coulomb model held-out periods prefer.
+pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
+    let Draft {
+        log,
+        first,
+        model,
+        raw,
+        fs,
+        mut plan,
+        mut findings,
+        mut regressor,
+        mut inverse,
+    } = d;
+    let own_regressor = first.is_none();
+    let mut delay = first.and_then(|d| d.delay_s);
+    let joints = model.joint_names();
+    let (tol, chain) = steady(log, &plan, &raw, (period, fs), &findings)?;
+    let p = chain.periods.as_ref().expect("aligned");
+    let mean = chain.mean.as_ref().expect("averaged");
+    findings.push((Found::Steady, steady_said(p, tol)));
+    let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
+    let moving = joint_wise(log, period, &joints, &sets, &mut findings)?;
+    let held_at = moving.map(|m| held_positions(m, &joints, &mean.q));
+    same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
+    findings.push((Found::Harmonics, harmonics_said));
+    let (positions_stage, torques_stage) = bands(period, mean, &joints, &sets, &union);
+    let stages_after = |inverse: Option<&(FilterSpec, f64)>, delay: Option<f64>, differentiate: &StageConfig| {
+        stages_after(
+            align(period, fs, tol),
+            &union,
+            inverse_filter(inverse, delay, fs),
+            differentiate,
+        )
+    };
+    let mut wide_band = first.map(|d| d.wide_band);
+    let mut held_out_relative = None;
+    if own_regressor {
+        let (wide, said, choice) = best_band(
+            &Scoring {
+                log,
+                plan: &plan,
+                raw: &raw,
+                model: &model,
+                regressor: &regressor,
+                moving,
+                declared: inverse.as_ref().map(|(f, _)| *f),
+                fs,
+                stages_after: &stages_after,
+            },
+            &positions_stage,
+            torques_stage.as_ref(),
+        )?;
+        wide_band = Some(wide);
+        held_out_relative = choice.relative;
+        findings.push((Found::Differentiate, said));
+        apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
+    }
+    // Validation recordings take the identification's rule.
+    let (differentiate, said, _) = match (&torques_stage, wide_band) {
+        (Some(t), Some(true)) => t,
+        _ => &positions_stage,
+    };
+    if !own_regressor {
+        findings.push((Found::Differentiate, said.clone()));
+    }
+    plan.stages = stages_after(inverse.as_ref(), delay, differentiate);
+    Ok(Design {
+        excitation: Excitation::Periodic(Periodic {
+            period_s: period,
+            periods: p.periods,
+            held_out_relative,
+            repeated: p.periods >= 2 || p.stretch.is_some(),
+            harmonics: sets,
+            union,
+        }),
+        wide_band: wide_band.unwrap_or(false),
+        joint_wise: held_at,
+        delay_s: delay,
+        ..Design::finish(plan, PERIODIC_TABLES.to_vec(), findings, regressor, inverse)?
+    })
+}
+
+/// The tables a periodic record's pipeline writes.
+const PERIODIC_TABLES: [TableKind; 4] = [
+    TableKind::PeriodMean,
+    TableKind::Noise,
+    TableKind::Kinematics,
+    TableKind::Regressor,
+];
+
+/// The align stage for `period` at `fs`, steady within `tol`.
+pub(super) fn align(period: f64, fs: f64, tol: f64) -> StageConfig {
+    StageConfig::Align(AlignConfig {
+        period_s: Some(period),
+        sample_rate_hz: Some(fs),
+        steady_tolerance: tol,
+        ..AlignConfig::default()
+    })
+}
+
+/// The stages up to differentiation: `align`, the filter undone (when
+/// one is), the average, the noise at the excited `union`, `differentiate`.
+pub(super) fn stages_after(
+    align: StageConfig,
+    union: &[u32],
+    inverse: Option<StageConfig>,
+    differentiate: &StageConfig,
+) -> Vec<StageConfig> {
+    let mut stages = vec![align];
+    stages.extend(inverse);
+    stages.push(StageConfig::Average(AverageConfig::default()));
+    stages.push(StageConfig::Noise(NoiseConfig {
+        harmonics: Some(union.to_vec()),
+    }));
+    stages.push(differentiate.clone());
+    stages
+}
+
+/// A joint-wise record gets the joint-wise model when it sets the
+/// regressor (`own`); one that takes the first recording's must be of its
+/// kind, joint-wise or whole-arm.
+pub(super) fn same_kind(log: &Path, joint_wise: bool, own: bool, regressor: &mut RegressorConfig) -> Result<()> {
+    if joint_wise && own {
+        joint_wise_model(regressor);
+    }
+    if !own && joint_wise != regressor.joint_wise {
+        return Err(refuse(
+            log,
+            format!(
+                "{} while the first recording {}: give joint-wise recordings (one joint moving in each) together, and whole-arm ones together",
+                if joint_wise { "one joint moves" } else { "every joint moves" },
+                if joint_wise { "moved every joint" } else { "moved one joint" }
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A record that does not repeat: derivatives by a zero-phase 2nd-order
+/// Butterworth (Swevers' data filter).
+/// The positions' resolution: the median over joints of the smallest
+/// step between successive samples (an encoder's count); None where the
+/// positions never move.
+pub(super) fn position_step(q: &[Vec<f64>]) -> Option<f64> {
+    let mut steps: Vec<f64> = q
+        .iter()
+        .filter_map(|c| {
+            c.windows(2)
+                .map(|w| (w[1] - w[0]).abs())
+                .filter(|d| *d > 0.0 && d.is_finite())
+                .min_by(f64::total_cmp)
+        })
+        .collect();
+    steps.sort_by(f64::total_cmp);
+    steps.get(steps.len() / 2).copied()
+}
+
+pub(super) fn non_periodic(
+    mut plan: Plan,
+    mut findings: Vec<(Found, String)>,
+    raw: &RawSamples,
+    fs: f64,
+    regressor: &RegressorConfig,
+    (inverse, delay): (Option<&(FilterSpec, f64)>, Option<f64>),
+) -> Result<Design> {
+    // Band-limiting the columns needs whole periods.
+    let mut regressor = RegressorConfig {
+        band_limit_hz: None,
+        ..regressor.clone()
+    };
+    let reach = power_band_hz(&raw.q, fs, 0.9999);
+    let cutoff = (4.0 * reach).max(5.0).min(fs / 8.0);
+    let cutoff = (cutoff * 100.0).round() / 100.0;
+    // A joint at rest has a filtered velocity that rings about zero below
+    // what the chain resolves (one encoder step per filter time constant,
+    // 2π·f_c·Δq): sign(q̇) there flips the Coulomb term from +F_c to −F_c
+    // where the true friction is nil (on the foreign UR5's validation run,
+    // with rests, 3.3 % relative error against 1.0 % with it). Below that
+    // velocity the Coulomb term turns over smoothly.
+    if let Some(step) = position_step(&raw.q) {
+        let v = 2.0 * std::f64::consts::PI * cutoff * step;
+        if v > regressor.coulomb_transition_rad_s.unwrap_or(0.0) {
+            regressor.coulomb_transition_rad_s = Some(v);
+            findings.push((
+                Found::CoulombTransition,
+                format!(
+                    "{v:.3e}: the filtered velocity's resolution (position step {step:.3e} rad × 2π × {cutoff} Hz); slower is rest to this chain, where sign(q̇) would flip on the filter's ringing"
+                ),
+            ));
+        }
+    }
+    findings.push((
+        Found::Differentiate,
+        format!(
+            "filtered, 2nd-order Butterworth at {cutoff} Hz (Swevers' 5 Hz data filter, or 4× the {reach:.3} Hz holding 99.99 % of the positions' power when higher; at most fs/8)"
+        ),
+    ));
+    plan.stages.extend(inverse_filter(inverse, delay, fs));
+    plan.stages.push(StageConfig::Differentiate(DifferentiateConfig {
+        method: Differentiation::Filtered,
+        harmonics: None,
+        bandwidth_hz: None,
+        filter: Some(FilterSpec {
+            family: FilterFamily::Butterworth,
+            order: 2,
+            cutoff_hz: cutoff,
+            ripple_db: None,
+        }),
+    }));
+    let tables = vec![TableKind::Kinematics, TableKind::Regressor];
+    Ok(Design {
+        delay_s: delay,
+        ..Design::finish(plan, tables, findings, regressor.clone(), inverse.copied())?
+    })
+}

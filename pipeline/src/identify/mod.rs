@@ -1,0 +1,438 @@
+//! The pipeline a recording needs, found in the recording itself (`robotid
+//! identify`): where its channels are, its sample rate, whether it is
+//! periodic and with which period, its steady periods, the harmonics each
+//! joint was excited at, and whether the robot tracked them well enough for
+//! a Fourier fit at those lines or needs the DFT's whole band. The result
+//! is an ordinary pipeline file with every value written out and an
+//! `[inferred]` table saying how each was found, so that running it again
+//! gives the same tables byte for byte, and a user can pin and edit it.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use robotid_schemas::{metadata, RawSamples, TableKind};
+use robotid_stages::dynamics::load_robot;
+use robotid_stages::dynamics::{FrictionTerms, ModelKind};
+use robotid_stages::estimation::spectral::{FilterChoice, Score};
+use robotid_stages::signal::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
+use robotid_stages::signal::{FilterFamily, FilterSpec};
+use robotid_stages::stage::align::AlignConfig;
+use robotid_stages::stage::average::AverageConfig;
+use robotid_stages::stage::differentiate::{DifferentiateConfig, Differentiation};
+use robotid_stages::stage::inverse_filter::InverseFilterConfig;
+use robotid_stages::stage::noise::NoiseConfig;
+use robotid_stages::stage::read::{
+    guess_read, headerless_layouts, log_columns, log_joint_names, log_width, named_joints, read, ReadConfig,
+};
+use robotid_stages::stage::regressor::RegressorConfig;
+use robotid_stages::stage::Chain;
+
+use crate::error::{Error, Result};
+use crate::plan::{Plan, StageConfig};
+use crate::Pipeline;
+
+mod design;
+mod layout;
+mod model;
+mod periods;
+
+use design::*;
+use layout::*;
+use model::*;
+use periods::*;
+
+/// What identify found, by kind: printed one line each, and written in
+/// the pipeline file's `[inferred]` under its [`Found::key`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Found {
+    /// How the log was read.
+    Read,
+    /// Joints the log does not hold, locked.
+    Locked,
+    /// A declaration its data contradict.
+    Conflict,
+    /// The sampling rate.
+    SampleRate,
+    /// The anti-alias filter undone.
+    InverseFilter,
+    /// The effort channel's delay, undone.
+    EffortDelay,
+    /// Not periodic, and why.
+    Periodic,
+    /// The excitation period.
+    Period,
+    /// The steady periods.
+    Steady,
+    /// The excited harmonics.
+    Harmonics,
+    /// Joints held still.
+    Held,
+    /// The joint a joint-wise record moves.
+    JointWise,
+    /// The kinematics' method and band.
+    Differentiate,
+    /// The friction model.
+    Friction,
+    /// The Coulomb term's transition speed.
+    CoulombTransition,
+    /// The held-out score that chose.
+    HeldOut,
+}
+
+impl Found {
+    /// Its key in `[inferred]` and in what identify prints.
+    pub fn key(self) -> &'static str {
+        match self {
+            Found::Read => "read",
+            Found::Locked => "locked",
+            Found::Conflict => "conflict",
+            Found::SampleRate => "sample_rate_hz",
+            Found::InverseFilter => "inverse_filter",
+            Found::EffortDelay => "effort_delay",
+            Found::Periodic => "periodic",
+            Found::Period => "period_s",
+            Found::Steady => "steady",
+            Found::Harmonics => "harmonics",
+            Found::Held => "held",
+            Found::JointWise => "joint_wise",
+            Found::Differentiate => "differentiate",
+            Found::Friction => "friction",
+            Found::CoulombTransition => "coulomb_transition_rad_s",
+            Found::HeldOut => "held_out",
+        }
+    }
+}
+
+/// A pipeline designed from a recording.
+#[derive(Debug, Clone)]
+pub struct Design {
+    /// The pipeline, typed…
+    pub plan: Plan,
+    /// …and as its file is written.
+    pub text: String,
+    /// What was found, one line each (also in the file's `[inferred]`).
+    pub findings: Vec<(Found, String)>,
+    /// What repeats in the record.
+    pub excitation: Excitation,
+    /// Its regressor stage (the tables of one identification share one).
+    pub regressor: RegressorConfig,
+    /// The anti-alias filter undone (declared, found in the spectrum, or
+    /// the identification recording's) and the band it is undone in, Hz.
+    pub inverse: Option<(FilterSpec, f64)>,
+    /// How late the effort channel is against the positions, s, undone
+    /// with the filter (found on held-out periods, or the identification
+    /// recording's); None: not late.
+    pub delay_s: Option<f64>,
+    /// The kinematics keep the torques' lines beyond the excited ones (the
+    /// identification's choice, which validation recordings follow).
+    pub wide_band: bool,
+    /// A joint-wise record: the joint that moves, and the held ones at
+    /// their mean positions (rad).
+    pub joint_wise: Option<(String, Vec<(String, f64)>)>,
+}
+
+/// What repeats in a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Excitation {
+    /// Not periodic: filtered and differentiated in time, no noise floor
+    /// of its own.
+    NonPeriodic,
+    Periodic(Periodic),
+}
+
+/// A periodic record's excitation, as found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Periodic {
+    /// The excitation period, s.
+    pub period_s: f64,
+    /// Whole steady periods averaged.
+    pub periods: usize,
+    /// The relative error of the chosen model on held-out periods (fitted
+    /// on the even periods, predicting the odd ones, and the reverse):
+    /// None with fewer than two steady periods, and for validation records.
+    pub held_out_relative: Option<f64>,
+    /// The noise floor comes from samples that repeat: two periods or
+    /// more, or one and a steady stretch beyond it (1.5 periods between
+    /// ramps). Else from one period's non-excited lines.
+    pub repeated: bool,
+    /// The excited harmonics of each joint, and their union, which the
+    /// stages use.
+    pub harmonics: Vec<Vec<u32>>,
+    pub union: Vec<u32>,
+}
+
+impl Design {
+    /// The periodic excitation, if the record is periodic.
+    pub fn periodic(&self) -> Option<&Periodic> {
+        match &self.excitation {
+            Excitation::Periodic(p) => Some(p),
+            Excitation::NonPeriodic => None,
+        }
+    }
+
+    /// The design of `plan` (its stages up to the regressor's), writing
+    /// `tables`, as a non-periodic record's: a periodic one sets its own
+    /// periods, band and harmonics.
+    fn finish(
+        mut plan: Plan,
+        tables: Vec<TableKind>,
+        findings: Vec<(Found, String)>,
+        regressor: RegressorConfig,
+        inverse: Option<(FilterSpec, f64)>,
+    ) -> Result<Design> {
+        plan.stages.push(StageConfig::Regressor(regressor.clone()));
+        plan.tables = tables;
+        plan.inferred = findings.iter().map(|(k, v)| (k.key().to_string(), v.clone())).collect();
+        Ok(Design {
+            text: file_text(&plan)?,
+            plan,
+            findings,
+            excitation: Excitation::NonPeriodic,
+            regressor,
+            inverse,
+            delay_s: None,
+            wide_band: false,
+            joint_wise: None,
+        })
+    }
+}
+
+/// A joint whose strongest line is under this fraction of the most moving
+/// joint's is held: sag and flicker, not excitation (a joint-wise record's
+/// held joints sag by milliradians, its moving one swings by radians).
+pub const HELD_FRACTION: f64 = 0.01;
+
+/// The regressor stage identify starts from: symmetric friction, rotor
+/// inertia where the robot file declares drives, and a torque offset per
+/// joint: torque sensors and current amplifiers carry offsets, and a sign(q̇)
+/// Coulomb pair that differs by direction is a symmetric one plus an
+/// offset (with a smooth turn-over it is not: held-out periods then choose
+/// Bona's asymmetric friction). With an inverse-filtered torque, the
+/// columns are band-limited to the same band (periodic records only).
+pub fn identify_regressor(band_limit_hz: Option<f64>) -> RegressorConfig {
+    RegressorConfig {
+        friction: FrictionTerms::Symmetric,
+        offset: true,
+        band_limit_hz,
+        ..RegressorConfig::default()
+    }
+}
+
+/// A joint-wise record's model (Bona §3): the decoupled one, from the
+/// moving joint's rows.
+fn joint_wise_model(c: &mut RegressorConfig) {
+    c.model = ModelKind::Decoupled;
+    c.rotor = Some(false);
+    c.joint_wise = true;
+}
+
+/// The `inverse_filter` stage: the filter undone up to its band (when
+/// there is one) and the effort channel's delay (when it is late); None
+/// for neither. A delay alone is undone over the whole band the log holds.
+fn inverse_filter(inverse: Option<&(FilterSpec, f64)>, delay_s: Option<f64>, fs: f64) -> Option<StageConfig> {
+    if inverse.is_none() && delay_s.is_none() {
+        return None;
+    }
+    Some(StageConfig::InverseFilter(InverseFilterConfig {
+        filter: inverse.map(|i| i.0),
+        zpk: None,
+        // Below Nyquist by the sample clock's jitter.
+        bandwidth_hz: inverse.map_or(0.45 * fs, |i| i.1),
+        delay_s,
+    }))
+}
+
+/// identify's refusal of `log`, or what it could not find there.
+fn refuse(log: &Path, message: impl Into<String>) -> Error {
+    Error::Identify {
+        log: log.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// A step of identify on `log` that failed, with its cause.
+fn at_step<E: Into<Error>>(log: &Path, step: impl Into<String>) -> impl FnOnce(E) -> Error {
+    let (log, step) = (log.to_path_buf(), step.into());
+    move |e| Error::IdentifyStep {
+        log,
+        step,
+        source: Box::new(e.into()),
+    }
+}
+
+/// A probe's stages run on the samples already read (the log is read once).
+fn probe(plan: &Plan, stages: Vec<StageConfig>, log: &Path, raw: &RawSamples) -> Result<Chain> {
+    let plan = Plan { stages, ..plan.clone() };
+    let built = Pipeline::from_plan(&plan)?.build()?;
+    let mut chain = Chain::from_raw(log.display().to_string(), "probe", raw.clone());
+    built.run_stages(&mut chain, |_| {})?;
+    Ok(chain)
+}
+
+/// The pipeline file identify writes: the plan, and a word on `[inferred]`.
+pub fn file_text(plan: &Plan) -> Result<String> {
+    Ok(format!(
+        "# Designed by `robotid identify`: every value written out, and how each was\n# found in the `inferred` table (copied into every table). Pin it, edit it, run it.\n{}",
+        plan.to_toml()?
+    ))
+}
+
+/// Designs the pipeline for `log` and the robot file `robot` (absolute
+/// paths are written into it). `first`: the first recording's design,
+/// whose regressor stage (and anti-alias filter, where this one declares
+/// none) the others take, so that their tables share one parameter set.
+pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> Result<Design> {
+    design_with(log, robot, first, None, None)
+}
+
+/// The same with the read settings stated (`--read`) and the drives'
+/// joint torque per ampere (`--torque-per-amp`, for current channels).
+pub fn design_with(
+    log: &Path,
+    robot: &Path,
+    first: Option<&Design>,
+    stated: Option<&ReadConfig>,
+    torque_per_amp: Option<&[f64]>,
+) -> Result<Design> {
+    let (model, locked) = unheld_locked(log, robot, first, stated)?;
+    let joints = model.joint_names();
+    let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
+    let mut findings: Vec<(Found, String)> = Vec::new();
+    let mut plan = Plan::draft(
+        &log.with_extension("toml"),
+        Some(robot.to_path_buf()),
+        log.display().to_string(),
+        read_cfg.clone(),
+    );
+    if !locked.is_empty() {
+        let said = locked
+            .iter()
+            .map(|(j, q)| format!("{j} at {q}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        findings.push((
+            Found::Locked,
+            format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'"),
+        ));
+        plan.lock.extend(locked);
+    }
+    findings.extend(layout_said(&layout, &read_cfg)?.map(|said| (Found::Read, said)));
+    let (fs, fs_said) = sample_rate(&raw, &mut findings);
+    let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
+    if let Some(d) = first.and_then(|d| d.delay_s) {
+        findings.push((
+            Found::EffortDelay,
+            format!(
+                "{:.3} samples ({:.3} ms) late, the identification recording's, undone",
+                d * fs,
+                d * 1e3
+            ),
+        ));
+    }
+    let regressor = match first {
+        Some(d) => d.regressor.clone(),
+        None => identify_regressor(inverse.map(|(_, b)| b)),
+    };
+    findings.push((Found::SampleRate, fs_said));
+    let period = period_of(&raw, &mut findings);
+    let (period, period_said) = match period {
+        Ok(p) => p,
+        Err(why) => {
+            findings.push((Found::Periodic, format!("no: {why}")));
+            let delay = first.and_then(|d| d.delay_s);
+            return non_periodic(plan, findings, &raw, fs, &regressor, (inverse.as_ref(), delay));
+        }
+    };
+    findings.push((Found::Period, period_said));
+    periodic(
+        Draft {
+            log,
+            first,
+            model,
+            raw,
+            fs,
+            plan,
+            findings,
+            regressor,
+            inverse,
+        },
+        period,
+    )
+}
+
+/// The robot as the log holds it: joints of the robot file that a log
+/// naming its joints does not hold (a gripper, a tool changer: URDFs
+/// carry them, arm logs often do not) are locked at the robot file's
+/// position for them, and returned with it. A validation recording takes
+/// the identification recording's locks (one parameter set).
+fn unheld_locked(
+    log: &Path,
+    robot: &Path,
+    first: Option<&Design>,
+    stated: Option<&ReadConfig>,
+) -> Result<(robotid_stages::dynamics::Model, Vec<(String, f64)>)> {
+    let model = load_robot(robot)?;
+    let joints = model.joint_names();
+    let missing: Vec<String> = match first {
+        Some(d) => d.plan.lock.keys().filter(|j| joints.contains(j)).cloned().collect(),
+        // The user's `joints` are what the log holds.
+        None if stated.is_some_and(|c| c.joints.is_some()) => Vec::new(),
+        None => {
+            let held: Option<Vec<String>> = match log_columns(log).map_err(at_step(log, "read its header"))? {
+                Some(header) => Some(named_joints(&header, &joints)),
+                None => log_joint_names(log, &stated.cloned().unwrap_or_default())
+                    .map_err(at_step(log, "read its joint names"))?
+                    .map(|names| joints.iter().filter(|j| names.contains(j)).cloned().collect()),
+            };
+            match held {
+                Some(h) if !h.is_empty() && h.len() < joints.len() => {
+                    joints.iter().filter(|j| !h.contains(j)).cloned().collect()
+                }
+                _ => Vec::new(),
+            }
+        }
+    };
+    if missing.is_empty() {
+        return Ok((model, Vec::new()));
+    }
+    let keep: Vec<String> = joints.iter().filter(|j| !missing.contains(j)).cloned().collect();
+    let locked_model = robotid_stages::dynamics::load_robot_with(
+        robot,
+        &robotid_stages::dynamics::Locks {
+            keep: Some(keep),
+            positions: Default::default(),
+        },
+    )?;
+    // Written as `[lock]`: the pipeline file's model is this one.
+    let locked: Vec<(String, f64)> = locked_model
+        .locked
+        .iter()
+        .filter(|(j, _)| missing.contains(j))
+        .cloned()
+        .collect();
+    Ok((locked_model, locked))
+}
+
+/// A design before its period: the recording read, its rate, the filter
+/// declared, the draft pipeline and what was found so far.
+struct Draft<'a> {
+    log: &'a Path,
+    /// The identification recording's design, when this one validates.
+    first: Option<&'a Design>,
+    model: robotid_stages::dynamics::Model,
+    raw: RawSamples,
+    fs: f64,
+    plan: Plan,
+    findings: Vec<(Found, String)>,
+    regressor: RegressorConfig,
+    inverse: Option<(FilterSpec, f64)>,
+}
+
+/// The absolute form of a path that exists.
+pub fn absolute(p: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(p).map_err(|source| Error::Io {
+        path: p.to_path_buf(),
+        source,
+    })
+}
