@@ -96,16 +96,6 @@ const PERIODIC_TABLES: [TableKind; 4] = [
     TableKind::Regressor,
 ];
 
-/// The align stage for `period` at `fs`, steady within `tol`.
-pub(super) fn align(period: f64, fs: f64, tol: f64) -> StageConfig {
-    StageConfig::Align(AlignConfig {
-        period_s: Some(period),
-        sample_rate_hz: Some(fs),
-        steady_tolerance: tol,
-        ..AlignConfig::default()
-    })
-}
-
 /// The stages up to differentiation: `align`, the filter undone (when
 /// one is), the average, the noise at the excited `union`, `differentiate`.
 pub(super) fn stages_after(

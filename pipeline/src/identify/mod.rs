@@ -436,3 +436,14 @@ pub fn absolute(p: &Path) -> Result<PathBuf> {
         source,
     })
 }
+
+/// A filter as a person writes it.
+fn describe(s: &FilterSpec) -> String {
+    let family = toml::Value::try_from(s.family)
+        .map(|v| v.to_string())
+        .unwrap_or_default();
+    match s.ripple_db {
+        Some(r) => format!("{family} order {} ({r} dB ripple) at {:.2} Hz", s.order, s.cutoff_hz),
+        None => format!("{family} order {} at {:.2} Hz", s.order, s.cutoff_hz),
+    }
+}

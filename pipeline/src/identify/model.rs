@@ -834,14 +834,3 @@ pub(super) fn torque_check(
 pub(super) fn chain_samples(kin: &robotid_schemas::Kinematics) -> usize {
     kin.joints.len() * kin.time.len()
 }
-
-/// A filter as a person writes it.
-pub(super) fn describe(s: &FilterSpec) -> String {
-    let family = toml::Value::try_from(s.family)
-        .map(|v| v.to_string())
-        .unwrap_or_default();
-    match s.ripple_db {
-        Some(r) => format!("{family} order {} ({r} dB ripple) at {:.2} Hz", s.order, s.cutoff_hz),
-        None => format!("{family} order {} at {:.2} Hz", s.order, s.cutoff_hz),
-    }
-}

@@ -299,3 +299,13 @@ pub(super) fn stretch_periods(
     };
     Some((one, periods, (n - shift) as f64 / n as f64))
 }
+
+/// The align stage for `period` at `fs`, steady within `tol`.
+pub(super) fn align(period: f64, fs: f64, tol: f64) -> StageConfig {
+    StageConfig::Align(AlignConfig {
+        period_s: Some(period),
+        sample_rate_hz: Some(fs),
+        steady_tolerance: tol,
+        ..AlignConfig::default()
+    })
+}
