@@ -91,11 +91,41 @@ impl Pipeline {
         })
     }
 
-    /// A plan made in code ([`Plan::draft`]), as its file would be read:
-    /// written with [`Plan::to_toml`] and parsed, so that its hash, lines
-    /// and checks are a file's.
-    pub fn from_plan(plan: &Plan) -> Result<Pipeline> {
-        Self::from_toml(&plan.to_toml()?, &plan.file)
+    /// A plan made in code ([`Plan::draft`]) to run in memory, as
+    /// identify's probes do: each stage's and `[read]`'s settings checked as
+    /// a file's are, with no text written and parsed back (so no hash, and
+    /// its stages at line 0). What is written as a file goes through
+    /// [`Plan::to_toml`] and [`Pipeline::from_toml`].
+    pub fn from_plan(plan: Plan) -> Result<Pipeline> {
+        let at = |place, message| crate::error::Placed {
+            file: plan.file.clone(),
+            place,
+            message,
+        };
+        let mut problems: Vec<crate::error::Placed> = plan
+            .read
+            .problems()
+            .into_iter()
+            .map(|p| at(crate::error::Place::Read(p.key), p.message))
+            .collect();
+        for (i, s) in plan.stages.iter().enumerate() {
+            for p in s.problems() {
+                let place = crate::error::Place::Stage {
+                    index: i + 1,
+                    kind: s.name().to_string(),
+                    line: 0,
+                    key: p.key,
+                };
+                problems.push(at(place, p.message));
+            }
+        }
+        if !problems.is_empty() {
+            return Err(Problems(problems).into());
+        }
+        let lines = vec![0; plan.stages.len()];
+        Ok(Pipeline {
+            plan: Plan { lines, ..plan },
+        })
     }
 
     /// Step 2, context: every problem knowable without reading samples,

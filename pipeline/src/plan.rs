@@ -173,7 +173,8 @@ impl Plan {
     /// A plan made in code (`robotid identify`'s) rather than parsed: no
     /// stages yet, the tables none; `file` is where it will be written
     /// (relative paths and messages refer to it). Its text, hash and
-    /// lines are those of [`Plan::to_toml`] once parsed ([`crate::Pipeline::from_plan`]).
+    /// lines are those of [`Plan::to_toml`] once parsed; in memory,
+    /// [`crate::Pipeline::from_plan`].
     pub fn draft(file: &Path, robot: Option<PathBuf>, source: String, read: ReadConfig) -> Plan {
         Plan {
             file: file.to_path_buf(),

@@ -264,7 +264,7 @@ fn at_step<E: Into<Error>>(log: &Path, step: impl Into<String>) -> impl FnOnce(E
 /// A probe's stages run on the samples already read (the log is read once).
 fn probe(plan: &Plan, stages: Vec<StageConfig>, log: &Path, raw: &RawSamples) -> Result<Chain> {
     let plan = Plan { stages, ..plan.clone() };
-    let built = Pipeline::from_plan(&plan)?.build()?;
+    let built = Pipeline::from_plan(plan)?.build()?;
     let mut chain = Chain::from_raw(log.display().to_string(), "probe", raw.clone());
     built.run_stages(&mut chain, |_| {})?;
     Ok(chain)
