@@ -647,3 +647,35 @@ fn identify_is_atomic_and_keeps_the_users_files() {
     assert!(beside.is_empty(), "left beside the folders: {beside:?}");
     println!("24 kill -9s during identify: {none} left nothing, {all} everything, 0 partial");
 }
+
+/// The same files whatever the threads of BLAS (a Ray worker runs with
+/// one, a terminal with all cores): the physical fit's semidefinite
+/// programs differed in their last digits between 1 and 2 OpenBLAS threads.
+#[test]
+fn identify_writes_the_same_bytes_at_any_blas_thread_count() {
+    let ws = robotid_tests::workspace(&["kuka_axis3", "kuka_axis3_validation"]);
+    let rec = ws.path().join("recordings");
+    let out = ws.path().join("id");
+    let mut made = Vec::new();
+    for threads in ["1", "2"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .arg("identify")
+            .arg(rec.join("kuka_axis3/kuka_axis3.mcap"))
+            .arg("--robot")
+            .arg(ws.path().join("robots/kuka_axis3.toml"))
+            .arg("--validate")
+            .arg(rec.join("kuka_axis3_validation/kuka_axis3_validation.mcap"))
+            .arg("--out")
+            .arg(&out)
+            .env("OPENBLAS_NUM_THREADS", threads)
+            .env("OMP_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", super::text(&o));
+        made.push(robotid_tests::bytes_of(&out));
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+    assert!(made[0].contains_key("parameters_physical.parquet"));
+    let differ: Vec<&String> = made[0].keys().filter(|k| made[0].get(*k) != made[1].get(*k)).collect();
+    assert!(differ.is_empty() && made[0].len() == made[1].len(), "{differ:?}");
+}

@@ -634,6 +634,7 @@ impl Problem {
             .iterative_refinement_enable(true)
             .build()
             .map_err(|e| Error::numerical("physical fit", format!("solver settings: {e:?}")))?;
+        one_blas_thread();
         let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
             .map_err(|e| Error::numerical("physical fit", format!("the problem as clarabel sees it: {e:?}")))?;
         // A panic inside the solver (its dense eigen-decompositions `expect`)
@@ -777,6 +778,21 @@ impl Problem {
         });
         links_hold && (0..x.len()).all(|i| self.kinds[i] != Kind::NonNegative || x[i] >= 0.0)
     }
+}
+
+/// OpenBLAS splits its LAPACK work by its thread count, and the
+/// semidefinite programs' round-off with it: the physical fit differed in
+/// its last digits between 1 and 2 threads (a Ray worker runs with one).
+/// One thread, so that the fit is the same bytes at any thread count; its
+/// matrices are small (a few 4×4 cones per link).
+fn one_blas_thread() {
+    extern "C" {
+        fn openblas_set_num_threads(threads: std::os::raw::c_int);
+    }
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    // SAFETY: OpenBLAS's own setter, called once before any solve of this
+    // process's physical fits starts.
+    ONCE.call_once(|| unsafe { openblas_set_num_threads(1) });
 }
 
 #[cfg(test)]
