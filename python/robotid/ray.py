@@ -11,6 +11,15 @@ recordings to round-off, for any partitioning.
         {"arm3": "pipelines/arm3.toml", "ur5": "pipelines/ur5.toml"},
     )                                            # {"arm3": pyarrow.Table, "ur5": ...}
 
+Or `robotid identify` for each robot of a fleet, one Ray task each:
+
+    results = robotid.ray.identify_robots(
+        {"arm_a": {"recordings": ["a/excitation.mcap"], "robot": "a/robot.urdf",
+                   "validate": ["a/validation.mcap"]},
+         "arm_b": {"recordings": ["b/excitation.mcap"], "robot": "b/robot.urdf"}},
+        out="out/fleet",
+    )                                            # {"arm_a": {"identified": True, ...}, ...}
+
 Workers read the recordings and pipeline files by path: on a cluster the
 paths must be visible to every node (a shared file system).
 """
@@ -25,6 +34,7 @@ from typing import Dict, Iterable, Mapping, Optional, Union
 import pyarrow as pa
 
 from . import Pipeline, RobotidError, merge, solve
+from . import identify as _identify
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -173,3 +183,48 @@ def identify(
         key = row[group_by]
         out[key] = solve(_from_ipc(row["summary"]), _pipeline(pipeline_of[key]))
     return dict(sorted(out.items()))
+
+
+def _identify_one(name: str, request: dict, out: str) -> dict:
+    """One robot identified in a Ray task: what `robotid.identify` returns,
+    as plain values (pyarrow tables travel as they are)."""
+    r = _identify(out=os.path.join(out, name), **request)
+    return {
+        "out": os.fspath(r.out),
+        "identified": r.identified,
+        "refused": r.refused,
+        "verdict": r.verdict,
+        "relative_error": r.relative_error,
+        "measured": r.measured,
+        "parameters": r.parameters,
+        "physical": r.physical,
+        "exports": [os.fspath(e) for e in r.exports],
+    }
+
+
+def identify_robots(robots: Mapping[str, Mapping], out: PathLike) -> Dict[str, dict]:
+    """`robotid identify` for each robot, one Ray task each, into
+    `out/<name>`: `robots` maps a name to the keyword arguments of
+    `robotid.identify` (`recordings` and `robot`, and optionally
+    `validate`, `tolerance`, `strict`, `accept_inadequate`,
+    `torque_per_amp`). Each folder holds what `robotid identify` writes;
+    the result per robot is what `robotid.identify` returns, as a dict.
+    A refused fit is a result (`identified` False); an error is raised as
+    the worker's `RobotidError`."""
+    import ray
+
+    out = os.path.abspath(os.fspath(out))
+    task = ray.remote(_identify_one)
+    names = sorted(robots)
+    refs = []
+    for name in names:
+        request = {k: v for k, v in robots[name].items()}
+        request["recordings"] = [os.path.abspath(os.fspath(p)) for p in request["recordings"]]
+        request["robot"] = os.path.abspath(os.fspath(request["robot"]))
+        if "validate" in request:
+            request["validate"] = [os.path.abspath(os.fspath(p)) for p in request["validate"]]
+        refs.append(task.remote(name, request, out))
+    try:
+        return dict(zip(names, ray.get(refs)))
+    except Exception as e:
+        raise _robotid_error_in(e) or e

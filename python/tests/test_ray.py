@@ -51,3 +51,35 @@ def test_a_missing_recording_is_a_robotid_error(fleet, local_ray, tmp_path):
     with pytest.raises(robotid.RobotidError) as e:
         robotid.ray.identify([missing], fleet["pipelines"])
     assert type(e.value) is robotid.RobotidError and e.value.file == missing, repr(e.value)
+
+
+def test_identify_robots_runs_identify_per_robot_as_the_command_line(examples, local_ray, tmp_path):
+    """Two robots of a fleet identified in two Ray tasks: each folder holds
+    the command line's files byte for byte (same paths: they are written
+    into the tables), and a refused one is a result."""
+    from test_identify import files
+
+    rec = examples / "recordings"
+    axis3 = {
+        "recordings": [rec / "kuka_axis3" / "kuka_axis3.mcap"],
+        "robot": examples / "robots" / "kuka_axis3.toml",
+        "validate": [rec / "kuka_axis3_validation" / "kuka_axis3_validation.mcap"],
+    }
+    strict = dict(axis3, tolerance=1e-6)
+    out = tmp_path / "fleet"
+    expected = {}
+    for name, extra in [("axis3", []), ("axis3_strict", ["--tolerance", "0.0001"])]:
+        args = [*axis3["recordings"], "--robot", axis3["robot"], "--validate", *axis3["validate"]]
+        done = cli("identify", *args, "--out", out / name, *extra, check=False)
+        assert done.returncode == (0 if not extra else 3), done.stderr
+        expected[name] = files(out / name)
+    import shutil
+
+    shutil.rmtree(out)
+    results = robotid.ray.identify_robots({"axis3": axis3, "axis3_strict": strict}, out)
+    assert sorted(results) == ["axis3", "axis3_strict"]
+    for name in results:
+        assert files(out / name) == expected[name], name
+    assert results["axis3"]["identified"] and results["axis3"]["physical"] is not None
+    assert not results["axis3_strict"]["identified"]
+    assert "over the tolerance" in results["axis3_strict"]["refused"]
