@@ -342,45 +342,62 @@ impl LineSystem {
         }
     }
 
-    /// The normal equations under the filter response `h`: Σ|h|²·G_l and
-    /// Σ Re(h̄·c_l) of each half.
-    fn normal(&self, h: &[Complex64]) -> (DMatrix<f64>, [DVector<f64>; 2]) {
+    /// The normal equations under each filter response of `hs`: Σ|h|²·G_l
+    /// and Σ Re(h̄·c_l) of each half. The responses are taken together, at
+    /// most [`BATCH`] at a time: each line's Gram entries are read once for
+    /// all of them (a search's hot loop, bound by reading the sums when
+    /// one response is taken at a time), and every entry sums the same
+    /// terms in the same order as for one response alone, so the bits are
+    /// the same.
+    fn normals(&self, hs: &[&[Complex64]]) -> Vec<(DMatrix<f64>, [DVector<f64>; 2])> {
+        match hs.len() {
+            0 => Vec::new(),
+            1 => self.normals_of::<1>(hs),
+            2..=4 => self.normals_of::<4>(hs),
+            5..=BATCH => self.normals_of::<BATCH>(hs),
+            k => panic!("{k} responses: at most {BATCH} at a time"),
+        }
+    }
+
+    /// [`normals`](Self::normals) with room for `K` responses (a
+    /// fixed-size inner loop the compiler unrolls; the slots past
+    /// `hs.len()` are weighted 0 and dropped).
+    fn normals_of<const K: usize>(&self, hs: &[&[Complex64]]) -> Vec<(DMatrix<f64>, [DVector<f64>; 2])> {
         let cols = self.cols;
-        let mut full = DMatrix::zeros(cols, cols);
-        let mut r = [DVector::zeros(cols), DVector::zeros(cols)];
-        // The pair (c, d ≥ c) summed into column c's rows d: contiguous in
-        // the column-major storage (a search's hot loop), then mirrored.
-        let lower = full.as_mut_slice();
+        // The lower triangle: entry (d ≥ c) at c·cols + d, one slot per response.
+        let mut lower = vec![[0.0; K]; cols * cols];
+        let mut r = vec![[DVector::zeros(cols), DVector::zeros(cols)]; hs.len()];
+        let mut s = [0.0; K];
         for l in 0..self.lines {
-            let s = h[l].norm_sqr();
+            for (s, h) in s.iter_mut().zip(hs) {
+                *s = h[l].norm_sqr();
+            }
             let on = &self.sums.active[self.sums.starts[l]..self.sums.starts[l + 1]];
             let mut y = &self.sums.gram[self.sums.gram_starts[l]..];
-            // Active columns in one run (the common case): a slice's axpy.
-            let run = on.last().is_some_and(|&e| (e - on[0]) as usize + 1 == on.len());
             for (i, &c) in on.iter().enumerate() {
-                let column = &mut lower[c as usize * cols..(c as usize + 1) * cols];
                 let (pairs, rest) = y.split_at(on.len() - i);
-                if run {
-                    for (v, g) in column[c as usize..c as usize + pairs.len()].iter_mut().zip(pairs) {
-                        *v += s * g;
-                    }
-                } else {
-                    for (&d, g) in on[i..].iter().zip(pairs) {
-                        column[d as usize] += s * g;
+                for (&d, &g) in on[i..].iter().zip(pairs) {
+                    let v = &mut lower[c as usize * cols + d as usize];
+                    for k in 0..K {
+                        v[k] += s[k] * g;
                     }
                 }
                 y = rest;
-                for half in 0..2 {
-                    r[half][c as usize] += (h[l].conj() * self.sums.cross[half][self.sums.starts[l] + i]).re;
+                let cross = [0, 1].map(|half| self.sums.cross[half][self.sums.starts[l] + i]);
+                for (r, h) in r.iter_mut().zip(hs) {
+                    for half in 0..2 {
+                        r[half][c as usize] += (h[l].conj() * cross[half]).re;
+                    }
                 }
             }
         }
-        for c in 0..cols {
-            for d in c + 1..cols {
-                full[(c, d)] = full[(d, c)];
-            }
-        }
-        (full, r)
+        r.into_iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let g = DMatrix::from_fn(cols, cols, |a, b| lower[a.min(b) * cols + a.max(b)][k]);
+                (g, r)
+            })
+            .collect()
     }
 
     /// The held-out score of the filter response `h`.
@@ -422,7 +439,7 @@ impl LineSystem {
             ratio,
             per_joint,
             relative: (residue / measured).sqrt(),
-            theta: solve_scaled(&g, &total)?,
+            theta: solve_scaled(&g, [&total])?.into_iter().next()?,
         })
     }
 
@@ -430,17 +447,44 @@ impl LineSystem {
     /// what a search ranks candidates by (no per-joint split, no fit on
     /// all periods). Infinite where the regression is singular.
     pub fn ratio(&self, spec: Option<&FilterSpec>) -> f64 {
-        self.response(spec)
-            .and_then(|h| self.held_out(&h))
-            .map_or(f64::INFINITY, |x| x.0)
+        self.ratios(&[spec.copied()])[0]
+    }
+
+    /// [`ratio`](Self::ratio) of each filter of `specs`, the same numbers,
+    /// the responses taken together ([`normals`](Self::normals)).
+    pub fn ratios(&self, specs: &[Option<FilterSpec>]) -> Vec<f64> {
+        let mut out = Vec::with_capacity(specs.len());
+        for chunk in specs.chunks(BATCH) {
+            let hs: Vec<Option<Vec<Complex64>>> = chunk.iter().map(|s| self.response(s.as_ref())).collect();
+            let made: Vec<&[Complex64]> = hs.iter().flatten().map(Vec::as_slice).collect();
+            let mut normals = self.normals(&made).into_iter();
+            out.extend(hs.iter().map(|h| {
+                h.as_ref()
+                    .and_then(|_| normals.next())
+                    .and_then(|(g, r)| self.held_out_of(g, r))
+                    .map_or(f64::INFINITY, |x| x.0)
+            }));
+        }
+        out
     }
 
     /// The held-out residue over the noise floor under the filter response
     /// `h`, with the normal equations and each half's fit.
     #[allow(clippy::type_complexity)]
     fn held_out(&self, h: &[Complex64]) -> Option<(f64, DMatrix<f64>, [DVector<f64>; 2], [DVector<f64>; 2])> {
-        let (g, r) = self.normal(h);
-        let theta = [solve_scaled(&g, &r[0])?, solve_scaled(&g, &r[1])?];
+        let (g, r) = self.normals(&[h]).pop()?;
+        self.held_out_of(g, r)
+    }
+
+    /// The held-out ratio of the normal equations `g`, `r` (one half's fit
+    /// scored on the other), with each half's fit.
+    #[allow(clippy::type_complexity)]
+    fn held_out_of(
+        &self,
+        g: DMatrix<f64>,
+        r: [DVector<f64>; 2],
+    ) -> Option<(f64, DMatrix<f64>, [DVector<f64>; 2], [DVector<f64>; 2])> {
+        let theta = solve_scaled(&g, [&r[0], &r[1]])?;
         // Fitted on one half, the other's residue: E − 2θᵀr + θᵀGθ.
         let held = |fit: usize, on: usize| {
             let t = &theta[fit];
@@ -456,20 +500,25 @@ impl LineSystem {
     }
 }
 
-/// G·θ = r by Cholesky of the column-scaled G (the columns differ by
-/// orders of magnitude), or None when G is singular.
-fn solve_scaled(g: &DMatrix<f64>, r: &DVector<f64>) -> Option<DVector<f64>> {
+/// G·θ = r for each of `rs` by one Cholesky factorisation of the
+/// column-scaled G (the columns differ by orders of magnitude), or None
+/// when G is singular.
+fn solve_scaled<const R: usize>(g: &DMatrix<f64>, rs: [&DVector<f64>; R]) -> Option<[DVector<f64>; R]> {
     let n = g.nrows();
     let d: Vec<f64> = (0..n)
         .map(|i| if g[(i, i)] > 0.0 { 1.0 / g[(i, i)].sqrt() } else { 0.0 })
         .collect();
     let scaled = DMatrix::from_fn(n, n, |i, j| g[(i, j)] * d[i] * d[j]);
-    let rs = DVector::from_fn(n, |i, _| r[i] * d[i]);
-    let x = match scaled.clone().cholesky() {
-        Some(c) => c.solve(&rs),
-        None => scaled.svd(true, true).solve(&rs, 1e-12).ok()?,
+    let rs = rs.map(|r| DVector::from_fn(n, |i, _| r[i] * d[i]));
+    let xs = match scaled.clone().cholesky() {
+        Some(c) => rs.map(|r| c.solve(&r)),
+        None => {
+            let svd = scaled.svd(true, true);
+            let xs: Vec<DVector<f64>> = rs.iter().map(|r| svd.solve(r, 1e-12).ok()).collect::<Option<_>>()?;
+            xs.try_into().ok()?
+        }
     };
-    Some(DVector::from_fn(n, |i, _| x[i] * d[i]))
+    Some(xs.map(|x| DVector::from_fn(n, |i, _| x[i] * d[i])))
 }
 
 /// The anti-alias filter the data call for, with the numbers that decided.
@@ -490,6 +539,10 @@ pub struct FilterChoice {
     /// The relative improvement over no filter a filter needs.
     pub margin: f64,
 }
+
+/// Filter responses whose normal equations are summed together: their
+/// accumulators (cols² each) stay in a core's cache.
+const BATCH: usize = 16;
 
 /// Chebyshev I ripples tried, dB.
 const RIPPLES: [f64; 7] = [0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 3.0];
@@ -526,22 +579,41 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
         cutoff_hz,
         ripple_db,
     };
-    let eval = |s: FilterSpec| sys.ratio(Some(&s));
     // Searched in u = ln(cutoff) + 20, which stays positive for the golden
     // section's relative tolerance.
     let (lo, hi) = (lowest_hz.ln() + 20.0, highest_hz.max(lowest_hz * 1.01).ln() + 20.0);
     let step = (hi - lo) / (GRID - 1) as f64;
     // Per shape: the best grid cutoff, refined between its neighbours.
-    let best: Vec<(f64, f64)> = shapes
+    let grid: Vec<Vec<f64>> = shapes
         .par_iter()
         .map(|&shape| {
-            let grid: Vec<f64> = (0..GRID)
-                .map(|i| eval(spec(shape, (lo + step * i as f64 - 20.0).exp())))
-                .collect();
-            let k = (0..GRID).min_by(|&a, &b| grid[a].total_cmp(&grid[b])).expect("a grid");
-            let (a, b) = (lo + step * (k as f64 - 1.0), lo + step * (k as f64 + 1.0));
-            let x = crate::signal::golden(|x| eval(spec(shape, (x - 20.0).exp())), a, b, 1e-3);
-            let refined = eval(spec(shape, (x - 20.0).exp()));
+            sys.ratios(
+                &(0..GRID)
+                    .map(|i| Some(at(spec(shape, 1.0), lo + step * i as f64)))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let near: Vec<usize> = grid
+        .iter()
+        .map(|g| (0..GRID).min_by(|&a, &b| g[a].total_cmp(&g[b])).expect("a grid"))
+        .collect();
+    let searches: Vec<(FilterSpec, f64, f64)> = shapes
+        .iter()
+        .zip(&near)
+        .map(|(&shape, &k)| {
+            (
+                spec(shape, 1.0),
+                lo + step * (k as f64 - 1.0),
+                lo + step * (k as f64 + 1.0),
+            )
+        })
+        .collect();
+    let refined = golden_cutoffs(sys, &searches, 1e-3);
+    let best: Vec<(f64, f64)> = refined
+        .iter()
+        .zip(near.iter().zip(&grid))
+        .map(|(&(x, refined), (&k, grid))| {
             if refined <= grid[k] {
                 ((x - 20.0).exp(), refined)
             } else {
@@ -593,27 +665,58 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
 /// Each filter's cutoff refined by golden section within ±`step` (natural
 /// log) to 1e-6, kept where it scores better; sorted best first.
 fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(FilterSpec, f64)> {
-    let eval = |s: FilterSpec| sys.ratio(Some(&s));
-    let with = |s: &FilterSpec, u: f64| FilterSpec {
-        cutoff_hz: (u - 20.0).exp(),
-        ..*s
-    };
-    let mut out: Vec<(FilterSpec, f64)> = start
-        .par_iter()
-        .map(|(s, r)| {
-            // u = ln(cutoff) + 20 stays positive for the relative tolerance.
-            let u = s.cutoff_hz.ln() + 20.0;
-            let x = crate::signal::golden(|x| eval(with(s, x)), u - step, u + step, 1e-8);
-            let refined = eval(with(s, x));
-            if refined <= *r {
-                (with(s, x), refined)
-            } else {
-                (*s, *r)
-            }
-        })
+    // u = ln(cutoff) + 20 stays positive for the relative tolerance.
+    let searches: Vec<(FilterSpec, f64, f64)> = start
+        .iter()
+        .map(|(s, _)| (*s, s.cutoff_hz.ln() + 20.0 - step, s.cutoff_hz.ln() + 20.0 + step))
+        .collect();
+    let mut out: Vec<(FilterSpec, f64)> = golden_cutoffs(sys, &searches, 1e-8)
+        .into_iter()
+        .zip(start)
+        .map(|((x, refined), (s, r))| if refined <= *r { (at(*s, x), refined) } else { (*s, *r) })
         .collect();
     out.sort_by(|a, b| a.1.total_cmp(&b.1));
     out
+}
+
+/// `shape` with its cutoff at u = ln(cutoff) + 20.
+fn at(shape: FilterSpec, u: f64) -> FilterSpec {
+    FilterSpec {
+        cutoff_hz: (u - 20.0).exp(),
+        ..shape
+    }
+}
+
+/// Golden-section searches of the cutoff of each `(shape, a, b)` in u =
+/// ln(cutoff) + 20 to `rel`, in lockstep so that each step's points are
+/// scored together ([`LineSystem::ratios`]), [`BATCH`] searches per
+/// thread; each search's minimum and its score.
+fn golden_cutoffs(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f64) -> Vec<(f64, f64)> {
+    use crate::signal::Golden;
+    searches
+        .par_chunks(BATCH)
+        .flat_map_iter(|chunk| {
+            let mut golden: Vec<Golden> = chunk.iter().map(|&(_, a, b)| Golden::new(a, b, rel)).collect();
+            loop {
+                let asked: Vec<(usize, f64)> = golden
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, g)| Some((i, g.next()?)))
+                    .collect();
+                if asked.is_empty() {
+                    break;
+                }
+                let specs: Vec<Option<FilterSpec>> = asked.iter().map(|&(i, x)| Some(at(chunk[i].0, x))).collect();
+                for ((i, _), f) in asked.into_iter().zip(sys.ratios(&specs)) {
+                    golden[i].tell(f);
+                }
+            }
+            let specs: Vec<Option<FilterSpec>> =
+                golden.iter().zip(chunk).map(|(g, s)| Some(at(s.0, g.best()))).collect();
+            let scores = sys.ratios(&specs);
+            golden.iter().map(|g| g.best()).zip(scores).collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 /// The best of `filters` (each cutoff refined within ±10 %) on `sys`, a
@@ -621,7 +724,8 @@ fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(Filt
 /// the same recording: a search's best shapes carried over, not searched
 /// again.
 pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterSpec, Score)> {
-    let start: Vec<(FilterSpec, f64)> = filters.iter().map(|s| (*s, sys.ratio(Some(s)))).collect();
+    let ratios = sys.ratios(&filters.iter().map(|s| Some(*s)).collect::<Vec<_>>());
+    let start: Vec<(FilterSpec, f64)> = filters.iter().copied().zip(ratios).collect();
     let (best, _) = *refine(sys, &start, 0.1).first()?;
     Some((best, sys.score(&sys.response(Some(&best))?)?))
 }
@@ -629,6 +733,51 @@ pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterS
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A UR5-sized line system of random columns: 6 joints, `cols`
+    /// columns, `lines` lines, 4 periods of noisy torque.
+    fn random_system(cols: usize, lines: usize) -> LineSystem {
+        let (joints, samples) = (6, 2 * lines);
+        let mut x = 11u64;
+        let mut next = move || {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let columns: Vec<Complex64> = (0..joints * cols * lines)
+            .map(|i| Complex64::new(next(), next()) / (1.0 + (i % lines) as f64))
+            .collect();
+        let torque: Vec<Vec<f64>> = (0..joints)
+            .map(|_| (0..4 * samples).map(|_| next()).collect())
+            .collect();
+        LineSystem::new(columns, lines, cols, &torque, samples, 10.0, &[], &Spectra::new()).unwrap()
+    }
+
+    /// Filters scored together give the bits each gives alone, at every
+    /// batch size the kernel has.
+    #[test]
+    fn scores_taken_together_are_the_same_bits() {
+        let sys = random_system(12, 200);
+        let specs: Vec<Option<FilterSpec>> = (0..19)
+            .map(|i| {
+                (i > 0).then(|| FilterSpec {
+                    family: [
+                        FilterFamily::Butterworth,
+                        FilterFamily::Bessel,
+                        FilterFamily::Chebyshev1,
+                    ][i % 3],
+                    order: 2 + i % 5,
+                    cutoff_hz: 1.0 + i as f64,
+                    ripple_db: (i % 3 == 2).then_some(0.5),
+                })
+            })
+            .collect();
+        let alone: Vec<u64> = specs.iter().map(|s| sys.ratio(s.as_ref()).to_bits()).collect();
+        for k in [1, 3, 4, 5, 16, 19] {
+            let together: Vec<u64> = sys.ratios(&specs[..k]).iter().map(|r| r.to_bits()).collect();
+            assert_eq!(together, alone[..k], "{k} at a time");
+        }
+        assert!(alone.iter().all(|r| f64::from_bits(*r).is_finite()));
+    }
 
     /// A known filter on a synthetic two-column regression (a smooth
     /// column and a square wave, as Coulomb friction makes) is found with

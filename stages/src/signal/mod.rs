@@ -84,20 +84,121 @@ pub fn summed_autocovariance<'a>(series: impl IntoIterator<Item = &'a [f64]> + C
 
 /// The minimum of a unimodal `f` on [a, b], by golden section until the
 /// interval is `rel` of its midpoint; one evaluation per step.
-pub fn golden(mut f: impl FnMut(f64) -> f64, mut a: f64, mut b: f64, rel: f64) -> f64 {
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-    let (mut fc, mut fd) = (f(c), f(d));
-    while (b - a).abs() > rel * (0.5 * (a + b)).abs() {
-        if fc < fd {
-            (b, d, fd) = (d, c, fc);
-            c = b - g * (b - a);
-            fc = f(c);
-        } else {
-            (a, c, fc) = (c, d, fd);
-            d = a + g * (b - a);
-            fd = f(d);
+pub fn golden(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, rel: f64) -> f64 {
+    let mut search = Golden::new(a, b, rel);
+    while let Some(x) = search.next() {
+        search.tell(f(x));
+    }
+    search.best()
+}
+
+/// [`golden`] driven from outside: the caller scores the point it asks
+/// for, so that many searches go in lockstep and their points are scored
+/// together.
+#[derive(Debug, Clone)]
+pub struct Golden {
+    a: f64,
+    b: f64,
+    c: f64,
+    d: f64,
+    fc: f64,
+    fd: f64,
+    rel: f64,
+    /// The point asked for: c or d, or none when done.
+    wants: Option<bool>,
+    started: bool,
+}
+
+impl Golden {
+    pub fn new(a: f64, b: f64, rel: f64) -> Golden {
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        Golden {
+            a,
+            b,
+            c: b - g * (b - a),
+            d: a + g * (b - a),
+            fc: f64::NAN,
+            fd: f64::NAN,
+            rel,
+            wants: Some(true),
+            started: false,
         }
     }
-    0.5 * (a + b)
+
+    /// The point to score next, or None when the search is done.
+    pub fn next(&self) -> Option<f64> {
+        self.wants.map(|c| if c { self.c } else { self.d })
+    }
+
+    /// The score of the point [`next`](Self::next) gave.
+    pub fn tell(&mut self, f: f64) {
+        match self.wants {
+            Some(true) => self.fc = f,
+            Some(false) => self.fd = f,
+            None => return,
+        }
+        if !self.started {
+            // The first two points, c then d, before any step.
+            self.started = self.wants == Some(false);
+            if !self.started {
+                self.wants = Some(false);
+                return;
+            }
+        }
+        let (g, a, b) = (0.5 * (5f64.sqrt() - 1.0), self.a, self.b);
+        self.wants = if !((b - a).abs() > self.rel * (0.5 * (a + b)).abs()) {
+            None
+        } else if self.fc < self.fd {
+            (self.b, self.d, self.fd) = (self.d, self.c, self.fc);
+            self.c = self.b - g * (self.b - self.a);
+            Some(true)
+        } else {
+            (self.a, self.c, self.fc) = (self.c, self.d, self.fd);
+            self.d = self.a + g * (self.b - self.a);
+            Some(false)
+        };
+    }
+
+    /// The interval's midpoint: the minimum found.
+    pub fn best(&self) -> f64 {
+        0.5 * (self.a + self.b)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Golden section finds a parabola's vertex to its tolerance, and two
+    /// searches driven in lockstep ask for the points one asks for alone.
+    #[test]
+    fn golden_section_finds_the_vertex_in_lockstep_too() {
+        let f = |v: f64| move |x: f64| (x - v).powi(2);
+        let x = golden(f(2.3), 1.0, 5.0, 1e-9);
+        assert!((x - 2.3).abs() < 3e-9, "{x}");
+        let mut alone = Vec::new();
+        golden(
+            |x| {
+                alone.push(x);
+                f(4.1)(x)
+            },
+            1.0,
+            5.0,
+            1e-6,
+        );
+        let mut two = [Golden::new(1.0, 5.0, 1e-6), Golden::new(0.0, 3.0, 1e-6)];
+        let mut asked = Vec::new();
+        while two.iter().any(|g| g.next().is_some()) {
+            for (g, v) in two.iter_mut().zip([4.1, 0.7]) {
+                if let Some(x) = g.next() {
+                    if v == 4.1 {
+                        asked.push(x);
+                    }
+                    g.tell(f(v)(x));
+                }
+            }
+        }
+        assert_eq!(asked, alone);
+        assert!((two[1].best() - 0.7).abs() < 1e-6, "{}", two[1].best());
+    }
 }
