@@ -200,3 +200,94 @@ pub fn borrow_floor(
     }
     any
 }
+
+/// One record rolled out: the estimate's and the robot file's models.
+pub struct RolledOut {
+    /// The kinematics table rolled out on.
+    pub table: PathBuf,
+    pub joints: Vec<String>,
+    /// Samples per window, and its length (s).
+    pub window: usize,
+    pub window_s: f64,
+    pub time: Vec<f64>,
+    /// The measured positions, `[joint][sample]`.
+    pub measured: Vec<Vec<f64>>,
+    /// The estimate's rollout, or where it stopped.
+    pub estimate: std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>,
+    /// The robot file's own parameters rolled out the same way (None for
+    /// a model without base parameters of its own: the decoupled one).
+    pub prior: Option<std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>>,
+}
+
+/// The parameters table at `parameters` (of `robot`) rolled out on the
+/// kinematics table beside each regressor table of `regressors` (both
+/// read `within` a folder): the model's forward dynamics driven by the
+/// measured torque from the measured state, restarted from it every
+/// `window_s` seconds; the robot file's parameters the same way.
+pub fn rollouts(
+    within: &Path,
+    parameters: &Path,
+    robot: &Path,
+    regressors: &[PathBuf],
+    window_s: f64,
+) -> Result<Vec<RolledOut>> {
+    use robotid_stages::dynamics::{rollout, BaseDynamics};
+    let (params, model, base) = crate::tables::identified(&within.join(robot), &within.join(parameters))?;
+    let theta: Vec<f64> = params.values.iter().copied().collect();
+    let prior: Option<Vec<f64>> = base.base_values(&model).map(|v| v.iter().copied().collect());
+    let mut out = Vec::new();
+    for r in regressors {
+        let table = r.with_file_name("kinematics.parquet");
+        let path = within.join(&table);
+        let kin =
+            robotid_schemas::Kinematics::from_record_batch(&robotid_stages::formats::parquet::read_parquet(&path)?)
+                .map_err(|e| Error::Table {
+                    path: path.clone(),
+                    source: e.into(),
+                })?;
+        let Some(tau) = kin.torque.as_ref() else {
+            return Err(Error::Output {
+                what: path.display().to_string(),
+                msg: "the kinematics table holds no torque to drive a rollout with".into(),
+            });
+        };
+        if kin.joints != model.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>() {
+            return Err(Error::Output {
+                what: path.display().to_string(),
+                msg: format!(
+                    "joints {} are not the robot's {}",
+                    kin.joints.join(", "),
+                    model
+                        .joints
+                        .iter()
+                        .map(|j| j.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        }
+        let step = (kin.time.last().copied().unwrap_or(0.0) - kin.time[0]) / (kin.time.len().max(2) - 1) as f64;
+        let window = ((window_s / step).round() as usize).max(2);
+        let run = |theta: &[f64]| {
+            rollout(
+                &mut BaseDynamics::new(&base, theta),
+                &kin.time,
+                &kin.q,
+                &kin.qd,
+                tau,
+                window,
+            )
+        };
+        out.push(RolledOut {
+            table,
+            joints: kin.joints.clone(),
+            window,
+            window_s: window as f64 * step,
+            estimate: run(&theta),
+            prior: prior.as_deref().map(run),
+            time: kin.time.clone(),
+            measured: kin.q.clone(),
+        });
+    }
+    Ok(out)
+}

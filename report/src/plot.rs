@@ -554,6 +554,61 @@ pub fn plot_validation(
     Ok(vec![torques, residues, report])
 }
 
+/// Pictures of rollouts (`robotid validate --rollout --plot DIR`): per
+/// record, `rollout_<k>.svg`, each joint's measured angle (grey, wide,
+/// underneath), the estimate's simulated one (blue) and the robot file's
+/// (orange), every window restarted from the measured state; a simulated
+/// angle beyond the measured span by half of it is drawn at that edge.
+pub fn plot_rollouts(dir: &Path, rolled: &[robotid::validation::RolledOut]) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files = Vec::new();
+    for (k, r) in rolled.iter().enumerate() {
+        // Simulated angles held to the measured span's ±50 % (a model far
+        // off would otherwise flatten the measured curve).
+        let series = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
+            let (lo, hi) = r.measured[j]
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+            let pad = 0.5 * (hi - lo).max(1e-3);
+            r.time
+                .iter()
+                .copied()
+                .zip(q[j].iter().map(|x| x.clamp(lo - pad, hi + pad)))
+                .collect()
+        };
+        let svg = figure_svg(r.joints.len(), 1, |areas| {
+            for (j, joint) in r.joints.iter().enumerate() {
+                let mut lines = vec![(series(&r.measured, j), GREY, "measured")];
+                if let Ok(e) = &r.estimate {
+                    lines.push((series(&e.q, j), BLUE_, "identified model"));
+                }
+                if let Some(Ok(p)) = &r.prior {
+                    lines.push((series(&p.q, j), ORANGE, "robot file's model"));
+                }
+                chart(
+                    &areas[j],
+                    &format!(
+                        "{joint}: joint angle, measured and simulated ({:.2} s windows)",
+                        r.window_s
+                    ),
+                    "time, s",
+                    "rad",
+                    &lines,
+                    &[],
+                )?;
+            }
+            Ok(())
+        })?;
+        let path = dir.join(format!("rollout_{k}.svg"));
+        write_text(&path, &svg)?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
 /// Pictures of a designed excitation: `excitation.svg` (q, q̇, q̈ per
 /// joint over one period) and `end_effector.svg` (its path seen from above
 /// and from the side).

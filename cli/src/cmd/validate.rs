@@ -22,13 +22,33 @@ pub struct Args {
     /// (mean squared residue over 1.2× the noise floor).
     #[arg(long)]
     pub fail_on_inadequate: bool,
+    /// Also judge the model by simulation error: its forward dynamics,
+    /// driven by the measured torque, from the measured state, restarted
+    /// from it every `--window-s` (on the kinematics table beside each
+    /// regressor table), beside the robot file's own parameters.
+    #[arg(long, requires = "robot")]
+    pub rollout: bool,
+    /// The robot file the parameters were identified for (for `--rollout`).
+    #[arg(long)]
+    pub robot: Option<PathBuf>,
+    /// The rollout's window, s: each restarts from the measured state.
+    #[arg(long, default_value_t = 0.5)]
+    pub window_s: f64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let v = robotid::validation::validate(Path::new(""), &args.parameters, &args.regressors)?;
     print!("{}", said(&v, &args.parameters));
+    let rolled = match args.robot.as_ref().filter(|_| args.rollout) {
+        Some(robot) => {
+            robotid::validation::rollouts(Path::new(""), &args.parameters, robot, &args.regressors, args.window_s)?
+        }
+        None => Vec::new(),
+    };
+    print!("{}", rollouts_said(&rolled));
     if let Some(dir) = &args.plot {
-        let files = robotid_report::plot::plot_validation(dir, &v.sys, &v.predicted, &v.stats)?;
+        let mut files = robotid_report::plot::plot_validation(dir, &v.sys, &v.predicted, &v.stats)?;
+        files.extend(robotid_report::plot::plot_rollouts(dir, &rolled)?);
         println!(
             "pictures and report: {}",
             files
@@ -90,6 +110,50 @@ pub fn said(v: &Validated, parameters: &Path) -> String {
     }
     if let Some(msg) = inadequate(v) {
         s.push_str(&format!("verdict: {msg}\n"));
+    }
+    s
+}
+
+/// Rollouts as text: per record and joint, the simulated positions' and
+/// velocities' RMS error against the measured, the estimate's beside the
+/// robot file's.
+pub fn rollouts_said(rolled: &[robotid::validation::RolledOut]) -> String {
+    use robotid_stages::dynamics::Stopped;
+    let mut s = String::new();
+    for r in rolled {
+        s.push_str(&format!(
+            "rollout on {}: forward dynamics driven by the measured torque, restarted from the measured state every {} samples ({:.3} s)\n",
+            r.table.display(),
+            r.window,
+            r.window_s
+        ));
+        let stopped = |x: &Stopped| match x {
+            Stopped::NotPositiveDefinite { sample, joint } => format!(
+                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+                r.joints[*joint]
+            ),
+        };
+        match (&r.estimate, &r.prior) {
+            (Err(e), _) => s.push_str(&format!("  estimate {}\n", stopped(e))),
+            (Ok(est), prior) => {
+                s.push_str("  joint                    position RMS (mrad)  velocity RMS (mrad/s)  robot file's position RMS  ratio\n");
+                for (j, joint) in r.joints.iter().enumerate() {
+                    let (file, ratio) = match prior {
+                        Some(Ok(p)) => (
+                            format!("{:.3}", 1e3 * p.q_rms[j]),
+                            format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
+                        ),
+                        Some(Err(e)) => (stopped(e), "-".into()),
+                        None => ("-".into(), "-".into()),
+                    };
+                    s.push_str(&format!(
+                        "  {joint:<24} {:>19.3}  {:>21.3}  {file:>25}  {ratio}\n",
+                        1e3 * est.q_rms[j],
+                        1e3 * est.qd_rms[j]
+                    ));
+                }
+            }
+        }
     }
     s
 }

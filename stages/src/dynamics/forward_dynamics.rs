@@ -36,13 +36,25 @@ pub fn forward_dynamics(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], t
 /// # Panics
 /// If M is not positive definite (a robot with a massless, rotor-less chain end).
 pub fn cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) {
+    if let Err(j) = try_cholesky_solve_in_place(m, b) {
+        panic!("mass matrix is not positive definite (pivot {j})");
+    }
+}
+
+/// [`cholesky_solve_in_place`], or Err(the first pivot that is not
+/// positive) where M is not positive definite: a pivot under 1e-12 of M's
+/// largest diagonal entry counts as zero (round-off of a singular M).
+pub fn try_cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) -> Result<(), usize> {
     let n = b.len();
+    let scale = (0..n).map(|j| m[(j, j)]).fold(0.0, f64::max);
     for j in 0..n {
         let mut d = m[(j, j)];
         for k in 0..j {
             d -= m[(j, k)] * m[(j, k)];
         }
-        assert!(d > 0.0, "mass matrix is not positive definite (pivot {j}: {d})");
+        if !(d > 1e-12 * scale) {
+            return Err(j);
+        }
         let d = d.sqrt();
         m[(j, j)] = d;
         for i in j + 1..n {
@@ -67,4 +79,5 @@ pub fn cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) {
         }
         b[i] = s / m[(i, i)];
     }
+    Ok(())
 }

@@ -17,6 +17,7 @@ pub mod model;
 mod r_factor;
 mod rnea;
 mod robot_file;
+mod rollout;
 mod stl;
 mod torque_regressor;
 mod urdf;
@@ -28,13 +29,14 @@ pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig,
 pub use batch::{BatchData, Batched, LANES};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
-pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics};
+pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics, try_cholesky_solve_in_place};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
 pub use model::{Drive, Extent, Friction, Inertial, Joint, Limits, Model};
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};
+pub use rollout::{rollout, BaseDynamics, Rollout, Stopped};
 pub use torque_regressor::{
     friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
     with_standard_parameters, FrictionTerms, ParameterKind, RegressorTerms, Spring,

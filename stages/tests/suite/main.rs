@@ -13,5 +13,6 @@ mod identification;
 mod preprocess;
 mod read;
 mod regressor;
+mod rollout;
 mod rows_on_demand;
 mod simulate;
