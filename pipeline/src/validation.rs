@@ -291,3 +291,60 @@ pub fn rollouts(
     }
     Ok(out)
 }
+
+/// Rollouts as one table, a row per record, model, window and joint:
+/// `table`, `model` (`estimate` or `robot_file`), `window`, `start_s`,
+/// `joint`, `q_rms` (rad) and `qd_rms` (rad/s), units in each field's
+/// metadata. A model that could not be simulated has no rows.
+pub fn rollout_table(rolled: &[RolledOut]) -> Result<arrow::record_batch::RecordBatch> {
+    use arrow::array::{ArrayRef, Float64Array, StringArray, UInt32Array};
+    use arrow::datatypes::{DataType, Field, Schema};
+    use std::sync::Arc;
+    let (mut table, mut model, mut window, mut start, mut joint, mut q, mut qd) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    for r in rolled {
+        for (name, out) in [("estimate", Some(&r.estimate)), ("robot_file", r.prior.as_ref())] {
+            let Some(Ok(out)) = out else { continue };
+            for (k, w) in out.windows.iter().enumerate() {
+                for (j, name_j) in r.joints.iter().enumerate() {
+                    table.push(r.table.display().to_string());
+                    model.push(name);
+                    window.push(k as u32);
+                    start.push(r.time[w.start]);
+                    joint.push(name_j.clone());
+                    q.push(w.q_rms[j]);
+                    qd.push(w.qd_rms[j]);
+                }
+            }
+        }
+    }
+    let field = |name: &str, t: DataType, unit: &str| {
+        Field::new(name, t, false).with_metadata(
+            [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
+                .into_iter()
+                .collect::<std::collections::HashMap<_, _>>(),
+        )
+    };
+    let schema = Schema::new(vec![
+        field("table", DataType::Utf8, "1"),
+        field("model", DataType::Utf8, "1"),
+        field("window", DataType::UInt32, "1"),
+        field("start_s", DataType::Float64, "s"),
+        field("joint", DataType::Utf8, "1"),
+        field("q_rms", DataType::Float64, "rad"),
+        field("qd_rms", DataType::Float64, "rad/s"),
+    ]);
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(table)),
+        Arc::new(StringArray::from(model)),
+        Arc::new(UInt32Array::from(window)),
+        Arc::new(Float64Array::from(start)),
+        Arc::new(StringArray::from(joint)),
+        Arc::new(Float64Array::from(q)),
+        Arc::new(Float64Array::from(qd)),
+    ];
+    arrow::record_batch::RecordBatch::try_new(Arc::new(schema), columns).map_err(|e| Error::Output {
+        what: "the rollout table".into(),
+        msg: e.to_string(),
+    })
+}

@@ -15,6 +15,12 @@ files in `out`, the verdict and tables returned):
     result = robotid.identify(["excitation.mcap"], "robot.urdf", validate=["validation.mcap"], out="out/id")
     result.identified, result.refused, result.parameters  # pyarrow.Table
 
+A model judged by simulation error (its forward dynamics driven by the
+measured torque, from the measured state, every `window_s` restarted):
+
+    errors = robotid.rollout("out/id/parameters.parquet", "robot.urdf",
+                             ["out/id/validation/validation/regressor.parquet"])
+
 `summarize` is the map and `merge` the reduce of identification: summaries
 merge in any grouping, on any machine, and solve to the parameters
 `robotid run` estimates from the same recordings (robotid.ray runs it on a
@@ -28,7 +34,7 @@ from typing import Sequence, Union
 
 import pyarrow as pa
 
-from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge
+from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge, rollout
 
 # Pickled by this name (a Ray worker's error reaches the driver so), it
 # comes back as this very class, its file, channel, sample and stage kept.
@@ -46,4 +52,4 @@ def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
     return pipeline.solve(summaries)
 
 
-__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "solve", "__version__"]
+__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "rollout", "solve", "__version__"]

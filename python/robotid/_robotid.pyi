@@ -76,3 +76,14 @@ def identify(
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
     result (`identified` False, `refused` the cause), not an error."""
+
+def rollout(
+    parameters: Union[str, PathLike],
+    robot: Union[str, PathLike],
+    regressors: Sequence[Union[str, PathLike]],
+    window_s: float = 0.5,
+) -> pa.Table:
+    """The parameters rolled out on the kinematics table beside each
+    regressor table, as `robotid validate --rollout`: per record, model
+    (`estimate`, `robot_file`), window and joint, the simulated angle's and
+    velocity's RMS error against the measured (rad, rad/s)."""

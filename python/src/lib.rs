@@ -407,6 +407,29 @@ fn identify(
     })
 }
 
+/// The parameters table `parameters` of `robot` rolled out on the
+/// kinematics table beside each regressor table of `regressors`, as
+/// `robotid validate --rollout`: per record, model (`estimate`,
+/// `robot_file`), window and joint, the simulated angle's and velocity's
+/// RMS error against the measured (rad, rad/s), as a pyarrow table.
+#[pyfunction]
+#[pyo3(signature = (parameters, robot, regressors, window_s=0.5))]
+fn rollout<'py>(
+    py: Python<'py>,
+    parameters: PathBuf,
+    robot: PathBuf,
+    regressors: Vec<PathBuf>,
+    window_s: f64,
+) -> PyResult<Bound<'py, PyAny>> {
+    let batch = py
+        .detach(|| {
+            let rolled = robotid::validation::rollouts(Path::new(""), &parameters, &robot, &regressors, window_s)?;
+            robotid::validation::rollout_table(&rolled)
+        })
+        .map_err(py_error)?;
+    table(py, batch)
+}
+
 /// Summaries merged, in order, into one row.
 #[pyfunction]
 fn merge<'py>(py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
@@ -420,6 +443,7 @@ fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Pipeline>()?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(rollout, m)?)?;
     m.add_class::<Identification>()?;
     m.add("RobotidError", m.py().get_type::<RobotidError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -63,6 +63,23 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     assert sorted(p.suffix for p in map(pathlib.Path, result.exports)) == [".json", ".parquet", ".urdf", ".xml"]
     assert 0 < result.relative_error < 0.05, result.relative_error
     assert result.measured == "on the validation recordings"
+    # Rolled out from Python on the validation record: a row per model,
+    # window and joint, in units; the identified model as close to the
+    # measured angle as the robot file (the simulation's truth; 1.109×
+    # pooled, cli/tests/suite/identify.rs).
+    out = tmp_path / "out"
+    errors = robotid.rollout(
+        out / "parameters.parquet",
+        examples / "robots" / "kuka_axis3.toml",
+        [out / "kuka_axis3_validation" / "kuka_axis3_validation" / "regressor.parquet"],
+    )
+    assert errors.schema.field("q_rms").metadata == {b"unit": b"rad"}
+    rows = errors.to_pylist()
+    by = {m: [r["q_rms"] for r in rows if r["model"] == m] for m in ("estimate", "robot_file")}
+    assert len(by["estimate"]) == len(by["robot_file"]) > 10
+    # Pooled over the windows (equal lengths but the last): √mean(rms²).
+    pooled = {m: (sum(x * x for x in v) / len(v)) ** 0.5 for m, v in by.items()}
+    assert pooled["estimate"] <= 1.15 * pooled["robot_file"], pooled
 
 
 def test_a_refused_identification_is_a_result_with_the_cause(tmp_path):

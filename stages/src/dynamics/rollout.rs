@@ -102,6 +102,17 @@ pub struct Rollout {
     pub qd_rms: Vec<f64>,
     /// The simulated positions, `[joint][sample]`.
     pub q: Vec<Vec<f64>>,
+    /// Per window: its first sample, and per joint the position and
+    /// velocity RMS error over its samples after the first.
+    pub windows: Vec<Window>,
+}
+
+/// One window's errors.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Window {
+    pub start: usize,
+    pub q_rms: Vec<f64>,
+    pub qd_rms: Vec<f64>,
 }
 
 /// Where a rollout could not go on.
@@ -128,6 +139,7 @@ pub fn rollout(
     let mut sim = vec![vec![0.0; samples]; n];
     let (mut sq, mut sqd) = (vec![0.0; n], vec![0.0; n]);
     let mut count = 0usize;
+    let mut windows: Vec<Window> = Vec::new();
     // State, stage buffers and torques: allocated once.
     let (mut x, mut v) = (vec![0.0; n], vec![0.0; n]);
     let mut k = [
@@ -140,6 +152,11 @@ pub fn rollout(
     let mut t = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
     for s in 0..samples {
         if s % window == 0 {
+            windows.push(Window {
+                start: s,
+                q_rms: vec![0.0; n],
+                qd_rms: vec![0.0; n],
+            });
             for j in 0..n {
                 x[j] = q[j][s];
                 v[j] = qd[j][s];
@@ -176,8 +193,12 @@ pub fn rollout(
             for j in 0..n {
                 x[j] += h / 6.0 * (k[0][0][j] + 2.0 * k[1][0][j] + 2.0 * k[2][0][j] + k[3][0][j]);
                 v[j] += h / 6.0 * (k[0][1][j] + 2.0 * k[1][1][j] + 2.0 * k[2][1][j] + k[3][1][j]);
-                sq[j] += (x[j] - q[j][s]).powi(2);
-                sqd[j] += (v[j] - qd[j][s]).powi(2);
+                let (eq, ev) = ((x[j] - q[j][s]).powi(2), (v[j] - qd[j][s]).powi(2));
+                sq[j] += eq;
+                sqd[j] += ev;
+                let w = windows.last_mut().expect("a window from sample 0");
+                w.q_rms[j] += eq;
+                w.qd_rms[j] += ev;
             }
             count += 1;
         }
@@ -186,7 +207,14 @@ pub fn rollout(
         }
     }
     let rms = |e: Vec<f64>| e.into_iter().map(|e| (e / count.max(1) as f64).sqrt()).collect();
+    for w in &mut windows {
+        let steps = (w.start + window).min(samples) - w.start - 1;
+        for e in w.q_rms.iter_mut().chain(w.qd_rms.iter_mut()) {
+            *e = (*e / steps.max(1) as f64).sqrt();
+        }
+    }
     Ok(Rollout {
+        windows,
         window,
         q_rms: rms(sq),
         qd_rms: rms(sqd),
