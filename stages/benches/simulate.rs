@@ -47,5 +47,37 @@ fn bench_dynamics(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_simulate, bench_dynamics);
+/// A rollout (validation by simulation error) of the UR5's true base
+/// parameters on a 130 s record at 200 Hz (26 000 samples, 0.5 s
+/// windows): the throughput is simulated samples per second; a simulated
+/// second is 200 of them.
+fn bench_rollout(c: &mut Criterion) {
+    use robotid_stages::dynamics::{rollout, BaseDynamics, BaseRegressor, RegressorModel};
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let regressor = BaseRegressor::new(&model, &RegressorModel::default()).unwrap();
+    let theta: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
+    let (n, rate, samples) = (model.dof(), 200.0, 26_000);
+    let time: Vec<f64> = (0..samples).map(|s| s as f64 / rate).collect();
+    let wave = |j: usize, d: usize| -> Vec<f64> {
+        let w = std::f64::consts::TAU * (0.2 + 0.05 * j as f64);
+        time.iter()
+            .map(|t| match d {
+                0 => 0.5 * (w * t).sin(),
+                _ => 0.5 * w * (w * t).cos(),
+            })
+            .collect()
+    };
+    let q: Vec<Vec<f64>> = (0..n).map(|j| wave(j, 0)).collect();
+    let qd: Vec<Vec<f64>> = (0..n).map(|j| wave(j, 1)).collect();
+    let tau: Vec<Vec<f64>> = (0..n).map(|j| q[j].iter().map(|x| 20.0 * x).collect()).collect();
+    let mut g = c.benchmark_group("rollout");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(samples as u64));
+    g.bench_function(BenchmarkId::new("ur5_130s_200Hz", samples), |b| {
+        b.iter(|| rollout(&mut BaseDynamics::new(&regressor, &theta), &time, &q, &qd, &tau, 100).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_simulate, bench_dynamics, bench_rollout);
 criterion_main!(benches);
