@@ -123,6 +123,57 @@ pub enum Stopped {
     NotPositiveDefinite { sample: usize, joint: usize },
 }
 
+/// RK4's four stages on (q, q̇), buffers kept between steps.
+struct Rk4 {
+    /// Per stage, (q̇, q̈) at the stage's state.
+    k: [[Vec<f64>; 2]; 4],
+    xs: Vec<f64>,
+    vs: Vec<f64>,
+}
+
+impl Rk4 {
+    fn new(n: usize) -> Rk4 {
+        Rk4 {
+            k: std::array::from_fn(|_| [vec![0.0; n], vec![0.0; n]]),
+            xs: vec![0.0; n],
+            vs: vec![0.0; n],
+        }
+    }
+
+    /// The stages of a step of length `h` from (`x`, `v`), the torque `t`
+    /// at its start, middle and end; Err(joint) where M(q) is not positive
+    /// definite.
+    fn stages(
+        &mut self,
+        dynamics: &mut BaseDynamics,
+        x: &[f64],
+        v: &[f64],
+        t: &[Vec<f64>; 3],
+        h: f64,
+    ) -> Result<(), usize> {
+        for stage in 0..4 {
+            let (c, torque) = match stage {
+                0 => (0.0, &t[0]),
+                1 | 2 => (0.5 * h, &t[1]),
+                _ => (h, &t[2]),
+            };
+            for j in 0..x.len() {
+                let (dx, dv) = if stage == 0 {
+                    (0.0, 0.0)
+                } else {
+                    (self.k[stage - 1][0][j], self.k[stage - 1][1][j])
+                };
+                self.xs[j] = x[j] + c * dx;
+                self.vs[j] = v[j] + c * dv;
+            }
+            let [kx, kv] = &mut self.k[stage];
+            kx.copy_from_slice(&self.vs);
+            dynamics.accelerations(&self.xs, &self.vs, torque, kv)?;
+        }
+        Ok(())
+    }
+}
+
 /// The model `dynamics` rolled out over a record (`time`, and per joint
 /// `q`, `qd`, `tau` as `[joint][sample]`): from the measured state at
 /// every `window`-th sample, RK4 over each sample step with the torque
@@ -142,13 +193,7 @@ pub fn rollout(
     let mut windows: Vec<Window> = Vec::new();
     // State, stage buffers and torques: allocated once.
     let (mut x, mut v) = (vec![0.0; n], vec![0.0; n]);
-    let mut k = [
-        [vec![0.0; n], vec![0.0; n]],
-        [vec![0.0; n], vec![0.0; n]],
-        [vec![0.0; n], vec![0.0; n]],
-        [vec![0.0; n], vec![0.0; n]],
-    ];
-    let (mut xs, mut vs) = (vec![0.0; n], vec![0.0; n]);
+    let mut rk4 = Rk4::new(n);
     let mut t = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
     for s in 0..samples {
         if s % window == 0 {
@@ -168,28 +213,9 @@ pub fn rollout(
                 t[2][j] = tau[j][s];
                 t[1][j] = 0.5 * (t[0][j] + t[2][j]);
             }
-            // RK4 on (q, q̇): k[i] = (q̇, q̈) at the stage's state.
-            for stage in 0..4 {
-                let (c, torque) = match stage {
-                    0 => (0.0, &t[0]),
-                    1 | 2 => (0.5 * h, &t[1]),
-                    _ => (h, &t[2]),
-                };
-                for j in 0..n {
-                    let (dx, dv) = if stage == 0 {
-                        (0.0, 0.0)
-                    } else {
-                        (k[stage - 1][0][j], k[stage - 1][1][j])
-                    };
-                    xs[j] = x[j] + c * dx;
-                    vs[j] = v[j] + c * dv;
-                }
-                let [kx, kv] = &mut k[stage];
-                kx.copy_from_slice(&vs);
-                dynamics
-                    .accelerations(&xs, &vs, torque, kv)
-                    .map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
-            }
+            rk4.stages(dynamics, &x, &v, &t, h)
+                .map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
+            let k = &rk4.k;
             for j in 0..n {
                 x[j] += h / 6.0 * (k[0][0][j] + 2.0 * k[1][0][j] + 2.0 * k[2][0][j] + k[3][0][j]);
                 v[j] += h / 6.0 * (k[0][1][j] + 2.0 * k[1][1][j] + 2.0 * k[2][1][j] + k[3][1][j]);
