@@ -583,44 +583,12 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
     // section's relative tolerance.
     let (lo, hi) = (lowest_hz.ln() + 20.0, highest_hz.max(lowest_hz * 1.01).ln() + 20.0);
     let step = (hi - lo) / (GRID - 1) as f64;
-    // Per shape: the best grid cutoff, refined between its neighbours.
-    let grid: Vec<Vec<f64>> = shapes
-        .par_iter()
-        .map(|&shape| {
-            sys.ratios(
-                &(0..GRID)
-                    .map(|i| Some(at(spec(shape, 1.0), lo + step * i as f64)))
-                    .collect::<Vec<_>>(),
-            )
-        })
-        .collect();
-    let near: Vec<usize> = grid
-        .iter()
-        .map(|g| (0..GRID).min_by(|&a, &b| g[a].total_cmp(&g[b])).expect("a grid"))
-        .collect();
-    let searches: Vec<(FilterSpec, f64, f64)> = shapes
-        .iter()
-        .zip(&near)
-        .map(|(&shape, &k)| {
-            (
-                spec(shape, 1.0),
-                lo + step * (k as f64 - 1.0),
-                lo + step * (k as f64 + 1.0),
-            )
-        })
-        .collect();
-    let refined = golden_cutoffs(sys, &searches, 1e-3);
-    let best: Vec<(f64, f64)> = refined
-        .iter()
-        .zip(near.iter().zip(&grid))
-        .map(|(&(x, refined), (&k, grid))| {
-            if refined <= grid[k] {
-                ((x - 20.0).exp(), refined)
-            } else {
-                ((lo + step * k as f64 - 20.0).exp(), grid[k])
-            }
-        })
-        .collect();
+    let best = best_cutoffs(
+        sys,
+        &shapes.iter().map(|&shape| spec(shape, 1.0)).collect::<Vec<_>>(),
+        lo,
+        step,
+    );
     let mut order: Vec<usize> = (0..shapes.len()).collect();
     order.sort_by(|&a, &b| best[a].1.total_cmp(&best[b].1).then(a.cmp(&b)));
     // The few best shapes refined to a cutoff within 1e-6: the filter's
@@ -660,6 +628,43 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
         candidates: shapes.len() * (GRID + 1) + REFINED + 1,
         margin,
     })
+}
+
+/// Per shape of `shapes` (their cutoffs ignored): the best cutoff on the
+/// grid lo + step·i in u = ln(cutoff) + 20, refined by golden section
+/// between its neighbours, and its score.
+fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], lo: f64, step: f64) -> Vec<(f64, f64)> {
+    // Per shape: the best grid cutoff, refined between its neighbours.
+    let grid: Vec<Vec<f64>> = shapes
+        .par_iter()
+        .map(|&shape| {
+            sys.ratios(
+                &(0..GRID)
+                    .map(|i| Some(at(shape, lo + step * i as f64)))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let near: Vec<usize> = grid
+        .iter()
+        .map(|g| (0..GRID).min_by(|&a, &b| g[a].total_cmp(&g[b])).expect("a grid"))
+        .collect();
+    let searches: Vec<(FilterSpec, f64, f64)> = shapes
+        .iter()
+        .zip(&near)
+        .map(|(&shape, &k)| (shape, lo + step * (k as f64 - 1.0), lo + step * (k as f64 + 1.0)))
+        .collect();
+    golden_cutoffs(sys, &searches, 1e-3)
+        .iter()
+        .zip(near.iter().zip(&grid))
+        .map(|(&(x, refined), (&k, grid))| {
+            if refined <= grid[k] {
+                ((x - 20.0).exp(), refined)
+            } else {
+                ((lo + step * k as f64 - 20.0).exp(), grid[k])
+            }
+        })
+        .collect()
 }
 
 /// Each filter's cutoff refined by golden section within ±`step` (natural
