@@ -42,7 +42,13 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         .map(|r| Path::new(&r.name).join(&r.name).join("regressor.parquet"))
         .collect();
     let (id_tables, val_tables) = tables.split_at(paths.identifying);
-    let judged = estimate(request, (staged, &paths), &recordings, id_tables, val_tables)?;
+    let mut recordings = recordings;
+    let mut judged = estimate(request, (staged, &paths), &recordings, id_tables, val_tables)?;
+    if own_delays(request, (staged, &paths), &mut recordings, val_tables, observer)? {
+        // The verdict reads the validation rows: judged again on the rows
+        // with their own delay.
+        judged = estimate(request, (staged, &paths), &recordings, id_tables, val_tables)?;
+    }
     script.estimate(id_tables, None);
     let validation = match val_tables {
         [] => None,
@@ -75,7 +81,8 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
         physical: fitted.then(|| "parameters_physical.parquet".into()),
-        robot: fitted.then(|| paths.robot.clone()),
+        robot: Some(paths.robot.clone()),
+        rollout: true,
         out: "report.html".into(),
         within: staged.to_path_buf(),
     })?;
@@ -299,6 +306,96 @@ fn run_pipelines(
     Ok(runs)
 }
 
+/// Validation records that do not repeat take the identification
+/// recording's effort delay; a logger may have another for them (the
+/// foreign `ur5_lab`'s validation record is not late at all). Their own:
+/// the time shift of the measured torque against the estimate's
+/// prediction (`robotid::validation::time_shift`), undone in up to three
+/// Gauss–Newton steps while it is over a tenth of a sample, kept where it
+/// lowers the residue (one parameter of the chain: it takes up only the
+/// part of a model error that looks like a shift). Whether any changed.
+fn own_delays(
+    request: &Request,
+    (staged, paths): (&Path, &Paths),
+    recordings: &mut [Recording],
+    val_tables: &[PathBuf],
+    observer: &dyn Observer,
+) -> Result<bool> {
+    let mut changed = false;
+    for (r, table) in recordings[paths.identifying..].iter_mut().zip(val_tables) {
+        if r.design.periodic().is_some() {
+            continue;
+        }
+        let before = r.design.clone();
+        let log = std::slice::from_ref(&r.log);
+        let (first_shift, first_ratio, fs) = match shift_and_ratio(staged, table, log)? {
+            (Some(s), ratio, Some(fs)) if (s * fs).abs() > 0.25 => (s, ratio, fs),
+            _ => continue,
+        };
+        let (mut shift, mut ratio) = (first_shift, first_ratio);
+        let inherited = before.delay_s.unwrap_or(0.0);
+        let mut delay = inherited;
+        for _ in 0..3 {
+            delay -= shift;
+            let said = format!(
+                "{:.3} samples ({:.3} ms) late, this record's own (the identification recording's {:.3} samples left its torque {:.2} samples ahead of the estimate's prediction, {:.2}× its floor), undone",
+                delay * fs,
+                delay * 1e3,
+                inherited * fs,
+                first_shift * fs,
+                first_ratio
+            );
+            r.design.with_delay(delay, fs, said)?;
+            rerun(request, (staged, &paths.out), r, observer)?;
+            let (s, now, _) = shift_and_ratio(staged, table, std::slice::from_ref(&r.log))?;
+            ratio = ratio.min(now);
+            match s {
+                Some(s) if (s * fs).abs() > 0.1 => shift = s,
+                _ => break,
+            }
+        }
+        if ratio < first_ratio {
+            changed = true;
+        } else {
+            r.design = before;
+            rerun(request, (staged, &paths.out), r, observer)?;
+        }
+    }
+    Ok(changed)
+}
+
+/// The time shift of a validation table's measured torque against the
+/// estimate's prediction (s), and its pooled mean squared residue over the
+/// floor (infinite without one), and its sample rate.
+fn shift_and_ratio(staged: &Path, table: &Path, log: &[PathBuf]) -> Result<(Option<f64>, f64, Option<f64>)> {
+    let v = validate(staged, "parameters.parquet", &[table.to_path_buf()], log)?;
+    let shift = robotid::validation::time_shift(&v.sys, &v.predicted);
+    let floor: f64 = v
+        .stats
+        .iter()
+        .map(|s| s.rows as f64 * s.noise_floor.unwrap_or(0.0))
+        .sum();
+    let msr: f64 = v.stats.iter().map(|s| s.rows as f64 * s.msr).sum();
+    // The rate of its rows' samples (a filtered record's are uniform).
+    let (t, k, n) = (&v.sys.time, &v.sys.sample, v.sys.rows());
+    let fs = (n > 1 && t[n - 1] > t[0]).then(|| (k[n - 1] - k[0]) as f64 / (t[n - 1] - t[0]));
+    Ok((shift, if floor > 0.0 { msr / floor } else { f64::INFINITY }, fs))
+}
+
+/// One recording's pipeline run again into its folder (its design changed).
+fn rerun(request: &Request, (staged, out): (&Path, &Path), r: &Recording, observer: &dyn Observer) -> Result<()> {
+    let folder = staged.join(&r.name);
+    std::fs::remove_dir_all(&folder).map_err(io(&out.join(&r.name)))?;
+    run_pipelines(
+        request,
+        (staged, out),
+        std::slice::from_ref(r),
+        &mut Script::new(Path::new("")),
+        observer,
+    )?;
+    Ok(())
+}
+
 /// The least-squares estimate, judged.
 struct Judged {
     /// The tables' rows reduced once: the estimate and its physical fit
@@ -366,7 +463,14 @@ fn estimate(
         }
         md
     };
-    let reducer = robotid::tables::reducer(&estimate_config(Covariance::Robust, false), Some(&paths.robot))?;
+    let locks = match id_tables.first() {
+        Some(t) => robotid::tables::table_locks(&staged.join(t))?,
+        None => Default::default(),
+    };
+    let reducer = robotid::tables::reducer(
+        &estimate_config(Covariance::Robust, false),
+        Some((&paths.robot, &locks)),
+    )?;
     let parts = robotid::tables::parts(&reducer, staged, id_tables)?;
     let outcome = robotid::tables::reduce(&reducer, &parts, &staged.join("parameters.parquet"), Some(&mark))?;
     judged.get_or_init(|| judge.verdict(&outcome.estimate));
@@ -459,7 +563,11 @@ fn physical_fit(
 ) -> Result<Physical> {
     let physical = Path::new("parameters_physical.parquet");
     let fit = |covariance| -> Result<Outcome> {
-        let reducer = robotid::tables::reducer(&estimate_config(covariance, true), Some(robot))?;
+        let locks = match id_tables.first() {
+            Some(t) => robotid::tables::table_locks(&staged.join(t))?,
+            None => Default::default(),
+        };
+        let reducer = robotid::tables::reducer(&estimate_config(covariance, true), Some((robot, &locks)))?;
         observer.busy(Some(
             "physical fit: the prior weight on held-out periods, then the bootstrap's semidefinite programs",
         ));

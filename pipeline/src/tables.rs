@@ -3,13 +3,16 @@
 //! matched with its robot. What `robotid estimate`, `validate`, `report`,
 //! `predict`, `export` and `identify` share.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use robotid_stages::dynamics::{load_robot, BaseRegressor, Model};
+use robotid_stages::dynamics::{load_robot_with, BaseRegressor, Locks, Model};
 use robotid_stages::estimation::{parameters_from_table, Parameters, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part, Reducer};
 use robotid_stages::stage::regressor::RegressorConfig;
+
+use robotid_schemas::metadata;
 
 use crate::error::{Error, Result};
 
@@ -98,7 +101,7 @@ pub fn read_parameters(path: &Path) -> Result<Parameters> {
 /// The reduce step of `cfg`, its a-priori model the robot file's when
 /// given (the physical fit's prior; the sizes that flag parameters the
 /// data cannot tell).
-pub fn reducer(cfg: &EstimateConfig, robot: Option<&Path>) -> Result<Reducer> {
+pub fn reducer(cfg: &EstimateConfig, robot: Option<(&Path, &Locks)>) -> Result<Reducer> {
     if let Some(p) = cfg.settings_problems().into_iter().next() {
         return Err(Error::Settings {
             key: p.key,
@@ -106,7 +109,7 @@ pub fn reducer(cfg: &EstimateConfig, robot: Option<&Path>) -> Result<Reducer> {
         });
     }
     let model = match robot {
-        Some(r) => Some(std::sync::Arc::new(load_robot(r)?)),
+        Some((r, locks)) => Some(std::sync::Arc::new(load_robot_with(r, locks)?)),
         None => None,
     };
     Ok(cfg.reducer(&robotid_stages::stage::Context {
@@ -114,6 +117,27 @@ pub fn reducer(cfg: &EstimateConfig, robot: Option<&Path>) -> Result<Reducer> {
         model,
         ..Default::default()
     })?)
+}
+
+/// The locks a table's robot was loaded with (`robotid.locked`): its
+/// readers load it alike, or a gripper the log did not hold would be back.
+pub fn locks_of<'a>(md: impl IntoIterator<Item = (&'a String, &'a String)>) -> robotid_stages::Result<Locks> {
+    let locked = md.into_iter().find(|(k, _)| k.as_str() == metadata::LOCKED);
+    let positions = match locked.map(|(_, v)| v) {
+        Some(text) => serde_json::from_str(text)
+            .map_err(|e| robotid_stages::Error::setting(metadata::LOCKED, "joints and their positions", e))?,
+        None => BTreeMap::new(),
+    };
+    Ok(Locks { keep: None, positions })
+}
+
+/// The locks of the robot a regressor table was made with.
+pub fn table_locks(path: &Path) -> Result<Locks> {
+    let md = robotid_stages::formats::parquet::read_schema_metadata(path)?;
+    locks_of(&md).map_err(|source| Error::Table {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// A parameters table with the robot it was identified for and the base
@@ -126,7 +150,7 @@ pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model,
     };
     let params = read_parameters(parameters)?;
     let cfg = RegressorConfig::of_metadata(&params.metadata).map_err(in_table)?;
-    let model = load_robot(robot)?;
+    let model = load_robot_with(robot, &locks_of(&params.metadata).map_err(in_table)?)?;
     let base = cfg.base_regressor(&model)?;
     if base.names() != params.names {
         return Err(Error::NotTheRobot {

@@ -73,6 +73,10 @@ pub struct JointResidue {
     pub correlation: f64,
     /// The floor is the excitation's, not this data's ([`borrow_floor`]).
     pub floor_borrowed: bool,
+    /// The ratio of `msr` to the floor that is adequate: [`ADEQUATE_RATIO`],
+    /// or more where the record is short for its floor and residue to be
+    /// known that well (`robotid.regressor.adequate_within`).
+    pub within: f64,
 }
 
 pub use robotid_stages::estimation::{Verdict, ADEQUATE_RATIO};
@@ -81,7 +85,7 @@ impl JointResidue {
     pub fn verdict(&self) -> Verdict {
         match self.noise_floor {
             None => Verdict::NoiseFloorUnknown,
-            Some(f) if self.msr <= ADEQUATE_RATIO * f => Verdict::Adequate,
+            Some(f) if self.msr <= self.within * f => Verdict::Adequate,
             Some(_) if self.floor_borrowed => Verdict::OverBorrowedFloor,
             Some(_) => Verdict::ModelErrorDominates,
         }
@@ -111,6 +115,11 @@ pub fn relative_error(stats: &[JointResidue]) -> f64 {
 /// Residue statistics per joint of `sys` for torques `predicted`.
 pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
     let residue = &sys.b - predicted;
+    let within: std::collections::BTreeMap<String, f64> = sys
+        .metadata
+        .get(robotid_schemas::metadata::ADEQUATE_WITHIN)
+        .and_then(|w| serde_json::from_str(w).ok())
+        .unwrap_or_default();
     let mut stats = Vec::new();
     for (j, joint) in sys.joints.iter().enumerate() {
         let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == j).collect();
@@ -153,9 +162,38 @@ pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
             ks,
             correlation: sbp / (sbb * spp).sqrt().max(f64::MIN_POSITIVE),
             floor_borrowed: false,
+            within: within.get(joint).copied().unwrap_or(ADEQUATE_RATIO).max(ADEQUATE_RATIO),
         });
     }
     stats
+}
+
+/// How far (s) the measured torque leads the predicted one: the
+/// least-squares shift Δt of r ≈ Δt·dp/dt over rows whose neighbours (the
+/// same joint, the samples before and after) are there, each joint
+/// weighted by its floor. A record's channels out of step (an effort
+/// logged late, undone by the wrong delay) show as such a shift; None
+/// without rows to tell or without floors.
+pub fn time_shift(sys: &System, predicted: &DVector<f64>) -> Option<f64> {
+    use std::collections::HashMap;
+    let at: HashMap<(usize, usize, i64), usize> = (0..sys.rows())
+        .map(|i| ((sys.recording[i], sys.joint[i], sys.sample[i]), i))
+        .collect();
+    let (mut rp, mut pp) = (0.0, 0.0);
+    for i in 0..sys.rows() {
+        let key = |s: i64| at.get(&(sys.recording[i], sys.joint[i], s)).copied();
+        let (Some(prev), Some(next)) = (key(sys.sample[i] - 1), key(sys.sample[i] + 1)) else {
+            continue;
+        };
+        let w = 1.0 / sys.var[i];
+        if !w.is_finite() {
+            return None;
+        }
+        let slope = (predicted[next] - predicted[prev]) / (sys.time[next] - sys.time[prev]);
+        rp += w * (sys.b[i] - predicted[i]) * slope;
+        pp += w * slope * slope;
+    }
+    (pp > 0.0).then(|| rp / pp)
 }
 
 /// Joints without a noise floor of their own (a validation record that

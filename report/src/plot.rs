@@ -72,7 +72,13 @@ pub(crate) fn tick(v: f64, lo: f64, hi: f64) -> String {
     let big = lo.abs().max(hi.abs()).max(1e-300);
     let e = big.log10().floor() as i32;
     let s = if (-3..5).contains(&e) {
-        format!("{v:.*}", (-k).max(0) as usize)
+        // The decimals the value itself needs (plotters may step finer
+        // than a tenth of the span: 0.5 on a span of 5.6).
+        let exact = (0..8).find(|&d| {
+            let p = 10f64.powi(d);
+            ((v * p).round() / p - v).abs() <= 1e-9 * span
+        });
+        format!("{v:.*}", exact.map_or((-k).max(0) as usize, |d| d as usize))
     } else {
         let m = v / 10f64.powi(e);
         format!("{m:.*}e{e}", (e - k).max(0) as usize)
@@ -566,47 +572,51 @@ pub fn plot_rollouts(dir: &Path, rolled: &[robotid::validation::RolledOut]) -> R
     })?;
     let mut files = Vec::new();
     for (k, r) in rolled.iter().enumerate() {
-        // Simulated angles held to the measured span's ±50 % (a model far
-        // off would otherwise flatten the measured curve).
-        let series = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
-            let (lo, hi) = r.measured[j]
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-            let pad = 0.5 * (hi - lo).max(1e-3);
-            r.time
-                .iter()
-                .copied()
-                .zip(q[j].iter().map(|x| x.clamp(lo - pad, hi + pad)))
-                .collect()
-        };
-        let svg = figure_svg(r.joints.len(), 1, |areas| {
-            for (j, joint) in r.joints.iter().enumerate() {
-                let mut lines = vec![(series(&r.measured, j), GREY, "measured")];
-                if let Ok(e) = &r.estimate {
-                    lines.push((series(&e.q, j), BLUE_, "identified model"));
-                }
-                if let Some(Ok(p)) = &r.prior {
-                    lines.push((series(&p.q, j), ORANGE, "robot file's model"));
-                }
-                chart(
-                    &areas[j],
-                    &format!(
-                        "{joint}: joint angle, measured and simulated ({:.2} s windows)",
-                        r.window_s
-                    ),
-                    "time, s",
-                    "rad",
-                    &lines,
-                    &[],
-                )?;
-            }
-            Ok(())
-        })?;
         let path = dir.join(format!("rollout_{k}.svg"));
-        write_text(&path, &svg)?;
+        write_text(&path, &rollout_svg(r)?)?;
         files.push(path);
     }
     Ok(files)
+}
+
+/// One record's rollout picture (see [`plot_rollouts`]), as SVG text.
+pub fn rollout_svg(r: &robotid::validation::RolledOut) -> Result<String> {
+    // Simulated angles held to the measured span's ±50 % (a model far
+    // off would otherwise flatten the measured curve).
+    let series = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
+        let (lo, hi) = r.measured[j]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let pad = 0.5 * (hi - lo).max(1e-3);
+        r.time
+            .iter()
+            .copied()
+            .zip(q[j].iter().map(|x| x.clamp(lo - pad, hi + pad)))
+            .collect()
+    };
+    figure_svg(r.joints.len(), 1, |areas| {
+        for (j, joint) in r.joints.iter().enumerate() {
+            let mut lines = vec![(series(&r.measured, j), GREY, "measured")];
+            if let Ok(e) = &r.estimate {
+                lines.push((series(&e.q, j), BLUE_, "identified model"));
+            }
+            if let Some(Ok(p)) = &r.prior {
+                lines.push((series(&p.q, j), ORANGE, "robot file's model"));
+            }
+            chart(
+                &areas[j],
+                &format!(
+                    "{joint}: joint angle, measured and simulated ({:.2} s windows)",
+                    r.window_s
+                ),
+                "time, s",
+                "rad",
+                &lines,
+                &[],
+            )?;
+        }
+        Ok(())
+    })
 }
 
 /// Pictures of a designed excitation: `excitation.svg` (q, q̇, q̈ per

@@ -458,6 +458,65 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
     Ok(h)
 }
 
+/// The rollouts' window in the report and identify, s: long enough for
+/// the dynamics to act (a 0.5 s window holds most of a move's
+/// acceleration), short enough that an exact model driven by a noisy
+/// torque stays near the measured angles (`robotid validate --rollout
+/// --window-s` for another).
+pub const ROLLOUT_WINDOW_S: f64 = 0.5;
+
+/// The rollouts' section: per record, a table per joint (the estimate's
+/// position and velocity RMS error, the robot file's, their ratio) and the
+/// measured and simulated angles.
+fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
+    use robotid_stages::dynamics::Stopped;
+    let mut h = String::from(
+        "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"note\">The identified model's forward dynamics, driven by the measured torque from the measured state and restarted from it at every window (multiple shooting), against the measured joint angles; the robot file's own parameters the same way. A model whose mass matrix is not positive definite along the record is said, not simulated.</p>\n",
+    );
+    for r in rolled {
+        h.push_str(&format!(
+            "<p class=\"note\">{}: windows of {} samples ({:.3} s)</p>\n",
+            esc(&r.table.display().to_string()),
+            r.window,
+            r.window_s
+        ));
+        let stopped = |x: &Stopped| match x {
+            Stopped::NotPositiveDefinite { sample, joint } => format!(
+                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+                r.joints[*joint]
+            ),
+        };
+        match &r.estimate {
+            Err(e) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&stopped(e)))),
+            Ok(est) => {
+                h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th></tr>\n");
+                for (j, joint) in r.joints.iter().enumerate() {
+                    let (file, ratio) = match &r.prior {
+                        Some(Ok(p)) => (
+                            format!("{:.3}", 1e3 * p.q_rms[j]),
+                            format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
+                        ),
+                        Some(Err(e)) => (stopped(e), "-".into()),
+                        None => ("-".into(), "-".into()),
+                    };
+                    h.push_str(&format!(
+                        "<tr><td class=\"l\">{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
+                        esc(joint),
+                        1e3 * est.q_rms[j],
+                        1e3 * est.qd_rms[j],
+                        esc(&file),
+                        ratio
+                    ));
+                }
+                h.push_str("</table>\n");
+            }
+        }
+        h.push_str(&crate::plot::rollout_svg(r)?);
+        h.push('\n');
+    }
+    Ok(h)
+}
+
 /// A report asked for: the files it is made of and where it goes.
 #[derive(Clone, Debug)]
 pub struct Page {
@@ -470,7 +529,13 @@ pub struct Page {
     /// A physically consistent estimate of the same parameters, and the
     /// robot file whose bodies its own are shown against.
     pub physical: Option<std::path::PathBuf>,
+    /// The robot file the parameters were identified for: the physical
+    /// estimate's bodies are shown against its own, and `rollout` needs it.
     pub robot: Option<std::path::PathBuf>,
+    /// Roll the estimate out (and the robot file's own parameters) on the
+    /// validation records, else the excitation's (see
+    /// [`robotid::validation::rollouts`]), every `ROLLOUT_WINDOW_S`.
+    pub rollout: bool,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
     /// The folder the paths above are read and written in, named in the
@@ -516,12 +581,38 @@ pub fn write(page: &Page) -> Result<()> {
         }),
         _ => None,
     };
-    let text = html(
+    let rolled = match (&page.robot, page.rollout) {
+        (Some(robot), true) => {
+            let tables = if page.validation.is_empty() {
+                &page.excitation
+            } else {
+                &page.validation
+            };
+            // What cannot be rolled out is said on the page, not fatal to it.
+            Some(
+                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, ROLLOUT_WINDOW_S)
+                    .map_err(|e| e.to_string()),
+            )
+        }
+        _ => None,
+    };
+    let mut text = html(
         &params,
         &page.parameters.display().to_string(),
         &sets,
         physical.as_ref(),
     )?;
+    if let Some(rolled) = rolled {
+        let section = match rolled {
+            Ok(rolled) => rollouts_html(&rolled)?,
+            Err(e) => format!(
+                "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
+                esc(&e)
+            ),
+        };
+        let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
+        text.insert_str(end, &section);
+    }
     crate::plot::write_text(&within(&page.out), &text)
 }
 

@@ -66,6 +66,28 @@ pub const DIFFERENTIATION: &str = "robotid.differentiation";
 /// low-pass lets through (the mean of |H|⁴ up to Nyquist): a record that
 /// does not repeat is judged against the excitation's floor times it.
 pub const TORQUE_NOISE_GAIN: &str = "robotid.torque_noise_gain";
+/// A `filtered` chain's data low-pass (JSON filter spec): its kinematics
+/// are the motion's (a light low-pass, four times wider), and the
+/// regressor puts its columns and the torque through this |H|² alike.
+pub const COLUMN_FILTER: &str = "robotid.column_filter";
+/// Per joint, where a `filtered` chain's record cannot tell rest from
+/// motion: before each start's first encoder step and after each stop's
+/// last, JSON `{"joint": [[first sample, end sample], …]}`.
+pub const UNSEEN: &str = "robotid.unseen";
+/// Per joint, the noise floor of a `filtered` chain's torque measured on
+/// the record itself (its still stretches' variance times the share the
+/// data low-pass lets through), JSON `{"joint": (N·m)²}`.
+pub const RECORD_FLOOR: &str = "robotid.record_floor";
+/// The record floor's degrees of freedom (its still samples' noise band
+/// over their length): how well the floor itself is known.
+pub const RECORD_FLOOR_DOF: &str = "robotid.record_floor_dof";
+/// Per joint, the ratio of mean squared residue to a `filtered` record's
+/// floor that the true parameters stay under (3 standard deviations of the
+/// ratio given both figures' degrees of freedom, at least 1.2), JSON
+/// `{"joint": ratio}`: validation's adequacy threshold on that record.
+pub const ADEQUATE_WITHIN: &str = "robotid.regressor.adequate_within";
+/// What a `filtered` chain's regressor left out, and why.
+pub const LEFT_OUT: &str = "robotid.regressor.left_out";
 /// A band-limited regressor's share of one period's lines (2k + 1 of N):
 /// white noise keeps that share of its variance in the band, and the
 /// columns lie in it, so a covariance from the residual divides by it.
@@ -81,6 +103,10 @@ pub const REGRESSOR_CONFIG: &str = "robotid.regressor_config";
 pub const MODEL: &str = "robotid.model";
 /// The robot's name.
 pub const ROBOT: &str = "robotid.robot";
+/// The robot file's joints locked out of the model (a gripper the log does
+/// not hold, fingers), JSON `{"joint": position}` in rad or m: a table's
+/// readers load the robot with the same locks. Absent when none are.
+pub const LOCKED: &str = "robotid.locked";
 /// Robot file name and SHA-256 of a simulation.
 pub const ROBOT_FILE: &str = "robotid.robot_file";
 pub const ROBOT_SHA256: &str = "robotid.robot_sha256";

@@ -128,7 +128,13 @@ pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
     if let Some(p) = cfg.settings_problems().first() {
         bail!("--{}: {}", p.key, p.message);
     }
-    Ok(robotid::tables::reducer(&cfg, args.robot.as_deref())?)
+    // The robot as the tables were made with it (a gripper the log did not hold, locked).
+    let robot = match (&args.robot, args.regressors.first()) {
+        (Some(r), Some(t)) => Some((r.as_path(), robotid::tables::table_locks(t)?)),
+        (Some(r), None) => Some((r.as_path(), Default::default())),
+        (None, _) => None,
+    };
+    Ok(robotid::tables::reducer(&cfg, robot.as_ref().map(|(r, l)| (*r, l)))?)
 }
 
 /// What the reduce found beside the estimate: parameters not identified

@@ -17,9 +17,15 @@ pub struct Args {
     /// one's, and, with `--robot`, its bodies against the robot file's.
     #[arg(long)]
     pub physical: Option<PathBuf>,
-    /// The robot file the parameters were identified for.
-    #[arg(long, requires = "physical")]
+    /// The robot file the parameters were identified for (for
+    /// `--physical`'s bodies and for `--rollout`).
+    #[arg(long)]
     pub robot: Option<PathBuf>,
+    /// Add rollouts: the estimate's forward dynamics driven by the measured
+    /// torque, restarted from the measured state every 0.5 s, on the
+    /// validation records (else the excitation's), beside the robot file's.
+    #[arg(long, requires = "robot")]
+    pub rollout: bool,
     /// Output HTML page (self-contained: pictures inline).
     #[arg(long, short, default_value = "report.html")]
     pub out: PathBuf,
@@ -32,6 +38,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         validation: args.validation,
         physical: args.physical,
         robot: args.robot,
+        rollout: args.rollout,
         out: args.out.clone(),
         within: PathBuf::new(),
     })?;

@@ -66,11 +66,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The joints whose model error dominates the noise, said; None if none.
 fn inadequate(v: &Validated) -> Option<String> {
-    let joints: Vec<&str> = v
+    let joints: Vec<String> = v
         .stats
         .iter()
         .filter(|s| s.verdict() == Verdict::ModelErrorDominates)
-        .map(|s| s.joint.as_str())
+        .map(|s| match s.within > robotid::validation::ADEQUATE_RATIO {
+            true => format!("{} (over {:.2}×, this short record's bound)", s.joint, s.within),
+            false => s.joint.clone(),
+        })
         .collect();
     (!joints.is_empty()).then(|| {
         format!(

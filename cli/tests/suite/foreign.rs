@@ -193,21 +193,135 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
                 link.mass
             );
         }
-        // The validation run rests between moves: its Coulomb term turns
-        // over below the filtered velocity's resolution (else sign(q̇) flips
-        // on the filter's ringing at rest: 3.3 % on the UR5). Each estimate's
-        // relative error on it, as printed (measured: UR5 1.01 %, Panda
-        // 1.48 %).
-        let validated: Vec<f64> = said
-            .lines()
-            .filter(|l| l.starts_with("all joints: relative error"))
-            .map(|l| l.split_whitespace().nth(4).unwrap().parse().unwrap())
-            .collect();
-        eprintln!("{arm}: validation relative error (least squares, physical): {validated:?}");
+        // The validation run (point-to-point moves with stops) judged on
+        // its own noise floor (its still stretches): the true parameters
+        // adequate on every joint (each figure within its record's bound,
+        // 3 standard deviations of the ratio given the residue's and the
+        // floor's degrees of freedom: about 1.5 here) and at most 1.2×
+        // pooled over the joints; the estimate's figures within 1.2× of
+        // the truth's; and models whose torque misses the truth's by 3×
+        // the floor's RMS flagged. Measured: UR5 0.63–1.31 per joint
+        // (pooled 0.95), Panda 0.83–1.38 (1.02).
+        let judged = validation_judged(&out, &truth, &p.values);
+        eprintln!("{arm}: validation, MSR over the record's floor: {judged:?}");
+        // ur5_lab's validation record is not late: once the excitation's
+        // 2-sample delay is undone on it, its effort leads the true
+        // parameters' prediction by 4.0 ms (99 % of shoulder_lift's
+        // residue): its truth is 24–116× the floor on the three large
+        // joints, the chain's delay, not the model (said in the notes).
+        if arm != "ur5_lab" {
+            assert!(
+                judged.truth_adequate && judged.truth_pooled <= 1.2,
+                "{arm}: the truth {judged:?}"
+            );
+        }
         assert!(
-            validated.len() == 2 && validated.iter().all(|r| *r < 1.5),
-            "{arm}: {validated:?}\n{said}"
+            judged.estimate.iter().zip(&judged.truth).all(|(e, t)| *e <= 1.2 * t),
+            "{arm}: the estimate {judged:?}"
         );
+        assert!(judged.wrong_flagged, "{arm}: a wrong model not flagged: {judged:?}");
+        // Rollouts on the validation record (0.5 s windows from the
+        // measured state): the estimate's position error within 1.1× of
+        // the true parameters' over all joints (root mean square) and
+        // 1.25× on each, and the robot file's (its URDF has no friction)
+        // at least 5× the estimate's on each.
+        let (estimate, exact, file) = rollout_errors(&out, &urdf, &truth);
+        eprintln!(
+            "{arm}: rollout position RMS (mrad), estimate {estimate:.3?}, truth {exact:.3?}, robot file {file:.1?}"
+        );
+        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        assert!(
+            rms(&estimate) <= 1.1 * rms(&exact),
+            "{arm}: estimate {estimate:?}, truth {exact:?}"
+        );
+        for j in 0..estimate.len() {
+            assert!(
+                estimate[j] <= 1.25 * exact[j] && file[j] >= 5.0 * estimate[j],
+                "{arm}: joint {j}: estimate {estimate:?}, truth {exact:?}, robot file {file:?}"
+            );
+        }
+    }
+}
+
+/// Position RMS errors (mrad) of rollouts on the validation record of the
+/// estimate, of the true parameters and of the robot file's own.
+fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    use robotid_stages::dynamics::{rollout, BaseDynamics};
+    let table = PathBuf::from("validation/validation/regressor.parquet");
+    let rolled = ::robotid::validation::rollouts(out, Path::new("parameters.parquet"), urdf, &[table], 0.5).unwrap();
+    let r = &rolled[0];
+    let mrad = |v: &[f64]| v.iter().map(|x| 1e3 * x).collect::<Vec<_>>();
+    let estimate = mrad(&r.estimate.as_ref().expect("simulated").q_rms);
+    let file = mrad(&r.prior.as_ref().expect("the URDF's").as_ref().expect("simulated").q_rms);
+    let (_, _, base) = ::robotid::tables::identified(urdf, &out.join("parameters.parquet")).unwrap();
+    let kin = robotid_schemas::Kinematics::from_record_batch(
+        &read_parquet(&out.join("validation/validation/kinematics.parquet")).unwrap(),
+    )
+    .unwrap();
+    let exact = rollout(
+        &mut BaseDynamics::new(&base, truth),
+        &kin.time,
+        &kin.q,
+        &kin.qd,
+        kin.torque.as_ref().unwrap(),
+        r.window,
+    )
+    .expect("the truth simulates");
+    (estimate, mrad(&exact.q_rms), file)
+}
+
+/// Figures of a validation record, per joint: the mean squared residue
+/// over the record's own floor, of the truth and of the estimate; whether
+/// the truth is adequate on every joint, and its figure pooled; whether
+/// models whose torque misses the truth's by 3× the floor's RMS (eight
+/// directions in parameter space) are all flagged as model error.
+#[derive(Debug)]
+#[allow(dead_code)]
+struct Judged {
+    truth: Vec<f64>,
+    truth_adequate: bool,
+    truth_pooled: f64,
+    estimate: Vec<f64>,
+    wrong_flagged: bool,
+}
+
+fn validation_judged(out: &Path, truth: &[f64], estimate: &nalgebra::DVector<f64>) -> Judged {
+    use ::robotid::validation::{residues, Verdict};
+    use nalgebra::DVector;
+    let sys = ::robotid::tables::load_system(out, &[PathBuf::from("validation/validation/regressor.parquet")]).unwrap();
+    let ratios = |theta: &DVector<f64>| -> Vec<f64> {
+        residues(&sys, &(&sys.a * theta))
+            .iter()
+            .map(|r| r.msr / r.noise_floor.expect("the record's own floor"))
+            .collect()
+    };
+    let t = DVector::from_column_slice(truth);
+    let at_truth = residues(&sys, &(&sys.a * &t));
+    let floor: f64 = at_truth.iter().map(|r| r.noise_floor.unwrap()).sum::<f64>() / sys.joints.len() as f64;
+    let pooled = at_truth.iter().map(|r| r.rows as f64 * r.msr).sum::<f64>()
+        / at_truth
+            .iter()
+            .map(|r| r.rows as f64 * r.noise_floor.unwrap())
+            .sum::<f64>();
+    let mut rng = 12345u64;
+    let wrong_flagged = (0..8).all(|_| {
+        let d = DVector::from_fn(t.len(), |_, _| {
+            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        });
+        let miss = &sys.a * &d;
+        let scale = 3.0 * (floor / (miss.norm_squared() / miss.len() as f64)).sqrt();
+        let wrong = &t + d * scale;
+        residues(&sys, &(&sys.a * &wrong))
+            .iter()
+            .any(|r| r.verdict() == Verdict::ModelErrorDominates)
+    });
+    Judged {
+        truth: ratios(&t),
+        truth_adequate: at_truth.iter().all(|r| r.verdict() == Verdict::Adequate),
+        truth_pooled: pooled,
+        estimate: ratios(estimate),
+        wrong_flagged,
     }
 }
 
@@ -667,6 +781,19 @@ fn the_foreign_corpus_is_identified_or_refused() {
                 locked.contains("gripper_joint at 0") && locked.contains("the log does not hold"),
                 "{case}: the lock is said: {locked}"
             );
+            // What reads the parameters later loads the robot with the
+            // same lock: the physical fit's exports, and a rollout.
+            assert!(out.join("identified.urdf").is_file(), "{case}: no export:\n{said}");
+            let rolled = ::robotid::validation::rollouts(
+                &out,
+                Path::new("parameters.parquet"),
+                &robot,
+                &[PathBuf::from("excitation/excitation/regressor.parquet")],
+                0.5,
+            )
+            .unwrap_or_else(|e| panic!("{case}: the rollout: {e}"));
+            let estimate = rolled[0].estimate.as_ref().expect("simulated");
+            assert_eq!(estimate.q_rms.len(), 6, "{case}: the arm's joints");
         }
         let ratios = ratios(&out.join("parameters.parquet"));
         assert!(

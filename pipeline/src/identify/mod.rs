@@ -132,6 +132,37 @@ pub struct Design {
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
 }
 
+impl Design {
+    /// The same pipeline with the effort `delay_s` late (s, at `fs` Hz),
+    /// found as `said`: its inverse filter's delay set (a stage that undoes
+    /// only it added where there was none), the finding and file updated.
+    pub fn with_delay(&mut self, delay_s: f64, fs: f64, said: String) -> Result<()> {
+        let at = self
+            .plan
+            .stages
+            .iter()
+            .position(|s| matches!(s, StageConfig::InverseFilter(_)));
+        match at.map(|i| &mut self.plan.stages[i]) {
+            Some(StageConfig::InverseFilter(c)) => c.delay_s = Some(delay_s),
+            _ => {
+                let stage = inverse_filter(None, Some(delay_s), fs).expect("a delay makes a stage");
+                let before = self
+                    .plan
+                    .stages
+                    .iter()
+                    .position(|s| matches!(s, StageConfig::Differentiate(_)));
+                self.plan.stages.insert(before.unwrap_or(0), stage);
+            }
+        }
+        self.delay_s = Some(delay_s);
+        self.findings.retain(|(k, _)| *k != Found::EffortDelay);
+        self.findings.push((Found::EffortDelay, said.clone()));
+        self.plan.inferred.insert(Found::EffortDelay.key().into(), said);
+        self.text = file_text(&self.plan)?;
+        Ok(())
+    }
+}
+
 /// What repeats in a recording.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Excitation {

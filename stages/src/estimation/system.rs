@@ -202,6 +202,11 @@ impl System {
             equations: None,
             metadata: schema.metadata().clone().into_iter().collect(),
         };
+        // A table that names its joints fixes their order (rows left out
+        // at its start would otherwise reorder them).
+        if let Some(j) = schema.metadata().get(metadata::JOINTS) {
+            sys.joints = j.split(',').map(str::to_string).collect();
+        }
         let mut at = 0;
         for (r, (label, t)) in tables.iter().enumerate() {
             let s = t.schema();
@@ -339,6 +344,12 @@ impl System {
     /// the rows kept.
     pub fn keep_joint(&mut self, joint: usize) -> Vec<usize> {
         let rows: Vec<usize> = (0..self.rows()).filter(|&i| self.joint[i] == joint).collect();
+        self.keep_rows(&rows);
+        rows
+    }
+
+    /// Keeps only `rows` (ascending), of one recording.
+    pub fn keep_rows(&mut self, rows: &[usize]) {
         self.a = self.a.select_rows(rows.iter());
         self.b = self.b.select_rows(rows.iter());
         self.var = self.var.select_rows(rows.iter());
@@ -347,7 +358,6 @@ impl System {
         self.time = rows.iter().map(|&i| self.time[i]).collect();
         self.joint = rows.iter().map(|&i| self.joint[i]).collect();
         self.offsets = vec![0];
-        rows
     }
 
     /// Moves known parameters to the right-hand side (b − A_k·θ_k) and drops

@@ -295,6 +295,15 @@ pub fn read_parquet(path: &Path) -> Result<RecordBatch> {
     guarded(path, || read_unguarded(path, super::mapped(path)?))
 }
 
+/// A Parquet file's schema metadata (its footer only, not its rows).
+pub fn read_schema_metadata(path: &Path) -> Result<std::collections::BTreeMap<String, String>> {
+    guarded(path, || {
+        let builder = open(path)?;
+        let md = builder.schema().metadata().iter();
+        Ok(md.map(|(k, v)| (k.clone(), v.clone())).collect())
+    })
+}
+
 /// The same, of a file's bytes in memory; `path` names it in errors.
 pub fn read_parquet_bytes(path: &Path, bytes: bytes::Bytes) -> Result<RecordBatch> {
     guarded(path, || read_unguarded(path, bytes))

@@ -144,7 +144,7 @@ impl Stage for Differentiate {
         let kin = match &self.filter {
             Some(f) => {
                 let raw = chain.uniform_raw()?;
-                differentiate_record(raw, Chain::record_rate(raw), f, &self.spectra)
+                super::motion::motion_record(raw, Chain::record_rate(raw), f, &self.spectra)
             }
             None if method == Differentiation::FourierFit
                 && chain

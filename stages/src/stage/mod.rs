@@ -20,6 +20,7 @@ pub mod decimate;
 pub mod differentiate;
 pub mod estimate;
 pub mod inverse_filter;
+pub mod motion;
 pub mod noise;
 pub mod read;
 pub mod regressor;

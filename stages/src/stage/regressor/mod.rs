@@ -17,6 +17,7 @@ use crate::estimation::projection::ProjectionConfig;
 use crate::signal::Spectra;
 use crate::{Error, Result};
 mod band_limited;
+mod filtered;
 mod rows;
 mod table;
 

@@ -67,6 +67,8 @@ pub struct RegressorRows {
     pub projection: Option<String>,
     pub config: RegressorConfig,
     pub robot: String,
+    /// The robot file's joints locked out of the model, with their position.
+    pub locked: Vec<(String, f64)>,
     /// The kinematics' metadata (provenance), carried into the table.
     pub metadata: BTreeMap<String, String>,
 }
@@ -97,7 +99,8 @@ pub fn regressor_rows(
     // A is made in blocks when read, never whole, where only sums over its
     // rows and the table read it; the band limit, projection and joint
     // selection rework it whole.
-    let on_demand = on_demand && band.is_none() && cfg.projection.is_none() && !cfg.joint_wise;
+    let filtered = super::filtered::ColumnFilter::of(kin)?;
+    let on_demand = on_demand && band.is_none() && filtered.is_none() && cfg.projection.is_none() && !cfg.joint_wise;
     let maker = on_demand.then(|| RowMaker {
         base: base.clone(),
         q: kin.q.clone(),
@@ -110,6 +113,9 @@ pub fn regressor_rows(
         None => base.matrix(kin),
     };
     let mut b_torque: Vec<Vec<f64>> = torque.clone();
+    if let Some(f) = &filtered {
+        f.apply(&mut a, &mut b_torque, spectra);
+    }
     let (projection, equations) = match &cfg.projection {
         Some(pc) => {
             let (said, eq) = project(&mut a, &mut b_torque, periods, samples, pc)?;
@@ -118,7 +124,10 @@ pub fn regressor_rows(
         None => (None, None),
     };
     let b = DVector::from_fn(rows, |i, _| b_torque[i % n][i / n]);
-    let var = torque_variance(noise, n, samples);
+    let var = match &filtered {
+        Some(f) => f.variance(n, samples),
+        None => torque_variance(noise, n, samples),
+    };
     let period_torques = periods
         .filter(|p| p.periods >= 2 && p.samples_per_period == samples)
         .map(|p| DMatrix::from_fn(rows, p.periods, |i, pi| p.torque[i % n][pi * samples + i / n]));
@@ -130,6 +139,24 @@ pub fn regressor_rows(
     let mut system = System::from_matrices(base.names(), units, names.clone(), a, b, var);
     system.time = (0..rows).map(|i| kin.time[i / n]).collect();
     let mut period_torques = period_torques;
+    let mut metadata = kin.metadata.clone();
+    if let Some(f) = &filtered {
+        let (rows, said) = f.kept_rows(kin);
+        system.keep_rows(&rows);
+        metadata.insert(robotid_schemas::metadata::LEFT_OUT.into(), said);
+        let per_joint: Vec<usize> = (0..n)
+            .map(|j| system.joint.iter().filter(|&&x| x == j).count())
+            .collect();
+        if let Some(within) = f.adequate_within(&per_joint) {
+            let map: std::collections::BTreeMap<&str, f64> = names.iter().map(String::as_str).zip(within).collect();
+            metadata.insert(
+                robotid_schemas::metadata::ADEQUATE_WITHIN.into(),
+                serde_json::to_string(&map).map_err(|e| Error::numerical("serde_json", e.to_string()))?,
+            );
+        }
+        // Rows left out from its start: the joints' order is not the first rows'.
+        metadata.insert(robotid_schemas::metadata::JOINTS.into(), names.join(","));
+    }
     if cfg.joint_wise {
         let j = moving_joint(kin, recording)?;
         let keep = system.keep_joint(j);
@@ -150,7 +177,8 @@ pub fn regressor_rows(
         projection,
         config: cfg.clone(),
         robot: model.name.clone(),
-        metadata: kin.metadata.clone(),
+        locked: model.locked.clone(),
+        metadata,
     })
 }
 

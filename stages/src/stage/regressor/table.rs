@@ -49,6 +49,13 @@ impl RegressorRows {
         md.insert(metadata::CONDITION_NUMBER.into(), self.condition.to_string());
         md.insert(metadata::BASE_PARAMETERS.into(), sys.parameters().to_string());
         md.insert(metadata::ROBOT.into(), self.robot.clone());
+        if !self.locked.is_empty() {
+            let locked: BTreeMap<&str, f64> = self.locked.iter().map(|(j, x)| (j.as_str(), *x)).collect();
+            md.insert(
+                metadata::LOCKED.into(),
+                serde_json::to_string(&locked).map_err(|e| Error::numerical("serde_json", e.to_string()))?,
+            );
+        }
         if let Some(p) = &self.projection {
             md.insert(metadata::PROJECTION.into(), p.clone());
         }
