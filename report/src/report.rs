@@ -320,7 +320,7 @@ fn verdicts_html(
         }
         h.push_str("</tr>\n");
     }
-    h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A data set that does not repeat is judged against the excitation's floor (per sample, through its chain's low-pass): \"over the excitation's floor\" is model error or the chain's own, which that floor cannot tell apart.</p>\n");
+    h.push_str("</table>\n<p class=\"note\">Relative error: √(Σ squared residue / Σ squared torque) over every row of the data set; per file under each data set below. A data set that does not repeat is judged against its own floor, measured on its still stretches (its regressor's columns filtered like its torque, rows near starts and stops left out); without a still stretch, against the excitation's floor through its chain's low-pass: \"over the excitation's floor\" is model error or noise the excitation had not, which that floor cannot tell apart.</p>\n");
     Ok(set_stats)
 }
 

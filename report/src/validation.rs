@@ -47,7 +47,7 @@ pub fn table(stats: &[JointResidue]) -> String {
         ));
     }
     if stats.iter().any(|r| r.floor_borrowed) {
-        s.push_str("* the excitation's noise floor (its averaged torque's noise variance times the periods averaged, times the share this data's low-pass lets through): this data does not repeat, so it has none of its own\n");
+        s.push_str("* the excitation's noise floor (its averaged torque's noise variance times the periods averaged, times the share this data's low-pass lets through): this data does not repeat and has no still stretch (every joint's encoder still) to measure its own on\n");
     }
     // Pooled over every row: what one number says about the data.
     let sum = |f: &dyn Fn(&JointResidue) -> f64| stats.iter().map(|r| r.rows as f64 * f(r)).sum::<f64>();

@@ -62,9 +62,11 @@ pub const NOISE_PREFIX: &str = "robotid.noise";
 pub const NOISE_PER_SAMPLE: &str = "robotid.noise.per_sample";
 /// How the kinematics were differentiated: `fourier_fit`, `dft`, `filtered`.
 pub const DIFFERENTIATION: &str = "robotid.differentiation";
-/// The share of white torque noise's variance a `filtered` chain's
-/// low-pass lets through (the mean of |H|⁴ up to Nyquist): a record that
-/// does not repeat is judged against the excitation's floor times it.
+/// The share of the torque noise's variance a `filtered` chain's low-pass
+/// lets through (the mean of |H|⁴ over the band the noise fills: up to
+/// the inverse filter's bandwidth, else Nyquist): a record that does not
+/// repeat and has no still stretch is judged against the excitation's
+/// floor times it.
 pub const TORQUE_NOISE_GAIN: &str = "robotid.torque_noise_gain";
 /// A `filtered` chain's data low-pass (JSON filter spec): its kinematics
 /// are the motion's (a light low-pass, four times wider), and the

@@ -107,7 +107,7 @@ pub fn said(v: &Validated, parameters: &Path) -> String {
         .collect();
     if !over.is_empty() {
         s.push_str(&format!(
-            "verdict: the residue is over the excitation's noise floor on {}: model error, or this chain's own (a record that does not repeat is low-pass filtered, and its Coulomb steps at reversals with it), which a borrowed floor cannot tell apart; validate on a periodic recording to judge the model alone\n",
+            "verdict: the residue is over the excitation's noise floor on {}: model error, or noise this record has and the excitation had not (it has no still stretch, every joint's encoder still, to measure its own floor on), which a borrowed floor cannot tell apart; validate on a record that rests between moves, or a periodic one, to judge the model alone\n",
             over.join(", ")
         ));
     }

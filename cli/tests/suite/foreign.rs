@@ -201,19 +201,17 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
         // pooled over the joints; the estimate's figures within 1.2× of
         // the truth's; and models whose torque misses the truth's by 3×
         // the floor's RMS flagged. Measured: UR5 0.63–1.31 per joint
-        // (pooled 0.95), Panda 0.83–1.38 (1.02).
+        // (pooled 0.93), Panda 0.83–1.38 (1.02), ur5_lab 0.74–1.86 (1.10).
         let judged = validation_judged(&out, &truth, &p.values);
         eprintln!("{arm}: validation, MSR over the record's floor: {judged:?}");
-        // ur5_lab's validation record is not late: once the excitation's
-        // 2-sample delay is undone on it, its effort leads the true
-        // parameters' prediction by 4.0 ms (99 % of shoulder_lift's
-        // residue): its truth is 24–116× the floor on the three large
-        // joints, the chain's delay, not the model (said in the notes).
+        // ur5_lab's validation record is not late (identify finds its own
+        // delay: the excitation's 2 samples had left 35.9× pooled); its
+        // shoulder_pan_joint is at 1.86× over its bound of 1.49 with the
+        // truth, its floor from the still stretches 8.1e-5 (N·m)² where
+        // the other joints' are 1.0–1.6e-4: the pooled figure is held.
+        assert!(judged.truth_pooled <= 1.2, "{arm}: the truth {judged:?}");
         if arm != "ur5_lab" {
-            assert!(
-                judged.truth_adequate && judged.truth_pooled <= 1.2,
-                "{arm}: the truth {judged:?}"
-            );
+            assert!(judged.truth_adequate, "{arm}: the truth {judged:?}");
         }
         assert!(
             judged.estimate.iter().zip(&judged.truth).all(|(e, t)| *e <= 1.2 * t),

@@ -26,9 +26,9 @@ pub enum Verdict {
     /// No noise floor to compare with (neither the periods' spread nor a
     /// `noise` stage).
     NoiseFloorUnknown,
-    /// Over a floor taken from the excitation (the data does not repeat):
-    /// model error, or the chain's own (a filtered record's Coulomb steps
-    /// at reversals), which that floor cannot tell apart.
+    /// Over a floor taken from the excitation (the data does not repeat
+    /// and has no still stretch to measure its own on): model error, or
+    /// noise the excitation had not, which that floor cannot tell apart.
     OverBorrowedFloor,
 }
 

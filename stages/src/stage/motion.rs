@@ -59,10 +59,6 @@ pub fn motion_record(raw: &RawSamples, fs: f64, data: &AnalogFilter, spectra: &S
     let mut kin = differentiate_record(raw, fs, &motion, spectra);
     let md = &mut kin.metadata;
     md.insert(
-        metadata::TORQUE_NOISE_GAIN.into(),
-        format!("{:e}", noise_share(data, fs, fs / 2.0)),
-    );
-    md.insert(
         metadata::COLUMN_FILTER.into(),
         serde_json::to_string(&spec).expect("a filter spec serialises"),
     );
@@ -82,12 +78,15 @@ pub fn motion_record(raw: &RawSamples, fs: f64, data: &AnalogFilter, spectra: &S
         .get(metadata::INVERSE_FILTER_BANDWIDTH_HZ)
         .and_then(|b| b.parse::<f64>().ok())
         .map_or(fs / 2.0, |b| b.min(fs / 2.0));
+    // Noise white up to `band` (an inverse filter zeroes the lines above):
+    // |H|² keeps the mean of |H|⁴ over [0, band] of its variance.
+    let share = noise_share(data, fs, band) / (band / (fs / 2.0));
+    md.insert(metadata::TORQUE_NOISE_GAIN.into(), format!("{share:e}"));
     // The raw torque has not been through the data filter, and the
     // stretches where a joint may move unseen are not still: trimmed by
     // one period of the motion filter's cutoff (an inverse filter's ringing).
     let trim = (1.0 / wide.cutoff_hz * fs).ceil() as usize;
     if let Some((var, samples, runs)) = still_variance(raw, &rests, trim, fs) {
-        let share = noise_share(data, fs, band) / (band / (fs / 2.0));
         let floor: Vec<f64> = var.iter().map(|v| v * share).collect();
         kin.metadata
             .insert(metadata::RECORD_FLOOR.into(), json_by_joint(&raw.joints, &floor));
