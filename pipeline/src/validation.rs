@@ -257,6 +257,56 @@ pub struct RolledOut {
     pub prior: Option<std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>>,
 }
 
+/// One joint's rollout figures, as said: the estimate's position and
+/// velocity RMS error (mrad, mrad/s), the robot file's position error
+/// (mrad, or why it was not simulated) and the ratio of the two.
+pub struct RolloutRow {
+    pub joint: String,
+    pub q_mrad: f64,
+    pub qd_mrad_s: f64,
+    pub file: String,
+    pub ratio: String,
+}
+
+impl RolledOut {
+    /// Why a model was not simulated, said.
+    pub fn stopped_said(&self, stopped: &robotid_stages::dynamics::Stopped) -> String {
+        match stopped {
+            robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample, joint } => format!(
+                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+                self.joints[*joint]
+            ),
+        }
+    }
+
+    /// Per joint, the figures said; Err: why the estimate was not simulated.
+    pub fn rows(&self) -> std::result::Result<Vec<RolloutRow>, String> {
+        let est = self.estimate.as_ref().map_err(|e| self.stopped_said(e))?;
+        Ok(self
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| {
+                let (file, ratio) = match &self.prior {
+                    Some(Ok(p)) => (
+                        format!("{:.3}", 1e3 * p.q_rms[j]),
+                        format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
+                    ),
+                    Some(Err(e)) => (self.stopped_said(e), "-".into()),
+                    None => ("-".into(), "-".into()),
+                };
+                RolloutRow {
+                    joint: joint.clone(),
+                    q_mrad: 1e3 * est.q_rms[j],
+                    qd_mrad_s: 1e3 * est.qd_rms[j],
+                    file,
+                    ratio,
+                }
+            })
+            .collect())
+    }
+}
+
 /// The parameters table at `parameters` (of `robot`) rolled out on the
 /// kinematics table beside each regressor table of `regressors` (both
 /// read `within` a folder): the model's forward dynamics driven by the

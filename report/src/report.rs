@@ -469,7 +469,6 @@ pub const ROLLOUT_WINDOW_S: f64 = 0.5;
 /// position and velocity RMS error, the robot file's, their ratio) and the
 /// measured and simulated angles.
 fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
-    use robotid_stages::dynamics::Stopped;
     let mut h = String::from(
         "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"note\">The identified model's forward dynamics, driven by the measured torque from the measured state and restarted from it at every window (multiple shooting), against the measured joint angles; the robot file's own parameters the same way. A model whose mass matrix is not positive definite along the record is said, not simulated.</p>\n",
     );
@@ -480,32 +479,18 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
             r.window,
             r.window_s
         ));
-        let stopped = |x: &Stopped| match x {
-            Stopped::NotPositiveDefinite { sample, joint } => format!(
-                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
-                r.joints[*joint]
-            ),
-        };
-        match &r.estimate {
-            Err(e) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&stopped(e)))),
-            Ok(est) => {
+        match r.rows() {
+            Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
+            Ok(rows) => {
                 h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th></tr>\n");
-                for (j, joint) in r.joints.iter().enumerate() {
-                    let (file, ratio) = match &r.prior {
-                        Some(Ok(p)) => (
-                            format!("{:.3}", 1e3 * p.q_rms[j]),
-                            format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
-                        ),
-                        Some(Err(e)) => (stopped(e), "-".into()),
-                        None => ("-".into(), "-".into()),
-                    };
+                for row in rows {
                     h.push_str(&format!(
                         "<tr><td class=\"l\">{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
-                        esc(joint),
-                        1e3 * est.q_rms[j],
-                        1e3 * est.qd_rms[j],
-                        esc(&file),
-                        ratio
+                        esc(&row.joint),
+                        row.q_mrad,
+                        row.qd_mrad_s,
+                        esc(&row.file),
+                        row.ratio
                     ));
                 }
                 h.push_str("</table>\n");

@@ -121,7 +121,6 @@ pub fn said(v: &Validated, parameters: &Path) -> String {
 /// velocities' RMS error against the measured, the estimate's beside the
 /// robot file's.
 pub fn rollouts_said(rolled: &[robotid::validation::RolledOut]) -> String {
-    use robotid_stages::dynamics::Stopped;
     let mut s = String::new();
     for r in rolled {
         s.push_str(&format!(
@@ -130,29 +129,14 @@ pub fn rollouts_said(rolled: &[robotid::validation::RolledOut]) -> String {
             r.window,
             r.window_s
         ));
-        let stopped = |x: &Stopped| match x {
-            Stopped::NotPositiveDefinite { sample, joint } => format!(
-                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
-                r.joints[*joint]
-            ),
-        };
-        match (&r.estimate, &r.prior) {
-            (Err(e), _) => s.push_str(&format!("  estimate {}\n", stopped(e))),
-            (Ok(est), prior) => {
+        match r.rows() {
+            Err(why) => s.push_str(&format!("  estimate {why}\n")),
+            Ok(rows) => {
                 s.push_str("  joint                    position RMS (mrad)  velocity RMS (mrad/s)  robot file's position RMS  ratio\n");
-                for (j, joint) in r.joints.iter().enumerate() {
-                    let (file, ratio) = match prior {
-                        Some(Ok(p)) => (
-                            format!("{:.3}", 1e3 * p.q_rms[j]),
-                            format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
-                        ),
-                        Some(Err(e)) => (stopped(e), "-".into()),
-                        None => ("-".into(), "-".into()),
-                    };
+                for row in rows {
                     s.push_str(&format!(
-                        "  {joint:<24} {:>19.3}  {:>21.3}  {file:>25}  {ratio}\n",
-                        1e3 * est.q_rms[j],
-                        1e3 * est.qd_rms[j]
+                        "  {:<24} {:>19.3}  {:>21.3}  {:>25}  {}\n",
+                        row.joint, row.q_mrad, row.qd_mrad_s, row.file, row.ratio
                     ));
                 }
             }

@@ -6,3 +6,4 @@ mod fuzz_regressions;
 mod lint;
 mod manifest;
 mod summaries;
+mod validation;
