@@ -25,7 +25,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     let staging = robotid::output::prepare(&absolute_path(&paths.out)?, None, &paths.all)?;
     if holds_anything(&paths.out) {
         return Err(Error::Request(format!(
-            "{}: the output folder is not empty; give another with --out, or remove it",
+            "{}: the output folder is not empty; give another, or remove it",
             paths.out.display()
         )));
     }
@@ -132,7 +132,7 @@ impl Paths {
             .unwrap_or_else(|| PathBuf::from("out/identify").join(&names[0]));
         if out.exists() && !out.is_dir() {
             return Err(Error::Request(format!(
-                "{}: --out is a file, not a folder; give a folder",
+                "{}: the output folder is a file; give a folder",
                 out.display()
             )));
         }
@@ -171,14 +171,14 @@ fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
         ref k if k.len() == joints => k.to_vec(),
         ref k => {
             return Err(Error::Request(format!(
-                "--torque-per-amp: {} values for {joints} joints: give one per joint, or one for all",
+                "the drives' gains (torque per amp): {} values for {joints} joints: give one per joint, or one for all",
                 k.len()
             )))
         }
     };
     match gains.iter().find(|k| !(k.is_finite() && **k != 0.0)) {
         Some(k) => Err(Error::Request(format!(
-            "--torque-per-amp: {k} N·m/A is not a drive's gain"
+            "the drives' gains (torque per amp): {k} N·m/A is not a drive's gain"
         ))),
         None => Ok(Some(gains)),
     }

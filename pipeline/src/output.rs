@@ -209,7 +209,7 @@ fn refuse_collisions(target: &Path, staged: &[Entry], ours: &std::collections::B
         return Err(output_error(
             &path,
             format!(
-                "{what}; it is not robotid's to remove or overwrite, so nothing was written: move it, or give another --out"
+                "{what}; it is not robotid's to remove or overwrite, so nothing was written: move it, or give another output folder"
             ),
         ));
     }
@@ -508,7 +508,7 @@ pub fn prepare(out: &Path, plot: Option<&Path>, logs: &[PathBuf]) -> Result<Stag
             return Err(output_error(
                 out,
                 format!(
-                    "holds the input {}: a run writes its tables there and could overwrite it; give another --out",
+                    "holds the input {}: a run writes its tables there and could overwrite it; give another output folder",
                     log.display()
                 ),
             ));
@@ -550,7 +550,7 @@ fn lock(out: &Path) -> Result<(File, PathBuf)> {
                 return Err(output_error(
                     out,
                     format!(
-                        "another robotid run (process {}) is writing here; wait for it or give another --out",
+                        "another robotid run (process {}) is writing here; wait for it or give another output folder",
                         pid.trim()
                     ),
                 ));

@@ -99,7 +99,7 @@ fn messages_say_it_once_and_what_there_is() {
         "--out".as_ref(),
         file.as_os_str(),
     ]);
-    assert!(err.contains("a_file: --out is a file, not a folder"), "{err}");
+    assert!(err.contains("a_file: the output folder is a file"), "{err}");
 }
 
 #[test]
