@@ -84,6 +84,17 @@ fn stage(c: &mut Criterion) {
             .unwrap()
         })
     });
+    // A record that does not repeat (a `filtered` chain's kinematics):
+    // the columns and the torque through the data filter after they are
+    // made, each joint's series on its own.
+    let mut filtered = kin.clone();
+    filtered.metadata.insert(
+        robotid_schemas::metadata::COLUMN_FILTER.into(),
+        r#"{"family":"butterworth","order":2,"cutoff_hz":5.0}"#.into(),
+    );
+    g.bench_function("rows_filtered", |b| {
+        b.iter(|| regressor_rows(&filtered, None, None, &base, &cfg, None, &spectra, "bench", false).unwrap())
+    });
     g.finish();
 
     // A 7-dof arm, 21 000 samples (the real KUKA LWR4+ URDF, read in place):
