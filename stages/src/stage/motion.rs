@@ -241,3 +241,47 @@ fn reach(filter: &AnalogFilter, fs: f64) -> f64 {
     }
     len as f64 / 2.0 / fs
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A joint at rest that starts a cubic onset x = c·(t − t₀)³ (a
+    /// quintic move's start) on a 17-bit encoder, then stops the same way
+    /// backwards: the stretch where it may move unseen reaches back to the
+    /// true start and on to the true stop, and the rest before and after
+    /// is still.
+    #[test]
+    fn an_unseen_start_and_stop_are_bracketed() {
+        let (fs, step) = (500.0, 2.0 * std::f64::consts::PI / 131_072.0);
+        let (start, stop, n) = (1.0, 3.0, 2000);
+        let c = 0.05;
+        let x = |t: f64| match t {
+            t if t <= start => 0.0,
+            t if t < 2.0 => c * (t - start).powi(3),
+            t if t < stop => 2.0 * c - c * (stop - t).powi(3),
+            _ => 2.0 * c,
+        };
+        let q: Vec<f64> = (0..n).map(|k| (x(k as f64 / fs) / step).floor() * step).collect();
+        let r = rests(&q, fs);
+        let (s, e) = ((start * fs) as usize, (stop * fs) as usize);
+        let before = r.unseen.iter().find(|[a, b]| *a <= s && s < *b);
+        let after = r.unseen.iter().find(|[a, b]| *a < e && e <= *b);
+        let (Some([from, _]), Some([_, to])) = (before, after) else {
+            panic!("start {s} or stop {e} not in {:?}", r.unseen);
+        };
+        // Still up to the unseen start and after the unseen stop, and
+        // not in between; the unseen stretches no longer than 0.2 s here.
+        assert!(r.still[..*from].iter().all(|x| *x) && r.still[*to..].iter().all(|x| *x));
+        assert!(r.still[*from..*to].iter().all(|x| !x));
+        assert!(
+            s - from < (0.2 * fs) as usize && to - e < (0.2 * fs) as usize,
+            "{:?}",
+            r.unseen
+        );
+        // Positions that change every sample (not quantised) have no rest.
+        let smooth: Vec<f64> = (0..n).map(|k| 1e-9 * k as f64).collect();
+        let r = rests(&smooth, fs);
+        assert!(r.unseen.is_empty() && r.still.iter().all(|x| !x));
+    }
+}
