@@ -121,9 +121,8 @@ pub fn reducer(cfg: &EstimateConfig, robot: Option<(&Path, &Locks)>) -> Result<R
 
 /// The locks a table's robot was loaded with (`robotid.locked`): its
 /// readers load it alike, or a gripper the log did not hold would be back.
-pub fn locks_of<'a>(md: impl IntoIterator<Item = (&'a String, &'a String)>) -> robotid_stages::Result<Locks> {
-    let locked = md.into_iter().find(|(k, _)| k.as_str() == metadata::LOCKED);
-    let positions = match locked.map(|(_, v)| v) {
+pub fn locks_of(md: &BTreeMap<String, String>) -> robotid_stages::Result<Locks> {
+    let positions = match md.get(metadata::LOCKED) {
         Some(text) => serde_json::from_str(text)
             .map_err(|e| robotid_stages::Error::setting(metadata::LOCKED, "joints and their positions", e))?,
         None => BTreeMap::new(),

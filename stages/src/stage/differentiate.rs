@@ -329,13 +329,8 @@ pub fn differentiate_record(
         metadata::DIFFERENTIATION.into(),
         Differentiation::Filtered.name().into(),
     );
-    // The torque passes |H|² (zero phase): white noise keeps the mean of
-    // |H|⁴ of its variance, on a grid fine against the cutoff.
-    let n = 20_000;
-    let gain = (0..n)
-        .map(|k| f.response((k as f64 + 0.5) * 0.5 * fs / n as f64).norm_sqr().powi(2))
-        .sum::<f64>()
-        / n as f64;
+    // The torque passes |H|² (zero phase).
+    let gain = f.zero_phase_noise_share(fs / 2.0);
     md.insert(metadata::TORQUE_NOISE_GAIN.into(), format!("{gain:e}"));
     Kinematics {
         joints: raw.joints.clone(),

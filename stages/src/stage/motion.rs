@@ -78,9 +78,8 @@ pub fn motion_record(raw: &RawSamples, fs: f64, data: &AnalogFilter, spectra: &S
         .get(metadata::INVERSE_FILTER_BANDWIDTH_HZ)
         .and_then(|b| b.parse::<f64>().ok())
         .map_or(fs / 2.0, |b| b.min(fs / 2.0));
-    // Noise white up to `band` (an inverse filter zeroes the lines above):
-    // |H|² keeps the mean of |H|⁴ over [0, band] of its variance.
-    let share = noise_share(data, fs, band) / (band / (fs / 2.0));
+    // Noise white up to `band` (an inverse filter zeroes the lines above).
+    let share = data.zero_phase_noise_share(band);
     md.insert(metadata::TORQUE_NOISE_GAIN.into(), format!("{share:e}"));
     // The raw torque has not been through the data filter, and the
     // stretches where a joint may move unseen are not still: trimmed by
@@ -97,18 +96,6 @@ pub fn motion_record(raw: &RawSamples, fs: f64, data: &AnalogFilter, spectra: &S
             .insert(metadata::RECORD_FLOOR_DOF.into(), format!("{dof:.1}"));
     }
     kin
-}
-
-/// The share of white noise's variance, band-limited to `band` Hz, that
-/// the zero-phase |H|² of `data` lets through: the mean of |H|⁴ over
-/// [0, band] times band/(fs/2), on a grid fine against the cutoff.
-fn noise_share(data: &AnalogFilter, fs: f64, band: f64) -> f64 {
-    let n = 20_000;
-    let mean = (0..n)
-        .map(|k| data.response((k as f64 + 0.5) * band / n as f64).norm_sqr().powi(2))
-        .sum::<f64>()
-        / n as f64;
-    mean * band / (fs / 2.0)
 }
 
 /// Rests shorter than this (s) between two encoder steps are motion.
@@ -139,18 +126,16 @@ fn rests(q: &[f64], fs: f64) -> Rests {
     let mut still = vec![false; n];
     let mut unseen = Vec::new();
     let blind = |gap: usize| (BLIND_OVER_GAP * gap as f64).ceil() as usize;
-    // Rests between steps (and before the first, after the last).
-    let bounds: Vec<(Option<usize>, Option<usize>)> = std::iter::once((None, steps.first().copied()))
-        .chain(steps.windows(2).map(|w| (Some(w[0]), Some(w[1]))))
-        .chain(std::iter::once((steps.last().copied(), None)))
-        .filter(|(a, b)| b.unwrap_or(n) - a.unwrap_or(0) >= min)
-        .collect();
-    for (from, to) in bounds {
-        let at = |k: usize| steps.iter().position(|&s| s == k);
+    // Rests between steps i − 1 and i, as indices into `steps` (None:
+    // before the first step, or after the last).
+    let m = steps.len();
+    let at = |i: Option<usize>, none: usize| i.map_or(none, |i| steps[i]);
+    let rests = (0..=m).map(|i| (i.checked_sub(1), (i < m).then_some(i)));
+    for (from, to) in rests.filter(|&(a, b)| at(b, n) - at(a, 0) >= min) {
         // After a stop's last step the joint may still creep.
         let start = match from {
-            Some(s) => {
-                let i = at(s).expect("a step");
+            Some(i) => {
+                let s = steps[i];
                 let b = if i > 0 { blind(s - steps[i - 1]) } else { 0 };
                 unseen.push([s, (s + b).min(n)]);
                 (s + b).min(n)
@@ -159,8 +144,8 @@ fn rests(q: &[f64], fs: f64) -> Rests {
         };
         // Before a start's first step it may already move.
         let end = match to {
-            Some(s) => {
-                let i = at(s).expect("a step");
+            Some(i) => {
+                let s = steps[i];
                 let b = steps.get(i + 1).map_or(0, |next| blind(next - s));
                 unseen.push([s.saturating_sub(b), s]);
                 s.saturating_sub(b)
