@@ -55,26 +55,15 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
-    let physical = if judged.refused.is_some() && !request.accept_inadequate {
-        std::fs::write(
-            staged.join("INADEQUATE.txt"),
-            format!("{}\n", judged.refused.as_deref().unwrap_or_default()),
-        )
-        .map_err(io(&paths.out.join("INADEQUATE.txt")))?;
-        Physical::Refused
-    } else if recordings.iter().any(|r| r.design.joint_wise.is_some()) {
-        // The model for simulators needs every link a real body; the
-        // decoupled model of joint-wise records has none to fit.
-        Physical::JointWise
-    } else {
-        physical_fit(
-            &judged.parts,
-            (staged, &paths.robot),
-            (id_tables, val_tables),
-            &mut script,
-            observer,
-        )?
-    };
+    let physical = physical_or_why(
+        request,
+        &judged,
+        &recordings,
+        (staged, &paths),
+        (id_tables, val_tables),
+        &mut script,
+        observer,
+    )?;
     let fitted = matches!(physical, Physical::Fitted { .. });
     robotid_report::report::write(&robotid_report::report::Page {
         parameters: "parameters.parquet".into(),
@@ -101,6 +90,30 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         validation,
         physical,
     })
+}
+
+/// The physical fit, or why there is none: refused (and not written
+/// anyway: marked INADEQUATE.txt), or joint-wise records.
+fn physical_or_why(
+    request: &Request,
+    judged: &Judged,
+    recordings: &[Recording],
+    (staged, paths): (&Path, &Paths),
+    tables: (&[PathBuf], &[PathBuf]),
+    script: &mut Script,
+    observer: &dyn Observer,
+) -> Result<Physical> {
+    if let Some(refused) = judged.refused.as_deref().filter(|_| !request.accept_inadequate) {
+        std::fs::write(staged.join("INADEQUATE.txt"), format!("{refused}\n"))
+            .map_err(io(&paths.out.join("INADEQUATE.txt")))?;
+        return Ok(Physical::Refused);
+    }
+    if recordings.iter().any(|r| r.design.joint_wise.is_some()) {
+        // The model for simulators needs every link a real body; the
+        // decoupled model of joint-wise records has none to fit.
+        return Ok(Physical::JointWise);
+    }
+    physical_fit(&judged.parts, (staged, &paths.robot), tables, script, observer)
 }
 
 /// The request's files made absolute and checked.

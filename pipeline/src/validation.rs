@@ -112,6 +112,50 @@ pub fn relative_error(stats: &[JointResidue]) -> f64 {
     (sum(&|r| r.msr) / sum(&|r| r.measured_rms.powi(2))).sqrt()
 }
 
+/// One recording's figures pooled over its rows and joints.
+#[derive(Debug, Clone)]
+pub struct RecordingFigures {
+    pub name: String,
+    /// Σ squared residue, (N·m)².
+    pub residue: f64,
+    /// Σ squared measured torque, (N·m)².
+    pub torque: f64,
+    /// Σ noise variance, (N·m)² (None: some row has no floor).
+    pub floor: Option<f64>,
+}
+
+impl RecordingFigures {
+    /// √(Σ squared residue / Σ squared torque).
+    pub fn relative_error(&self) -> f64 {
+        (self.residue / self.torque).sqrt()
+    }
+}
+
+/// The pooled figures of each recording stacked in `sys`.
+pub fn per_recording(sys: &System, predicted: &DVector<f64>) -> Vec<RecordingFigures> {
+    sys.recordings
+        .iter()
+        .enumerate()
+        .map(|(r, name)| {
+            let rows = || (0..sys.rows()).filter(move |&i| sys.recording[i] == r);
+            let floor = rows().map(|i| sys.var[i]).sum::<f64>();
+            RecordingFigures {
+                name: name.clone(),
+                residue: rows().map(|i| (sys.b[i] - predicted[i]).powi(2)).sum(),
+                torque: rows().map(|i| sys.b[i].powi(2)).sum(),
+                floor: floor.is_finite().then_some(floor),
+            }
+        })
+        .collect()
+}
+
+impl Validated {
+    /// Each validation recording's pooled figures.
+    pub fn per_recording(&self) -> Vec<RecordingFigures> {
+        per_recording(&self.sys, &self.predicted)
+    }
+}
+
 /// Residue statistics per joint of `sys` for torques `predicted`.
 pub fn residues(sys: &System, predicted: &DVector<f64>) -> Vec<JointResidue> {
     let residue = &sys.b - predicted;

@@ -76,7 +76,7 @@ impl Measured {
                 "on held-out periods (fitted on the even periods, predicting the odd ones, and the reverse)"
             }
             Measured::InSample => {
-                "in sample: nothing held out (fewer than two steady periods and no --validate recording)"
+                "in sample: nothing held out (fewer than two steady periods and no validation recording)"
             }
         }
     }
@@ -131,7 +131,7 @@ impl std::fmt::Display for Refusal {
         match self {
             Refusal::OverFloor(joints) => write!(
                 f,
-                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {} (--strict)",
+                "the fit's residue is over {REFUSE_RATIO}× the noise floor on {} (the strict policy)",
                 joints
                     .iter()
                     .map(|(j, r)| format!("{j} ({r:.1}×)"))
@@ -140,7 +140,7 @@ impl std::fmt::Display for Refusal {
             ),
             Refusal::MissingFriction(joints) => write!(
                 f,
-                "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; robotid's friction models (viscous and Coulomb, asymmetric, a smooth turn-over) do not hold it. Excite the joints above the speeds where it fades, or take the estimate as it is with --accept-inadequate",
+                "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; robotid's friction models (viscous and Coulomb, asymmetric, a smooth turn-over) do not hold it. Excite the joints above the speeds where it fades, or take the estimate as it is (accept inadequate)",
                 joints
                     .iter()
                     .map(|(j, share, r)| format!("{j} ({:.0} % of a residue {r:.1}× the noise floor)", 100.0 * share))
@@ -153,7 +153,7 @@ impl std::fmt::Display for Refusal {
                 tolerance,
             } => write!(
                 f,
-                "the relative error {:.2} % {} is over the tolerance {:.1} % (--tolerance)",
+                "the relative error {:.2} % {} is over the tolerance {:.1} %",
                 100.0 * relative,
                 measured.said(),
                 100.0 * tolerance
@@ -202,7 +202,7 @@ impl Verdict {
     fn judged(&self) -> String {
         let (rel, measured) = self.relative;
         let rule = if self.policy.strict {
-            format!("--strict: refused over {REFUSE_RATIO}× the noise floor on any joint")
+            format!("strict: refused over {REFUSE_RATIO}× the noise floor on any joint")
         } else {
             format!(
                 "tolerance {:.1} % of the torque; relative error {:.2} % {}",

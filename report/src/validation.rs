@@ -81,16 +81,8 @@ pub fn per_recording(sys: &System, predicted: &DVector<f64>) -> String {
     if sys.recordings.len() < 2 {
         return String::new();
     }
-    let mut s = String::new();
-    for (r, name) in sys.recordings.iter().enumerate() {
-        let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.recording[i] == r).collect();
-        let residue = rows.iter().map(|&i| (sys.b[i] - predicted[i]).powi(2)).sum();
-        let torque = rows.iter().map(|&i| sys.b[i].powi(2)).sum();
-        let floor = rows.iter().map(|&i| sys.var[i]).sum::<f64>();
-        s.push_str(&format!(
-            "{name}: {}\n",
-            pooled(residue, torque, floor.is_finite().then_some(floor))
-        ));
-    }
-    s
+    robotid::validation::per_recording(sys, predicted)
+        .iter()
+        .map(|r| format!("{}: {}\n", r.name, pooled(r.residue, r.torque, r.floor)))
+        .collect()
 }

@@ -19,9 +19,8 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         mut regressor,
         mut inverse,
     } = d;
-    let own_regressor = first.is_none();
+    let (own_regressor, joints) = (first.is_none(), model.joint_names());
     let mut delay = first.and_then(|d| d.delay_s);
-    let joints = model.joint_names();
     let (tol, chain) = steady(log, &plan, &raw, (period, fs), &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
@@ -41,7 +40,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         )
     };
     let mut wide_band = first.map(|d| d.wide_band);
-    let mut held_out_relative = None;
+    let (mut held_out_relative, mut friction_scores) = (None, None);
     if own_regressor {
         let (wide, said, choice) = best_band(
             &Scoring {
@@ -59,7 +58,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
             torques_stage.as_ref(),
         )?;
         wide_band = Some(wide);
-        held_out_relative = choice.relative;
+        (held_out_relative, friction_scores) = (choice.relative, choice.friction_scores);
         findings.push((Found::Differentiate, said));
         apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
     }
@@ -77,6 +76,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
             period_s: period,
             periods: p.periods,
             held_out_relative,
+            friction_scores,
             repeated: p.periods >= 2 || p.stretch.is_some(),
             harmonics: sets,
             union,

@@ -104,6 +104,15 @@ impl Found {
     }
 }
 
+/// The held-out residues over the noise floor that chose the friction:
+/// symmetric (and an offset), and Bona's asymmetric (None: singular, or
+/// friction < 0 on these periods).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrictionScores {
+    pub symmetric: f64,
+    pub asymmetric: Option<f64>,
+}
+
 /// A pipeline designed from a recording.
 #[derive(Debug, Clone)]
 pub struct Design {
@@ -183,6 +192,9 @@ pub struct Periodic {
     /// on the even periods, predicting the odd ones, and the reverse):
     /// None with fewer than two steady periods, and for validation records.
     pub held_out_relative: Option<f64>,
+    /// The held-out scores the friction was chosen by (None: symmetric
+    /// friction was not a choice, or nothing was held out).
+    pub friction_scores: Option<FrictionScores>,
     /// The noise floor comes from samples that repeat: two periods or
     /// more, or one and a steady stretch beyond it (1.5 periods between
     /// ramps). Else from one period's non-excited lines.

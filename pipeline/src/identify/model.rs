@@ -210,6 +210,7 @@ pub(super) struct ModelChoice {
     /// prefer it, and why (None: not tried).
     pub(super) friction: FrictionTerms,
     pub(super) friction_said: Option<String>,
+    pub(super) friction_scores: Option<FrictionScores>,
     /// The held-out score of the choice and its relative error (None:
     /// fewer than two periods).
     pub(super) score: Option<f64>,
@@ -234,6 +235,7 @@ impl ModelChoice {
             relative: None,
             friction,
             friction_said: None,
+            friction_scores: None,
             margin,
         }
     }
@@ -304,7 +306,7 @@ pub(super) fn choose_model(
     // `friction_choice`).
     let symmetric = template.friction == FrictionTerms::Symmetric && !at_floor;
     let asymmetric = asymmetric_fit(&systems, &scorer, symmetric, pick.0, first)?;
-    let (friction, friction_said, (filter, score)) =
+    let (friction, friction_said, friction_scores, (filter, score)) =
         friction_choice(template.friction, symmetric, asymmetric, (filter, score), margin);
     let transition_said = transition_said(
         &scored,
@@ -328,6 +330,7 @@ pub(super) fn choose_model(
         relative: Some(score.relative),
         friction,
         friction_said,
+        friction_scores,
         margin,
     })
 }
@@ -689,7 +692,8 @@ impl<'a> LineSystems<'a> {
 
 /// Symmetric friction, or Bona's asymmetric one where its held-out score
 /// beats the symmetric one's by `margin`; what says so (when `symmetric`
-/// was a choice), and the filter and score of the model chosen. A Coulomb
+/// was a choice) with both scores, and the filter and score of the model
+/// chosen. A Coulomb
 /// pair that differs by direction is a symmetric one plus the offset only
 /// with sign(q̇); with a smooth turn-over, and with viscous friction that
 /// differs by direction, the asymmetric friction is another model.
@@ -700,7 +704,16 @@ pub(super) fn friction_choice(
     asymmetric: Option<(Option<FilterSpec>, Score)>,
     (filter, score): (Option<FilterSpec>, Score),
     margin: f64,
-) -> (FrictionTerms, Option<String>, (Option<FilterSpec>, Score)) {
+) -> (
+    FrictionTerms,
+    Option<String>,
+    Option<FrictionScores>,
+    (Option<FilterSpec>, Score),
+) {
+    let scores = symmetric.then(|| FrictionScores {
+        symmetric: score.ratio,
+        asymmetric: asymmetric.as_ref().map(|(_, s)| s.ratio),
+    });
     match asymmetric {
         Some((f, s)) if s.ratio < score.ratio * (1.0 - margin) => (
             FrictionTerms::Asymmetric,
@@ -708,6 +721,7 @@ pub(super) fn friction_choice(
                 "asymmetric (Bona eq. 2: viscous and Coulomb for each direction): held-out residue {:.3}× the noise floor, symmetric {:.3}×",
                 s.ratio, score.ratio
             )),
+            scores,
             (f, s),
         ),
         other => (
@@ -721,6 +735,7 @@ pub(super) fn friction_choice(
                 ),
                 None => "symmetric (and an offset): asymmetric friction is singular or has friction < 0 on these periods".into(),
             }),
+            scores,
             (filter, score),
         ),
     }

@@ -132,6 +132,28 @@ fn period_torques(label: &str, t: &RecordBatch) -> Result<Option<DMatrix<f64>>> 
     })
 }
 
+/// Refused unless `t` is a regressor table with the parameter columns
+/// `names`, in order.
+fn same_parameters(label: &str, t: &RecordBatch, names: &[String]) -> Result<()> {
+    let s = t.schema();
+    TableKind::Regressor.validate(&s).map_err(|e| Error::Decode {
+        path: label.into(),
+        source: Box::new(e),
+    })?;
+    let theirs: Vec<&String> = columns_of(&s, PARAMETER_COLUMN)
+        .into_iter()
+        .map(|i| s.field(i).name())
+        .collect();
+    if theirs.len() != names.len() || theirs.iter().zip(names).any(|(a, b)| *a != b) {
+        return Err(Error::mismatch(
+            format!("{label}: parameters (the recordings were not made with one regressor configuration)"),
+            format!("{} (the first table's)", names.join(", ")),
+            theirs.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
+        ));
+    }
+    Ok(())
+}
+
 impl System {
     /// Table `t` (recording `r`, `label`) into rows `at..` of A, b and
     /// their row labels.
@@ -209,22 +231,7 @@ impl System {
         }
         let mut at = 0;
         for (r, (label, t)) in tables.iter().enumerate() {
-            let s = t.schema();
-            TableKind::Regressor.validate(&s).map_err(|e| Error::Decode {
-                path: label.into(),
-                source: Box::new(e),
-            })?;
-            let theirs: Vec<&String> = columns_of(&s, PARAMETER_COLUMN)
-                .into_iter()
-                .map(|i| s.field(i).name())
-                .collect();
-            if theirs.len() != p || theirs.iter().zip(&sys.names).any(|(a, b)| *a != b) {
-                return Err(Error::mismatch(
-                    format!("{label}: parameters (the recordings were not made with one regressor configuration)"),
-                    format!("{} (the first table's)", sys.names.join(", ")),
-                    theirs.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
-                ));
-            }
+            same_parameters(label, t, &sys.names)?;
             sys.recordings.push(label.clone());
             sys.offsets.push(at);
             sys.periods.push(period_torques(label, t)?);

@@ -136,6 +136,33 @@ impl ColumnFilter {
         })
     }
 
+    /// `system` with only [`ColumnFilter::kept_rows`], what was left out
+    /// and each joint's adequacy bound said in `md`, and the joints'
+    /// order (rows left out from its start: not the first rows').
+    pub fn keep_rows(
+        &self,
+        kin: &Kinematics,
+        system: &mut crate::estimation::System,
+        md: &mut BTreeMap<String, String>,
+        names: &[String],
+    ) -> Result<()> {
+        let (rows, said) = self.kept_rows(kin);
+        system.keep_rows(&rows);
+        md.insert(metadata::LEFT_OUT.into(), said);
+        let per_joint: Vec<usize> = (0..names.len())
+            .map(|j| system.joint.iter().filter(|&&x| x == j).count())
+            .collect();
+        if let Some(within) = self.adequate_within(&per_joint) {
+            let map: BTreeMap<&str, f64> = names.iter().map(String::as_str).zip(within).collect();
+            md.insert(
+                metadata::ADEQUATE_WITHIN.into(),
+                serde_json::to_string(&map).map_err(|e| Error::numerical("serde_json", e.to_string()))?,
+            );
+        }
+        md.insert(metadata::JOINTS.into(), names.join(","));
+        Ok(())
+    }
+
     /// The rows kept (sample-major): not within the margin of where a
     /// joint may move unseen (its starts and stops), nor of the record's
     /// ends (mirror-extended there); and what was left out, said.

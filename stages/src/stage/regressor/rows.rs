@@ -117,10 +117,7 @@ pub fn regressor_rows(
         f.apply(&mut a, &mut b_torque, spectra);
     }
     let (projection, equations) = match &cfg.projection {
-        Some(pc) => {
-            let (said, eq) = project(&mut a, &mut b_torque, periods, samples, pc)?;
-            (Some(said), Some(eq))
-        }
+        Some(pc) => project(&mut a, &mut b_torque, periods, samples, pc).map(|(s, e)| (Some(s), Some(e)))?,
         None => (None, None),
     };
     let b = DVector::from_fn(rows, |i, _| b_torque[i % n][i / n]);
@@ -128,34 +125,15 @@ pub fn regressor_rows(
         Some(f) => f.variance(n, samples),
         None => torque_variance(noise, n, samples),
     };
-    let period_torques = periods
+    let mut period_torques = periods
         .filter(|p| p.periods >= 2 && p.samples_per_period == samples)
         .map(|p| DMatrix::from_fn(rows, p.periods, |i, pi| p.torque[i % n][pi * samples + i / n]));
-    let units = base
-        .names()
-        .iter()
-        .map(|name| parameter_unit(name).to_string())
-        .collect();
+    let units = base.names().iter().map(|n| parameter_unit(n).to_string()).collect();
     let mut system = System::from_matrices(base.names(), units, names.clone(), a, b, var);
     system.time = (0..rows).map(|i| kin.time[i / n]).collect();
-    let mut period_torques = period_torques;
     let mut metadata = kin.metadata.clone();
     if let Some(f) = &filtered {
-        let (rows, said) = f.kept_rows(kin);
-        system.keep_rows(&rows);
-        metadata.insert(robotid_schemas::metadata::LEFT_OUT.into(), said);
-        let per_joint: Vec<usize> = (0..n)
-            .map(|j| system.joint.iter().filter(|&&x| x == j).count())
-            .collect();
-        if let Some(within) = f.adequate_within(&per_joint) {
-            let map: std::collections::BTreeMap<&str, f64> = names.iter().map(String::as_str).zip(within).collect();
-            metadata.insert(
-                robotid_schemas::metadata::ADEQUATE_WITHIN.into(),
-                serde_json::to_string(&map).map_err(|e| Error::numerical("serde_json", e.to_string()))?,
-            );
-        }
-        // Rows left out from its start: the joints' order is not the first rows'.
-        metadata.insert(robotid_schemas::metadata::JOINTS.into(), names.join(","));
+        f.keep_rows(kin, &mut system, &mut metadata, &names)?;
     }
     if cfg.joint_wise {
         let j = moving_joint(kin, recording)?;
