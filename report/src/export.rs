@@ -10,7 +10,8 @@ use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, Str
 use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
+    parameter_names, parameter_unit, patch_urdf, standard_parameters, to_mjcf, to_urdf, with_standard_parameters,
+    Model, Patched,
 };
 use robotid_stages::estimation::{physically_consistent, LinkBound};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
@@ -19,7 +20,10 @@ use robotid_stages::formats::{sha256_hex, write_atomic};
 /// What to write.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
-    /// `<stem>.urdf`: inertials and `<dynamics damping friction>`.
+    /// `<stem>.urdf`: the robot file's own URDF with each moving link's
+    /// `<inertial>` and each joint's `<dynamics damping friction>`
+    /// replaced, every other byte kept (a robot file in robotid's TOML: a
+    /// URDF made from the model).
     Urdf,
     /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
     /// damping, frictionloss.
@@ -77,6 +81,8 @@ pub enum ExportError {
     OutOfBounds { parameters: PathBuf, links: Vec<String> },
     #[error("{}: the parameters table has no column `{column}`", parameters.display())]
     Column { parameters: PathBuf, column: String },
+    #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
+    Patch { robot: PathBuf, problem: String },
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -231,12 +237,28 @@ pub fn export(args: &Export) -> Result<Exported> {
         args.parameters.display(),
         args.robot.display(),
     );
+    let short = format!(
+        "identified by robotid {} from {}, physically consistent (the sidecar has its provenance)",
+        env!("CARGO_PKG_VERSION"),
+        args.parameters.display()
+    );
+    let patched = patched_urdf(&args.robot, &identified, &short)?;
+    if let Some((text, links)) = &patched {
+        warnings.extend(relative_meshes(text));
+        warnings.extend(links.iter().filter_map(|p| p.said.clone()));
+    }
     let stem = stem(&args.out, &args.formats);
     // Everything is made before anything is written.
     let mut files: Vec<(PathBuf, Output)> = Vec::new();
     for f in dedup(&args.formats) {
         match f {
-            Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(to_urdf(&identified, &note)))),
+            Format::Urdf => files.push((
+                with_ext(&stem, "urdf"),
+                Output::Text(match &patched {
+                    Some((text, _)) => text.clone(),
+                    None => to_urdf(&identified, &note),
+                }),
+            )),
             Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
             Format::Sidecar => {
                 let batch = read_parquet(&args.within.join(&args.parameters))?;
@@ -252,6 +274,7 @@ pub fn export(args: &Export) -> Result<Exported> {
                     map,
                     warnings: &warnings,
                     bounds: &bounds,
+                    patched: patched.as_ref().map(|(_, p)| p.as_slice()),
                 };
                 files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
                 files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
@@ -263,6 +286,44 @@ pub fn export(args: &Export) -> Result<Exported> {
         how: fit.said,
         warnings,
         files: files.into_iter().map(|(p, _)| p).collect(),
+    })
+}
+
+/// The robot file's own URDF with `model`'s bodies and friction written
+/// into it (None: the robot file is not a URDF).
+fn patched_urdf(robot: &Path, model: &Model, note: &str) -> Result<Option<(String, Vec<Patched>)>> {
+    if !robot.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf")) {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(robot).map_err(|source| ExportError::Io {
+        path: robot.to_path_buf(),
+        source,
+    })?;
+    let patched = patch_urdf(&text, robot, model, note).map_err(|problem| ExportError::Patch {
+        robot: robot.to_path_buf(),
+        problem,
+    })?;
+    Ok(Some(patched))
+}
+
+/// Mesh files a URDF names by a path relative to its own folder: they
+/// resolve beside the robot file, not beside the export.
+fn relative_meshes(urdf: &str) -> Option<String> {
+    let doc = roxmltree::Document::parse(urdf).ok()?;
+    let mut relative: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("mesh"))
+        .filter_map(|n| n.attribute("filename"))
+        .filter(|f| !f.contains("://") && !Path::new(f).is_absolute())
+        .collect();
+    relative.dedup();
+    (!relative.is_empty()).then(|| {
+        format!(
+            "the URDF names {} mesh file(s) relative to its folder ({}{}): they resolve from the robot file's folder, so keep the exported URDF there or give it the meshes",
+            relative.len(),
+            relative[..relative.len().min(3)].join(", "),
+            if relative.len() > 3 { ", …" } else { "" }
+        )
     })
 }
 
@@ -468,6 +529,8 @@ struct Sidecar<'a> {
     map: &'a nalgebra::DMatrix<f64>,
     warnings: &'a [String],
     bounds: &'a [LinkBound],
+    /// The robot file's own URDF patched: which link holds each body.
+    patched: Option<&'a [Patched]>,
 }
 
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
@@ -606,6 +669,10 @@ impl Sidecar<'_> {
                 "how": b.said,
             })).collect::<Vec<_>>(),
             "warnings": self.warnings,
+            "urdf_patched": self.patched.map(|p| p.iter().map(|p| json!({
+                "joint": p.joint, "link": p.link, "lumped_links": p.lumped,
+                "carried_links": p.carried, "said": p.said,
+            })).collect::<Vec<_>>()),
         });
         Ok(serde_json::to_string_pretty(&doc)? + "\n")
     }

@@ -347,7 +347,9 @@ pub fn python_json(script: &str, args: &[&Path]) -> serde_json::Value {
 /// - the MJCF loaded in MuJoCo: `mj_inverse` (constraints off) against
 ///   robotid's RNEA of the exported standard parameters with gravity,
 ///   rotor inertia (MuJoCo's armature) and viscous friction (damping);
-/// - the URDF loaded in Pinocchio: `rnea` against robotid's rigid-body RNEA;
+/// - the URDF (the robot file's own where it is one, patched) loaded in
+///   Pinocchio, the joints the model locks locked there: `rnea` against
+///   robotid's rigid-body RNEA;
 /// - those standard parameters' base values against the estimate's.
 ///
 /// At 40 random states within the joint limits. Returns the largest
@@ -431,7 +433,16 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
     )
     .unwrap();
     let mujoco = python_json("mujoco_inverse.py", &[&dir.join("identified.xml"), &file]);
-    let pin = python_json("pin_rnea.py", &[&dir.join("identified.urdf"), &file]);
+    // The URDF is the robot file's own, patched: its locked joints (a
+    // gripper) are still joints there, locked where the model holds them.
+    let locked: serde_json::Map<String, serde_json::Value> = base
+        .model
+        .locked
+        .iter()
+        .map(|(j, x)| (j.clone(), serde_json::json!(x)))
+        .collect();
+    let locks = serde_json::Value::Object(locked).to_string();
+    let pin = python_json("pin_rnea.py", &[&dir.join("identified.urdf"), &file, Path::new(&locks)]);
     for v in [&mujoco, &pin] {
         let names: Vec<&str> = v["names"]
             .as_array()
@@ -464,6 +475,40 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
         }
     }
     (worst_mj / top_mj, worst_pin / top_pin)
+}
+
+/// A URDF's lines with every `<inertial>` and `<dynamics>` element and
+/// robotid's comments cut out, blank lines dropped and self-closed links
+/// written open: what a patched URDF must keep of its robot file's, byte
+/// for byte.
+pub fn urdf_but_dynamics(text: &str) -> Vec<String> {
+    let mut s = text.to_string();
+    // Comments first: robotid's name `<dynamics>` in their text.
+    for open in ["<!-- robotid", "<inertial", "<dynamics"] {
+        while let Some(a) = s.find(open) {
+            let start_tag = a + s[a..].find('>').unwrap() + 1;
+            let b = if open.starts_with("<!--") {
+                a + s[a..].find("-->").unwrap() + 3
+            } else if s[a..start_tag].ends_with("/>") {
+                start_tag
+            } else {
+                let close = format!("</{}>", &open[1..]);
+                a + s[a..].find(&close).unwrap() + close.len()
+            };
+            s.replace_range(a..b, "");
+        }
+    }
+    let mut lines: Vec<String> = Vec::new();
+    for l in s.lines().filter(|l| !l.trim().is_empty()) {
+        match (lines.last(), l.trim()) {
+            (Some(prev), "</link>") if prev.trim_start().starts_with("<link") && prev.ends_with('>') => {
+                let open = lines.pop().unwrap();
+                lines.push(format!("{}/>", open.trim_end_matches('>')));
+            }
+            _ => lines.push(l.to_string()),
+        }
+    }
+    lines
 }
 
 /// A global allocator that counts the bytes live and their peak, for tests

@@ -782,6 +782,19 @@ fn the_foreign_corpus_is_identified_or_refused() {
             // What reads the parameters later loads the robot with the
             // same lock: the physical fit's exports, and a rollout.
             assert!(out.join("identified.urdf").is_file(), "{case}: no export:\n{said}");
+            // The case's own robot file, patched: the gripper and its
+            // finger keep their bodies (they move in a simulator), the
+            // wrist's body is the identified one less theirs.
+            let was = std::fs::read_to_string(&robot).unwrap();
+            let is = std::fs::read_to_string(out.join("identified.urdf")).unwrap();
+            assert_eq!(
+                robotid_tests::urdf_but_dynamics(&was),
+                robotid_tests::urdf_but_dynamics(&is)
+            );
+            assert!(
+                is.contains(r#"<mass value="1.2"/>"#) && is.contains(r#"<mass value="0.3"/>"#),
+                "{case}"
+            );
             let rolled = ::robotid::validation::rollouts(
                 &out,
                 Path::new("parameters.parquet"),

@@ -6,11 +6,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use robotid::identify::design;
-use robotid_stages::dynamics::load_robot;
-use robotid_stages::estimation::parameters_from_table;
+use robotid::verdict::{Measured, Refusal};
+use robotid_identify::{Physical, Request};
+use robotid_stages::dynamics::{load_robot, FrictionTerms};
+use robotid_stages::estimation::{parameters_from_table, Covariance, Verdict as AdequacyVerdict};
 use robotid_stages::formats::parquet::read_parquet;
 use robotid_stages::simulation::{provenance, simulate, write_simulation, SimConfig};
-use robotid_tests::{fixture, realdata};
+use robotid_tests::{fixture, realdata, urdf_but_dynamics};
 
 use super::ok;
 
@@ -209,62 +211,67 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let out = tmp.path().join("id");
     let f = |n: u32| dir.join(format!("measurements_{n}.csv"));
     let robot = dir.join("kuka_lwr4.urdf");
-    let text = ok(&[
-        "identify",
-        s(&f(1)),
-        "--robot",
-        s(&robot),
-        "--validate",
-        s(&f(2)),
-        s(&f(3)),
-        "--out",
-        s(&out),
-        "--accept-inadequate",
-    ]);
+    // The library's identify, read typed (the command line prints it).
+    let mut request = Request::new(vec![f(1)], robot.clone());
+    request.validate = vec![f(2), f(3)];
+    request.out = Some(out.clone());
+    request.accept_inadequate = true;
+    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let text = id.verdict.said();
     // The wrist's residue is far over the floor that 1.94 periods give
     // (1.2e-4 (N·m)² on lwr_6_joint, from the repeated 0.94 period): said.
+    let wrist = id
+        .estimate
+        .estimate
+        .adequacy
+        .iter()
+        .find(|a| a.joint == "lwr_6_joint")
+        .unwrap();
+    assert_eq!(wrist.verdict(), AdequacyVerdict::ModelErrorDominates, "{text}");
     // What decides is the relative error on the validation files, over
     // the default 5 % tolerance: refused (exit 3 without the flag) with
     // the figure, written here as the lab asked.
-    let wrist = text.lines().find(|l| l.starts_with("lwr_6_joint ")).unwrap_or_default();
-    assert!(wrist.ends_with("model error dominates"), "{text}");
-    let refused = text
-        .lines()
-        .find(|l| l.starts_with("refused, written anyway (--accept-inadequate): the relative error "))
-        .unwrap_or_else(|| panic!("the refusal is said:\n{text}"));
-    let pooled: f64 = refused
-        .split("relative error ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next()?.parse().ok())
-        .unwrap();
-    assert!(
-        (5.0..10.0).contains(&pooled) && refused.contains("on the validation recordings is over the tolerance 5.0 %"),
-        "{refused}"
-    );
+    match &id.verdict.refused {
+        Some(Refusal::OverTolerance {
+            relative,
+            measured: Measured::Validation,
+            tolerance,
+        }) => assert!((0.05..0.10).contains(relative) && *tolerance == 0.05, "{text}"),
+        other => panic!("refused over the tolerance on the validation files: {other:?}\n{text}"),
+    }
+    assert!(!id.is_refused(), "written anyway");
     // Each held-out file's relative error, least squares then the physical
     // fit: file 3 at 9.40 % and 5.66 % (5.92 % before its links were
     // bounded).
-    let rel: Vec<f64> = text
-        .lines()
-        .filter(|l| l.contains("measurements_3/regressor.parquet: relative error"))
-        .map(|l| {
-            l.split("relative error ")
-                .nth(1)
-                .unwrap()
-                .split(' ')
-                .next()
-                .unwrap()
-                .parse()
-                .unwrap()
-        })
-        .collect();
-    assert!(rel.len() == 2 && rel[0] < 9.5 && rel[1] < 6.0, "{rel:?}\n{text}");
+    let file_3 = |v: &robotid::validation::Validated| {
+        let r = v.per_recording();
+        r.iter()
+            .find(|r| r.name.contains("measurements_3"))
+            .unwrap()
+            .relative_error()
+    };
+    let ols = file_3(id.validation.as_deref().unwrap());
+    let Physical::Fitted {
+        validation: Some(v), ..
+    } = &id.physical
+    else {
+        panic!("no physical fit validated:\n{text}")
+    };
+    let physical = file_3(v);
+    assert!(ols < 0.095 && physical < 0.060, "{ols} {physical}\n{text}");
     let d = design(&f(1), &robot, None).unwrap();
     let p = d.periodic().unwrap().period_s;
     assert!((p - 4.0 * std::f64::consts::PI).abs() < 2e-3, "{p}\n{text}");
     for k in ["report.html", "identified.urdf", "identified.xml", "identify.sh"] {
         assert!(out.join(k).is_file(), "{k} missing:\n{text}");
     }
+    // The exported URDF is the user's own: links, visuals, collisions,
+    // meshes and comments as they wrote them, only the bodies and the
+    // friction replaced.
+    let was = std::fs::read_to_string(&robot).unwrap();
+    let is = std::fs::read_to_string(out.join("identified.urdf")).unwrap();
+    assert_eq!(urdf_but_dynamics(&was), urdf_but_dynamics(&is));
+    assert!(is.matches("<visual").count() + is.matches("<collision").count() >= 28);
     // Bodies a robot could have: every exported link within [0.2×, 5×] of
     // the URDF's mass (the fit's bound; unbounded, one weighed 3714 kg and
     // another 0.0 kg), and inside its shapes (export refuses otherwise).
@@ -317,16 +324,12 @@ fn real_kuka_lwr4_repeats_agree_within_the_robust_intervals() {
     let fit = |n: u32| -> (PathBuf, PathBuf) {
         let out = tmp.path().join(format!("id{n}"));
         let file = dir.join(format!("measurements_{n}.csv"));
-        let text = ok(&[
-            "identify",
-            s(&file),
-            "--robot",
-            s(&robot),
-            "--out",
-            s(&out),
-            "--accept-inadequate",
-        ]);
-        assert!(text.contains("covariance from robust ("), "{text}");
+        let mut request = Request::new(vec![file], robot.clone());
+        request.out = Some(out.clone());
+        request.accept_inadequate = true;
+        let id = robotid_identify::identify_quietly(&request).unwrap();
+        let from = id.estimate.estimate.covariance_from;
+        assert_eq!(from, Covariance::Robust, "{}", id.verdict.said());
         let table = out.join(format!("measurements_{n}/measurements_{n}/regressor.parquet"));
         (out.join("parameters.parquet"), table)
     };
@@ -505,11 +508,14 @@ fn joint_wise_recordings_give_the_decoupled_model() {
         .collect();
     let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
     let out = dir.path().join("id");
-    let mut args = vec!["identify"];
-    args.extend(logs.iter().map(|l| s(l)));
-    args.extend(["--robot", s(&robot), "--out", s(&out)]);
-    let text = ok(&args);
-    assert!(text.contains("only j1 moves"), "{text}");
+    let mut request = Request::new(logs, robot);
+    request.out = Some(out.clone());
+    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let text = id.verdict.said();
+    for (i, r) in id.recordings.iter().enumerate() {
+        let moving = r.design.joint_wise.as_ref().map(|(j, _)| j.as_str());
+        assert_eq!(moving, Some(format!("j{}", i + 1).as_str()), "{}", r.name);
+    }
     let (names, values, _) = parameters(&out.join("parameters.parquet"));
     let value = |n: &str| {
         values[names
@@ -543,27 +549,26 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
     let rec = dir.path().join("rec");
     ok(&["simulate", s(&sim), "--out", s(&rec)]);
     let out = dir.path().join("id");
-    let text = ok(&[
-        "identify",
-        s(&rec.join("ur5.mcap")),
-        "--robot",
-        s(&robot),
-        "--out",
-        s(&out),
-    ]);
+    let mut request = Request::new(vec![rec.join("ur5.mcap")], robot);
+    request.out = Some(out.clone());
+    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let design = &id.recordings[0].design;
+    assert_eq!(design.regressor.friction, FrictionTerms::Asymmetric);
+    // Said in the pipeline file with both scores…
     let pipeline = std::fs::read_to_string(out.join("pipelines/ur5.toml")).unwrap();
     assert!(pipeline.contains("friction = \"asymmetric\"\n"), "{pipeline}");
-    let said = text
-        .lines()
-        .find(|l| l.trim_start().starts_with("friction: asymmetric"))
-        .expect("said");
-    let scores: Vec<f64> = said
-        .split('×')
-        .filter_map(|p| p.rsplit(' ').next()?.parse().ok())
-        .collect();
-    assert!(scores.len() == 2 && scores[0] < 1.05 && scores[1] > scores[0], "{said}");
-    let shoulder = text.lines().find(|l| l.starts_with("shoulder_lift_joint ")).unwrap();
-    assert!(shoulder.ends_with("adequate"), "{shoulder}");
+    // …which are these.
+    let scores = design.periodic().and_then(|p| p.friction_scores).expect("scored");
+    let asymmetric = scores.asymmetric.expect("fitted");
+    assert!(asymmetric < 1.05 && scores.symmetric > asymmetric, "{scores:?}");
+    let shoulder = id
+        .estimate
+        .estimate
+        .adequacy
+        .iter()
+        .find(|a| a.joint == "shoulder_lift_joint")
+        .unwrap();
+    assert_eq!(shoulder.verdict(), AdequacyVerdict::Adequate, "{}", id.verdict.said());
     let (names, v, sd) = parameters(&out.join("parameters.parquet"));
     for (name, truth) in [("Fc+_shoulder_lift_joint", 4.5), ("Fc-_shoulder_lift_joint", 3.5)] {
         let i = names.iter().position(|n| n == name).expect(name);

@@ -22,6 +22,7 @@ mod stl;
 mod torque_regressor;
 mod urdf;
 mod urdf_export;
+mod urdf_patch;
 
 pub use agreement::{torque_agreement, Agreement};
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
@@ -43,3 +44,4 @@ pub use torque_regressor::{
 };
 pub use urdf::{load_urdf, load_urdf_with, parse_urdf, parse_urdf_with, Locks};
 pub use urdf_export::to_urdf;
+pub use urdf_patch::{patch_urdf, Patched};

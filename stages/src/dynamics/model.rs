@@ -31,6 +31,32 @@ impl Inertial {
         self.inertia_com + (Matrix3::identity() * c.dot(&c) - c * c.transpose()) * self.mass
     }
 
+    /// The body left when `part` (given in this link's frame) is taken
+    /// out; None when what is left is no body (mass ≤ 0, or an inertia
+    /// about its centre of mass that is not positive definite or breaks
+    /// the triangle inequality of its principal moments).
+    pub fn without(&self, part: &Inertial) -> Option<Inertial> {
+        let rest = self.minus(part)?;
+        let p = rest.inertia_com.symmetric_eigenvalues();
+        let scale = p.amax().max(f64::MIN_POSITIVE);
+        let body = p.iter().all(|&e| e > 1e-9 * scale)
+            && (0..3).all(|k| p[k] <= p[(k + 1) % 3] + p[(k + 2) % 3] + 1e-9 * scale);
+        body.then_some(rest)
+    }
+
+    /// Mass, first moment and inertia about the origin less `part`'s,
+    /// whatever is left (None: no mass left).
+    pub fn minus(&self, part: &Inertial) -> Option<Inertial> {
+        let mass = self.mass - part.mass;
+        if !(mass > 0.0) {
+            return None;
+        }
+        let com = (self.first_moment() - part.first_moment()) / mass;
+        let origin = self.inertia_origin() - part.inertia_origin();
+        let inertia_com = origin - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
+        Some(Inertial { mass, com, inertia_com })
+    }
+
     /// Adds a rigid body given in this link's frame (used to lump fixed
     /// children, e.g. a URDF tool flange, into the moving link).
     pub fn merge(&self, other: &Inertial) -> Inertial {

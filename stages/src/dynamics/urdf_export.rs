@@ -10,7 +10,7 @@ use std::fmt::Write;
 
 use nalgebra::{Rotation3, Vector3};
 
-use super::model::Model;
+use super::model::{Inertial, Model};
 
 fn v3(v: &Vector3<f64>) -> String {
     format!("{} {} {}", v.x, v.y, v.z)
@@ -19,6 +19,53 @@ fn v3(v: &Vector3<f64>) -> String {
 fn rpy(m: &nalgebra::Matrix3<f64>) -> String {
     let (r, p, y) = Rotation3::from_matrix_unchecked(*m).euler_angles();
     format!("{r} {p} {y}")
+}
+
+/// What URDF cannot hold of joint `i`'s friction and drive, as a
+/// `robotid:` comment.
+pub(super) fn friction_comment(model: &Model, i: usize) -> String {
+    let (f, d) = (&model.friction[i], &model.drives[i]);
+    format!(
+        "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (<dynamics> carries the means of the two signs), offset = {}, coulomb_transition = {}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} (URDF has no place for it) -->",
+        f.viscous_pos,
+        f.viscous_neg,
+        f.coulomb_pos,
+        f.coulomb_neg,
+        f.offset,
+        f.transition,
+        d.rotor_inertia,
+        d.gear_ratio,
+        d.reflected_inertia()
+    )
+}
+
+/// A link's `<inertial>` element, its inner lines indented by `indent`
+/// plus two spaces and its close by `indent`; `comment` first inside it.
+pub(super) fn inertial(l: &Inertial, indent: &str, comment: Option<&str>) -> String {
+    let ic = (l.inertia_com + l.inertia_com.transpose()) * 0.5;
+    let comment = comment.map(|c| format!("\n{indent}  <!-- {} -->", c.replace("--", "- -")));
+    format!(
+        "<inertial>{}\n{indent}  <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n{indent}  <mass value=\"{}\"/>\n{indent}  <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n{indent}</inertial>",
+        comment.unwrap_or_default(),
+        v3(&l.com),
+        l.mass,
+        ic[(0, 0)],
+        ic[(0, 1)],
+        ic[(0, 2)],
+        ic[(1, 1)],
+        ic[(1, 2)],
+        ic[(2, 2)]
+    )
+}
+
+/// `<dynamics>` of joint `i`: the means of the two signs' friction.
+pub(super) fn dynamics(model: &Model, i: usize) -> String {
+    let f = &model.friction[i];
+    format!(
+        "<dynamics damping=\"{}\" friction=\"{}\"/>",
+        0.5 * (f.viscous_pos + f.viscous_neg),
+        0.5 * (f.coulomb_pos + f.coulomb_neg)
+    )
 }
 
 /// The URDF text of `model`; `note` goes into a comment at the top.
@@ -45,46 +92,22 @@ pub fn to_urdf(model: &Model, note: &str) -> String {
         let child = format!("{}_link", j.name);
         let lim = &model.limits[i];
         let (lo, hi) = lim.position.unwrap_or((-std::f64::consts::PI, std::f64::consts::PI));
-        let f = &model.friction[i];
-        let d = &model.drives[i];
+        let _ = writeln!(s, "  {}", friction_comment(model, i));
         let _ = writeln!(
             s,
-            "  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (<dynamics> carries the means of the two signs), offset = {}, coulomb_transition = {}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} (URDF has no place for it) -->",
-            f.viscous_pos,
-            f.viscous_neg,
-            f.coulomb_pos,
-            f.coulomb_neg,
-            f.offset,
-            f.transition,
-            d.rotor_inertia,
-            d.gear_ratio,
-            d.reflected_inertia()
-        );
-        let _ = writeln!(
-            s,
-            "  <joint name=\"{}\" type=\"revolute\">\n    <parent link=\"{parent}\"/>\n    <child link=\"{child}\"/>\n    <origin xyz=\"{}\" rpy=\"{}\"/>\n    <axis xyz=\"{}\"/>\n    <limit lower=\"{lo}\" upper=\"{hi}\" effort=\"{}\" velocity=\"{}\"/>\n    <dynamics damping=\"{}\" friction=\"{}\"/>\n  </joint>",
+            "  <joint name=\"{}\" type=\"revolute\">\n    <parent link=\"{parent}\"/>\n    <child link=\"{child}\"/>\n    <origin xyz=\"{}\" rpy=\"{}\"/>\n    <axis xyz=\"{}\"/>\n    <limit lower=\"{lo}\" upper=\"{hi}\" effort=\"{}\" velocity=\"{}\"/>\n    {}\n  </joint>",
             j.name,
             v3(&j.origin_xyz),
             rpy(&j.origin_rot),
             v3(&j.axis),
             lim.torque.unwrap_or(0.0),
             lim.velocity.unwrap_or(0.0),
-            0.5 * (f.viscous_pos + f.viscous_neg),
-            0.5 * (f.coulomb_pos + f.coulomb_neg),
+            dynamics(model, i),
         );
-        let l = &model.links[i];
-        let ic = (l.inertia_com + l.inertia_com.transpose()) * 0.5;
         let _ = writeln!(
             s,
-            "  <link name=\"{child}\">\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"{}\"/>\n      <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n    </inertial>\n  </link>",
-            v3(&l.com),
-            l.mass,
-            ic[(0, 0)],
-            ic[(0, 1)],
-            ic[(0, 2)],
-            ic[(1, 1)],
-            ic[(1, 2)],
-            ic[(2, 2)]
+            "  <link name=\"{child}\">\n    {}\n  </link>",
+            inertial(&model.links[i], "    ", None)
         );
         parent = child;
     }
