@@ -49,6 +49,11 @@ enum Command {
     /// standard parameters are the physically consistent ones closest to
     /// the a-priori model.
     Export(cmd::export::Args),
+    /// Parameter sets drawn from the identification's covariance for domain
+    /// randomization: each mapped to physically consistent bodies, written
+    /// as one table (and per-draw URDF/MJCF), with each quantity's value,
+    /// spread and correlations (`randomization.json`, `.yaml`).
+    Sample(cmd::sample::Args),
     /// One self-contained HTML page per identification: parameters with
     /// intervals, torques, residues and noise densities.
     Report(cmd::report::Args),
@@ -121,6 +126,7 @@ fn main() -> ExitCode {
         Command::Predict(a) => cmd::predict::run(a),
         Command::Sweeps(a) => cmd::sweeps::run(a),
         Command::Export(a) => cmd::export::run(a),
+        Command::Sample(a) => cmd::sample::run(a),
         Command::Excite(a) => cmd::excite::run(a),
         Command::Report(a) => cmd::report::run(a),
         Command::Dataset(a) => return forward(a.args),

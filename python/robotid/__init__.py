@@ -34,7 +34,7 @@ from typing import Sequence, Union
 
 import pyarrow as pa
 
-from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge, rollout
+from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge, rollout, sample
 
 # Pickled by this name (a Ray worker's error reaches the driver so), it
 # comes back as this very class, its file, channel, sample and stage kept.
@@ -52,4 +52,4 @@ def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
     return pipeline.solve(summaries)
 
 
-__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "rollout", "solve", "__version__"]
+__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "rollout", "sample", "solve", "__version__"]

@@ -87,3 +87,17 @@ def rollout(
     regressor table, as `robotid validate --rollout`: per record, model
     (`estimate`, `robot_file`), window and joint, the simulated angle's and
     velocity's RMS error against the measured (rad, rad/s)."""
+
+def sample(
+    parameters: Union[str, PathLike],
+    robot: Union[str, PathLike],
+    draws: int,
+    out: Union[str, PathLike],
+    seed: int = 0,
+    formats: Sequence[str] = (),
+) -> pa.Table:
+    """Parameter sets drawn from a physically consistent estimate's
+    distribution for domain randomization, as `robotid sample`: written into
+    `out` (`samples.parquet`, `randomization.json` and `.yaml`, a model per
+    draw for each of `formats`, "urdf" and "mjcf"); the samples table (draw,
+    joint, quantity, unit, value) returned."""

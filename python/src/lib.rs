@@ -430,6 +430,46 @@ fn rollout<'py>(
     table(py, batch)
 }
 
+/// Parameter sets drawn from a physically consistent estimate's
+/// distribution for domain randomization, as `robotid sample`: written
+/// into `out` (`samples.parquet`, `randomization.json` and `.yaml`, and a
+/// model per draw for each of `formats`, "urdf" and "mjcf"); the samples
+/// table (one row per draw and quantity) returned as a pyarrow table.
+#[pyfunction]
+#[pyo3(signature = (parameters, robot, draws, out, seed=0, formats=Vec::new()))]
+fn sample<'py>(
+    py: Python<'py>,
+    parameters: PathBuf,
+    robot: PathBuf,
+    draws: usize,
+    out: PathBuf,
+    seed: u64,
+    formats: Vec<String>,
+) -> PyResult<Bound<'py, PyAny>> {
+    use robotid_report::export::Format;
+    let formats = formats
+        .iter()
+        .map(|f| match f.as_str() {
+            "urdf" => Ok(Format::Urdf),
+            "mjcf" => Ok(Format::Mjcf),
+            other => Err(RobotidError::new_err(format!(
+                "formats: `{other}` is neither \"urdf\" nor \"mjcf\""
+            ))),
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let request = robotid_report::sample::Sample {
+        robot,
+        parameters,
+        draws,
+        seed,
+        formats,
+        out: out.clone(),
+    };
+    py.detach(|| robotid_report::sample::sample(&request))
+        .map_err(|e| RobotidError::new_err(e.to_string()))?;
+    Ok(written(py, &out.join("samples.parquet"))?.into_bound(py))
+}
+
 /// Summaries merged, in order, into one row.
 #[pyfunction]
 fn merge<'py>(py: Python<'py>, summaries: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
@@ -444,6 +484,7 @@ fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(rollout, m)?)?;
+    m.add_function(wrap_pyfunction!(sample, m)?)?;
     m.add_class::<Identification>()?;
     m.add("RobotidError", m.py().get_type::<RobotidError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

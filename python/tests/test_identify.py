@@ -80,6 +80,20 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     # Pooled over the windows (equal lengths but the last): √mean(rms²).
     pooled = {m: (sum(x * x for x in v) / len(v)) ** 0.5 for m, v in by.items()}
     assert pooled["estimate"] <= 1.15 * pooled["robot_file"], pooled
+    # Domain randomization from Python: the command line's files, byte for
+    # byte; each drawn MJCF loads in MuJoCo with the drawn masses.
+    physical = out / "parameters_physical.parquet"
+    robot = examples / "robots" / "kuka_axis3.toml"
+    drawn = robotid.sample(physical, robot, 20, tmp_path / "py_samples", seed=3, formats=["mjcf"])
+    cli("sample", "20", "--robot", robot, "-p", physical, "--seed", "3", "--format", "mjcf", "-o", tmp_path / "cli_samples")
+    assert files(tmp_path / "py_samples") == files(tmp_path / "cli_samples")
+    assert drawn.num_rows == 20 * 13 and set(drawn.column("quantity").to_pylist()) >= {"mass", "damping", "armature"}
+    import mujoco
+
+    masses = [r["value"] for r in drawn.to_pylist() if r["quantity"] == "mass"]
+    for k in (0, 19):
+        model = mujoco.MjModel.from_xml_path(str(tmp_path / "py_samples" / f"draw_{k:05d}.xml"))
+        assert abs(model.body_mass[-1] - masses[k]) <= 1e-9 * masses[k], (model.body_mass, masses[k])
 
 
 def test_a_refused_identification_is_a_result_with_the_cause(tmp_path):

@@ -81,6 +81,8 @@ pub enum ExportError {
     OutOfBounds { parameters: PathBuf, links: Vec<String> },
     #[error("{}: the parameters table has no column `{column}`", parameters.display())]
     Column { parameters: PathBuf, column: String },
+    #[error("{0} draw(s) mapped to bodies: at least 2 are needed for a spread")]
+    Draws(usize),
     #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
     Patch { robot: PathBuf, problem: String },
     #[error("{}: {source}", path.display())]
@@ -99,7 +101,7 @@ pub enum ExportError {
     Arrow(#[from] arrow::error::ArrowError),
 }
 
-type Result<T, E = ExportError> = std::result::Result<T, E>;
+pub type Result<T, E = ExportError> = std::result::Result<T, E>;
 
 /// Every file made, written (each atomically).
 fn write_outputs(within: &Path, files: &[(PathBuf, Output)]) -> Result<()> {
@@ -337,7 +339,7 @@ struct Consistent {
 
 /// Links whose exported mass or centre of mass is outside its bounds
 /// (beyond the solver's tolerance), with the numbers.
-fn outside_bounds(exported: &Model, bounds: &[LinkBound]) -> Vec<String> {
+pub(crate) fn outside_bounds(exported: &Model, bounds: &[LinkBound]) -> Vec<String> {
     exported
         .links
         .iter()

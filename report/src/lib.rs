@@ -6,6 +6,7 @@
 pub mod export;
 pub mod plot;
 pub mod report;
+pub mod sample;
 pub mod validation;
 
 use std::path::{Path, PathBuf};

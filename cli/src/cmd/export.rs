@@ -4,7 +4,9 @@ use robotid_report::export::{export, Export};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
-    /// `<stem>.urdf`: inertials and `<dynamics damping friction>`.
+    /// `<stem>.urdf`: the robot file's own URDF with each moving link's
+    /// `<inertial>` and each joint's `<dynamics damping friction>` replaced
+    /// (a robot file in robotid's TOML: a URDF made from the model).
     Urdf,
     /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
     /// damping, frictionloss.

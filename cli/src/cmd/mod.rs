@@ -9,6 +9,7 @@ pub mod model;
 pub mod predict;
 pub mod report;
 pub mod run;
+pub mod sample;
 pub mod schema;
 pub mod simulate;
 pub mod sweeps;

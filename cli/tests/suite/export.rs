@@ -361,3 +361,75 @@ fn a_body_outside_its_bounds_is_refused_unless_forced() {
     assert!((b["mass_max_kg"].as_f64().unwrap() - 1.85).abs() < 1e-12, "{b}");
     assert!(b["ellipsoid"].is_null(), "the fixture's URDF has no shapes: {b}");
 }
+
+/// `robotid sample`: parameter sets drawn from the UR5 example estimate's
+/// distribution and mapped to bodies by its bounded fit: all of them
+/// mapped, never spread wider than the covariance, one table row per draw
+/// and quantity, and the same bytes at any thread count.
+#[test]
+fn samples_hold_the_estimates_distribution() {
+    use robotid_report::sample::{sample, Sample};
+    use robotid_stages::estimation::parameters_from_table;
+    use robotid_stages::formats::parquet::read_parquet;
+    let ws = workspace(&["ur5"]);
+    let out = ur5_identified(ws.path(), true);
+    let params = out.join("parameters.parquet");
+    let robot = ws.path().join("robots/ur5.toml");
+    let n = 400;
+    let done = sample(&Sample {
+        robot: robot.clone(),
+        parameters: params.clone(),
+        draws: n,
+        seed: 7,
+        formats: vec![],
+        out: ws.path().join("samples"),
+    })
+    .unwrap();
+    assert_eq!(done.failed, 0, "{:?}", done.failed_why);
+    // Here the bodies' bounds bind (the bounded fit moves a draw by χ²
+    // 6.2 of 52): the physical draws are the Gaussian cut by what a body
+    // can be, never wider than the covariance (variances 0.34–1.02× its;
+    // the sampling error of a variance from 400 draws is 7 %). Where the
+    // bounds do not bind, the draws are the Gaussian itself (the foreign
+    // corpus' butter4_20).
+    let p = parameters_from_table(&read_parquet(&params).unwrap()).unwrap();
+    let m = done.base.len() as f64;
+    let mut lo = f64::INFINITY;
+    for i in 0..p.names.len() {
+        let mean = done.base.iter().map(|b| b[i]).sum::<f64>() / m;
+        let var = done.base.iter().map(|b| (b[i] - mean).powi(2)).sum::<f64>() / (m - 1.0);
+        let ratio = var / p.covariance[(i, i)];
+        assert!(ratio < 1.25, "{}: {ratio} times the covariance's variance", p.names[i]);
+        lo = lo.min(ratio);
+    }
+    println!(
+        "samples: {} of {n} projected, moved χ² {:.3}, variances from {lo:.2}× the covariance's",
+        done.projected, done.moved
+    );
+    assert!(done.moved > 1.0 && done.moved < 20.0, "moved by χ² {}", done.moved);
+    // The table: one row per draw and quantity (13 per joint), readable as is.
+    let table = read_parquet(&ws.path().join("samples/samples.parquet")).unwrap();
+    assert_eq!(table.num_rows(), n * 13 * 6);
+    assert!(done
+        .parameters
+        .iter()
+        .any(|q| q.name == "shoulder_lift_joint.mass" && q.std > 0.0));
+    // The same bytes at one thread and two, models per draw included.
+    let run = |threads: &str, dir: &str| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_robotid"))
+            .env("RAYON_NUM_THREADS", threads)
+            .args(["sample", "40", "--format", "urdf,mjcf", "--robot"])
+            .arg(&robot)
+            .arg("-p")
+            .arg(&params)
+            .arg("-o")
+            .arg(ws.path().join(dir))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        robotid_tests::bytes_of(&ws.path().join(dir))
+    };
+    let (one, two) = (run("1", "one"), run("2", "two"));
+    assert_eq!(one.keys().filter(|k| k.starts_with("draw_")).count(), 2 * 40);
+    assert!(one == two, "the draws depend on the thread count");
+}
