@@ -242,7 +242,7 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
         .enumerate()
         .filter(|(_, s)| s.rows > 0)
         .map(|(j, s)| {
-            let adequacy = est.adequacy.iter().find(|a| a.joint == s.joint);
+            let adequacy = est.adequacy_of(&s.joint);
             let floor = adequacy.and_then(|a| a.noise_floor).unwrap_or(0.0);
             let ratio = adequacy.and_then(|a| a.ratio());
             let over = ratio.is_some_and(|r| !(r <= REFUSE_RATIO));

@@ -339,35 +339,35 @@ struct Consistent {
 
 /// Links whose exported mass or centre of mass is outside its bounds
 /// (beyond the solver's tolerance), with the numbers.
-pub(crate) fn outside_bounds(exported: &Model, bounds: &[LinkBound]) -> Vec<String> {
-    exported
-        .links
-        .iter()
-        .zip(&exported.joints)
-        .zip(bounds)
-        .filter_map(|((link, j), b)| {
-            let tol = 1e-6;
-            let m = link.mass;
-            if !(m >= b.mass.0 * (1.0 - tol) && m <= b.mass.1 * (1.0 + tol)) {
-                return Some(format!(
-                    "the link of `{}` weighs {m:.4} kg, outside {:.4}–{:.4} kg ({}× either way of the robot file's)",
-                    j.name,
-                    b.mass.0,
-                    b.mass.1,
-                    robotid_stages::estimation::MASS_FACTOR
-                ));
-            }
-            let e = b.ellipsoid?;
-            let c = link.com;
-            let d = (c - e.centre).component_div(&e.semi_axes).norm();
-            (d > 1.0 + tol).then(|| {
+fn outside_bounds(exported: &Model, bounds: &[LinkBound]) -> Vec<String> {
+    (0..exported.dof())
+        .filter_map(|i| outside_bound(exported, i, &bounds[i]))
+        .collect()
+}
+
+/// Whether the link of joint `i` is outside its bound `b`, said.
+pub(crate) fn outside_bound(exported: &Model, i: usize, b: &LinkBound) -> Option<String> {
+    let (link, j) = (&exported.links[i], &exported.joints[i]);
+    let tol = 1e-6;
+    let m = link.mass;
+    if !(m >= b.mass.0 * (1.0 - tol) && m <= b.mass.1 * (1.0 + tol)) {
+        return Some(format!(
+            "the link of `{}` weighs {m:.4} kg, outside {:.4}–{:.4} kg ({}× either way of the robot file's)",
+            j.name,
+            b.mass.0,
+            b.mass.1,
+            robotid_stages::estimation::MASS_FACTOR
+        ));
+    }
+    let e = b.ellipsoid?;
+    let c = link.com;
+    let d = (c - e.centre).component_div(&e.semi_axes).norm();
+    (d > 1.0 + tol).then(|| {
                 format!(
                     "the link of `{}` has its centre of mass at ({:.3}, {:.3}, {:.3}) m, {d:.2}× the way out of the ellipsoid of its shapes (centre ({:.3}, {:.3}, {:.3}) m, semi-axes ({:.3}, {:.3}, {:.3}) m)",
                     j.name, c.x, c.y, c.z, e.centre.x, e.centre.y, e.centre.z, e.semi_axes.x, e.semi_axes.y, e.semi_axes.z
                 )
             })
-        })
-        .collect()
 }
 
 /// What the estimate's own checks said of the table, carried into the

@@ -75,8 +75,13 @@ pub struct Sampled {
     /// covariance's metric.
     pub moved: f64,
     /// Draws that were no body a robot can have as drawn, projected by the
-    /// estimate's bounded fit.
+    /// estimate's bounded fit, and how many of them each joint's body or
+    /// friction was outside its bounds in.
     pub projected: usize,
+    pub projected_by_joint: Vec<(String, usize)>,
+    /// The drawn base parameters' standard deviations over the
+    /// covariance's, before projection: smallest and largest.
+    pub drawn_std_ratio: (f64, f64),
     pub files: Vec<PathBuf>,
 }
 
@@ -178,12 +183,13 @@ struct Drawing {
 
 /// One draw mapped to bodies: them, their base parameters, how far the
 /// bounded fit moved them from the draw (χ² in the covariance's metric; 0
-/// for bodies as drawn) and whether it had to.
+/// for bodies as drawn) and the joints whose bodies or friction were no
+/// robot's as drawn (empty: not projected).
 struct Drawn {
     model: Model,
     base: DVector<f64>,
     moved: f64,
-    projected: bool,
+    outside: Vec<usize>,
 }
 
 impl Drawing {
@@ -263,12 +269,13 @@ impl Drawing {
         let step = &self.lift * (d - self.centre());
         let lifted: Vec<f64> = self.own.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
         let model = with_standard_parameters(&self.base.model, self.base.terms, &lifted);
-        if self.possible(&model) {
+        let outside = self.impossible(&model);
+        if outside.is_empty() {
             return Ok(Drawn {
                 base: map * DVector::from_column_slice(&lifted),
                 model,
                 moved: 0.0,
-                projected: false,
+                outside,
             });
         }
         let cov = &self.params.covariance;
@@ -280,24 +287,24 @@ impl Drawing {
             model: with_standard_parameters(&self.base.model, self.base.terms, &fit.standard),
             base,
             moved,
-            projected: true,
+            outside,
         })
     }
 
-    /// Bodies within the links' bounds (the estimate's: mass, centre of
-    /// mass in the shapes' ellipsoid, a positive definite inertia with the
-    /// triangle inequality) and friction ≥ 0.
-    fn possible(&self, model: &Model) -> bool {
-        model.validate().is_ok()
-            && crate::export::outside_bounds(model, &self.bounds).is_empty()
-            && model
-                .links
-                .iter()
-                .all(|l| l.inertia_com.symmetric_eigenvalues().min() > 0.0)
-            && model
-                .friction
-                .iter()
-                .all(|f| f.viscous_pos.min(f.viscous_neg).min(f.coulomb_pos).min(f.coulomb_neg) >= 0.0)
+    /// The joints whose body or friction no robot can have: outside the
+    /// link's bounds (the estimate's: mass, centre of mass in the shapes'
+    /// ellipsoid), an inertia that is not positive definite or breaks the
+    /// triangle inequality, friction < 0.
+    fn impossible(&self, model: &Model) -> Vec<usize> {
+        (0..model.dof())
+            .filter(|&i| {
+                let p = model.links[i].inertia_com.symmetric_eigenvalues();
+                let f = &model.friction[i];
+                crate::export::outside_bound(model, i, &self.bounds[i]).is_some()
+                    || !(p.min() > 0.0 && (0..3).all(|k| p[k] <= p[(k + 1) % 3] + p[(k + 2) % 3]))
+                    || !(f.viscous_pos.min(f.viscous_neg).min(f.coulomb_pos).min(f.coulomb_neg) >= 0.0)
+            })
+            .collect()
     }
 }
 
@@ -315,19 +322,21 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
     // identification's covariance, in order, then fitted in parallel: the
     // same at any thread count.
     let centre = drawing.centre();
-    let fitted: Vec<_> = draws(&centre, &drawing.params.covariance, args.draws, args.seed)
-        .par_iter()
-        .map(|d| drawing.fit(d))
-        .collect();
+    let drawn = draws(&centre, &drawing.params.covariance, args.draws, args.seed);
+    let fitted: Vec<_> = drawn.par_iter().map(|d| drawing.fit(d)).collect();
     let (mut models, mut base_values, mut moved, mut failed_why) = (Vec::new(), Vec::new(), 0.0, None);
     let mut projected = 0;
+    let mut by_joint = vec![0usize; drawing.base.model.dof()];
     for (k, f) in fitted.into_iter().enumerate() {
         match f {
             Ok(d) => {
                 models.push((k as u32, d.model));
                 base_values.push(d.base);
                 moved += d.moved;
-                projected += d.projected as usize;
+                projected += !d.outside.is_empty() as usize;
+                for &j in &d.outside {
+                    by_joint[j] += 1;
+                }
             }
             Err(e) => {
                 failed_why.get_or_insert(format!("draw {k}: {e}"));
@@ -338,21 +347,28 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
         return Err(ExportError::Draws(models.len()));
     }
     let failed = args.draws - models.len();
-    let moved = moved / models.len() as f64;
     let table: Vec<Vec<f64>> = models.iter().map(|(_, m)| values(m)).collect();
     let (parameters, correlation) = spread(&identified, &table);
+    let joints = drawing.base.model.joint_names();
+    let mut sampled = Sampled {
+        parameters,
+        correlation,
+        failed,
+        failed_why,
+        moved: moved / models.len() as f64,
+        projected,
+        projected_by_joint: joints.into_iter().zip(by_joint).collect(),
+        drawn_std_ratio: std_ratio(&drawn, &drawing.params.covariance),
+        base: base_values,
+        centre,
+        files: Vec::new(),
+    };
     let md = provenance(args, failed)?;
     let staging = robotid::output::prepare(&args.out, None, &[args.parameters.clone(), args.robot.clone()])?;
     let dir = staging.staged_out();
     let mut files = vec![PathBuf::from("samples.parquet")];
     write_parquet(&dir.join(&files[0]), &samples_table(&identified, &models, &table, &md)?)?;
-    let doc = randomization(
-        &identified,
-        &parameters,
-        &correlation,
-        &md,
-        (moved, centre.len(), projected),
-    );
+    let doc = randomization(&identified, &sampled, &md);
     for (file, text) in [
         ("randomization.json", serde_json::to_string_pretty(&doc)? + "\n"),
         ("randomization.yaml", yaml(&doc, 0)),
@@ -362,17 +378,22 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
     }
     files.extend(model_files(args, dir, &models)?);
     staging.commit()?;
-    Ok(Sampled {
-        parameters,
-        correlation,
-        failed,
-        failed_why,
-        base: base_values,
-        centre,
-        moved,
-        projected,
-        files,
-    })
+    sampled.files = files;
+    Ok(sampled)
+}
+
+/// The drawn base parameters' standard deviations over the covariance's,
+/// smallest and largest: the draws themselves, before any projection.
+fn std_ratio(drawn: &[DVector<f64>], covariance: &DMatrix<f64>) -> (f64, f64) {
+    let n = drawn.len() as f64;
+    (0..covariance.nrows())
+        .filter(|&i| covariance[(i, i)] > 0.0)
+        .map(|i| {
+            let mean = drawn.iter().map(|d| d[i]).sum::<f64>() / n;
+            let var = drawn.iter().map(|d| (d[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            (var / covariance[(i, i)]).sqrt()
+        })
+        .fold((f64::INFINITY, 0.0), |(a, b), r| (a.min(r), b.max(r)))
 }
 
 /// What the sample's files say of where they come from.
@@ -497,13 +518,8 @@ fn samples_table(
 }
 
 /// What `randomization.json` and `.yaml` hold.
-fn randomization(
-    identified: &Model,
-    parameters: &[Randomized],
-    correlation: &DMatrix<f64>,
-    md: &[(&str, String)],
-    (moved, p, projected): (f64, usize, usize),
-) -> serde_json::Value {
+fn randomization(identified: &Model, sampled: &Sampled, md: &[(&str, String)]) -> serde_json::Value {
+    let (parameters, correlation) = (&sampled.parameters, &sampled.correlation);
     use serde_json::json;
     let finite = |x: f64| if x.is_finite() { json!(x) } else { json!(null) };
     let rows: Vec<Vec<serde_json::Value>> = (0..correlation.nrows())
@@ -513,9 +529,11 @@ fn randomization(
         "robot": identified.name,
         "provenance": md.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
         "distribution": "base parameters drawn from N(the estimate's bodies' base parameters, the estimate's covariance); each draw made bodies by the standard-parameter step of least a-priori size from the estimate's own (what the data cannot tell stays the robot file's), or, where that is no body a robot can have, by the estimate's bounded fit (projected_draws); value: the estimate's own bodies (the exported model); mean and std over the draws; std 0: the quantity moves no torque (the data cannot tell it)",
-        "projected_draws": projected,
-        "bounded_fit_moved_chi2": moved,
-        "bounded_fit_moved": moved_said(moved, p),
+        "drawn_std_over_covariance": [sampled.drawn_std_ratio.0, sampled.drawn_std_ratio.1],
+        "projected_draws": sampled.projected,
+        "projected_by_joint": sampled.projected_by_joint.iter().map(|(j, n)| (j.clone(), json!(n))).collect::<serde_json::Map<_, _>>(),
+        "bounded_fit_moved_chi2": sampled.moved,
+        "bounded_fit_moved": moved_said(sampled.moved, sampled.centre.len()),
         "parameters": parameters.iter().map(|p| json!({
             "name": p.name, "joint": p.joint, "quantity": p.quantity, "unit": p.unit,
             "value": p.value, "mean": p.mean, "std": p.std,

@@ -56,6 +56,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     let p = done.base.first().map_or(0, |b| b.len());
+    println!(
+        "drawn: {} base parameters, their standard deviations {:.3}–{:.3}× the covariance's",
+        p, done.drawn_std_ratio.0, done.drawn_std_ratio.1
+    );
+    let by: Vec<String> = done
+        .projected_by_joint
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(j, n)| format!("{j} {n}"))
+        .collect();
+    println!(
+        "projected by the bounded fit: {} of {} draws (outside their bounds, per joint's body or friction: {})",
+        done.projected,
+        done.base.len(),
+        if by.is_empty() {
+            "none".to_string()
+        } else {
+            by.join(", ")
+        }
+    );
     println!("{}", robotid_report::sample::moved_said(done.moved, p));
     if done.failed > 0 {
         eprintln!(

@@ -31,6 +31,15 @@ fn assert_agree(what: &str, (mujoco, pinocchio): (f64, f64)) {
     assert!(pinocchio < 1e-9, "{what}: Pinocchio's rnea differs by {pinocchio:e}");
 }
 
+/// `robotid export` of `params` (physically consistent, for `robot`) into
+/// the new folder `dir`, checked in MuJoCo and Pinocchio as
+/// [`assert_agree`] says.
+pub fn exports_agree(what: &str, robot: &Path, params: &Path, dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let bin = Path::new(env!("CARGO_BIN_EXE_robotid"));
+    assert_agree(what, export_checked_in_simulators(bin, robot, params, dir));
+}
+
 /// The UR5 example's pipeline with the regressor and an estimate
 /// (physically consistent or not) added, run; its output folder.
 fn ur5_identified(ws: &Path, physical: bool) -> std::path::PathBuf {

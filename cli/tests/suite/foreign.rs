@@ -814,6 +814,16 @@ fn the_foreign_corpus_is_identified_or_refused() {
         }
         if case == "butter4_20" {
             samples_keep_the_distribution(&out, &robot);
+            // example-robot-data's UR5 URDF, patched, in Pinocchio; the
+            // MJCF in MuJoCo: rigid-body torques equal to robotid's.
+            let sim = out.join("sim");
+            super::export::exports_agree("UR5 (its URDF)", &robot, &out.join("parameters_physical.parquet"), &sim);
+            let is = std::fs::read_to_string(sim.join("identified.urdf")).unwrap();
+            let was = std::fs::read_to_string(&robot).unwrap();
+            assert_eq!(
+                robotid_tests::urdf_but_dynamics(&was),
+                robotid_tests::urdf_but_dynamics(&is)
+            );
         }
         if case.starts_with("gripper") {
             let locked = id.recordings[0]

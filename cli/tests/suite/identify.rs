@@ -7,7 +7,7 @@ use std::process::Command;
 
 use robotid::identify::design;
 use robotid::verdict::{Measured, Refusal};
-use robotid_identify::{Physical, Request};
+use robotid_identify::{Identification, Physical, Request};
 use robotid_stages::dynamics::{load_robot, FrictionTerms};
 use robotid_stages::estimation::{parameters_from_table, Covariance, Verdict as AdequacyVerdict};
 use robotid_stages::formats::parquet::read_parquet;
@@ -18,6 +18,15 @@ use super::ok;
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
+}
+
+/// The library's identify of `logs` for `robot` into `out`, the request
+/// otherwise as `edit` leaves it: what the command line prints, typed.
+fn identified(logs: Vec<PathBuf>, robot: &Path, out: &Path, edit: impl FnOnce(&mut Request)) -> Identification {
+    let mut request = Request::new(logs, robot.to_path_buf());
+    request.out = Some(out.to_path_buf());
+    edit(&mut request);
+    robotid_identify::identify_quietly(&request).unwrap()
 }
 
 /// The arm3 example with another period, harmonic subsets per joint and a
@@ -212,21 +221,14 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     let f = |n: u32| dir.join(format!("measurements_{n}.csv"));
     let robot = dir.join("kuka_lwr4.urdf");
     // The library's identify, read typed (the command line prints it).
-    let mut request = Request::new(vec![f(1)], robot.clone());
-    request.validate = vec![f(2), f(3)];
-    request.out = Some(out.clone());
-    request.accept_inadequate = true;
-    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let id = identified(vec![f(1)], &robot, &out, |r| {
+        r.validate = vec![f(2), f(3)];
+        r.accept_inadequate = true;
+    });
     let text = id.verdict.said();
     // The wrist's residue is far over the floor that 1.94 periods give
     // (1.2e-4 (N·m)² on lwr_6_joint, from the repeated 0.94 period): said.
-    let wrist = id
-        .estimate
-        .estimate
-        .adequacy
-        .iter()
-        .find(|a| a.joint == "lwr_6_joint")
-        .unwrap();
+    let wrist = id.estimate.estimate.adequacy_of("lwr_6_joint").unwrap();
     assert_eq!(wrist.verdict(), AdequacyVerdict::ModelErrorDominates, "{text}");
     // What decides is the relative error on the validation files, over
     // the default 5 % tolerance: refused (exit 3 without the flag) with
@@ -275,6 +277,15 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     // Bodies a robot could have: every exported link within [0.2×, 5×] of
     // the URDF's mass (the fit's bound; unbounded, one weighed 3714 kg and
     // another 0.0 kg), and inside its shapes (export refuses otherwise).
+    // The patched URDF in Pinocchio (the meshes are not shipped: no
+    // geometry) and the MJCF in MuJoCo: rigid-body torques equal to
+    // robotid's at 40 states.
+    super::export::exports_agree(
+        "LWR4+",
+        &robot,
+        &out.join("parameters_physical.parquet"),
+        &tmp.path().join("sim"),
+    );
     let file = robotid_stages::dynamics::load_urdf(&robot).unwrap();
     let exported = robotid_stages::dynamics::load_urdf(&out.join("identified.urdf")).unwrap();
     for ((a, b), j) in file.links.iter().zip(&exported.links).zip(&file.joints) {
@@ -324,10 +335,7 @@ fn real_kuka_lwr4_repeats_agree_within_the_robust_intervals() {
     let fit = |n: u32| -> (PathBuf, PathBuf) {
         let out = tmp.path().join(format!("id{n}"));
         let file = dir.join(format!("measurements_{n}.csv"));
-        let mut request = Request::new(vec![file], robot.clone());
-        request.out = Some(out.clone());
-        request.accept_inadequate = true;
-        let id = robotid_identify::identify_quietly(&request).unwrap();
+        let id = identified(vec![file], &robot, &out, |r| r.accept_inadequate = true);
         let from = id.estimate.estimate.covariance_from;
         assert_eq!(from, Covariance::Robust, "{}", id.verdict.said());
         let table = out.join(format!("measurements_{n}/measurements_{n}/regressor.parquet"));
@@ -508,9 +516,7 @@ fn joint_wise_recordings_give_the_decoupled_model() {
         .collect();
     let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
     let out = dir.path().join("id");
-    let mut request = Request::new(logs, robot);
-    request.out = Some(out.clone());
-    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let id = identified(logs, &robot, &out, |_| {});
     let text = id.verdict.said();
     for (i, r) in id.recordings.iter().enumerate() {
         let moving = r.design.joint_wise.as_ref().map(|(j, _)| j.as_str());
@@ -549,9 +555,7 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
     let rec = dir.path().join("rec");
     ok(&["simulate", s(&sim), "--out", s(&rec)]);
     let out = dir.path().join("id");
-    let mut request = Request::new(vec![rec.join("ur5.mcap")], robot);
-    request.out = Some(out.clone());
-    let id = robotid_identify::identify_quietly(&request).unwrap();
+    let id = identified(vec![rec.join("ur5.mcap")], &robot, &out, |_| {});
     let design = &id.recordings[0].design;
     assert_eq!(design.regressor.friction, FrictionTerms::Asymmetric);
     // Said in the pipeline file with both scores…
@@ -561,13 +565,7 @@ fn friction_that_differs_by_direction_is_chosen_asymmetric() {
     let scores = design.periodic().and_then(|p| p.friction_scores).expect("scored");
     let asymmetric = scores.asymmetric.expect("fitted");
     assert!(asymmetric < 1.05 && scores.symmetric > asymmetric, "{scores:?}");
-    let shoulder = id
-        .estimate
-        .estimate
-        .adequacy
-        .iter()
-        .find(|a| a.joint == "shoulder_lift_joint")
-        .unwrap();
+    let shoulder = id.estimate.estimate.adequacy_of("shoulder_lift_joint").unwrap();
     assert_eq!(shoulder.verdict(), AdequacyVerdict::Adequate, "{}", id.verdict.said());
     let (names, v, sd) = parameters(&out.join("parameters.parquet"));
     for (name, truth) in [("Fc+_shoulder_lift_joint", 4.5), ("Fc-_shoulder_lift_joint", 3.5)] {

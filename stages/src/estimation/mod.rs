@@ -163,6 +163,11 @@ pub struct Estimate {
 
 impl Estimate {
     /// The joints where model error dominates.
+    /// The adequacy figures of `joint` (None: it has no rows).
+    pub fn adequacy_of(&self, joint: &str) -> Option<&JointAdequacy> {
+        self.adequacy.iter().find(|a| a.joint == joint)
+    }
+
     pub fn inadequate(&self) -> Vec<&JointAdequacy> {
         self.adequacy
             .iter()
