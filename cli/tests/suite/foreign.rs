@@ -818,6 +818,10 @@ fn the_foreign_corpus_is_identified_or_refused() {
             // MJCF in MuJoCo: rigid-body torques equal to robotid's.
             let sim = out.join("sim");
             super::export::exports_agree("UR5 (its URDF)", &robot, &out.join("parameters_physical.parquet"), &sim);
+            // The MJCF is seen and collides: the URDF's collision meshes (the
+            // base's and each link's STL) are its geoms.
+            let mjcf = std::fs::read_to_string(sim.join("identified.xml")).unwrap();
+            assert_eq!(mjcf.matches("<geom type=\"mesh\"").count(), 7, "{mjcf}");
             let is = std::fs::read_to_string(sim.join("identified.urdf")).unwrap();
             let was = std::fs::read_to_string(&robot).unwrap();
             assert_eq!(

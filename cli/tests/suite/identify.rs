@@ -667,6 +667,13 @@ fn identify_is_atomic_and_keeps_the_users_files() {
         } else {
             all += 1;
             assert_eq!(seen, files, "trial {trial}: a partial identify output");
+            // Killed between the exchange and removing the old state, the
+            // run leaves that beside the folder (`.<out>.robotid-next-<pid>`):
+            // the next run on the folder removes it, and refuses the full
+            // folder without touching it.
+            let o = identify(&out).wait_with_output().unwrap();
+            assert_eq!(o.status.code(), Some(1), "trial {trial}");
+            assert_eq!(visible(&out).into_keys().collect::<Vec<_>>(), files, "trial {trial}");
         }
     }
     assert_eq!(std::fs::read(dir.path().join("lab-notes.txt")).unwrap(), b"arm 3, warm");

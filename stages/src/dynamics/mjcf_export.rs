@@ -9,13 +9,16 @@
 //! Coulomb friction (MuJoCo's dry friction is symmetric: the mean of the
 //! two signs). What MJCF cannot hold — asymmetric friction, the Coulomb
 //! transition, offsets — goes into a `robotid:` comment beside each joint
-//! and into the export's sidecar.
+//! and into the export's sidecar. The robot file's shapes (URDF collision
+//! shapes, else visual ones) are each body's `<geom>`s, meshes as assets
+//! at their STL files' absolute paths, so that the model is seen and
+//! collides; the explicit inertials, not the geoms, give the mass.
 
 use std::fmt::Write;
 
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion, Vector3};
 
-use super::model::Model;
+use super::model::{Geometry, Model, Shape};
 
 /// Numbers in their shortest exact form, with an exponent when tiny or huge.
 fn v3(v: &Vector3<f64>) -> String {
@@ -39,6 +42,92 @@ pub fn principal_axes(inertia: &Matrix3<f64>) -> (Vector3<f64>, Matrix3<f64>) {
     (eig.eigenvalues, axes)
 }
 
+/// The mesh files a model's shapes name, each once per scale, as MJCF
+/// assets.
+struct Meshes(Vec<(std::path::PathBuf, Vector3<f64>)>);
+
+impl Meshes {
+    fn of(model: &Model) -> Meshes {
+        let mut files = Vec::new();
+        for shape in model.base_shapes.iter().chain(model.shapes.iter().flatten()) {
+            if let Geometry::Mesh {
+                file: Some(f), scale, ..
+            } = &shape.geometry
+            {
+                if !files.contains(&(f.clone(), *scale)) {
+                    files.push((f.clone(), *scale));
+                }
+            }
+        }
+        Meshes(files)
+    }
+
+    /// The `<asset>` block (empty without meshes).
+    fn assets(&self) -> String {
+        if self.0.is_empty() {
+            return String::new();
+        }
+        let mut s = String::from("  <asset>\n");
+        for (k, (f, scale)) in self.0.iter().enumerate() {
+            let scale = match *scale == Vector3::new(1.0, 1.0, 1.0) {
+                true => String::new(),
+                false => format!(" scale=\"{}\"", v3(scale)),
+            };
+            let _ = writeln!(
+                s,
+                "    <mesh name=\"mesh{k}\" file=\"{}\"{scale}/>",
+                xml_attr(&f.display().to_string())
+            );
+        }
+        s.push_str("  </asset>\n");
+        s
+    }
+
+    /// A `<geom>` per shape, each line led by `pad`; a mesh MuJoCo cannot
+    /// read (not found, or not an STL) said in a comment instead.
+    fn geoms(&self, shapes: &[Shape], pad: &str) -> String {
+        let mut s = String::new();
+        for shape in shapes {
+            let at = format!("pos=\"{}\" quat=\"{}\"", v3(&shape.position), quat(&shape.rotation));
+            let geom = match &shape.geometry {
+                Geometry::Box(h) => format!("type=\"box\" size=\"{}\"", v3(h)),
+                Geometry::Cylinder { radius, half_length } => {
+                    format!("type=\"cylinder\" size=\"{radius:?} {half_length:?}\"")
+                }
+                Geometry::Capsule { radius, half_length } => {
+                    format!("type=\"capsule\" size=\"{radius:?} {half_length:?}\"")
+                }
+                Geometry::Sphere(r) => format!("type=\"sphere\" size=\"{r:?}\""),
+                Geometry::Mesh {
+                    file: Some(f), scale, ..
+                } => {
+                    let k = self
+                        .0
+                        .iter()
+                        .position(|x| x.0 == *f && x.1 == *scale)
+                        .unwrap_or_default();
+                    format!("type=\"mesh\" mesh=\"mesh{k}\"")
+                }
+                Geometry::Mesh { name, .. } => {
+                    let _ = writeln!(
+                        s,
+                        "{pad}<!-- robotid: mesh {} not drawn (not found as an STL file, which MuJoCo reads) -->",
+                        name.replace("--", "- -")
+                    );
+                    continue;
+                }
+            };
+            let _ = writeln!(s, "{pad}<geom {geom} {at}/>");
+        }
+        s
+    }
+}
+
+/// `text` escaped for a double-quoted XML attribute.
+fn xml_attr(text: &str) -> String {
+    text.replace('&', "&amp;").replace('"', "&quot;").replace('<', "&lt;")
+}
+
 /// The MJCF text of `model`; `note` goes into a comment at the top.
 pub fn to_mjcf(model: &Model, note: &str) -> String {
     let mut s = String::new();
@@ -46,7 +135,10 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
     let _ = writeln!(s, "<mujoco model=\"{}\">", model.name);
     let _ = writeln!(s, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
     let _ = writeln!(s, "  <option gravity=\"{}\"/>", v3(&model.gravity));
+    let meshes = Meshes::of(model);
+    s.push_str(&meshes.assets());
     let _ = writeln!(s, "  <worldbody>");
+    s.push_str(&meshes.geoms(&model.base_shapes, "    "));
     let n = model.dof();
     for (i, j) in model.joints.iter().enumerate() {
         let pad = "  ".repeat(i + 2);
@@ -86,6 +178,7 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg)
         );
+        s.push_str(&meshes.geoms(model.shapes.get(i).map_or(&[], Vec::as_slice), &format!("{pad}  ")));
     }
     for i in (0..n).rev() {
         let _ = writeln!(s, "{}</body>", "  ".repeat(i + 2));

@@ -233,6 +233,45 @@ pub struct Model {
     /// shapes, else visual ones), when the description has them: where
     /// its mass can be (the physical fit's bounds).
     pub extents: Vec<Option<Extent>>,
+    /// Per link, its shapes in its frame (URDF collision shapes, else
+    /// visual ones), for the exports' geometry; empty where the
+    /// description has none.
+    pub shapes: Vec<Vec<Shape>>,
+    /// The base's shapes (the links before the first moving joint), in the
+    /// base frame.
+    pub base_shapes: Vec<Shape>,
+}
+
+/// A shape of a link, placed in its frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shape {
+    pub geometry: Geometry,
+    pub rotation: Matrix3<f64>,
+    pub position: Vector3<f64>,
+}
+
+/// What a shape is, m.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Geometry {
+    /// Half the box's sides.
+    Box(Vector3<f64>),
+    /// About the shape's z axis.
+    Cylinder {
+        radius: f64,
+        half_length: f64,
+    },
+    Capsule {
+        radius: f64,
+        half_length: f64,
+    },
+    Sphere(f64),
+    /// A mesh as the description names it, and the STL file it resolved to
+    /// (None: not found, or not an STL).
+    Mesh {
+        name: String,
+        file: Option<std::path::PathBuf>,
+        scale: Vector3<f64>,
+    },
 }
 
 /// An axis-aligned box in a link's frame, m.
@@ -363,6 +402,8 @@ impl Model {
             locked: Vec::new(),
             drives_declared: false,
             extents: Vec::new(),
+            shapes: Vec::new(),
+            base_shapes: Vec::new(),
         }
     }
 

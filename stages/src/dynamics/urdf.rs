@@ -15,7 +15,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Unit, Vector3};
 use urdf_rs::JointType;
 
-use super::model::{rpy_rotation, Drive, Extent, Friction, Inertial, Joint, Limits, Model};
+use super::model::{rpy_rotation, Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape};
 use crate::{Error, Result};
 
 /// A rigid transform (rotation, translation).
@@ -257,18 +257,20 @@ fn push_revolute(model: &mut Model, j: &urdf_rs::Joint, origin: Frame, path: &Pa
     Ok(())
 }
 
-/// A URDF link's inertial in the frame `frame` places it in; its shapes'
-/// box merged into `extent`, the box of the moving link it joins.
+/// A URDF link's inertial in the frame `frame` places it in; its shapes
+/// and their box merged `into` the moving link's it joins.
 fn link_inertial(
     l: &urdf_rs::Link,
     frame: &Frame,
     path: &Path,
-    extent: &std::cell::RefCell<Option<Extent>>,
+    into: &std::cell::RefCell<(Option<Extent>, Vec<Shape>)>,
 ) -> Inertial {
-    if let Some(e) = shapes_extent(l, frame, path) {
-        let mut x = extent.borrow_mut();
-        *x = Some(x.map_or(e, |x| x.union(&e)));
+    let shapes = link_shapes(l, frame, path);
+    let mut x = into.borrow_mut();
+    if let Some(e) = shapes_extent(&shapes) {
+        x.0 = Some(x.0.map_or(e, |x| x.union(&e)));
     }
+    x.1.extend(shapes);
     let (r, p) = compose(frame, &pose(&l.inertial.origin));
     let i = &l.inertial.inertia;
     let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
@@ -276,6 +278,16 @@ fn link_inertial(
         mass: l.inertial.mass.value,
         com: p,
         inertia_com: r * local * r.transpose(),
+    }
+}
+
+/// The shapes and box `found` for the current moving link (if any) are
+/// its: into `model`, `found` emptied for the next.
+fn close_link(model: &mut Model, found: &std::cell::RefCell<(Option<Extent>, Vec<Shape>)>) {
+    if !model.links.is_empty() {
+        let (extent, shapes) = std::mem::take(&mut *found.borrow_mut());
+        model.extents.push(extent);
+        model.shapes.push(shapes);
     }
 }
 
@@ -321,17 +333,19 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     let at = |j: &urdf_rs::Joint| locked.get(&j.name).copied().unwrap_or(0.0);
     let rigid = |j: &urdf_rs::Joint| compose(&pose(&j.origin), &motion(j, at(j)));
     // The shapes of the URDF links merged into the current moving link,
-    // as a box in its frame (meshes: their STL's vertices, when found).
-    let extent = std::cell::RefCell::new(None::<Extent>);
-    let inertial_of = |name: &str, frame: &Frame| link_inertial(links[name], frame, path, &extent);
+    // and the box they fill in its frame (meshes: their STL's vertices,
+    // when found).
+    let found = std::cell::RefCell::new((None::<Extent>, Vec::new()));
+    let inertial_of = |name: &str, frame: &Frame| link_inertial(links[name], frame, path, &found);
     let mut model = Model::empty(&robot.name, Vector3::new(0.0, 0.0, -9.81));
     // `frame`: the current URDF link's frame in the current moving link's
     // frame (or the base frame before the first moving joint).
     let mut frame: Frame = (Matrix3::identity(), Vector3::zeros());
     let mut link = root;
     loop {
-        if let Some(last) = model.links.last_mut() {
-            *last = last.merge(&inertial_of(link, &frame));
+        match model.links.last_mut() {
+            Some(last) => *last = last.merge(&inertial_of(link, &frame)),
+            None => model.base_shapes.extend(link_shapes(links[link], &frame, path)),
         }
         // One child leads to the next moving joint; the others are rigid parts.
         let kids = children.get(link).map(Vec::as_slice).unwrap_or_default();
@@ -362,16 +376,12 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
             (frame, link) = (compose(&frame, &rigid(j)), &j.child.link);
             continue;
         }
-        if !model.links.is_empty() {
-            model.extents.push(extent.borrow_mut().take());
-        }
+        close_link(&mut model, &found);
         push_revolute(&mut model, j, origin, path)?;
         frame = (Matrix3::identity(), Vector3::zeros());
         link = &j.child.link;
     }
-    if !model.links.is_empty() {
-        model.extents.push(extent.borrow_mut().take());
-    }
+    close_link(&mut model, &found);
     model.end_effector = tool_point(link, frame, &children, &rigid);
     model.warnings = warnings;
     model.locked = locked.into_iter().collect();
@@ -381,34 +391,61 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     Ok(model)
 }
 
-/// The box a URDF link's collision shapes (else its visual ones) fill,
-/// in the frame `frame` places the link in; None without shapes, or with
-/// a mesh whose file is not found or not an STL.
-fn shapes_extent(link: &urdf_rs::Link, frame: &Frame, urdf: &Path) -> Option<Extent> {
+/// A URDF link's collision shapes (else its visual ones), placed by
+/// `frame` (meshes resolved to their STL files where found).
+fn link_shapes(link: &urdf_rs::Link, frame: &Frame, urdf: &Path) -> Vec<Shape> {
     let shapes: Vec<(&urdf_rs::Pose, &urdf_rs::Geometry)> = if link.collision.is_empty() {
         link.visual.iter().map(|v| (&v.origin, &v.geometry)).collect()
     } else {
         link.collision.iter().map(|c| (&c.origin, &c.geometry)).collect()
     };
+    shapes
+        .into_iter()
+        .map(|(origin, geometry)| {
+            let (rotation, position) = compose(frame, &pose(origin));
+            let geometry = match geometry {
+                urdf_rs::Geometry::Box { size } => Geometry::Box(Vector3::new(size[0], size[1], size[2]) * 0.5),
+                urdf_rs::Geometry::Cylinder { radius, length } => Geometry::Cylinder {
+                    radius: *radius,
+                    half_length: 0.5 * length,
+                },
+                urdf_rs::Geometry::Capsule { radius, length } => Geometry::Capsule {
+                    radius: *radius,
+                    half_length: 0.5 * length,
+                },
+                urdf_rs::Geometry::Sphere { radius } => Geometry::Sphere(*radius),
+                urdf_rs::Geometry::Mesh { filename, scale } => Geometry::Mesh {
+                    name: filename.clone(),
+                    file: super::stl::resolve(filename, urdf),
+                    scale: scale.map_or(Vector3::new(1.0, 1.0, 1.0), |s| Vector3::new(s[0], s[1], s[2])),
+                },
+            };
+            Shape {
+                geometry,
+                rotation,
+                position,
+            }
+        })
+        .collect()
+}
+
+/// The box `shapes` fill; None without shapes, or with a mesh whose file
+/// is not found or not an STL.
+fn shapes_extent(shapes: &[Shape]) -> Option<Extent> {
     let mut out: Option<Extent> = None;
-    for (origin, geometry) in shapes {
-        let h = |x: f64, y: f64, z: f64| Extent {
-            min: Vector3::new(-x, -y, -z),
-            max: Vector3::new(x, y, z),
-        };
-        let local = match geometry {
-            urdf_rs::Geometry::Box { size } => h(0.5 * size[0], 0.5 * size[1], 0.5 * size[2]),
-            urdf_rs::Geometry::Cylinder { radius, length } => h(*radius, *radius, 0.5 * length),
-            urdf_rs::Geometry::Capsule { radius, length } => h(*radius, *radius, 0.5 * length + radius),
-            urdf_rs::Geometry::Sphere { radius } => h(*radius, *radius, *radius),
-            urdf_rs::Geometry::Mesh { filename, scale } => {
-                let s = scale.map_or(Vector3::new(1.0, 1.0, 1.0), |s| Vector3::new(s[0], s[1], s[2]));
-                let e = super::stl::extent(&super::stl::resolve(filename, urdf)?).ok()?;
-                Extent::of_points([e.min.component_mul(&s), e.max.component_mul(&s)])?
+    for shape in shapes {
+        let h = |v: Vector3<f64>| Extent { min: -v, max: v };
+        let local = match &shape.geometry {
+            Geometry::Box(half) => h(*half),
+            Geometry::Cylinder { radius, half_length } => h(Vector3::new(*radius, *radius, *half_length)),
+            Geometry::Capsule { radius, half_length } => h(Vector3::new(*radius, *radius, half_length + radius)),
+            Geometry::Sphere(r) => h(Vector3::new(*r, *r, *r)),
+            Geometry::Mesh { file, scale, .. } => {
+                let e = super::stl::extent(file.as_ref()?).ok()?;
+                Extent::of_points([e.min.component_mul(scale), e.max.component_mul(scale)])?
             }
         };
-        let placed = compose(frame, &pose(origin));
-        let e = Extent::of_points(local.corners().map(|c| placed.0 * c + placed.1))?;
+        let e = Extent::of_points(local.corners().map(|c| shape.rotation * c + shape.position))?;
         if !(e.min.iter().chain(e.max.iter()).all(|v| v.is_finite())) {
             return None;
         }
