@@ -148,6 +148,11 @@ pub struct Identification {
     /// The estimate validated on the held-out recordings.
     pub validation: Option<Box<Validated>>,
     pub physical: Physical,
+    /// The report's rollouts (multiple shooting, every
+    /// `ROLLOUT_WINDOW_S`): on each validation record (else each
+    /// identification one), the estimate's and the robot file's position
+    /// and velocity errors; Err: why there are none, as the report says.
+    pub rollouts: robotid_report::report::Rolled,
 }
 
 impl Identification {

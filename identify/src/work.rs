@@ -65,7 +65,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         observer,
     )?;
     let fitted = matches!(physical, Physical::Fitted { .. });
-    robotid_report::report::write(&robotid_report::report::Page {
+    let rollouts = robotid_report::report::write(&robotid_report::report::Page {
         parameters: "parameters.parquet".into(),
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
@@ -89,6 +89,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         unjudged: judged.unjudged,
         validation,
         physical,
+        rollouts,
     })
 }
 

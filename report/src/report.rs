@@ -528,8 +528,13 @@ pub struct Page {
     pub within: std::path::PathBuf,
 }
 
-/// The report of `page`, written to `page.out`.
-pub fn write(page: &Page) -> Result<()> {
+/// What a page rolled out: per record, the estimate's and the robot file's
+/// rollouts (None: not asked for, or no robot file; Err: why not, as the
+/// page says).
+pub type Rolled = Option<std::result::Result<Vec<robotid::validation::RolledOut>, String>>;
+
+/// The report of `page`, written to `page.out`; its rollouts returned.
+pub fn write(page: &Page) -> Result<Rolled> {
     let within = |p: &std::path::Path| page.within.join(p);
     let params = robotid::tables::read_parameters(&within(&page.parameters))?;
     let load = |tables: &[std::path::PathBuf]| {
@@ -587,18 +592,19 @@ pub fn write(page: &Page) -> Result<()> {
         &sets,
         physical.as_ref(),
     )?;
-    if let Some(rolled) = rolled {
+    if let Some(rolled) = &rolled {
         let section = match rolled {
-            Ok(rolled) => rollouts_html(&rolled)?,
+            Ok(rolled) => rollouts_html(rolled)?,
             Err(e) => format!(
                 "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
-                esc(&e)
+                esc(e)
             ),
         };
         let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
         text.insert_str(end, &section);
     }
-    crate::plot::write_text(&within(&page.out), &text)
+    crate::plot::write_text(&within(&page.out), &text)?;
+    Ok(rolled)
 }
 
 /// The report of a run with an `estimate` stage: its parameters against

@@ -857,14 +857,11 @@ fn the_foreign_corpus_is_identified_or_refused() {
                 is.contains(r#"<mass value="1.2"/>"#) && is.contains(r#"<mass value="0.3"/>"#),
                 "{case}"
             );
-            let rolled = ::robotid::validation::rollouts(
-                &out,
-                Path::new("parameters.parquet"),
-                &robot,
-                &[PathBuf::from("excitation/excitation/regressor.parquet")],
-                0.5,
-            )
-            .unwrap_or_else(|e| panic!("{case}: the rollout: {e}"));
+            let rolled = match &id.rollouts {
+                Some(Ok(rolled)) => rolled,
+                Some(Err(e)) => panic!("{case}: the rollout: {e}"),
+                None => panic!("{case}: not rolled out"),
+            };
             let estimate = rolled[0].estimate.as_ref().expect("simulated");
             assert_eq!(estimate.q_rms.len(), 6, "{case}: the arm's joints");
         }
