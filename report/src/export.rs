@@ -10,8 +10,8 @@ use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, Str
 use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, parameter_unit, patch_urdf, standard_parameters, to_mjcf, to_urdf, with_standard_parameters,
-    Model, Patched,
+    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model, Patched,
+    UrdfPatch,
 };
 use robotid_stages::estimation::{physically_consistent, LinkBound};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
@@ -146,14 +146,18 @@ fn simulable(identified: &Model, parameters: &Path) -> Result<()> {
 /// The estimate's own consistent model (`stored`), unless another prior
 /// weight is asked for (or the table predates it being stored): then
 /// fitted again.
-fn consistent(
+pub(crate) fn consistent(
     params: &robotid_stages::estimation::Parameters,
     base: &robotid_stages::dynamics::BaseRegressor,
     map: &nalgebra::DMatrix<f64>,
     names: &[String],
-    stored: Option<Vec<f64>>,
     prior_weight: Option<f64>,
 ) -> Result<Consistent> {
+    let stored: Option<Vec<f64>> = params
+        .metadata
+        .get(metadata::PHYSICAL_STANDARD)
+        .and_then(|s| serde_json::from_str(s).ok())
+        .filter(|v: &Vec<f64>| v.len() == names.len());
     Ok(match (stored, prior_weight) {
         (Some(standard), None) => Consistent {
             standard,
@@ -197,23 +201,10 @@ pub fn export(args: &Export) -> Result<Exported> {
     if let Some(w) = args.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
         return Err(ExportError::PriorWeight(w));
     }
-    let (params, _, base) = robotid::tables::identified(&args.robot, &args.within.join(&args.parameters))?;
-    let Some(map) = base.map() else {
-        return Err(ExportError::Decoupled);
-    };
-    if !params.metadata.contains_key(metadata::PHYSICAL) {
-        return Err(ExportError::NotPhysical {
-            parameters: args.parameters.clone(),
-            robot: args.robot.clone(),
-        });
-    }
+    let (params, base) = physical_table(&args.robot, &args.within.join(&args.parameters), &args.parameters)?;
+    let map = base.map().ok_or(ExportError::Decoupled)?;
     let names = parameter_names(&base.model, base.terms);
-    let stored: Option<Vec<f64>> = params
-        .metadata
-        .get(metadata::PHYSICAL_STANDARD)
-        .and_then(|s| serde_json::from_str(s).ok())
-        .filter(|v: &Vec<f64>| v.len() == names.len());
-    let fit = consistent(&params, &base, map, &names, stored, args.prior_weight)?;
+    let fit = consistent(&params, &base, map, &names, args.prior_weight)?;
     let identified = with_standard_parameters(&base.model, base.terms, &fit.standard);
     simulable(&identified, &args.parameters)?;
     let prior = standard_parameters(&base.model, base.terms);
@@ -239,28 +230,13 @@ pub fn export(args: &Export) -> Result<Exported> {
         args.parameters.display(),
         args.robot.display(),
     );
-    let short = format!(
-        "identified by robotid {} from {}, physically consistent (the sidecar has its provenance)",
-        env!("CARGO_PKG_VERSION"),
-        args.parameters.display()
-    );
-    let patched = patched_urdf(&args.robot, &identified, &short)?;
-    if let Some((text, links)) = &patched {
-        warnings.extend(relative_meshes(text));
-        warnings.extend(links.iter().filter_map(|p| p.said.clone()));
-    }
+    let (urdf, patched) = urdf_of(args, &identified, &note, &mut warnings)?;
     let stem = stem(&args.out, &args.formats);
     // Everything is made before anything is written.
     let mut files: Vec<(PathBuf, Output)> = Vec::new();
     for f in dedup(&args.formats) {
         match f {
-            Format::Urdf => files.push((
-                with_ext(&stem, "urdf"),
-                Output::Text(match &patched {
-                    Some((text, _)) => text.clone(),
-                    None => to_urdf(&identified, &note),
-                }),
-            )),
+            Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(urdf.clone()))),
             Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
             Format::Sidecar => {
                 let batch = read_parquet(&args.within.join(&args.parameters))?;
@@ -276,7 +252,7 @@ pub fn export(args: &Export) -> Result<Exported> {
                     map,
                     warnings: &warnings,
                     bounds: &bounds,
-                    patched: patched.as_ref().map(|(_, p)| p.as_slice()),
+                    patched: patched.as_deref(),
                 };
                 files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
                 files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
@@ -291,9 +267,34 @@ pub fn export(args: &Export) -> Result<Exported> {
     })
 }
 
-/// The robot file's own URDF with `model`'s bodies and friction written
-/// into it (None: the robot file is not a URDF).
-fn patched_urdf(robot: &Path, model: &Model, note: &str) -> Result<Option<(String, Vec<Patched>)>> {
+/// The URDF export: the robot file's own, patched, where it is a URDF (the
+/// links lumped or carried, and meshes named relative to it, said in
+/// `warnings` where they need the user), else one made from the model.
+fn urdf_of(
+    args: &Export,
+    identified: &Model,
+    note: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(String, Option<Vec<Patched>>)> {
+    let Some(user) = user_urdf(&args.robot, identified)? else {
+        return Ok((to_urdf(identified, note), None));
+    };
+    let short = format!(
+        "identified by robotid {} from {}, physically consistent (the sidecar has its provenance)",
+        env!("CARGO_PKG_VERSION"),
+        args.parameters.display()
+    );
+    let (text, links) = user
+        .apply(identified, &short)
+        .map_err(|p| patch_error(&args.robot, p))?;
+    warnings.extend(relative_meshes(&text));
+    warnings.extend(links.iter().filter_map(|p| p.said.clone()));
+    Ok((text, Some(links)))
+}
+
+/// The robot file's own URDF read for patching with models of it like
+/// `model` (None: the robot file is not a URDF).
+pub(crate) fn user_urdf(robot: &Path, model: &Model) -> Result<Option<UrdfPatch>> {
     if !robot.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf")) {
         return Ok(None);
     }
@@ -301,11 +302,16 @@ fn patched_urdf(robot: &Path, model: &Model, note: &str) -> Result<Option<(Strin
         path: robot.to_path_buf(),
         source,
     })?;
-    let patched = patch_urdf(&text, robot, model, note).map_err(|problem| ExportError::Patch {
+    Ok(Some(
+        UrdfPatch::new(text, robot, model).map_err(|problem| patch_error(robot, problem))?,
+    ))
+}
+
+pub(crate) fn patch_error(robot: &Path, problem: String) -> ExportError {
+    ExportError::Patch {
         robot: robot.to_path_buf(),
         problem,
-    })?;
-    Ok(Some(patched))
+    }
 }
 
 /// Mesh files a URDF names by a path relative to its own folder: they
@@ -329,9 +335,33 @@ fn relative_meshes(urdf: &str) -> Option<String> {
     })
 }
 
+/// The parameters table at `path` (named `shown`) with the robot it was
+/// identified for; refused unless it is a physically consistent estimate
+/// of the chain model.
+pub(crate) fn physical_table(
+    robot: &Path,
+    path: &Path,
+    shown: &Path,
+) -> Result<(
+    robotid_stages::estimation::Parameters,
+    Arc<robotid_stages::dynamics::BaseRegressor>,
+)> {
+    let (params, _, base) = robotid::tables::identified(robot, path)?;
+    if base.map().is_none() {
+        return Err(ExportError::Decoupled);
+    }
+    if !params.metadata.contains_key(metadata::PHYSICAL) {
+        return Err(ExportError::NotPhysical {
+            parameters: shown.to_path_buf(),
+            robot: robot.to_path_buf(),
+        });
+    }
+    Ok((params, base))
+}
+
 /// Physically consistent standard parameters and how they were obtained.
-struct Consistent {
-    standard: Vec<f64>,
+pub(crate) struct Consistent {
+    pub(crate) standard: Vec<f64>,
     how: String,
     /// What the export says of it.
     said: String,

@@ -16,7 +16,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, patch_urdf, prior_scales, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
+    parameter_names, prior_scales, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
 };
 use robotid_stages::estimation::{link_bounds, physically_consistent};
 use robotid_stages::formats::parquet::write_parquet;
@@ -172,8 +172,10 @@ struct Drawing {
     bounds: Vec<robotid_stages::estimation::LinkBound>,
     /// The covariance's (pseudo-)inverse: χ² between two base vectors.
     inverse: DMatrix<f64>,
-    /// The estimate's bodies, as standard parameters.
+    /// The estimate's bodies, as standard parameters, and their base
+    /// parameters: the draws' centre.
     own: Vec<f64>,
+    centre: DVector<f64>,
     /// The estimate's own prior weight (None: chosen again).
     weight: Option<f64>,
     /// A base-parameter step into the standard step of least a-priori
@@ -194,33 +196,16 @@ struct Drawn {
 
 impl Drawing {
     fn of(args: &Sample) -> Result<Drawing> {
-        let (params, _, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
+        let (params, base) = crate::export::physical_table(&args.robot, &args.parameters, &args.parameters)?;
         let map = base.map().ok_or(ExportError::Decoupled)?;
-        if !params.metadata.contains_key(metadata::PHYSICAL) {
-            return Err(ExportError::NotPhysical {
-                parameters: args.parameters.clone(),
-                robot: args.robot.clone(),
-            });
-        }
         let names = parameter_names(&base.model, base.terms);
         let prior = standard_parameters(&base.model, base.terms);
         let bounds = link_bounds(&base.model, &prior);
-        let stored: Option<Vec<f64>> = params
-            .metadata
-            .get(metadata::PHYSICAL_STANDARD)
-            .and_then(|s| serde_json::from_str(s).ok())
-            .filter(|v: &Vec<f64>| v.len() == names.len());
         let weight = params
             .metadata
             .get(metadata::PHYSICAL_PRIOR_WEIGHT)
             .and_then(|w| w.parse().ok());
-        let own = match stored {
-            Some(s) => s,
-            None => {
-                physically_consistent(&names, &prior, map, &params.values, &params.covariance, &bounds, weight)?
-                    .standard
-            }
-        };
+        let own = crate::export::consistent(&params, &base, map, &names, None)?.standard;
         let s2 = DMatrix::from_diagonal(&DVector::from_vec(prior_scales(&names, &prior)).map(|x| x * x));
         let gram = (map * &s2 * map.transpose())
             .pseudo_inverse(1e-12)
@@ -229,6 +214,7 @@ impl Drawing {
                 problem: format!("its base map cannot be inverted: {e}"),
             })?;
         let lift = &s2 * map.transpose() * gram;
+        let centre = map * DVector::from_column_slice(&own);
         let inverse = params
             .covariance
             .clone()
@@ -245,6 +231,7 @@ impl Drawing {
             bounds,
             inverse,
             own,
+            centre,
             weight,
             lift,
         })
@@ -254,11 +241,6 @@ impl Drawing {
         self.base.map().expect("the chain model's")
     }
 
-    /// The estimate's bodies' base parameters: the draws' centre.
-    fn centre(&self) -> DVector<f64> {
-        self.map() * DVector::from_column_slice(&self.own)
-    }
-
     /// Draw `d` as bodies: the estimate's own moved by the standard step of
     /// least a-priori size that makes the draw (exact, and nothing moves
     /// that the data cannot tell); where that is no body a robot can have
@@ -266,7 +248,7 @@ impl Drawing {
     /// fit of the draw.
     fn fit(&self, d: &DVector<f64>) -> std::result::Result<Drawn, String> {
         let map = self.map();
-        let step = &self.lift * (d - self.centre());
+        let step = &self.lift * (d - &self.centre);
         let lifted: Vec<f64> = self.own.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
         let model = with_standard_parameters(&self.base.model, self.base.terms, &lifted);
         let outside = self.impossible(&model);
@@ -321,7 +303,7 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
     // Drawn around the estimate's own bodies (the exported model) with the
     // identification's covariance, in order, then fitted in parallel: the
     // same at any thread count.
-    let centre = drawing.centre();
+    let centre = drawing.centre.clone();
     let drawn = draws(&centre, &drawing.params.covariance, args.draws, args.seed);
     let fitted: Vec<_> = drawn.par_iter().map(|d| drawing.fit(d)).collect();
     let (mut models, mut base_values, mut moved, mut failed_why) = (Vec::new(), Vec::new(), 0.0, None);
@@ -576,14 +558,10 @@ fn yaml(v: &serde_json::Value, indent: usize) -> String {
 
 /// One model file per draw and format (`draw_00000.urdf`, `.xml`).
 fn model_files(args: &Sample, dir: &Path, models: &[(u32, Model)]) -> Result<Vec<PathBuf>> {
-    let user = match args.formats.contains(&Format::Urdf)
-        && args.robot.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"))
-    {
-        true => Some(std::fs::read_to_string(&args.robot).map_err(|source| ExportError::Io {
-            path: args.robot.clone(),
-            source,
-        })?),
-        false => None,
+    // Read once: the carried links' shares are the robot file's.
+    let user = match (args.formats.contains(&Format::Urdf), models.first()) {
+        (true, Some((_, m))) => crate::export::user_urdf(&args.robot, m)?,
+        _ => None,
     };
     let mut files = Vec::new();
     for (k, m) in models {
@@ -591,13 +569,10 @@ fn model_files(args: &Sample, dir: &Path, models: &[(u32, Model)]) -> Result<Vec
         for f in &args.formats {
             let (ext, text) = match f {
                 Format::Urdf => match &user {
-                    Some(text) => (
+                    Some(user) => (
                         "urdf",
-                        patch_urdf(text, &args.robot, m, &note)
-                            .map_err(|problem| ExportError::Patch {
-                                robot: args.robot.clone(),
-                                problem,
-                            })?
+                        user.apply(m, &note)
+                            .map_err(|p| crate::export::patch_error(&args.robot, p))?
                             .0,
                     ),
                     None => ("urdf", to_urdf(m, &note)),

@@ -44,4 +44,4 @@ pub use torque_regressor::{
 };
 pub use urdf::{load_urdf, load_urdf_with, parse_urdf, parse_urdf_with, Locks};
 pub use urdf_export::to_urdf;
-pub use urdf_patch::{patch_urdf, Patched};
+pub use urdf_patch::{patch_urdf, Patched, UrdfPatch};

@@ -49,121 +49,181 @@ struct Hung<'a> {
 /// comment inside each replaced `<inertial>`. Refused when a joint of the
 /// model is not in the text (another robot file).
 pub fn patch_urdf(text: &str, path: &Path, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
-    let doc = roxmltree::Document::parse(text).map_err(|e| format!("invalid XML: {e}"))?;
-    let robot = doc.root_element();
-    let elements = |tag: &'static str| robot.children().filter(move |n| n.has_tag_name(tag));
-    let links: HashMap<&str, roxmltree::Node> = elements("link")
-        .filter_map(|l| Some((l.attribute("name")?, l)))
-        .collect();
-    let joints: HashMap<&str, roxmltree::Node> = elements("joint")
-        .filter_map(|j| Some((j.attribute("name")?, j)))
-        .collect();
-    let moving: HashSet<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
-    // Each link's joints to its children that do not move (and whether
-    // the joint is locked rather than fixed): what is lumped.
-    let mut rigid: BTreeMap<&str, Vec<(&str, bool)>> = BTreeMap::new();
-    for (name, j) in &joints {
-        if let (false, Some(p), Some(c)) = (moving.contains(name), end(*j, "parent"), end(*j, "child")) {
-            rigid
-                .entry(p)
-                .or_default()
-                .push((c, j.attribute("type") != Some("fixed")));
-        }
-    }
-    let inertial_of = |l: &str| {
-        links
-            .get(l)
-            .and_then(|n| n.children().find(|c| c.has_tag_name("inertial")))
-    };
-    let mut hung = Vec::new();
-    for mj in &model.joints {
-        let joint = joints
-            .get(mj.name.as_str())
-            .ok_or_else(|| format!("joint `{}` of the model is not in the URDF", mj.name))?;
-        let link = end(*joint, "child").ok_or_else(|| format!("joint `{}` has no child link", mj.name))?;
-        hung.push((link, below(link, false, &rigid)));
-    }
-    // The carried links' share of each body, at their locked positions:
-    // the robot file's bodies with and without their inertials.
-    let carried: Vec<Range<usize>> = hung
-        .iter()
-        .flat_map(|(_, h)| {
-            h.iter()
-                .filter(|h| h.carried)
-                .filter_map(|h| inertial_of(h.link))
-                .map(|n| n.range())
-        })
-        .collect();
-    let shares = match carried.is_empty() {
-        true => vec![None; model.joints.len()],
-        false => carried_shares(text, path, model, &carried)?,
-    };
-    let mut edits: Vec<(Range<usize>, String)> = Vec::new();
-    let mut patched = Vec::new();
-    for (i, ((link_name, hung), share)) in hung.iter().zip(&shares).enumerate() {
-        let body = &model.links[i];
-        let rest = share.as_ref().map(|s| body.without(s));
-        let keep_carried = matches!(rest, Some(Some(_)));
-        let (lumped, carried): (Vec<&Hung>, Vec<&Hung>) = hung.iter().partition(|h| !(h.carried && keep_carried));
-        let lumped: Vec<String> = lumped.iter().map(|h| h.link.to_string()).collect();
-        let carried: Vec<String> = carried.iter().map(|h| h.link.to_string()).collect();
-        let said = matches!(rest, Some(None)).then(|| {
-            format!(
-                "the identified body of {link_name} less the robot file's bodies of {} (on locked joints) is no body: their inertials are in it, and they have none of their own",
-                hung.iter().filter(|h| h.carried).map(|h| h.link).collect::<Vec<_>>().join(", ")
-            )
-        });
-        let mut comment = note.to_string();
-        if !lumped.is_empty() {
-            comment += &format!(
-                "; this body holds the links {} (their inertials moved here)",
-                lumped.join(", ")
-            );
-        }
-        if !carried.is_empty() {
-            comment += &format!(
-                "; the links {} on locked joints keep their own, taken out of it",
-                carried.join(", ")
-            );
-        }
-        let written = rest.flatten().unwrap_or_else(|| body.clone());
-        let link = links.get(link_name).ok_or_else(|| {
-            format!(
-                "link `{link_name}` (child of `{}`) is not in the URDF",
-                model.joints[i].name
-            )
-        })?;
-        edits.push(replace_inertial(
-            text,
-            link,
-            &inertial(&written, &indent(text, link, "  "), Some(&comment)),
-        ));
-        for l in &lumped {
-            if let Some(own) = inertial_of(l) {
-                let why = format!("<!-- robotid: this link's inertial is in the identified body of {link_name} -->");
-                edits.push((own.range(), why));
+    UrdfPatch::new(text.to_string(), path, model)?.apply(model, note)
+}
+
+/// A robot file's URDF read for patching, once for any number of models
+/// of it (the same joints and locks, other bodies and friction): the
+/// carried links' share of each body is the robot file's, found by loading
+/// it twice.
+pub struct UrdfPatch {
+    text: String,
+    /// Each body's share that links on locked joints hold (None: none).
+    shares: Vec<Option<Inertial>>,
+}
+
+/// A URDF's links and joints by name, and the links hung below each of
+/// the model's moving joints' child links.
+struct Tree<'a, 'i> {
+    links: HashMap<&'a str, roxmltree::Node<'a, 'i>>,
+    joints: HashMap<&'a str, roxmltree::Node<'a, 'i>>,
+    hung: Vec<(&'a str, Vec<Hung<'a>>)>,
+}
+
+impl<'a, 'i> Tree<'a, 'i> {
+    fn of(doc: &'a roxmltree::Document<'i>, model: &Model) -> Result<Tree<'a, 'i>, String> {
+        let robot = doc.root_element();
+        let named = |tag: &'static str| -> HashMap<&'a str, roxmltree::Node<'a, 'i>> {
+            robot
+                .children()
+                .filter(|n| n.has_tag_name(tag))
+                .filter_map(|n| Some((n.attribute("name")?, n)))
+                .collect()
+        };
+        let (links, joints) = (named("link"), named("joint"));
+        let moving: HashSet<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
+        // Each link's joints to its children that do not move (and whether
+        // the joint is locked rather than fixed): what is lumped.
+        let mut rigid: BTreeMap<&str, Vec<(&str, bool)>> = BTreeMap::new();
+        for (name, j) in &joints {
+            if let (false, Some(p), Some(c)) = (moving.contains(name), end(*j, "parent"), end(*j, "child")) {
+                rigid
+                    .entry(p)
+                    .or_default()
+                    .push((c, j.attribute("type") != Some("fixed")));
             }
         }
-        let joint = joints[model.joints[i].name.as_str()];
-        let element = format!(
-            "{}\n{}{}",
-            friction_comment(model, i),
-            indent(text, &joint, "  "),
-            dynamics(model, i)
-        );
-        edits.push(match joint.children().find(|c| c.has_tag_name("dynamics")) {
-            Some(d) => (d.range(), element),
-            None => insert_before_close(text, &joint, &element),
-        });
-        patched.push(Patched {
-            link: link_name.to_string(),
-            joint: model.joints[i].name.clone(),
-            lumped,
-            carried,
-            said,
-        });
+        let mut hung = Vec::new();
+        for mj in &model.joints {
+            let joint = joints
+                .get(mj.name.as_str())
+                .ok_or_else(|| format!("joint `{}` of the model is not in the URDF", mj.name))?;
+            let link = end(*joint, "child").ok_or_else(|| format!("joint `{}` has no child link", mj.name))?;
+            if !links.contains_key(link) {
+                return Err(format!("link `{link}` (child of `{}`) is not in the URDF", mj.name));
+            }
+            hung.push((link, below(link, false, &rigid)));
+        }
+        Ok(Tree { links, joints, hung })
     }
-    Ok((apply(text, edits), patched))
+
+    /// Link `l`'s `<inertial>` element.
+    fn inertial_of(&self, l: &str) -> Option<roxmltree::Node<'a, 'i>> {
+        self.links.get(l)?.children().find(|c| c.has_tag_name("inertial"))
+    }
+}
+
+impl UrdfPatch {
+    pub fn new(text: String, path: &Path, model: &Model) -> Result<UrdfPatch, String> {
+        let doc = roxmltree::Document::parse(&text).map_err(|e| format!("invalid XML: {e}"))?;
+        let tree = Tree::of(&doc, model)?;
+        // The carried links' share of each body, at their locked positions:
+        // the robot file's bodies with and without their inertials.
+        let carried: Vec<Range<usize>> = tree
+            .hung
+            .iter()
+            .flat_map(|(_, h)| h.iter().filter(|h| h.carried).filter_map(|h| tree.inertial_of(h.link)))
+            .map(|n| n.range())
+            .collect();
+        let shares = match carried.is_empty() {
+            true => vec![None; model.joints.len()],
+            false => carried_shares(&text, path, model, &carried)?,
+        };
+        Ok(UrdfPatch { text, shares })
+    }
+
+    /// The URDF with `model`'s bodies and friction written into it, and
+    /// what was done to each link.
+    pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
+        let text = self.text.as_str();
+        let doc = roxmltree::Document::parse(text).map_err(|e| format!("invalid XML: {e}"))?;
+        let tree = Tree::of(&doc, model)?;
+        let mut edits: Vec<(Range<usize>, String)> = Vec::new();
+        let mut patched = Vec::new();
+        for (i, ((link_name, hung), share)) in tree.hung.iter().zip(&self.shares).enumerate() {
+            let p = body_edits(
+                text,
+                &tree,
+                (link_name, hung),
+                (&model.links[i], share.as_ref()),
+                note,
+                &mut edits,
+            );
+            let joint = tree.joints[model.joints[i].name.as_str()];
+            let element = format!(
+                "{}\n{}{}",
+                friction_comment(model, i),
+                indent(text, &joint, "  "),
+                dynamics(model, i)
+            );
+            edits.push(match joint.children().find(|c| c.has_tag_name("dynamics")) {
+                Some(d) => (d.range(), element),
+                None => insert_before_close(text, &joint, &element),
+            });
+            patched.push(Patched {
+                joint: model.joints[i].name.clone(),
+                ..p
+            });
+        }
+        Ok((apply(text, edits), patched))
+    }
+}
+
+/// The edits that write `body` on `link` and take the lumped links'
+/// inertials out; the links lumped and carried, and what is said (the
+/// joint's name left to the caller).
+fn body_edits(
+    text: &str,
+    tree: &Tree,
+    (link_name, hung): (&str, &[Hung]),
+    (body, share): (&Inertial, Option<&Inertial>),
+    note: &str,
+    edits: &mut Vec<(Range<usize>, String)>,
+) -> Patched {
+    let rest = share.map(|s| body.without(s));
+    let keep_carried = matches!(rest, Some(Some(_)));
+    let (lumped, carried): (Vec<&Hung>, Vec<&Hung>) = hung.iter().partition(|h| !(h.carried && keep_carried));
+    let lumped: Vec<String> = lumped.iter().map(|h| h.link.to_string()).collect();
+    let carried: Vec<String> = carried.iter().map(|h| h.link.to_string()).collect();
+    let said = matches!(rest, Some(None)).then(|| {
+        format!(
+            "the identified body of {link_name} less the robot file's bodies of {} (on locked joints) is no body: their inertials are in it, and they have none of their own",
+            hung.iter().filter(|h| h.carried).map(|h| h.link).collect::<Vec<_>>().join(", ")
+        )
+    });
+    let mut comment = note.to_string();
+    if !lumped.is_empty() {
+        comment += &format!(
+            "; this body holds the links {} (their inertials moved here)",
+            lumped.join(", ")
+        );
+    }
+    if !carried.is_empty() {
+        comment += &format!(
+            "; the links {} on locked joints keep their own, taken out of it",
+            carried.join(", ")
+        );
+    }
+    let written = rest.flatten().unwrap_or_else(|| body.clone());
+    let link = &tree.links[link_name];
+    edits.push(replace_inertial(
+        text,
+        link,
+        &inertial(&written, &indent(text, link, "  "), Some(&comment)),
+    ));
+    for l in &lumped {
+        if let Some(own) = tree.inertial_of(l) {
+            let why = format!("<!-- robotid: this link's inertial is in the identified body of {link_name} -->");
+            edits.push((own.range(), why));
+        }
+    }
+    Patched {
+        link: link_name.to_string(),
+        joint: String::new(),
+        lumped,
+        carried,
+        said,
+    }
 }
 
 /// `text` with each range replaced.
