@@ -49,6 +49,9 @@ pub struct Request {
     /// Worker threads of the pipeline runs (default: one per core); the
     /// outputs do not depend on it.
     pub threads: Option<usize>,
+    /// The user's own MJCF of the robot: the MJCF export is it, patched
+    /// (else MJCF made from the robot file).
+    pub mjcf: Option<PathBuf>,
 }
 
 impl Request {
@@ -68,6 +71,7 @@ impl Request {
             },
             accept_inadequate: false,
             threads: None,
+            mjcf: None,
         }
     }
 }

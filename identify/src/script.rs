@@ -47,9 +47,10 @@ impl Script {
         }
     }
 
-    pub fn export(&mut self) {
+    pub fn export(&mut self, mjcf: Option<&Path>) {
+        let mjcf = mjcf.map(|m| format!(" --mjcf {}", m.display())).unwrap_or_default();
         self.line(format!(
-            "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar -o identified",
+            "robotid export --robot {} -p parameters_physical.parquet --format urdf,mjcf,sidecar{mjcf} -o identified",
             self.robot
         ));
     }

@@ -114,12 +114,14 @@ fn physical_or_why(
         // decoupled model of joint-wise records has none to fit.
         return Ok(Physical::JointWise);
     }
-    physical_fit(&judged.parts, (staged, &paths.robot), tables, script, observer)
+    physical_fit(&judged.parts, (staged, paths), tables, script, observer)
 }
 
 /// The request's files made absolute and checked.
 struct Paths {
     robot: PathBuf,
+    /// The user's MJCF, to patch.
+    mjcf: Option<PathBuf>,
     /// The identification recordings, then the validation ones.
     all: Vec<PathBuf>,
     identifying: usize,
@@ -132,6 +134,10 @@ impl Paths {
     fn of(request: &Request) -> Result<Paths> {
         let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<robotid::Result<Vec<_>>>();
         let robot = absolute(&request.robot)?;
+        let mjcf = request.mjcf.as_deref().map(absolute).transpose()?;
+        if let Some(m) = mjcf.as_deref().filter(|m| !m.is_file()) {
+            return Err(Error::Request(format!("--mjcf {}: no such file", m.display())));
+        }
         let mut all = absolutes(&request.recordings)?;
         let held = absolutes(&request.validate)?;
         let identifying = all.len();
@@ -167,6 +173,7 @@ impl Paths {
         }
         Ok(Paths {
             robot,
+            mjcf,
             all,
             identifying,
             held,
@@ -570,12 +577,13 @@ fn validate(staged: &Path, parameters: &str, tables: &[PathBuf], held: &[PathBuf
 /// The physically consistent estimate, validated, and the exports.
 fn physical_fit(
     parts: &[Part],
-    (staged, robot): (&Path, &Path),
+    (staged, paths): (&Path, &Paths),
     (id_tables, val_tables): (&[PathBuf], &[PathBuf]),
     script: &mut Script,
     observer: &dyn Observer,
 ) -> Result<Physical> {
     let physical = Path::new("parameters_physical.parquet");
+    let robot = paths.robot.as_path();
     let fit = |covariance| -> Result<Outcome> {
         let locks = match id_tables.first() {
             Some(t) => robotid::tables::table_locks(&staged.join(t))?,
@@ -611,10 +619,11 @@ fn physical_fit(
         prior_weight: None,
         force: false,
         within: staged.to_path_buf(),
+        mjcf: paths.mjcf.clone(),
     })?;
     script.estimate(id_tables, Some(if fallback.is_some() { "residual" } else { "robust" }));
     script.validate("parameters_physical.parquet", val_tables);
-    script.export();
+    script.export(paths.mjcf.as_deref());
     Ok(Physical::Fitted {
         outcome: Box::new(outcome),
         fallback,

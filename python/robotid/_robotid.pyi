@@ -72,10 +72,13 @@ def identify(
     accept_inadequate: bool = False,
     torque_per_amp: Sequence[float] = (),
     threads: Optional[int] = None,
+    mjcf: Optional[Union[str, PathLike]] = None,
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
-    result (`identified` False, `refused` the cause), not an error."""
+    result (`identified` False, `refused` the cause), not an error. With
+    `mjcf` (the user's own MJCF of the robot), `identified.xml` is it with
+    the identified dynamics written in."""
 
 def rollout(
     parameters: Union[str, PathLike],
@@ -95,9 +98,11 @@ def sample(
     out: Union[str, PathLike],
     seed: int = 0,
     formats: Sequence[str] = (),
+    mjcf: Optional[Union[str, PathLike]] = None,
 ) -> pa.Table:
     """Parameter sets drawn from a physically consistent estimate's
     distribution for domain randomization, as `robotid sample`: written into
     `out` (`samples.parquet`, `randomization.json` and `.yaml`, a model per
-    draw for each of `formats`, "urdf" and "mjcf"); the samples table (draw,
-    joint, quantity, unit, value) returned."""
+    draw for each of `formats`, "urdf" and "mjcf", the user's own `mjcf`
+    patched when given); the samples table (draw, joint, quantity, unit,
+    value) returned."""

@@ -207,7 +207,7 @@ def identify_robots(robots: Mapping[str, Mapping], out: PathLike) -> Dict[str, d
     `out/<name>`: `robots` maps a name to the keyword arguments of
     `robotid.identify` (`recordings` and `robot`, and optionally
     `validate`, `tolerance`, `strict`, `accept_inadequate`,
-    `torque_per_amp`). Each folder holds what `robotid identify` writes;
+    `torque_per_amp`, `mjcf`). Each folder holds what `robotid identify` writes;
     the result per robot is what `robotid.identify` returns, as a dict.
     A refused fit is a result (`identified` False); an error is raised as
     the worker's `RobotidError`."""
@@ -221,6 +221,8 @@ def identify_robots(robots: Mapping[str, Mapping], out: PathLike) -> Dict[str, d
         request = {k: v for k, v in robots[name].items()}
         request["recordings"] = [os.path.abspath(os.fspath(p)) for p in request["recordings"]]
         request["robot"] = os.path.abspath(os.fspath(request["robot"]))
+        if request.get("mjcf") is not None:
+            request["mjcf"] = os.path.abspath(os.fspath(request["mjcf"]))
         if "validate" in request:
             request["validate"] = [os.path.abspath(os.fspath(p)) for p in request["validate"]]
         refs.append(task.remote(name, request, out))

@@ -344,7 +344,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -357,6 +357,7 @@ fn identify(
     accept_inadequate: bool,
     torque_per_amp: Vec<f64>,
     threads: Option<usize>,
+    mjcf: Option<PathBuf>,
 ) -> PyResult<Identification> {
     use robotid_identify::{Physical, Request};
     let request = Request {
@@ -366,6 +367,7 @@ fn identify(
         policy: robotid::verdict::Policy { tolerance, strict },
         accept_inadequate,
         threads,
+        mjcf,
         ..Request::new(recordings, robot)
     };
     let id = py
@@ -433,10 +435,12 @@ fn rollout<'py>(
 /// Parameter sets drawn from a physically consistent estimate's
 /// distribution for domain randomization, as `robotid sample`: written
 /// into `out` (`samples.parquet`, `randomization.json` and `.yaml`, and a
-/// model per draw for each of `formats`, "urdf" and "mjcf"); the samples
-/// table (one row per draw and quantity) returned as a pyarrow table.
+/// model per draw for each of `formats`, "urdf" and "mjcf", the user's
+/// own `mjcf` patched when given); the samples table (one row per draw and
+/// quantity) returned as a pyarrow table.
 #[pyfunction]
-#[pyo3(signature = (parameters, robot, draws, out, seed=0, formats=Vec::new()))]
+#[pyo3(signature = (parameters, robot, draws, out, seed=0, formats=Vec::new(), mjcf=None))]
+#[allow(clippy::too_many_arguments)]
 fn sample<'py>(
     py: Python<'py>,
     parameters: PathBuf,
@@ -445,6 +449,7 @@ fn sample<'py>(
     out: PathBuf,
     seed: u64,
     formats: Vec<String>,
+    mjcf: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyAny>> {
     use robotid_report::export::Format;
     let formats = formats
@@ -464,6 +469,7 @@ fn sample<'py>(
         seed,
         formats,
         out: out.clone(),
+        mjcf,
     };
     py.detach(|| robotid_report::sample::sample(&request))
         .map_err(|e| RobotidError::new_err(e.to_string()))?;

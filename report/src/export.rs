@@ -10,8 +10,8 @@ use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, Str
 use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model, Patched,
-    UrdfPatch,
+    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, MjcfPatch, Model,
+    Patched, UrdfPatch,
 };
 use robotid_stages::estimation::{physically_consistent, LinkBound};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
@@ -25,8 +25,10 @@ pub enum Format {
     /// replaced, every other byte kept (a robot file in robotid's TOML: a
     /// URDF made from the model).
     Urdf,
-    /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
-    /// damping, frictionloss.
+    /// `<stem>.xml`: the user's MJCF ([`Export::mjcf`]) with each moving
+    /// body's `<inertial>` and each joint's `armature`, `damping` and
+    /// `frictionloss` written, every other byte kept; without one, MJCF made
+    /// from the model (bodies, inertials, the robot file's shapes as geoms).
     Mjcf,
     /// `<stem>.sidecar.json` and `<stem>.sidecar.parquet`: every value with
     /// unit, standard deviation and interval, the covariance, what the
@@ -52,6 +54,8 @@ pub struct Export {
     /// The folder `parameters` is read and `out` written in, both named as
     /// given (`""`: the working folder).
     pub within: PathBuf,
+    /// The user's own MJCF of the robot, patched for [`Format::Mjcf`].
+    pub mjcf: Option<PathBuf>,
 }
 
 /// What an export did.
@@ -85,6 +89,8 @@ pub enum ExportError {
     Draws(usize),
     #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
     Patch { robot: PathBuf, problem: String },
+    #[error("--mjcf {}: the identified dynamics cannot be written into it: {problem}", mjcf.display())]
+    MjcfPatch { mjcf: PathBuf, problem: String },
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -231,13 +237,17 @@ pub fn export(args: &Export) -> Result<Exported> {
         args.robot.display(),
     );
     let (urdf, patched) = urdf_of(args, &identified, &note, &mut warnings)?;
+    let (mjcf, mjcf_patched) = match args.formats.contains(&Format::Mjcf) {
+        true => mjcf_of(args, &identified, &note, &mut warnings)?,
+        false => (String::new(), None),
+    };
     let stem = stem(&args.out, &args.formats);
     // Everything is made before anything is written.
     let mut files: Vec<(PathBuf, Output)> = Vec::new();
     for f in dedup(&args.formats) {
         match f {
             Format::Urdf => files.push((with_ext(&stem, "urdf"), Output::Text(urdf.clone()))),
-            Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(to_mjcf(&identified, &note)))),
+            Format::Mjcf => files.push((with_ext(&stem, "xml"), Output::Text(mjcf.clone()))),
             Format::Sidecar => {
                 let batch = read_parquet(&args.within.join(&args.parameters))?;
                 let table = Table::of(&batch, &params.names, &args.parameters)?;
@@ -253,6 +263,7 @@ pub fn export(args: &Export) -> Result<Exported> {
                     warnings: &warnings,
                     bounds: &bounds,
                     patched: patched.as_deref(),
+                    mjcf_patched: mjcf_patched.as_deref(),
                 };
                 files.push((with_ext(&stem, "sidecar.json"), Output::Text(side.json()?)));
                 files.push((with_ext(&stem, "sidecar.parquet"), Output::Table(side.parquet()?)));
@@ -290,6 +301,84 @@ fn urdf_of(
     warnings.extend(relative_meshes(&text));
     warnings.extend(links.iter().filter_map(|p| p.said.clone()));
     Ok((text, Some(links)))
+}
+
+/// The MJCF export: the user's own (`--mjcf`), patched, with what it
+/// overrides and where its kinematics differ said in `warnings`; else one
+/// made from the model.
+fn mjcf_of(
+    args: &Export,
+    identified: &Model,
+    note: &str,
+    warnings: &mut Vec<String>,
+) -> Result<(String, Option<Vec<Patched>>)> {
+    let Some(user) = user_mjcf(args.mjcf.as_deref(), identified)? else {
+        return Ok((to_mjcf(identified, note), None));
+    };
+    let short = format!(
+        "identified by robotid {} from {}, physically consistent (the sidecar has its provenance)",
+        env!("CARGO_PKG_VERSION"),
+        args.parameters.display()
+    );
+    let mjcf = args.mjcf.as_deref().unwrap_or(Path::new(""));
+    let (text, bodies) = user.apply(identified, &short).map_err(|p| mjcf_error(mjcf, p))?;
+    warnings.extend(user.said.iter().cloned());
+    warnings.extend(relative_assets(&text));
+    warnings.extend(bodies.iter().filter_map(|p| p.said.clone()));
+    Ok((text, Some(bodies)))
+}
+
+/// The user's MJCF read for patching with models like `model` (None:
+/// none given).
+pub(crate) fn user_mjcf(mjcf: Option<&Path>, model: &Model) -> Result<Option<MjcfPatch>> {
+    let Some(path) = mjcf else { return Ok(None) };
+    let text = std::fs::read_to_string(path).map_err(|source| ExportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(Some(MjcfPatch::new(text, model).map_err(|p| mjcf_error(path, p))?))
+}
+
+pub(crate) fn mjcf_error(mjcf: &Path, problem: String) -> ExportError {
+    ExportError::MjcfPatch {
+        mjcf: mjcf.to_path_buf(),
+        problem,
+    }
+}
+
+/// Asset files an MJCF names relative to its folder (or its `meshdir`):
+/// they resolve from the folder of the file MuJoCo loads.
+fn relative_assets(mjcf: &str) -> Option<String> {
+    let doc = roxmltree::Document::parse(mjcf).ok()?;
+    let root = doc.root_element();
+    let absolute_dir = |k: &str| {
+        root.children()
+            .filter(|n| n.has_tag_name("compiler"))
+            .filter_map(|n| n.attribute(k).or_else(|| n.attribute("assetdir")))
+            .any(|d| Path::new(d).is_absolute())
+    };
+    let mut relative: Vec<&str> = doc
+        .descendants()
+        .filter(|n| ["mesh", "texture", "hfield", "skin"].iter().any(|t| n.has_tag_name(*t)))
+        .filter(|n| {
+            !absolute_dir(if n.has_tag_name("texture") {
+                "texturedir"
+            } else {
+                "meshdir"
+            })
+        })
+        .filter_map(|n| n.attribute("file"))
+        .filter(|f| !Path::new(f).is_absolute())
+        .collect();
+    relative.dedup();
+    (!relative.is_empty()).then(|| {
+        format!(
+            "the MJCF names {} asset file(s) relative to its folder ({}{}): they resolve from the folder of the file MuJoCo loads, so keep the exported MJCF beside the one given or give it the assets",
+            relative.len(),
+            relative[..relative.len().min(3)].join(", "),
+            if relative.len() > 3 { ", …" } else { "" }
+        )
+    })
 }
 
 /// The robot file's own URDF read for patching with models of it like
@@ -563,6 +652,8 @@ struct Sidecar<'a> {
     bounds: &'a [LinkBound],
     /// The robot file's own URDF patched: which link holds each body.
     patched: Option<&'a [Patched]>,
+    /// The user's MJCF patched: which body holds each.
+    mjcf_patched: Option<&'a [Patched]>,
 }
 
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
@@ -705,6 +796,13 @@ impl Sidecar<'_> {
                 "joint": p.joint, "link": p.link, "lumped_links": p.lumped,
                 "carried_links": p.carried, "said": p.said,
             })).collect::<Vec<_>>()),
+            "mjcf_patched": self.mjcf_patched.map(|p| json!({
+                "file": self.args.mjcf.as_ref().map(|m| m.display().to_string()),
+                "bodies": p.iter().map(|p| json!({
+                    "joint": p.joint, "body": p.link, "welded_bodies": p.lumped,
+                    "carried_bodies": p.carried, "said": p.said,
+                })).collect::<Vec<_>>(),
+            })),
         });
         Ok(serde_json::to_string_pretty(&doc)? + "\n")
     }

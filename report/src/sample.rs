@@ -39,6 +39,8 @@ pub struct Sample {
     pub formats: Vec<Format>,
     /// The output folder (made; must not hold anything).
     pub out: PathBuf,
+    /// The user's own MJCF, patched per draw for [`Format::Mjcf`].
+    pub mjcf: Option<PathBuf>,
 }
 
 /// One simulator parameter.
@@ -563,6 +565,10 @@ fn model_files(args: &Sample, dir: &Path, models: &[(u32, Model)]) -> Result<Vec
         (true, Some((_, m))) => crate::export::user_urdf(&args.robot, m)?,
         _ => None,
     };
+    let user_mjcf = match (args.formats.contains(&Format::Mjcf), models.first()) {
+        (true, Some((_, m))) => crate::export::user_mjcf(args.mjcf.as_deref(), m)?,
+        _ => None,
+    };
     let mut files = Vec::new();
     for (k, m) in models {
         let note = format!("robotid sample: draw {k} of {} (seed {})", args.draws, args.seed);
@@ -577,7 +583,15 @@ fn model_files(args: &Sample, dir: &Path, models: &[(u32, Model)]) -> Result<Vec
                     ),
                     None => ("urdf", to_urdf(m, &note)),
                 },
-                Format::Mjcf => ("xml", to_mjcf(m, &note)),
+                Format::Mjcf => match &user_mjcf {
+                    Some(user) => (
+                        "xml",
+                        user.apply(m, &note)
+                            .map_err(|p| crate::export::mjcf_error(args.mjcf.as_deref().unwrap_or(Path::new("")), p))?
+                            .0,
+                    ),
+                    None => ("xml", to_mjcf(m, &note)),
+                },
                 Format::Sidecar => continue,
             };
             let file = PathBuf::from(format!("draw_{k:05}.{ext}"));

@@ -355,21 +355,79 @@ pub fn python_json(script: &str, args: &[&Path]) -> serde_json::Value {
 /// At 40 random states within the joint limits. Returns the largest
 /// differences relative to the largest torque: (MuJoCo, Pinocchio).
 pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path, dir: &Path) -> (f64, f64) {
-    use robotid_stages::dynamics::{parameter_names, rnea_terms, with_standard_parameters, Data, Terms};
-    use robotid_stages::estimation::parameters_from_table;
-    use robotid_stages::formats::parquet::read_parquet;
-    use robotid_stages::stage::regressor::RegressorConfig;
-    let stem = dir.join("identified");
+    export(robotid, robot, params, dir, &[]);
+    let (model, locked) = exported_model(robot, params, dir);
+    let file = states_file(&model, dir);
+    let mujoco = python_json("mujoco_inverse.py", &[&dir.join("identified.xml"), &file]);
+    // The URDF is the robot file's own, patched: its locked joints (a
+    // gripper) are still joints there, locked where the model holds them.
+    let pin = python_json(
+        "pin_rnea.py",
+        &[&dir.join("identified.urdf"), &file, Path::new(&locked)],
+    );
+    (
+        against_mujoco(&model, &file, &mujoco),
+        against_rigid(&model, &file, &pin),
+    )
+}
+
+/// `robotid export --mjcf MJCF` (the user's own MJCF of `robot`) of
+/// `params` into `dir`, loaded in MuJoCo: `mj_inverse` (constraints off,
+/// joints the model locks held at their positions) against robotid's RNEA
+/// of the exported standard parameters on the MJCF's own kinematics
+/// (gravity, armature, damping). At 40 random states; returns the largest
+/// difference relative to the largest torque, and the exported MJCF's text.
+pub fn mjcf_patch_checked_in_mujoco(
+    robotid: &Path,
+    robot: &Path,
+    params: &Path,
+    mjcf: &Path,
+    dir: &Path,
+) -> (f64, String) {
+    export(robotid, robot, params, dir, &["--mjcf".as_ref(), mjcf.as_os_str()]);
+    let (model, locked) = exported_model(robot, params, dir);
+    let patch = robotid_stages::dynamics::MjcfPatch::new(std::fs::read_to_string(mjcf).unwrap(), &model).unwrap();
+    let theirs = patch.on_its_kinematics(&model);
+    let exported = dir.join("identified.xml");
+    (
+        mujoco_agrees(&theirs, &exported, &locked, dir),
+        std::fs::read_to_string(exported).unwrap(),
+    )
+}
+
+/// MuJoCo's `mj_inverse` of the MJCF file `mjcf` (constraints off, joints
+/// not in `model` held at the positions of `locked`, a JSON object) against
+/// robotid's RNEA of `model` with gravity, armature and damping, at 40
+/// random states written into `dir`: the largest difference over the
+/// largest torque.
+pub fn mujoco_agrees(model: &robotid_stages::dynamics::Model, mjcf: &Path, locked: &str, dir: &Path) -> f64 {
+    let file = states_file(model, dir);
+    let mujoco = python_json("mujoco_inverse.py", &[mjcf, &file, Path::new(locked)]);
+    against_mujoco(model, &file, &mujoco)
+}
+
+fn export(robotid: &Path, robot: &Path, params: &Path, dir: &Path, more: &[&std::ffi::OsStr]) {
     let out = std::process::Command::new(robotid)
         .args(["export", "--format", "urdf,mjcf,sidecar", "--robot"])
         .arg(robot)
         .arg("-p")
         .arg(params)
         .arg("-o")
-        .arg(&stem)
+        .arg(dir.join("identified"))
+        .args(more)
         .output()
         .unwrap();
     assert!(out.status.success(), "export: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// The model `robotid export` wrote into `dir` (the sidecar's standard
+/// parameters), checked to be the estimate's base values; and its locked
+/// joints as a JSON object {name: position}.
+fn exported_model(robot: &Path, params: &Path, dir: &Path) -> (robotid_stages::dynamics::Model, String) {
+    use robotid_stages::dynamics::{parameter_names, with_standard_parameters};
+    use robotid_stages::estimation::parameters_from_table;
+    use robotid_stages::formats::parquet::read_parquet;
+    use robotid_stages::stage::regressor::RegressorConfig;
     let estimate = parameters_from_table(&read_parquet(params).unwrap()).unwrap();
     let base = RegressorConfig::of_metadata(&estimate.metadata)
         .unwrap()
@@ -377,18 +435,9 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
         .unwrap();
     let sidecar: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("identified.sidecar.json")).unwrap()).unwrap();
-    let standard: Vec<f64> = sidecar["standard_parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p["value"].as_f64().unwrap())
-        .collect();
-    let names: Vec<String> = sidecar["standard_parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p["name"].as_str().unwrap().to_string())
-        .collect();
+    let listed = sidecar["standard_parameters"].as_array().unwrap();
+    let standard: Vec<f64> = listed.iter().map(|p| p["value"].as_f64().unwrap()).collect();
+    let names: Vec<String> = listed.iter().map(|p| p["name"].as_str().unwrap().to_string()).collect();
     assert_eq!(names, parameter_names(&base.model, base.terms));
     let model = with_standard_parameters(&base.model, base.terms, &standard);
     // The exported model is the estimate: its base values are the table's.
@@ -408,6 +457,18 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
         (model.gravity.norm() - 9.81).abs() < 1e-12,
         "the scripts assume |g| = 9.81"
     );
+    let locked: serde_json::Map<String, serde_json::Value> = base
+        .model
+        .locked
+        .iter()
+        .map(|(j, x)| (j.clone(), serde_json::json!(x)))
+        .collect();
+    (model, serde_json::Value::Object(locked).to_string())
+}
+
+/// 40 random states of `model` within its joint limits, written as JSON
+/// with its joint names into `dir`.
+fn states_file(model: &robotid_stages::dynamics::Model, dir: &Path) -> std::path::PathBuf {
     let n = model.dof();
     let mut x = 11u64;
     let mut u = || {
@@ -429,52 +490,95 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
     let file = dir.join("states.json");
     std::fs::write(
         &file,
-        serde_json::json!({"q": states[0], "v": states[1], "a": states[2]}).to_string(),
+        serde_json::json!({"q": states[0], "v": states[1], "a": states[2], "names": model.joint_names()}).to_string(),
     )
     .unwrap();
-    let mujoco = python_json("mujoco_inverse.py", &[&dir.join("identified.xml"), &file]);
-    // The URDF is the robot file's own, patched: its locked joints (a
-    // gripper) are still joints there, locked where the model holds them.
-    let locked: serde_json::Map<String, serde_json::Value> = base
-        .model
-        .locked
+    file
+}
+
+/// A script's torques at the states in `file` (by `model`'s joint names)
+/// against `want` of each state: the largest difference over the largest
+/// torque.
+fn against(
+    model: &robotid_stages::dynamics::Model,
+    file: &Path,
+    got: &serde_json::Value,
+    mut want: impl FnMut(&[f64], &[f64], &[f64]) -> Vec<f64>,
+) -> f64 {
+    let names: Vec<&str> = got["names"]
+        .as_array()
+        .unwrap()
         .iter()
-        .map(|(j, x)| (j.clone(), serde_json::json!(x)))
+        .map(|s| s.as_str().unwrap())
         .collect();
-    let locks = serde_json::Value::Object(locked).to_string();
-    let pin = python_json("pin_rnea.py", &[&dir.join("identified.urdf"), &file, Path::new(&locks)]);
-    for v in [&mujoco, &pin] {
-        let names: Vec<&str> = v["names"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|s| s.as_str().unwrap())
-            .collect();
-        assert_eq!(names, model.joint_names());
-    }
-    let mut data = Data::new(&model);
-    let (mut worst_mj, mut worst_pin, mut top_mj, mut top_pin) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for k in 0..states[0].len() {
-        let (q, v, a) = (&states[0][k], &states[1][k], &states[2][k]);
-        let rigid = Terms {
-            gravity: true,
-            friction: false,
-            rotor: false,
-        };
-        let t_rigid = rnea_terms(&model, &mut data, q, v, a, rigid).clone();
-        let t_mj = rnea_terms(&model, &mut data, q, v, a, Terms { rotor: true, ..rigid }).clone();
-        for j in 0..n {
-            let f = &model.friction[j];
-            let want_mj = t_mj[j] + 0.5 * (f.viscous_pos + f.viscous_neg) * v[j];
-            let got_mj = mujoco["tau"][k][j].as_f64().unwrap();
-            let got_pin = pin["tau"][k][j].as_f64().unwrap();
-            worst_mj = worst_mj.max((got_mj - want_mj).abs());
-            worst_pin = worst_pin.max((got_pin - t_rigid[j]).abs());
-            top_mj = top_mj.max(want_mj.abs());
-            top_pin = top_pin.max(t_rigid[j].abs());
+    assert_eq!(names, model.joint_names());
+    let states: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap();
+    let rows = |k: &str| -> Vec<Vec<f64>> { serde_json::from_value(states[k].clone()).unwrap() };
+    let (qs, vs, accs) = (rows("q"), rows("v"), rows("a"));
+    let (mut worst, mut top) = (0.0f64, 0.0f64);
+    for k in 0..qs.len() {
+        let w = want(&qs[k], &vs[k], &accs[k]);
+        for (j, w) in w.iter().enumerate() {
+            worst = worst.max((got["tau"][k][j].as_f64().unwrap() - w).abs());
+            top = top.max(w.abs());
         }
     }
-    (worst_mj / top_mj, worst_pin / top_pin)
+    worst / top
+}
+
+/// MuJoCo's inverse dynamics (constraints off) against robotid's RNEA with
+/// gravity, rotor inertia (armature) and viscous friction (damping).
+fn against_mujoco(model: &robotid_stages::dynamics::Model, file: &Path, got: &serde_json::Value) -> f64 {
+    use robotid_stages::dynamics::{rnea_terms, Data, Terms};
+    let mut data = Data::new(model);
+    let terms = Terms {
+        gravity: true,
+        friction: false,
+        rotor: true,
+    };
+    against(model, file, got, |q, v, a| {
+        let t = rnea_terms(model, &mut data, q, v, a, terms);
+        let f = &model.friction;
+        (0..q.len())
+            .map(|j| t[j] + 0.5 * (f[j].viscous_pos + f[j].viscous_neg) * v[j])
+            .collect()
+    })
+}
+
+/// A rigid-body inverse dynamics (Pinocchio's) against robotid's.
+fn against_rigid(model: &robotid_stages::dynamics::Model, file: &Path, got: &serde_json::Value) -> f64 {
+    use robotid_stages::dynamics::{rnea_terms, Data, Terms};
+    let mut data = Data::new(model);
+    let terms = Terms {
+        gravity: true,
+        friction: false,
+        rotor: false,
+    };
+    against(model, file, got, |q, v, a| {
+        rnea_terms(model, &mut data, q, v, a, terms).iter().copied().collect()
+    })
+}
+
+/// An MJCF's lines with every `<inertial …/>` element, robotid's comments
+/// and the joints' `armature`, `damping` and `frictionloss` attributes cut
+/// out, blank lines dropped: what a patched MJCF must keep of the user's,
+/// byte for byte.
+pub fn mjcf_but_dynamics(text: &str) -> Vec<String> {
+    let mut s = text.to_string();
+    for (open, close) in [("<!-- robotid", "-->"), ("<inertial", "/>")] {
+        while let Some(a) = s.find(open) {
+            let b = a + s[a..].find(close).unwrap() + close.len();
+            s.replace_range(a..b, "");
+        }
+    }
+    for k in ["armature", "damping", "frictionloss"] {
+        let attr = format!(" {k}=\"");
+        while let Some(a) = s.find(&attr) {
+            let b = a + attr.len() + s[a + attr.len()..].find('"').unwrap() + 1;
+            s.replace_range(a..b, "");
+        }
+    }
+    s.lines().filter(|l| !l.trim().is_empty()).map(str::to_string).collect()
 }
 
 /// A URDF's lines with every `<inertial>` and `<dynamics>` element and

@@ -8,8 +8,10 @@ pub enum Format {
     /// `<inertial>` and each joint's `<dynamics damping friction>` replaced
     /// (a robot file in robotid's TOML: a URDF made from the model).
     Urdf,
-    /// `<stem>.xml`: MuJoCo bodies, inertials on principal axes, armature,
-    /// damping, frictionloss.
+    /// `<stem>.xml`: the MJCF given with --mjcf, its bodies' inertials and
+    /// its joints' armature, damping and frictionloss written, every other
+    /// byte kept; without one, MJCF made from the robot file (bodies,
+    /// inertials, its shapes as geoms).
     Mjcf,
     /// `<stem>.sidecar.json` and `<stem>.sidecar.parquet`: every value with
     /// unit, standard deviation and interval, the covariance, what the
@@ -45,6 +47,12 @@ pub struct Args {
     /// the same; the sidecar says which.
     #[arg(long)]
     pub force: bool,
+    /// The user's own MJCF of the robot (e.g. MuJoCo Menagerie's, or
+    /// MuJoCo's import of the URDF saved as MJCF): the MJCF export is it
+    /// with the identified dynamics written in. Its joints are found by the
+    /// robot file's names, and its kinematics must be the robot file's.
+    #[arg(long)]
+    pub mjcf: Option<PathBuf>,
 }
 
 impl From<Format> for robotid_report::export::Format {
@@ -69,6 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         prior_weight: args.prior_weight,
         force: args.force,
         within: PathBuf::new(),
+        mjcf: args.mjcf,
     })?;
     println!("{}", done.how);
     for w in &done.warnings {

@@ -51,6 +51,11 @@ pub struct Args {
     /// robot file that declares no drives.
     #[arg(long, value_delimiter = ',', num_args = 1.., allow_negative_numbers = true)]
     pub torque_per_amp: Vec<f64>,
+    /// The user's own MJCF of the robot: `identified.xml` is it with the
+    /// identified dynamics written in (as `robotid export --mjcf`), else
+    /// MJCF made from the robot file.
+    #[arg(long)]
+    pub mjcf: Option<PathBuf>,
 }
 
 /// The exit code of an identification refused as inadequate.
@@ -79,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         accept_inadequate: args.accept_inadequate,
         validate: args.validate,
+        mjcf: args.mjcf,
         ..Request::new(args.recordings, args.robot)
     };
     let id = robotid_identify::identify(&request, &crate::progress::Bars::new(false, |_| {}))?;

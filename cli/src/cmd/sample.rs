@@ -28,6 +28,10 @@ pub struct Args {
     /// outputs).
     #[arg(long, short, default_value = "samples")]
     pub out: PathBuf,
+    /// The user's own MJCF of the robot: each draw's `.xml` is it with the
+    /// draw's dynamics written in (as `robotid export --mjcf`).
+    #[arg(long)]
+    pub mjcf: Option<PathBuf>,
 }
 
 /// Parameter sets drawn from the identification's distribution for domain
@@ -40,6 +44,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         formats: args.format.into_iter().map(Into::into).collect(),
         out: args.out.clone(),
+        mjcf: args.mjcf,
     })?;
     println!(
         "{:<34} {:>10} {:>12} {:>12} {:>12}  unit",

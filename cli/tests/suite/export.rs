@@ -189,6 +189,48 @@ bandwidth_hz = 1.0
     assert!(!mjcf.contains("slide"));
 }
 
+/// A user's MJCF of an arm written in other frames than its URDF (bodies
+/// turned, one off its joint's axis and inside a `<frame>`, Euler angles in
+/// degrees, `<default>` classes giving the joints' dynamics, a welded
+/// flange, a gripper on a joint the log does not hold), patched with other
+/// bodies, friction and armature, and loaded in MuJoCo: with the gripper
+/// held where the model locks it, MuJoCo's inverse dynamics are robotid's
+/// of the URDF to round-off. So robotid reads MJCF kinematics as MuJoCo
+/// does, writes each body in its own frame, and takes the gripper's body
+/// out of the forearm's.
+#[test]
+fn a_users_mjcf_in_other_frames_moves_as_the_identified_model() {
+    use robotid_stages::dynamics::{load_urdf_with, Locks, MjcfPatch};
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots");
+    let locks = Locks {
+        keep: Some(vec!["shoulder".into(), "elbow".into()]),
+        positions: [("grip".to_string(), 0.4)].into(),
+    };
+    let mut model = load_urdf_with(&fixtures.join("arm_gripper.urdf"), &locks).unwrap();
+    for (k, l) in model.links.iter_mut().enumerate() {
+        l.mass *= 1.25 + 0.1 * k as f64;
+        l.com += nalgebra::Vector3::new(0.01, -0.02, 0.005);
+        l.inertia_com += nalgebra::Matrix3::new(0.002, 0.0004, 0.0, 0.0004, 0.003, -0.0002, 0.0, -0.0002, 0.001);
+    }
+    model.friction[0] = robotid_stages::dynamics::Friction::symmetric(0.4, 0.2);
+    model.friction[1].viscous_neg = 0.9;
+    model.drives[1].rotor_inertia = 2e-5;
+    model.drives[1].gear_ratio = 120.0;
+    let given = std::fs::read_to_string(fixtures.join("arm_gripper.xml")).unwrap();
+    let patch = MjcfPatch::new(given.clone(), &model).unwrap();
+    let (text, _) = patch.apply(&model, "test").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("arm.xml");
+    std::fs::write(&file, &text).unwrap();
+    let e = robotid_tests::mujoco_agrees(&model, &file, r#"{"grip": 0.4}"#, dir.path());
+    println!("hand-written MJCF: MuJoCo {e:.2e} of the largest torque");
+    assert!(e < 1e-12, "MuJoCo's mj_inverse differs by {e:e}");
+    assert_eq!(
+        robotid_tests::mjcf_but_dynamics(&given),
+        robotid_tests::mjcf_but_dynamics(&text)
+    );
+}
+
 /// An estimate that is not physically consistent is refused, with the way
 /// to a consistent one; nothing is written.
 #[test]
@@ -392,6 +434,7 @@ fn samples_hold_the_estimates_distribution() {
         seed: 7,
         formats: vec![],
         out: ws.path().join("samples"),
+        mjcf: None,
     })
     .unwrap();
     assert_eq!(done.failed, 0, "{:?}", done.failed_why);

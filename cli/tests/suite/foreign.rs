@@ -34,6 +34,7 @@ fn samples_keep_the_distribution(out: &Path, robot: &Path) {
         seed: 1,
         formats: vec![],
         out: out.join("samples"),
+        mjcf: None,
     })
     .unwrap();
     let p = parameters_from_table(&read_parquet(&params).unwrap()).unwrap();
@@ -61,6 +62,28 @@ fn samples_keep_the_distribution(out: &Path, robot: &Path) {
         done.moved
     );
     assert!(lo > 0.7 && hi < 1.3, "{ratios:?}");
+}
+
+/// The UR5's URDF imported by MuJoCo itself and saved as MJCF (collision
+/// meshes only: MuJoCo reads STL, not the visual DAE files), given to
+/// `robotid export --mjcf`: in MuJoCo, the patched file's inverse dynamics
+/// are robotid's on its own kinematics (MuJoCo writes 6 digits) to 1e-9 of
+/// the largest torque; its names, meshes and geoms are as MuJoCo wrote
+/// them.
+fn mujocos_own_import_patched(urdf: &Path, params: &Path, dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let given = dir.join("ur5_mujoco.xml");
+    robotid_tests::python_json("mujoco_import.py", &[urdf, &given]);
+    let bin = Path::new(env!("CARGO_BIN_EXE_robotid"));
+    let (e, text) = robotid_tests::mjcf_patch_checked_in_mujoco(bin, urdf, params, &given, dir);
+    println!("UR5, MuJoCo's import patched: MuJoCo {e:.2e} of the largest torque");
+    assert!(e < 1e-9, "MuJoCo's mj_inverse differs by {e:e}");
+    let was = std::fs::read_to_string(&given).unwrap();
+    assert_eq!(
+        robotid_tests::mjcf_but_dynamics(&was),
+        robotid_tests::mjcf_but_dynamics(&text)
+    );
+    assert_eq!(text.matches("<geom").count(), 8);
 }
 
 /// The truth's base parameters: the URDF's inertials (the simulator's
@@ -828,6 +851,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
                 robotid_tests::urdf_but_dynamics(&was),
                 robotid_tests::urdf_but_dynamics(&is)
             );
+            mujocos_own_import_patched(&robot, &out.join("parameters_physical.parquet"), &out.join("mjcf"));
         }
         if case.starts_with("gripper") {
             let locked = id.recordings[0]

@@ -12,7 +12,9 @@ mod decoupled;
 mod forward_dynamics;
 mod kinematics;
 pub mod lagrange;
+mod mjcf;
 mod mjcf_export;
+mod mjcf_patch;
 pub mod model;
 mod r_factor;
 mod rnea;
@@ -33,6 +35,7 @@ pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offs
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics, try_cholesky_solve_in_place};
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
+pub use mjcf_patch::MjcfPatch;
 pub use model::{Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape};
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
