@@ -291,6 +291,8 @@ pub struct RolledOut {
     /// Samples per window, and its length (s).
     pub window: usize,
     pub window_s: f64,
+    /// How the window was chosen (from the noise, or given), said.
+    pub window_said: String,
     pub time: Vec<f64>,
     /// The measured positions, `[joint][sample]`.
     pub measured: Vec<Vec<f64>>,
@@ -332,10 +334,7 @@ impl RolledOut {
             .enumerate()
             .map(|(j, joint)| {
                 let (file, ratio) = match &self.prior {
-                    Some(Ok(p)) => (
-                        format!("{:.3}", 1e3 * p.q_rms[j]),
-                        format!("{:.3}", est.q_rms[j] / p.q_rms[j]),
-                    ),
+                    Some(Ok(p)) => (format!("{:.3}", 1e3 * p.q_rms[j]), figure(est.q_rms[j] / p.q_rms[j])),
                     Some(Err(e)) => (self.stopped_said(e), "-".into()),
                     None => ("-".into(), "-".into()),
                 };
@@ -351,17 +350,116 @@ impl RolledOut {
     }
 }
 
+/// The windows a rollout may restart every, s: the longest one at which
+/// the noise alone moves an exact model by at most [`NOISE_SHARE`] of
+/// each joint's motion is taken.
+const WINDOWS_S: [f64; 7] = [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0];
+
+/// The share of a joint's motion (the standard deviation of its angle
+/// over the record) that the noise may move an exact model by within a
+/// window: a model error smaller than this is not told from the noise in
+/// longer windows.
+pub const NOISE_SHARE: f64 = 0.01;
+
+/// The rollout window of a record (samples): given (`window_s`), else
+/// the longest of [`WINDOWS_S`] (at most a quarter of the record) over
+/// which the torque the model leaves unexplained (its residue on the
+/// record, its spectrum kept and its phases drawn: the noise as the chain
+/// delivers it, filtered or not, and what model error there is) and the
+/// start states' noise move the model by at most [`NOISE_SHARE`] of each
+/// moving joint's motion; with what decided it, said.
+fn rollout_window(
+    dynamics: &mut robotid_stages::dynamics::BaseDynamics,
+    kin: &robotid_schemas::Kinematics,
+    tau: &[Vec<f64>],
+    window_s: Option<f64>,
+) -> std::result::Result<(usize, String), robotid_stages::dynamics::Stopped> {
+    let step = (kin.time.last().copied().unwrap_or(0.0) - kin.time[0]) / (kin.time.len().max(2) - 1) as f64;
+    let samples = |t: f64| ((t / step).round() as usize).max(2);
+    if let Some(w) = window_s {
+        return Ok((samples(w), format!("{:.3} s, as given", samples(w) as f64 * step)));
+    }
+    let longest = WINDOWS_S
+        .iter()
+        .copied()
+        .rfind(|&t| samples(t) <= kin.time.len() / 4)
+        .unwrap_or(WINDOWS_S[0]);
+    let n = kin.q.len();
+    let mut residue = vec![vec![0.0; kin.time.len()]; n];
+    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    for s in 0..kin.time.len() {
+        for j in 0..n {
+            (q[j], qd[j], qdd[j]) = (kin.q[j][s], kin.qd[j][s], kin.qdd[j][s]);
+        }
+        for (j, t) in dynamics.torque(&q, &qd, &qdd).iter().enumerate() {
+            residue[j][s] = tau[j][s] - t;
+        }
+    }
+    let growth = robotid_stages::dynamics::noise_growth(
+        dynamics,
+        &kin.time,
+        (&kin.q, &kin.qd, tau),
+        Some(&residue),
+        (samples(longest), 0x5eed),
+    )?;
+    let motion: Vec<f64> = kin.q.iter().map(|q| std_dev(q)).collect();
+    let moving = |j: &usize| motion[*j] > 1e-6;
+    // The noise's share of the motion after `t` seconds, on the worst joint.
+    let share = |t: f64| {
+        let row = &growth[(samples(t) - 2).min(growth.len() - 1)];
+        (0..row.len())
+            .filter(moving)
+            .map(|j| row[j] / motion[j])
+            .fold(0.0, f64::max)
+    };
+    let fits: Vec<f64> = WINDOWS_S.iter().copied().filter(|&t| t <= longest).collect();
+    let chosen = fits
+        .iter()
+        .copied()
+        .take_while(|&t| share(t) <= NOISE_SHARE)
+        .last()
+        .unwrap_or(fits[0]);
+    let next = fits.iter().copied().find(|&t| t > chosen);
+    let rms: Vec<f64> = residue.iter().map(|r| std_dev(r)).collect();
+    let said = format!(
+        "{chosen} s, chosen from the noise: the torque the model leaves unexplained on this record (RMS {:.2e}–{:.2e} N·m, its spectrum kept, its phases drawn) and the start states' noise move it by {:.2} % of the motion of the joint they move most within it{}",
+        rms.iter().copied().fold(f64::INFINITY, f64::min),
+        rms.iter().copied().fold(0.0, f64::max),
+        100.0 * share(chosen),
+        match next {
+            Some(t) => format!(" ({:.2} % within {t} s; at most {:.0} % taken)", 100.0 * share(t), 100.0 * NOISE_SHARE),
+            None => format!(" (the longest window tried: a quarter of the record at most; at most {:.0} % taken)", 100.0 * NOISE_SHARE),
+        }
+    );
+    Ok((samples(chosen), said))
+}
+
+fn std_dev(x: &[f64]) -> f64 {
+    let m = x.iter().sum::<f64>() / x.len().max(1) as f64;
+    (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// A ratio with three significant digits.
+fn figure(x: f64) -> String {
+    match x.abs() {
+        a if a == 0.0 || !a.is_finite() => format!("{x}"),
+        a if a < 0.01 => format!("{x:.2e}"),
+        _ => format!("{x:.3}"),
+    }
+}
+
 /// The parameters table at `parameters` (of `robot`) rolled out on the
 /// kinematics table beside each regressor table of `regressors` (both
 /// read `within` a folder): the model's forward dynamics driven by the
 /// measured torque from the measured state, restarted from it every
-/// `window_s` seconds; the robot file's parameters the same way.
+/// window (`window_s` seconds, else chosen from the record's noise: see
+/// [`NOISE_SHARE`]); the robot file's parameters the same way.
 pub fn rollouts(
     within: &Path,
     parameters: &Path,
     robot: &Path,
     regressors: &[PathBuf],
-    window_s: f64,
+    window_s: Option<f64>,
 ) -> Result<Vec<RolledOut>> {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
     let (params, model, base) = crate::tables::identified(&within.join(robot), &within.join(parameters))?;
@@ -399,7 +497,22 @@ pub fn rollouts(
             });
         }
         let step = (kin.time.last().copied().unwrap_or(0.0) - kin.time[0]) / (kin.time.len().max(2) - 1) as f64;
-        let window = ((window_s / step).round() as usize).max(2);
+        // Chosen with the estimate's own model; where that cannot be
+        // simulated, the robot file's, else the given or shortest window.
+        let mut chosen = Err(robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample: 0, joint: 0 });
+        for t in std::iter::once(&theta).chain(prior.as_ref()) {
+            chosen = rollout_window(&mut BaseDynamics::new(&base, t), &kin, tau, window_s);
+            if chosen.is_ok() {
+                break;
+            }
+        }
+        let (window, window_said) = chosen.unwrap_or_else(|_| {
+            let t = window_s.unwrap_or(WINDOWS_S[0]);
+            (
+                ((t / step).round() as usize).max(2),
+                format!("{t} s: neither model could be simulated to choose it"),
+            )
+        });
         let run = |theta: &[f64]| {
             rollout(
                 &mut BaseDynamics::new(&base, theta),
@@ -415,6 +528,7 @@ pub fn rollouts(
             joints: kin.joints.clone(),
             window,
             window_s: window as f64 * step,
+            window_said,
             estimate: run(&theta),
             prior: prior.as_deref().map(run),
             time: kin.time.clone(),

@@ -84,12 +84,14 @@ def rollout(
     parameters: Union[str, PathLike],
     robot: Union[str, PathLike],
     regressors: Sequence[Union[str, PathLike]],
-    window_s: float = 0.5,
+    window_s: Optional[float] = None,
 ) -> pa.Table:
     """The parameters rolled out on the kinematics table beside each
     regressor table, as `robotid validate --rollout`: per record, model
     (`estimate`, `robot_file`), window and joint, the simulated angle's and
-    velocity's RMS error against the measured (rad, rad/s)."""
+    velocity's RMS error against the measured (rad, rad/s). The window is
+    `window_s`, else chosen from each record's noise (the longest at which
+    it moves an exact model by at most 1 % of each joint's motion)."""
 
 def sample(
     parameters: Union[str, PathLike],

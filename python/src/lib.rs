@@ -415,13 +415,13 @@ fn identify(
 /// `robot_file`), window and joint, the simulated angle's and velocity's
 /// RMS error against the measured (rad, rad/s), as a pyarrow table.
 #[pyfunction]
-#[pyo3(signature = (parameters, robot, regressors, window_s=0.5))]
+#[pyo3(signature = (parameters, robot, regressors, window_s=None))]
 fn rollout<'py>(
     py: Python<'py>,
     parameters: PathBuf,
     robot: PathBuf,
     regressors: Vec<PathBuf>,
-    window_s: f64,
+    window_s: Option<f64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let batch = py
         .detach(|| {

@@ -72,6 +72,7 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
         out / "parameters.parquet",
         examples / "robots" / "kuka_axis3.toml",
         [out / "kuka_axis3_validation" / "kuka_axis3_validation" / "regressor.parquet"],
+        window_s=0.5,
     )
     assert errors.schema.field("q_rms").metadata == {b"unit": b"rad"}
     rows = errors.to_pylist()

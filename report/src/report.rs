@@ -458,13 +458,6 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
     Ok(h)
 }
 
-/// The rollouts' window in the report and identify, s: long enough for
-/// the dynamics to act (a 0.5 s window holds most of a move's
-/// acceleration), short enough that an exact model driven by a noisy
-/// torque stays near the measured angles (`robotid validate --rollout
-/// --window-s` for another).
-pub const ROLLOUT_WINDOW_S: f64 = 0.5;
-
 /// The rollouts' section: per record, a table per joint (the estimate's
 /// position and velocity RMS error, the robot file's, their ratio) and the
 /// measured and simulated angles.
@@ -474,10 +467,11 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
     );
     for r in rolled {
         h.push_str(&format!(
-            "<p class=\"note\">{}: windows of {} samples ({:.3} s)</p>\n",
+            "<p class=\"note\">{}: windows of {} samples ({:.3} s): {}</p>\n",
             esc(&r.table.display().to_string()),
             r.window,
-            r.window_s
+            r.window_s,
+            esc(&r.window_said)
         ));
         match r.rows() {
             Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
@@ -519,7 +513,8 @@ pub struct Page {
     pub robot: Option<std::path::PathBuf>,
     /// Roll the estimate out (and the robot file's own parameters) on the
     /// validation records, else the excitation's (see
-    /// [`robotid::validation::rollouts`]), every `ROLLOUT_WINDOW_S`.
+    /// [`robotid::validation::rollouts`]), over windows chosen from each
+    /// record's noise.
     pub rollout: bool,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
@@ -580,7 +575,7 @@ pub fn write(page: &Page) -> Result<Rolled> {
             };
             // What cannot be rolled out is said on the page, not fatal to it.
             Some(
-                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, ROLLOUT_WINDOW_S)
+                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, None)
                     .map_err(|e| e.to_string()),
             )
         }

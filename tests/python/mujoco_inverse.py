@@ -1,6 +1,7 @@
 """Independent inverse dynamics with MuJoCo: loads an MJCF model, reads a
 JSON file of states {"q": [[...]], "v": [[...]], "a": [[...]]} and prints
-mj_inverse's joint forces (qfrc_inverse) and the joint names as JSON.
+mj_inverse's joint forces (qfrc_inverse), the joint names and their
+armature, damping and frictionloss as MuJoCo loaded them, as JSON.
 Constraints are disabled: joint limits, and frictionloss, which MuJoCo
 applies as a constraint force rather than Fc·sign(q̇); damping and armature
 stay in (passive force and mass matrix).
@@ -40,7 +41,9 @@ def main(mjcf, states, locks="{}"):
         data.qacc[dadr] = a
         mujoco.mj_inverse(model, data)
         taus.append(data.qfrc_inverse[dadr].tolist())
-    print(json.dumps({"names": names, "tau": taus}))
+    # The joints' dynamics as MuJoCo loaded them.
+    dof = {k: [float(getattr(model, "dof_" + k)[d]) for d in dadr] for k in ("armature", "damping", "frictionloss")}
+    print(json.dumps({"names": names, "tau": taus, **dof}))
 
 
 if __name__ == "__main__":

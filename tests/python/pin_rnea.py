@@ -1,7 +1,8 @@
 """Independent inverse dynamics with Pinocchio: reads a URDF, a JSON file of
 states {"q": [[...]], "v": [[...]], "a": [[...]]} and optionally a JSON
 object of locked joints {name: position}; prints the joint torques
-(pin.rnea, gravity (0, 0, -9.81)) and the joint names as JSON. Locked
+(pin.rnea, gravity (0, 0, -9.81)), the joint names and their damping and
+friction as Pinocchio loaded them from <dynamics>, as JSON. Locked
 joints are removed by pin.buildReducedModel at those positions (the other
 joints of the reference configuration at 0)."""
 import json
@@ -28,7 +29,9 @@ def main(urdf, states, locks=None):
     taus = []
     for q, v, a in zip(s["q"], s["v"], s["a"]):
         taus.append(pin.rnea(model, data, np.array(q), np.array(v), np.array(a)).tolist())
-    print(json.dumps({"names": [n for n in model.names][1:], "nq": model.nq, "tau": taus}))
+    # The URDF's <dynamics> as Pinocchio loaded them.
+    dyn = {"damping": model.damping.tolist(), "friction": model.friction.tolist()}
+    print(json.dumps({"names": [n for n in model.names][1:], "nq": model.nq, "tau": taus, **dyn}))
 
 
 if __name__ == "__main__":

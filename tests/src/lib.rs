@@ -365,10 +365,47 @@ pub fn export_checked_in_simulators(robotid: &Path, robot: &Path, params: &Path,
         "pin_rnea.py",
         &[&dir.join("identified.urdf"), &file, Path::new(&locked)],
     );
+    loaded_as_written(
+        &model,
+        &pin,
+        &[("damping", Dynamics::Damping), ("friction", Dynamics::Friction)],
+    );
     (
         against_mujoco(&model, &file, &mujoco),
         against_rigid(&model, &file, &pin),
     )
+}
+
+/// A joint dynamics value as the exports write it.
+#[derive(Clone, Copy)]
+enum Dynamics {
+    Armature,
+    Damping,
+    Friction,
+}
+
+/// The joints' dynamics a simulator loaded (`got[key]`, per joint) are
+/// the model's as the exports write them (the sidecar's `urdf` and `mjcf`
+/// values): armature the reflected rotor inertia, damping and friction
+/// the means of the two signs.
+fn loaded_as_written(model: &robotid_stages::dynamics::Model, got: &serde_json::Value, keys: &[(&str, Dynamics)]) {
+    for (key, what) in keys {
+        for (j, f) in model.friction.iter().enumerate() {
+            let want = match what {
+                Dynamics::Armature => model.drives[j].reflected_inertia(),
+                Dynamics::Damping => 0.5 * (f.viscous_pos + f.viscous_neg),
+                Dynamics::Friction => 0.5 * (f.coulomb_pos + f.coulomb_neg),
+            };
+            let loaded = got[key][j]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{key} of joint {j}: {got}"));
+            assert!(
+                (loaded - want).abs() <= 1e-12 * want.abs().max(1e-12),
+                "{}: {key} loaded {loaded}, written {want}",
+                model.joints[j].name
+            );
+        }
+    }
 }
 
 /// `robotid export --mjcf MJCF` (the user's own MJCF of `robot`) of
@@ -530,6 +567,15 @@ fn against(
 /// gravity, rotor inertia (armature) and viscous friction (damping).
 fn against_mujoco(model: &robotid_stages::dynamics::Model, file: &Path, got: &serde_json::Value) -> f64 {
     use robotid_stages::dynamics::{rnea_terms, Data, Terms};
+    loaded_as_written(
+        model,
+        got,
+        &[
+            ("armature", Dynamics::Armature),
+            ("damping", Dynamics::Damping),
+            ("frictionloss", Dynamics::Friction),
+        ],
+    );
     let mut data = Data::new(model);
     let terms = Terms {
         gravity: true,

@@ -430,7 +430,7 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
             PathBuf::from("kuka_axis3/kuka_axis3/regressor.parquet"),
             PathBuf::from("kuka_axis3_validation/kuka_axis3_validation/regressor.parquet"),
         ],
-        0.5,
+        Some(0.5),
     )
     .unwrap();
     for (r, bar) in rolled.iter().zip([1.1, 1.15]) {

@@ -42,6 +42,12 @@ impl<'a> BaseDynamics<'a> {
         }
     }
 
+    /// The torque the model needs for (q, q̇, q̈): Y(q, q̇, q̈)·θ.
+    pub fn torque(&mut self, q: &[f64], qd: &[f64], qdd: &[f64]) -> &[f64] {
+        self.predict(q, qd, qdd);
+        &self.torque
+    }
+
     /// Y(q, q̇, q̈)·θ into `self.torque`.
     fn predict(&mut self, q: &[f64], qd: &[f64], qdd: &[f64]) {
         self.regressor.rows(&mut self.ws, q, qd, qdd, &mut self.rows);
@@ -246,4 +252,125 @@ pub fn rollout(
         qd_rms: rms(sqd),
         q: sim,
     })
+}
+
+/// The standard deviation of a sampled signal's white noise: its second
+/// differences' median absolute value over 0.6745·√6 (white noise of
+/// variance σ² gives second differences of variance 6σ²; a motion sampled
+/// densely adds little, and the median ignores the few steps of a
+/// Coulomb reversal). Noise a filter took out is not seen.
+pub fn noise_std(x: &[f64]) -> f64 {
+    let mut d: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    *m / (0.6745 * 6f64.sqrt())
+}
+
+/// A record's positions, velocities and torques, each `[joint][sample]`.
+pub type Channels<'a> = (&'a [Vec<f64>], &'a [Vec<f64>], &'a [Vec<f64>]);
+
+/// How far the noise alone moves a rollout: the model rolled out twice
+/// over windows of `window` samples, on the record as measured and with
+/// an independent draw of its errors added: to the start states, white
+/// noise of each channel's [`noise_std`]; to the torque, `torque_error`
+/// (per joint, e.g. a fit's residue) with its spectrum kept and its phases
+/// drawn, else white noise of the torque's [`noise_std`] (seeded). Per
+/// joint, the root mean square of the difference in position over every
+/// window's first k samples after its start, for k = 1 … `window` − 1
+/// (`[k - 1][joint]`, rad). For an exact model this is its rollout error.
+pub fn noise_growth(
+    dynamics: &mut BaseDynamics,
+    time: &[f64],
+    (q, qd, tau): Channels,
+    torque_error: Option<&[Vec<f64>]>,
+    (window, seed): (usize, u64),
+) -> Result<Vec<Vec<f64>>, Stopped> {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let (n, window) = (q.len(), window.max(2));
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let noisy = |x: &[Vec<f64>], rng: &mut rand_chacha::ChaCha8Rng| -> Vec<Vec<f64>> {
+        x.iter()
+            .map(|c| {
+                let s = noise_std(c);
+                c.iter()
+                    .map(|v| {
+                        let e: f64 = StandardNormal.sample(rng);
+                        v + s * e
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let (nq, nqd) = (noisy(q, &mut rng), noisy(qd, &mut rng));
+    let ntau = match torque_error {
+        None => noisy(tau, &mut rng),
+        Some(e) => tau
+            .iter()
+            .zip(e)
+            .map(|(t, e)| {
+                let drawn = phase_randomized(e, &mut rng);
+                t.iter().zip(&drawn).map(|(t, d)| t + d).collect()
+            })
+            .collect(),
+    };
+    let clean = rollout(dynamics, time, q, qd, tau, window)?;
+    let moved = rollout(dynamics, time, &nq, &nqd, &ntau, window)?;
+    let mut by_offset = vec![vec![0.0; n]; window - 1];
+    let mut count = vec![0usize; window - 1];
+    for s in 0..time.len() {
+        let k = s % window;
+        if k == 0 {
+            continue;
+        }
+        count[k - 1] += 1;
+        for j in 0..n {
+            by_offset[k - 1][j] += (moved.q[j][s] - clean.q[j][s]).powi(2);
+        }
+    }
+    // Cumulative: the RMS over a window's first k samples, as the
+    // rollout's own figures are.
+    let (mut sum, mut seen) = (vec![0.0; n], 0usize);
+    for (k, row) in by_offset.iter_mut().enumerate() {
+        seen += count[k];
+        for j in 0..n {
+            sum[j] += row[j];
+            row[j] = (sum[j] / seen.max(1) as f64).sqrt();
+        }
+    }
+    Ok(by_offset)
+}
+
+/// `x` with its amplitude spectrum kept and each frequency's phase drawn
+/// (the mean and, for an even length, the Nyquist line kept as they are):
+/// a series with `x`'s spectrum and no relation to anything `x` followed.
+fn phase_randomized(x: &[f64], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
+    use rand::Rng;
+    let n = x.len();
+    if n < 3 {
+        return x.to_vec();
+    }
+    let mut planner = realfft::RealFftPlanner::<f64>::new();
+    let (forward, inverse) = (planner.plan_fft_forward(n), planner.plan_fft_inverse(n));
+    let mut input = x.to_vec();
+    let mut spectrum = forward.make_output_vec();
+    forward
+        .process(&mut input, &mut spectrum)
+        .expect("buffers made by the plan");
+    let last = spectrum.len() - 1;
+    for (k, c) in spectrum.iter_mut().enumerate() {
+        if k == 0 || (n.is_multiple_of(2) && k == last) {
+            continue;
+        }
+        *c = rustfft::num_complex::Complex::from_polar(c.norm(), rng.random_range(0.0..std::f64::consts::TAU));
+    }
+    let mut out = inverse.make_output_vec();
+    inverse
+        .process(&mut spectrum, &mut out)
+        .expect("buffers made by the plan");
+    out.iter_mut().for_each(|v| *v /= n as f64);
+    out
 }
