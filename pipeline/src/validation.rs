@@ -538,6 +538,123 @@ pub fn rollouts(
     Ok(out)
 }
 
+/// A controller as a recording declares it: a TOML file with a
+/// `[controller]` table of per-joint `kp`, `kd`, `ki` in the robot's
+/// joint order (robotid's simulator writes one beside each recording,
+/// `<name>.truth.toml`).
+pub fn read_controller(path: &Path, joints: usize) -> Result<robotid_stages::dynamics::Pid> {
+    let bad = |msg: String| Error::Output {
+        what: path.display().to_string(),
+        msg,
+    };
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let table: toml::Table = text.parse().map_err(|e| bad(format!("not TOML: {e}")))?;
+    let c = table
+        .get("controller")
+        .and_then(|c| c.as_table())
+        .ok_or_else(|| bad("no [controller] table (kp, kd, ki per joint)".into()))?;
+    let gains = |k: &str| -> Result<Vec<f64>> {
+        let v: Option<Vec<f64>> = c.get(k).and_then(|v| v.as_array()).map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_float().or(x.as_integer().map(|i| i as f64)))
+                .collect()
+        });
+        match v {
+            Some(v) if v.len() == joints && v.iter().all(|g| g.is_finite() && *g >= 0.0) => Ok(v),
+            _ => Err(bad(format!(
+                "[controller] {k}: {joints} gains ≥ 0 expected, one per joint"
+            ))),
+        }
+    };
+    Ok(robotid_stages::dynamics::Pid {
+        kp: gains("kp")?,
+        kd: gains("kd")?,
+        ki: gains("ki")?,
+    })
+}
+
+/// One record rolled out in closed loop: the estimate's model and the
+/// robot file's under the declared controller, tracking the recorded
+/// reference.
+pub struct ClosedLoopRun {
+    pub recording: PathBuf,
+    pub joints: Vec<String>,
+    pub time: Vec<f64>,
+    pub measured: Vec<Vec<f64>>,
+    pub estimate: std::result::Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>,
+    pub prior: Option<std::result::Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>>,
+}
+
+/// The parameters table at `parameters` (of `robot`) simulated in closed
+/// loop on each raw recording of `recordings` (a table with each joint's
+/// position and reference, `q_<joint>` and `ref_<joint>`, as `robotid
+/// simulate` writes): under `controller`, tracking the recorded
+/// reference from the first sample's state; the robot file's parameters
+/// the same way.
+pub fn closed_loop_rollouts(
+    parameters: &Path,
+    robot: &Path,
+    recordings: &[PathBuf],
+    controller: &robotid_stages::dynamics::Pid,
+) -> Result<Vec<ClosedLoopRun>> {
+    use robotid_stages::dynamics::{closed_loop, BaseDynamics};
+    let (params, model, base) = crate::tables::identified(robot, parameters)?;
+    let theta: Vec<f64> = params.values.iter().copied().collect();
+    let prior: Option<Vec<f64>> = base.base_values(&model).map(|v| v.iter().copied().collect());
+    let mut out = Vec::new();
+    for path in recordings {
+        let raw =
+            robotid_schemas::RawSamples::from_record_batch(&robotid_stages::formats::parquet::read_parquet(path)?)
+                .map_err(|e| Error::Table {
+                    path: path.clone(),
+                    source: e.into(),
+                })?;
+        let reference = raw.reference.as_ref().ok_or_else(|| Error::Output {
+            what: path.display().to_string(),
+            msg: "no reference columns (`ref_<joint>`): a closed-loop rollout tracks the recorded reference".into(),
+        })?;
+        if raw.joints != model.joint_names() || raw.time.len() < 3 {
+            return Err(Error::Output {
+                what: path.display().to_string(),
+                msg: format!(
+                    "joints {} over {} samples: not the robot's {} over 3 or more",
+                    raw.joints.join(", "),
+                    raw.time.len(),
+                    model.joint_names().join(", ")
+                ),
+            });
+        }
+        // The start velocity from the first two samples (a record that
+        // starts at rest: zero up to the position noise).
+        let qd: Vec<Vec<f64>> = raw
+            .q
+            .iter()
+            .map(|q| vec![(q[1] - q[0]) / (raw.time[1] - raw.time[0])])
+            .collect();
+        let run = |theta: &[f64]| {
+            closed_loop(
+                &mut BaseDynamics::new(&base, theta),
+                &raw.time,
+                reference,
+                controller,
+                (&raw.q, &qd),
+            )
+        };
+        out.push(ClosedLoopRun {
+            recording: path.clone(),
+            joints: raw.joints.clone(),
+            estimate: run(&theta),
+            prior: prior.as_deref().map(run),
+            time: raw.time.clone(),
+            measured: raw.q.clone(),
+        });
+    }
+    Ok(out)
+}
+
 /// Rollouts as one table, a row per record, model, window and joint:
 /// `table`, `model` (`estimate` or `robot_file`), `window`, `start_s`,
 /// `joint`, `q_rms` (rad) and `qd_rms` (rad/s), units in each field's

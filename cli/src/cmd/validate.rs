@@ -36,6 +36,17 @@ pub struct Args {
     /// moves an exact model by at most 1 % of each joint's motion, said.
     #[arg(long)]
     pub window_s: Option<f64>,
+    /// Also simulate the model in closed loop on these raw recordings
+    /// (positions and the recorded reference, `ref_<joint>`, as `robotid
+    /// simulate` writes them), under the controller declared with
+    /// --controller, from the first sample's state over the whole record;
+    /// beside the robot file's own parameters.
+    #[arg(long, requires_all = ["robot", "controller"])]
+    pub closed_loop: Vec<PathBuf>,
+    /// The recording's controller: a TOML file with a `[controller]` table
+    /// of per-joint `kp`, `kd`, `ki` (the simulator's `<name>.truth.toml`).
+    #[arg(long)]
+    pub controller: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -48,6 +59,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => Vec::new(),
     };
     print!("{}", rollouts_said(&rolled));
+    if let (Some(robot), Some(controller)) = (&args.robot, &args.controller) {
+        let pid = robotid::validation::read_controller(controller, args.closed_loop_joints(robot)?)?;
+        let runs = robotid::validation::closed_loop_rollouts(&args.parameters, robot, &args.closed_loop, &pid)?;
+        print!("{}", closed_loop_said(&runs));
+    }
     if let Some(dir) = &args.plot {
         let mut files = robotid_report::plot::plot_validation(dir, &v.sys, &v.predicted, &v.stats)?;
         files.extend(robotid_report::plot::plot_rollouts(dir, &rolled)?);
@@ -115,6 +131,52 @@ pub fn said(v: &Validated, parameters: &Path) -> String {
     }
     if let Some(msg) = inadequate(v) {
         s.push_str(&format!("verdict: {msg}\n"));
+    }
+    s
+}
+
+impl Args {
+    /// How many joints the robot has (the controller's gains are per joint).
+    fn closed_loop_joints(&self, robot: &Path) -> anyhow::Result<usize> {
+        Ok(robotid_stages::dynamics::load_robot(robot)?.dof())
+    }
+}
+
+/// Closed-loop rollouts as text: per recording and joint, the simulated
+/// positions' RMS error against the measured, the estimate's beside the
+/// robot file's.
+pub fn closed_loop_said(runs: &[robotid::validation::ClosedLoopRun]) -> String {
+    let mut s = String::new();
+    for r in runs {
+        s.push_str(&format!(
+            "closed loop on {}: the declared controller tracking the recorded reference, from the first sample's state over {:.1} s\n",
+            r.recording.display(),
+            r.time.last().unwrap_or(&0.0) - r.time[0]
+        ));
+        let said = |x: &Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>| match x {
+            Ok(c) => Ok(c.q_rms.clone()),
+            Err(robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample, joint }) => Err(format!(
+                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+                r.joints[*joint]
+            )),
+        };
+        match (said(&r.estimate), r.prior.as_ref().map(said)) {
+            (Err(why), _) => s.push_str(&format!("  estimate {why}\n")),
+            (Ok(ours), file) => {
+                s.push_str("  joint                    position RMS (mrad)  robot file's (mrad)  ratio\n");
+                for (j, joint) in r.joints.iter().enumerate() {
+                    let (theirs, ratio) = match &file {
+                        Some(Ok(f)) => (format!("{:.4}", 1e3 * f[j]), format!("{:.3}", ours[j] / f[j])),
+                        Some(Err(why)) => (why.clone(), "-".into()),
+                        None => ("-".into(), "-".into()),
+                    };
+                    s.push_str(&format!(
+                        "  {joint:<24} {:>19.4}  {theirs:>19}  {ratio}\n",
+                        1e3 * ours[j]
+                    ));
+                }
+            }
+        }
     }
     s
 }

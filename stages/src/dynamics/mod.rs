@@ -40,7 +40,9 @@ pub use model::{Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Mode
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};
-pub use rollout::{noise_growth, noise_std, rollout, BaseDynamics, Rollout, Stopped, Window};
+pub use rollout::{
+    closed_loop, noise_growth, noise_std, rollout, BaseDynamics, Channels, ClosedLoop, Pid, Rollout, Stopped, Window,
+};
 pub use torque_regressor::{
     friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
     with_standard_parameters, FrictionTerms, ParameterKind, RegressorTerms, Spring,

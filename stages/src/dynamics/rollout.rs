@@ -374,3 +374,127 @@ fn phase_randomized(x: &[f64], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
     out.iter_mut().for_each(|v| *v /= n as f64);
     out
 }
+
+/// A PID position controller per joint, as robotid's simulator runs it:
+/// u = kp·(r − q) + kd·(ṙ − q̇) + ki·∫(r − q).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pid {
+    pub kp: Vec<f64>,
+    pub kd: Vec<f64>,
+    pub ki: Vec<f64>,
+}
+
+/// A closed-loop rollout: the simulated positions and the controller's
+/// torques, `[joint][sample]`, and the RK4 steps per sample step taken.
+#[derive(Debug, Clone)]
+pub struct ClosedLoop {
+    pub q: Vec<Vec<f64>>,
+    pub torque: Vec<Vec<f64>>,
+    /// Per joint, the root mean square of simulated − measured position
+    /// over the record, rad.
+    pub q_rms: Vec<f64>,
+    pub substeps: usize,
+}
+
+/// The model `dynamics` under `pid`, tracking `reference` (per joint, at
+/// each sample of `time`; linear between samples, its velocity the
+/// reference's central differences), from the measured state at the first
+/// sample (`q`, `qd`) with the integral at zero (a record that starts at
+/// rest): no measured torque drives it, so the whole record is one run,
+/// held near the measurement by the feedback as the robot was. RK4 with
+/// enough steps per sample for the loop's fastest mode at the start
+/// (ω = max(kd/M, √(kp/M), ∛(ki/M)) per joint, ω·h ≤ 0.5).
+pub fn closed_loop(
+    dynamics: &mut BaseDynamics,
+    time: &[f64],
+    reference: &[Vec<f64>],
+    pid: &Pid,
+    (q, qd): (&[Vec<f64>], &[Vec<f64>]),
+) -> Result<ClosedLoop, Stopped> {
+    let (n, samples) = (q.len(), time.len());
+    let rd: Vec<Vec<f64>> = reference
+        .iter()
+        .map(|r| {
+            (0..samples)
+                .map(|s| {
+                    let (a, b) = (s.saturating_sub(1), (s + 1).min(samples - 1));
+                    match b > a {
+                        true => (r[b] - r[a]) / (time[b] - time[a]),
+                        false => 0.0,
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    // State [q | q̇ | ∫(r − q)], stage buffers: allocated once.
+    let mut x: Vec<f64> = (0..n).map(|j| q[j][0]).chain((0..n).map(|j| qd[j][0])).collect();
+    x.extend(std::iter::repeat_n(0.0, n));
+    let mut scratch = vec![0.0; n];
+    dynamics
+        .accelerations(&x[..n], &vec![0.0; n], &vec![0.0; n], &mut scratch)
+        .map_err(|joint| Stopped::NotPositiveDefinite { sample: 0, joint })?;
+    let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
+    let fastest = (0..n)
+        .map(|j| {
+            let m = dynamics.mass[(j, j)].max(f64::MIN_POSITIVE);
+            (pid.kd[j] / m).max((pid.kp[j] / m).sqrt()).max((pid.ki[j] / m).cbrt())
+        })
+        .fold(0.0, f64::max);
+    let substeps = ((fastest * step / 0.5).ceil() as usize).clamp(1, 1000);
+    let mut out = ClosedLoop {
+        q: vec![vec![0.0; samples]; n],
+        torque: vec![vec![0.0; samples]; n],
+        q_rms: vec![0.0; n],
+        substeps,
+    };
+    let mut k: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.0; 3 * n]);
+    let (mut xs, mut u, mut qdd) = (vec![0.0; 3 * n], vec![0.0; n], vec![0.0; n]);
+    // dx/dt at state `s`, the reference between samples `i` and `i + 1`
+    // at fraction `f`; the controller's torque into `u`.
+    let mut derivative = |i: usize, f: f64, s: &[f64], d: &mut [f64], u: &mut [f64], qdd: &mut [f64]| {
+        let next = (i + 1).min(samples - 1);
+        for j in 0..n {
+            let r = reference[j][i] + f * (reference[j][next] - reference[j][i]);
+            let v = rd[j][i] + f * (rd[j][next] - rd[j][i]);
+            u[j] = pid.kp[j] * (r - s[j]) + pid.kd[j] * (v - s[n + j]) + pid.ki[j] * s[2 * n + j];
+            d[j] = s[n + j];
+            d[2 * n + j] = r - s[j];
+        }
+        dynamics.accelerations(&s[..n], &s[n..2 * n], u, qdd)?;
+        d[n..2 * n].copy_from_slice(qdd);
+        Ok(())
+    };
+    for s in 0..samples {
+        if s > 0 {
+            let h = (time[s] - time[s - 1]) / substeps as f64;
+            for sub in 0..substeps {
+                let f0 = sub as f64 / substeps as f64;
+                let df = 1.0 / substeps as f64;
+                for (stage, (c, f)) in [(0.0, f0), (0.5, f0 + 0.5 * df), (0.5, f0 + 0.5 * df), (1.0, f0 + df)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    for m in 0..3 * n {
+                        xs[m] = x[m] + if stage == 0 { 0.0 } else { c * h * k[stage - 1][m] };
+                    }
+                    derivative(s - 1, f, &xs, &mut k[stage], &mut u, &mut qdd)
+                        .map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
+                }
+                for m in 0..3 * n {
+                    x[m] += h / 6.0 * (k[0][m] + 2.0 * k[1][m] + 2.0 * k[2][m] + k[3][m]);
+                }
+            }
+        }
+        let mut d = std::mem::take(&mut xs);
+        derivative(s, 0.0, &x, &mut d, &mut u, &mut qdd)
+            .map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
+        xs = d;
+        for j in 0..n {
+            out.q[j][s] = x[j];
+            out.torque[j][s] = u[j];
+            out.q_rms[j] += (x[j] - q[j][s]).powi(2);
+        }
+    }
+    out.q_rms.iter_mut().for_each(|e| *e = (*e / samples as f64).sqrt());
+    Ok(out)
+}
