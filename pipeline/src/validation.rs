@@ -655,6 +655,54 @@ pub fn closed_loop_rollouts(
     Ok(out)
 }
 
+/// Closed-loop rollouts as one table, a row per recording, model and
+/// joint: `recording`, `model` (`estimate` or `robot_file`), `joint`,
+/// `q_rms` (rad) and the RK4 `substeps` per sample step, units in each
+/// field's metadata. A model that could not be simulated has no rows.
+pub fn closed_loop_table(runs: &[ClosedLoopRun]) -> Result<arrow::record_batch::RecordBatch> {
+    use arrow::array::{ArrayRef, Float64Array, StringArray, UInt32Array};
+    use arrow::datatypes::{DataType, Field, Schema};
+    use std::sync::Arc;
+    let (mut recording, mut model, mut joint, mut q, mut substeps) = (vec![], vec![], vec![], vec![], vec![]);
+    for r in runs {
+        for (name, run) in [("estimate", Some(&r.estimate)), ("robot_file", r.prior.as_ref())] {
+            let Some(Ok(run)) = run else { continue };
+            for (j, name_j) in r.joints.iter().enumerate() {
+                recording.push(r.recording.display().to_string());
+                model.push(name);
+                joint.push(name_j.clone());
+                q.push(run.q_rms[j]);
+                substeps.push(run.substeps as u32);
+            }
+        }
+    }
+    let field = |name: &str, t: DataType, unit: &str| {
+        Field::new(name, t, false).with_metadata(
+            [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
+                .into_iter()
+                .collect::<std::collections::HashMap<_, _>>(),
+        )
+    };
+    let schema = Schema::new(vec![
+        field("recording", DataType::Utf8, "1"),
+        field("model", DataType::Utf8, "1"),
+        field("joint", DataType::Utf8, "1"),
+        field("q_rms", DataType::Float64, "rad"),
+        field("substeps", DataType::UInt32, "1"),
+    ]);
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(recording)),
+        Arc::new(StringArray::from(model)),
+        Arc::new(StringArray::from(joint)),
+        Arc::new(Float64Array::from(q)),
+        Arc::new(UInt32Array::from(substeps)),
+    ];
+    arrow::record_batch::RecordBatch::try_new(Arc::new(schema), columns).map_err(|e| Error::Output {
+        what: "the closed-loop table".into(),
+        msg: e.to_string(),
+    })
+}
+
 /// Rollouts as one table, a row per record, model, window and joint:
 /// `table`, `model` (`estimate` or `robot_file`), `window`, `start_s`,
 /// `joint`, `q_rms` (rad) and `qd_rms` (rad/s), units in each field's

@@ -21,6 +21,9 @@ measured torque, from the measured state, every `window_s` restarted):
     errors = robotid.rollout("out/id/parameters.parquet", "robot.urdf",
                              ["out/id/validation/validation/regressor.parquet"])
 
+and in closed loop, under the controller a recording declares, tracking
+its recorded reference (`robotid.closed_loop`).
+
 `summarize` is the map and `merge` the reduce of identification: summaries
 merge in any grouping, on any machine, and solve to the parameters
 `robotid run` estimates from the same recordings (robotid.ray runs it on a
@@ -34,7 +37,17 @@ from typing import Sequence, Union
 
 import pyarrow as pa
 
-from ._robotid import Identification, Pipeline, RobotidError, __version__, identify, merge, rollout, sample
+from ._robotid import (
+    Identification,
+    Pipeline,
+    RobotidError,
+    __version__,
+    closed_loop,
+    identify,
+    merge,
+    rollout,
+    sample,
+)
 
 # Pickled by this name (a Ray worker's error reaches the driver so), it
 # comes back as this very class, its file, channel, sample and stage kept.
@@ -52,4 +65,4 @@ def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
     return pipeline.solve(summaries)
 
 
-__all__ = ["Identification", "Pipeline", "RobotidError", "identify", "merge", "rollout", "sample", "solve", "__version__"]
+__all__ = ["Identification", "Pipeline", "RobotidError", "closed_loop", "identify", "merge", "rollout", "sample", "solve", "__version__"]

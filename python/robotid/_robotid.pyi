@@ -93,6 +93,19 @@ def rollout(
     `window_s`, else chosen from each record's noise (the longest at which
     it moves an exact model by at most 1 % of each joint's motion)."""
 
+def closed_loop(
+    parameters: Union[str, PathLike],
+    robot: Union[str, PathLike],
+    recordings: Sequence[Union[str, PathLike]],
+    controller: Union[str, PathLike],
+) -> pa.Table:
+    """The parameters simulated in closed loop on each raw recording (its
+    positions and recorded reference) under the controller declared in
+    `controller` (a `[controller]` table of per-joint kp, kd, ki), as
+    `robotid validate --closed-loop`: per recording, model (`estimate`,
+    `robot_file`) and joint, the simulated angle's RMS error against the
+    measured (rad)."""
+
 def sample(
     parameters: Union[str, PathLike],
     robot: Union[str, PathLike],

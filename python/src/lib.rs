@@ -432,6 +432,34 @@ fn rollout<'py>(
     table(py, batch)
 }
 
+/// The parameters table `parameters` of `robot` simulated in closed loop
+/// on each raw recording of `recordings` under the controller declared in
+/// `controller` (a TOML file with a `[controller]` table of per-joint kp,
+/// kd, ki), tracking the recorded reference, as `robotid validate
+/// --closed-loop`: per recording, model (`estimate`, `robot_file`) and
+/// joint, the simulated angle's RMS error against the measured (rad), as a
+/// pyarrow table.
+#[pyfunction]
+fn closed_loop<'py>(
+    py: Python<'py>,
+    parameters: PathBuf,
+    robot: PathBuf,
+    recordings: Vec<PathBuf>,
+    controller: PathBuf,
+) -> PyResult<Bound<'py, PyAny>> {
+    let batch = py
+        .detach(|| {
+            let joints = robotid_stages::dynamics::load_robot(&robot)
+                .map_err(robotid::Error::Stage)?
+                .dof();
+            let pid = robotid::validation::read_controller(&controller, joints)?;
+            let runs = robotid::validation::closed_loop_rollouts(&parameters, &robot, &recordings, &pid)?;
+            robotid::validation::closed_loop_table(&runs)
+        })
+        .map_err(py_error)?;
+    table(py, batch)
+}
+
 /// Parameter sets drawn from a physically consistent estimate's
 /// distribution for domain randomization, as `robotid sample`: written
 /// into `out` (`samples.parquet`, `randomization.json` and `.yaml`, and a
@@ -491,6 +519,7 @@ fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(rollout, m)?)?;
     m.add_function(wrap_pyfunction!(sample, m)?)?;
+    m.add_function(wrap_pyfunction!(closed_loop, m)?)?;
     m.add_class::<Identification>()?;
     m.add("RobotidError", m.py().get_type::<RobotidError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -81,6 +81,18 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     # Pooled over the windows (equal lengths but the last): √mean(rms²).
     pooled = {m: (sum(x * x for x in v) / len(v)) ** 0.5 for m, v in by.items()}
     assert pooled["estimate"] <= 1.15 * pooled["robot_file"], pooled
+    # In closed loop under the simulator's declared PID (its truth file),
+    # tracking the recorded reference: within 1.3× of the truth (1.245×,
+    # cli/tests/suite/identify.rs).
+    validation = examples / "recordings" / "kuka_axis3_validation"
+    looped = robotid.closed_loop(
+        out / "parameters.parquet",
+        examples / "robots" / "kuka_axis3.toml",
+        [validation / "kuka_axis3_validation.parquet"],
+        validation / "kuka_axis3_validation.truth.toml",
+    ).to_pylist()
+    by = {r["model"]: r["q_rms"] for r in looped}
+    assert by["estimate"] <= 1.3 * by["robot_file"], by
     # Domain randomization from Python: the command line's files, byte for
     # byte; each drawn MJCF loads in MuJoCo with the drawn masses.
     physical = out / "parameters_physical.parquet"
