@@ -311,9 +311,9 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
         // constraint as exported, contacts and limits off): pooled within
         // 1.2× of the true parameters' error in robotid's rollout, each
         // joint within 1.5× of it and at least 5× under the robot file's.
-        // Measured: 0.58–0.93× (UR5), 0.64–0.88× (Panda), 0.69–0.92×
-        // (ur5_lab): MuJoCo's friction-loss constraint holds a joint at
-        // rest where robotid's RK4 of sign(q̇) dithers about it.
+        // Measured: 0.86–1.08× (UR5), 0.86–1.11× (Panda), 0.90–1.06×
+        // (ur5_lab): both hold a joint at rest by a friction-loss
+        // constraint.
         let mujoco = mujoco_rollout(&out, window_s);
         eprintln!("{arm}: the exported MJCF rolled out by MuJoCo (mrad): {mujoco:.3?}");
         assert!(

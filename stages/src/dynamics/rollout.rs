@@ -12,10 +12,21 @@ use super::{BaseRegressor, Workspace};
 /// [`BaseRegressor::base_values`]): the base regressor is linear in q̈, so
 /// h(q, q̇) = Y(q, q̇, 0)·θ and column i of M(q) is Y(q, 0, eᵢ)·θ −
 /// Y(q, 0, 0)·θ. The friction, offsets and Coulomb turn-over are the
-/// estimate's own. Allocates nothing per call.
+/// estimate's own, but for [`BaseDynamics::settle`]. Allocates nothing per
+/// call.
 pub struct BaseDynamics<'a> {
     regressor: &'a BaseRegressor,
     theta: &'a [f64],
+    /// Per Coulomb parameter: its joint, its index in θ and its side
+    /// (+1, −1; 0 for both).
+    coulomb: Vec<(usize, usize, i8)>,
+    /// The time constant of the friction-loss constraint Coulomb friction
+    /// is applied as (None: the estimate's own sign(q̇) or turn-over).
+    settle_s: Option<f64>,
+    /// The mass matrix's factor and the unconstrained accelerations, for
+    /// the constraint.
+    factor: DMatrix<f64>,
+    free: Vec<f64>,
     ws: Workspace,
     rows: Vec<f64>,
     mass: DMatrix<f64>,
@@ -29,9 +40,33 @@ impl<'a> BaseDynamics<'a> {
     pub fn new(regressor: &'a BaseRegressor, theta: &'a [f64]) -> BaseDynamics<'a> {
         let n = regressor.model.dof();
         assert_eq!(theta.len(), regressor.parameters(), "one value per base parameter");
+        let names = regressor.names();
+        let coulomb = regressor
+            .model
+            .joints
+            .iter()
+            .enumerate()
+            // A joint whose Coulomb friction turns over smoothly
+            // (tanh(q̇/v), identified) keeps it: only a sign(q̇) needs the
+            // constraint.
+            .filter(|(j, _)| regressor.model.friction[*j].transition == 0.0)
+            .flat_map(|(j, joint)| {
+                let names = &names;
+                [("Fc", 0i8), ("Fc+", 1), ("Fc-", -1)]
+                    .into_iter()
+                    .filter_map(move |(p, side)| {
+                        let name = format!("{p}_{}", joint.name);
+                        names.iter().position(|n| *n == name).map(|i| (j, i, side))
+                    })
+            })
+            .collect();
         BaseDynamics {
             regressor,
             theta,
+            coulomb,
+            settle_s: None,
+            factor: DMatrix::zeros(n, n),
+            free: vec![0.0; n],
             ws: regressor.workspace(),
             rows: vec![0.0; n * regressor.parameters()],
             mass: DMatrix::zeros(n, n),
@@ -40,6 +75,61 @@ impl<'a> BaseDynamics<'a> {
             torque: vec![0.0; n],
             bias: vec![0.0; n],
         }
+    }
+
+    /// Coulomb friction as a simulator's friction-loss constraint applies
+    /// it, not as sign(q̇): per joint, the force that would bring its
+    /// velocity to zero over `time_constant` given every other force,
+    /// clamped to ±Fc (MuJoCo's constraint on the mass matrix's diagonal):
+    /// Fc·sign(q̇) while the joint slides, and what holds it where the
+    /// torque cannot overcome Fc, instead of a sign(q̇) an explicit
+    /// integrator dithers about rest with.
+    pub fn settle(&mut self, time_constant: f64) {
+        self.settle_s = (time_constant > 0.0).then_some(time_constant);
+    }
+
+    /// The Coulomb torque on joint `j` the regressor's columns give at
+    /// `qd` (its sign, or its turn-over), per the parameter at `i` of `side`.
+    fn coulomb_column(&self, j: usize, side: i8, qd: f64) -> f64 {
+        let own = self.regressor.model.friction[j].transition;
+        let s = match own > 0.0 {
+            true => (qd / own).tanh(),
+            false => qd.signum() * (qd != 0.0) as i32 as f64,
+        };
+        // Asymmetric columns hold on one side only (`friction_values`).
+        match side {
+            1 if qd >= 0.0 => s.max(0.0),
+            -1 if qd < 0.0 => s.min(0.0),
+            0 => s,
+            _ => 0.0,
+        }
+    }
+
+    /// Right-hand side `rhs` = τ − h(q, q̇) with the Coulomb terms taken
+    /// out and the friction-loss constraint's force put in (see
+    /// [`BaseDynamics::settle`]); `self.mass` the mass matrix, kept.
+    fn constrained(&mut self, qd: &[f64], tc: f64, rhs: &mut [f64]) -> Result<(), usize> {
+        let n = rhs.len();
+        for k in 0..self.coulomb.len() {
+            let (j, i, side) = self.coulomb[k];
+            rhs[j] += self.theta[i] * self.coulomb_column(j, side, qd[j]);
+        }
+        self.free.copy_from_slice(rhs);
+        self.factor.copy_from(&self.mass);
+        super::forward_dynamics::try_cholesky_solve_in_place(&mut self.factor, &mut self.free)?;
+        for j in 0..n {
+            let needed = self.mass[(j, j)] * (self.free[j] + qd[j] / tc);
+            // The friction of the side the joint is driven to.
+            let fc = self
+                .coulomb
+                .iter()
+                .filter(|(k, _, side)| *k == j && (*side == 0 || (*side == 1) == (needed >= 0.0)))
+                .map(|&(_, i, _)| self.theta[i].abs())
+                .next()
+                .unwrap_or(0.0);
+            rhs[j] -= needed.clamp(-fc, fc);
+        }
+        Ok(())
     }
 
     /// The torque the model needs for (q, q̇, q̈): Y(q, q̇, q̈)·θ.
@@ -91,6 +181,9 @@ impl<'a> BaseDynamics<'a> {
                 self.mass[(i, j)] = m;
                 self.mass[(j, i)] = m;
             }
+        }
+        if let Some(tc) = self.settle_s.filter(|_| !self.coulomb.is_empty()) {
+            self.constrained(qd, tc, qdd)?;
         }
         super::forward_dynamics::try_cholesky_solve_in_place(&mut self.mass, qdd)
     }
@@ -183,7 +276,9 @@ impl Rk4 {
 /// The model `dynamics` rolled out over a record (`time`, and per joint
 /// `q`, `qd`, `tau` as `[joint][sample]`): from the measured state at
 /// every `window`-th sample, RK4 over each sample step with the torque
-/// linear between samples.
+/// linear between samples; a Coulomb friction of sign(q̇) applied as a
+/// friction-loss constraint over half a sample step
+/// ([`BaseDynamics::settle`]).
 pub fn rollout(
     dynamics: &mut BaseDynamics,
     time: &[f64],
@@ -193,6 +288,11 @@ pub fn rollout(
     window: usize,
 ) -> Result<Rollout, Stopped> {
     let (n, samples, window) = (q.len(), time.len(), window.max(2));
+    // Rest as a simulator's friction-loss constraint holds it, not a
+    // dithering sign(q̇): over half a sample step, as hard as RK4 keeps
+    // stable (its damping −q̇/tc is stable up to h/tc = 2.78).
+    let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
+    dynamics.settle(0.5 * step);
     let mut sim = vec![vec![0.0; samples]; n];
     let (mut sq, mut sqd) = (vec![0.0; n], vec![0.0; n]);
     let mut count = 0usize;
@@ -441,6 +541,7 @@ pub fn closed_loop(
         })
         .fold(0.0, f64::max);
     let substeps = ((fastest * step / 0.5).ceil() as usize).clamp(1, 1000);
+    dynamics.settle(0.5 * step / substeps as f64);
     let mut out = ClosedLoop {
         q: vec![vec![0.0; samples]; n],
         torque: vec![vec![0.0; samples]; n],
