@@ -661,7 +661,7 @@ pub fn closed_loop_rollouts(
 /// field's metadata. A model that could not be simulated has no rows.
 pub fn closed_loop_table(runs: &[ClosedLoopRun]) -> Result<arrow::record_batch::RecordBatch> {
     use arrow::array::{ArrayRef, Float64Array, StringArray, UInt32Array};
-    use arrow::datatypes::{DataType, Field, Schema};
+
     use std::sync::Arc;
     let (mut recording, mut model, mut joint, mut q, mut substeps) = (vec![], vec![], vec![], vec![], vec![]);
     for r in runs {
@@ -676,31 +676,16 @@ pub fn closed_loop_table(runs: &[ClosedLoopRun]) -> Result<arrow::record_batch::
             }
         }
     }
-    let field = |name: &str, t: DataType, unit: &str| {
-        Field::new(name, t, false).with_metadata(
-            [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
-                .into_iter()
-                .collect::<std::collections::HashMap<_, _>>(),
-        )
-    };
-    let schema = Schema::new(vec![
-        field("recording", DataType::Utf8, "1"),
-        field("model", DataType::Utf8, "1"),
-        field("joint", DataType::Utf8, "1"),
-        field("q_rms", DataType::Float64, "rad"),
-        field("substeps", DataType::UInt32, "1"),
-    ]);
-    let columns: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(recording)),
-        Arc::new(StringArray::from(model)),
-        Arc::new(StringArray::from(joint)),
-        Arc::new(Float64Array::from(q)),
-        Arc::new(UInt32Array::from(substeps)),
-    ];
-    arrow::record_batch::RecordBatch::try_new(Arc::new(schema), columns).map_err(|e| Error::Output {
-        what: "the closed-loop table".into(),
-        msg: e.to_string(),
-    })
+    units_table(
+        "the closed-loop table",
+        vec![
+            ("recording", "1", Arc::new(StringArray::from(recording)) as ArrayRef),
+            ("model", "1", Arc::new(StringArray::from(model))),
+            ("joint", "1", Arc::new(StringArray::from(joint))),
+            ("q_rms", "rad", Arc::new(Float64Array::from(q))),
+            ("substeps", "1", Arc::new(UInt32Array::from(substeps))),
+        ],
+    )
 }
 
 /// Rollouts as one table, a row per record, model, window and joint:
@@ -709,7 +694,7 @@ pub fn closed_loop_table(runs: &[ClosedLoopRun]) -> Result<arrow::record_batch::
 /// metadata. A model that could not be simulated has no rows.
 pub fn rollout_table(rolled: &[RolledOut]) -> Result<arrow::record_batch::RecordBatch> {
     use arrow::array::{ArrayRef, Float64Array, StringArray, UInt32Array};
-    use arrow::datatypes::{DataType, Field, Schema};
+
     use std::sync::Arc;
     let (mut table, mut model, mut window, mut start, mut joint, mut q, mut qd) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
@@ -729,33 +714,42 @@ pub fn rollout_table(rolled: &[RolledOut]) -> Result<arrow::record_batch::Record
             }
         }
     }
-    let field = |name: &str, t: DataType, unit: &str| {
-        Field::new(name, t, false).with_metadata(
-            [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
-                .into_iter()
-                .collect::<std::collections::HashMap<_, _>>(),
-        )
-    };
-    let schema = Schema::new(vec![
-        field("table", DataType::Utf8, "1"),
-        field("model", DataType::Utf8, "1"),
-        field("window", DataType::UInt32, "1"),
-        field("start_s", DataType::Float64, "s"),
-        field("joint", DataType::Utf8, "1"),
-        field("q_rms", DataType::Float64, "rad"),
-        field("qd_rms", DataType::Float64, "rad/s"),
-    ]);
-    let columns: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(table)),
-        Arc::new(StringArray::from(model)),
-        Arc::new(UInt32Array::from(window)),
-        Arc::new(Float64Array::from(start)),
-        Arc::new(StringArray::from(joint)),
-        Arc::new(Float64Array::from(q)),
-        Arc::new(Float64Array::from(qd)),
-    ];
-    arrow::record_batch::RecordBatch::try_new(Arc::new(schema), columns).map_err(|e| Error::Output {
-        what: "the rollout table".into(),
-        msg: e.to_string(),
+    units_table(
+        "the rollout table",
+        vec![
+            ("table", "1", Arc::new(StringArray::from(table)) as ArrayRef),
+            ("model", "1", Arc::new(StringArray::from(model))),
+            ("window", "1", Arc::new(UInt32Array::from(window))),
+            ("start_s", "s", Arc::new(Float64Array::from(start))),
+            ("joint", "1", Arc::new(StringArray::from(joint))),
+            ("q_rms", "rad", Arc::new(Float64Array::from(q))),
+            ("qd_rms", "rad/s", Arc::new(Float64Array::from(qd))),
+        ],
+    )
+}
+
+/// A table of `columns` (name, unit, values), each unit in its field's
+/// metadata; `what` names it in an error.
+fn units_table(
+    what: &str,
+    columns: Vec<(&str, &str, arrow::array::ArrayRef)>,
+) -> Result<arrow::record_batch::RecordBatch> {
+    use arrow::datatypes::{Field, Schema};
+    let fields: Vec<Field> = columns
+        .iter()
+        .map(|(name, unit, values)| {
+            Field::new(*name, values.data_type().clone(), false).with_metadata(
+                [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
+                    .into_iter()
+                    .collect::<std::collections::HashMap<_, _>>(),
+            )
+        })
+        .collect();
+    let arrays = columns.into_iter().map(|(_, _, a)| a).collect();
+    arrow::record_batch::RecordBatch::try_new(std::sync::Arc::new(Schema::new(fields)), arrays).map_err(|e| {
+        Error::Output {
+            what: what.into(),
+            msg: e.to_string(),
+        }
     })
 }

@@ -303,20 +303,6 @@ impl Compiler {
     }
 }
 
-/// The indentation of `element`'s children: its first child element's,
-/// else its own plus two spaces.
-pub(super) fn child_indent(text: &str, element: &roxmltree::Node) -> String {
-    let line = |at: usize| {
-        let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
-        let lead = &text[start..at];
-        lead.chars().all(|c| c == ' ' || c == '\t').then(|| lead.to_string())
-    };
-    match element.children().find(|c| c.is_element()) {
-        Some(c) => line(c.range().start).unwrap_or_else(|| "    ".into()),
-        None => line(element.range().start).map_or_else(|| "  ".into(), |own| own + "  "),
-    }
-}
-
 /// Where an element's start tag ends: its attributes' end (before `/>`
 /// or `>`), and just after it.
 fn start_tag(text: &str, n: &roxmltree::Node) -> (usize, usize) {
@@ -408,7 +394,7 @@ impl<'a> Reader<'a> {
             joints: Vec::new(),
             inertial: None,
             open_end,
-            indent: child_indent(self.text, &c),
+            indent: super::urdf_patch::indent(self.text, &c, "  "),
         });
         let id = self.bodies.len() - 1;
         self.contents(

@@ -214,16 +214,7 @@ impl MjcfPatch {
                 said: over,
             });
         }
-        edits.sort_by_key(|(r, _)| r.start);
-        let mut out = String::with_capacity(text.len() + 8192);
-        let mut at = 0;
-        for (r, with) in edits {
-            out.push_str(&text[at..r.start]);
-            out.push_str(&with);
-            at = r.end;
-        }
-        out.push_str(&text[at..]);
-        Ok((out, patched))
+        Ok((super::urdf_patch::apply(text, edits), patched))
     }
 
     /// The edits that write joint `i`'s armature, damping and frictionloss

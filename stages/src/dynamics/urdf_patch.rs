@@ -227,7 +227,7 @@ fn body_edits(
 }
 
 /// `text` with each range replaced.
-fn apply(text: &str, mut edits: Vec<(Range<usize>, String)>) -> String {
+pub(super) fn apply(text: &str, mut edits: Vec<(Range<usize>, String)>) -> String {
     edits.sort_by_key(|(r, _)| r.start);
     let mut out = String::with_capacity(text.len() + 4096);
     let mut at = 0;
@@ -279,7 +279,7 @@ fn below<'a>(link: &str, carried: bool, rigid: &BTreeMap<&'a str, Vec<(&'a str, 
 
 /// The indentation of the children of `element`: its first child
 /// element's, else its own plus `step`.
-fn indent(text: &str, element: &roxmltree::Node, step: &str) -> String {
+pub(super) fn indent(text: &str, element: &roxmltree::Node, step: &str) -> String {
     let line = |at: usize| {
         let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
         let lead = &text[start..at];
