@@ -448,6 +448,42 @@ fn figure(x: f64) -> String {
     }
 }
 
+/// The kinematics table at `path` and its torque, refused without one or
+/// for other joints than `model`'s.
+fn kinematics_of(
+    path: &Path,
+    model: &robotid_stages::dynamics::Model,
+) -> Result<(robotid_schemas::Kinematics, Vec<Vec<f64>>)> {
+    let mut kin =
+        robotid_schemas::Kinematics::from_record_batch(&robotid_stages::formats::parquet::read_parquet(path)?)
+            .map_err(|e| Error::Table {
+                path: path.to_path_buf(),
+                source: e.into(),
+            })?;
+    let Some(tau) = kin.torque.take() else {
+        return Err(Error::Output {
+            what: path.display().to_string(),
+            msg: "the kinematics table holds no torque to drive a rollout with".into(),
+        });
+    };
+    if kin.joints != model.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>() {
+        return Err(Error::Output {
+            what: path.display().to_string(),
+            msg: format!(
+                "joints {} are not the robot's {}",
+                kin.joints.join(", "),
+                model
+                    .joints
+                    .iter()
+                    .map(|j| j.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        });
+    }
+    Ok((kin, tau))
+}
+
 /// The parameters table at `parameters` (of `robot`) rolled out on the
 /// kinematics table beside each regressor table of `regressors` (both
 /// read `within` a folder): the model's forward dynamics driven by the
@@ -468,34 +504,8 @@ pub fn rollouts(
     let mut out = Vec::new();
     for r in regressors {
         let table = r.with_file_name("kinematics.parquet");
-        let path = within.join(&table);
-        let kin =
-            robotid_schemas::Kinematics::from_record_batch(&robotid_stages::formats::parquet::read_parquet(&path)?)
-                .map_err(|e| Error::Table {
-                    path: path.clone(),
-                    source: e.into(),
-                })?;
-        let Some(tau) = kin.torque.as_ref() else {
-            return Err(Error::Output {
-                what: path.display().to_string(),
-                msg: "the kinematics table holds no torque to drive a rollout with".into(),
-            });
-        };
-        if kin.joints != model.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>() {
-            return Err(Error::Output {
-                what: path.display().to_string(),
-                msg: format!(
-                    "joints {} are not the robot's {}",
-                    kin.joints.join(", "),
-                    model
-                        .joints
-                        .iter()
-                        .map(|j| j.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            });
-        }
+        let (kin, tau) = kinematics_of(&within.join(&table), &model)?;
+        let tau = &tau;
         let step = (kin.time.last().copied().unwrap_or(0.0) - kin.time[0]) / (kin.time.len().max(2) - 1) as f64;
         // Chosen with the estimate's own model; where that cannot be
         // simulated, the robot file's, else the given or shortest window.

@@ -70,78 +70,13 @@ impl MjcfPatch {
     /// `text` (an MJCF) read for patching with models like `model`.
     pub fn new(text: String, model: &Model) -> Result<MjcfPatch, String> {
         let mjcf = Mjcf::read(&text)?;
-        let mut at = Vec::new();
-        for j in &model.joints {
-            let (b, k) = mjcf.joint(&j.name).ok_or_else(|| {
-                let names: Vec<&str> = mjcf
-                    .bodies
-                    .iter()
-                    .flat_map(|b| &b.joints)
-                    .map(|j| j.name.as_str())
-                    .collect();
-                format!(
-                    "joint `{}` of the model is not in the MJCF (its joints: {})",
-                    j.name,
-                    names.join(", ")
-                )
-            })?;
-            let body = &mjcf.bodies[b];
-            if body.joints[k].kind != "hinge" {
-                return Err(format!(
-                    "joint `{}` is a {} joint in the MJCF, a hinge in the robot file",
-                    j.name, body.joints[k].kind
-                ));
-            }
-            if body.joints.len() > 1 {
-                return Err(format!(
-                    "body `{}` holds joint `{}` and {} other(s): robotid writes one identified body per joint",
-                    body.name,
-                    j.name,
-                    body.joints.len() - 1
-                ));
-            }
-            at.push((b, k));
-        }
-        let mut bases = vec![(Pose::identity(), "its world frame".to_string())];
-        if let Some(p) = at.first().and_then(|&(b, _)| mjcf.bodies[b].parent) {
-            bases.push((mjcf.bodies[p].world, format!("its body `{}`", mjcf.bodies[p].name)));
-        }
-        let (overlay, base_said) = bases
-            .iter()
-            .map(|(w, said)| (overlay(&mjcf, model, &at, *w), said))
-            .min_by(|a, b| {
-                let worst = |o: &Overlay| o.worst.0.max(o.worst.1);
-                worst(&a.0).total_cmp(&worst(&b.0))
-            })
-            .ok_or("the model has no joint")?;
-        let (angle, distance, j) = overlay.worst;
-        if angle.max(distance) > SAME_ROBOT {
-            return Err(format!(
-                "its kinematics are not the robot file's: joint `{}`'s axis is {angle:.2e} rad and {distance:.2e} m from the robot file's, with the robot file's base at {base_said} (another robot, or another zero pose)",
-                model.joints[j].name
-            ));
-        }
-        let mut said = Vec::new();
-        if angle.max(distance) > 1e-9 {
-            said.push(format!(
-                "the MJCF's joint axes are up to {angle:.1e} rad and {distance:.1e} m from the robot file's (its numbers rounded): the identified bodies are written in its frames, and it moves as its own kinematics say"
-            ));
-        }
+        let at = model_joints(&mjcf, model)?;
+        let (overlay, said) = best_overlay(&mjcf, model, &at)?;
         let moving: HashSet<usize> = at.iter().map(|&(b, _)| b).collect();
         let mut placed = Vec::new();
         for (i, &(body, joint)) in at.iter().enumerate() {
             let (lumped, carried) = parts(&mjcf, body, &moving, model);
-            let mut share: Option<Inertial> = None;
-            for (c, pose) in &carried {
-                let Some((_, own)) = &mjcf.bodies[*c].inertial else {
-                    return Err(format!(
-                        "body `{}` moves on a joint the model holds locked and has no <inertial>: MuJoCo would take its mass from its geoms, which robotid does not compute; give it an <inertial> so that robotid can take it out of the identified body of `{}`",
-                        mjcf.bodies[*c].name, mjcf.bodies[body].name
-                    ));
-                };
-                let own = pose.inertial(own);
-                share = Some(share.map_or(own.clone(), |s| s.merge(&own)));
-            }
+            let share = carried_share(&mjcf, body, &carried)?;
             placed.push(Placed {
                 body,
                 joint,
@@ -303,6 +238,93 @@ impl MjcfPatch {
         }
         out
     }
+}
+
+/// Each of the model's joints in the MJCF: its body and its index there;
+/// refused where one is missing, not a hinge, or shares its body.
+fn model_joints(mjcf: &Mjcf, model: &Model) -> Result<Vec<(usize, usize)>, String> {
+    let mut at = Vec::new();
+    for j in &model.joints {
+        let (b, k) = mjcf.joint(&j.name).ok_or_else(|| {
+            let names: Vec<&str> = mjcf
+                .bodies
+                .iter()
+                .flat_map(|b| &b.joints)
+                .map(|j| j.name.as_str())
+                .collect();
+            format!(
+                "joint `{}` of the model is not in the MJCF (its joints: {})",
+                j.name,
+                names.join(", ")
+            )
+        })?;
+        let body = &mjcf.bodies[b];
+        if body.joints[k].kind != "hinge" {
+            return Err(format!(
+                "joint `{}` is a {} joint in the MJCF, a hinge in the robot file",
+                j.name, body.joints[k].kind
+            ));
+        }
+        if body.joints.len() > 1 {
+            return Err(format!(
+                "body `{}` holds joint `{}` and {} other(s): robotid writes one identified body per joint",
+                body.name,
+                j.name,
+                body.joints.len() - 1
+            ));
+        }
+        at.push((b, k));
+    }
+    Ok(at)
+}
+
+/// The robot file's kinematics laid over the MJCF's with its base at the
+/// MJCF's world or at the body holding the first joint, whichever fits;
+/// refused past [`SAME_ROBOT`], a difference above 1e-9 said.
+fn best_overlay(mjcf: &Mjcf, model: &Model, at: &[(usize, usize)]) -> Result<(Overlay, Vec<String>), String> {
+    let mut bases = vec![(Pose::identity(), "its world frame".to_string())];
+    if let Some(p) = at.first().and_then(|&(b, _)| mjcf.bodies[b].parent) {
+        bases.push((mjcf.bodies[p].world, format!("its body `{}`", mjcf.bodies[p].name)));
+    }
+    let (overlay, base_said) = bases
+        .iter()
+        .map(|(w, said)| (overlay(mjcf, model, at, *w), said))
+        .min_by(|a, b| {
+            let worst = |o: &Overlay| o.worst.0.max(o.worst.1);
+            worst(&a.0).total_cmp(&worst(&b.0))
+        })
+        .ok_or("the model has no joint")?;
+    let (angle, distance, j) = overlay.worst;
+    if angle.max(distance) > SAME_ROBOT {
+        return Err(format!(
+            "its kinematics are not the robot file's: joint `{}`'s axis is {angle:.2e} rad and {distance:.2e} m from the robot file's, with the robot file's base at {base_said} (another robot, or another zero pose)",
+            model.joints[j].name
+        ));
+    }
+    let mut said = Vec::new();
+    if angle.max(distance) > 1e-9 {
+        said.push(format!(
+            "the MJCF's joint axes are up to {angle:.1e} rad and {distance:.1e} m from the robot file's (its numbers rounded): the identified bodies are written in its frames, and it moves as its own kinematics say"
+        ));
+    }
+    Ok((overlay, said))
+}
+
+/// The bodies `carried` (each with its pose in `body`'s frame) together,
+/// in `body`'s frame; refused where one has no `<inertial>`.
+fn carried_share(mjcf: &Mjcf, body: usize, carried: &[(usize, Pose)]) -> Result<Option<Inertial>, String> {
+    let mut share: Option<Inertial> = None;
+    for (c, pose) in carried {
+        let Some((_, own)) = &mjcf.bodies[*c].inertial else {
+            return Err(format!(
+                "body `{}` moves on a joint the model holds locked and has no <inertial>: MuJoCo would take its mass from its geoms, which robotid does not compute; give it an <inertial> so that robotid can take it out of the identified body of `{}`",
+                mjcf.bodies[*c].name, mjcf.bodies[body].name
+            ));
+        };
+        let own = pose.inertial(own);
+        share = Some(share.map_or(own.clone(), |s| s.merge(&own)));
+    }
+    Ok(share)
 }
 
 /// The robot file's kinematics over the MJCF's with its base at `base`:

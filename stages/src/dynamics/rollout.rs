@@ -475,6 +475,43 @@ fn phase_randomized(x: &[f64], rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
     out
 }
 
+/// Per joint, the central differences of `x` over `time` (one-sided at
+/// the ends).
+fn velocity(time: &[f64], x: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let samples = time.len();
+    x.iter()
+        .map(|r| {
+            (0..samples)
+                .map(|s| {
+                    let (a, b) = (s.saturating_sub(1), (s + 1).min(samples - 1));
+                    match b > a {
+                        true => (r[b] - r[a]) / (time[b] - time[a]),
+                        false => 0.0,
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// RK4 steps per sample step of length `step` for `pid` on the model at
+/// `q`: its fastest mode ω = max(kd/M, √(kp/M), ∛(ki/M)) per joint,
+/// ω·h ≤ 0.5 (at most 1000).
+fn loop_substeps(dynamics: &mut BaseDynamics, pid: &Pid, q: &[f64], step: f64) -> Result<usize, Stopped> {
+    let n = q.len();
+    let mut scratch = vec![0.0; n];
+    dynamics
+        .accelerations(q, &vec![0.0; n], &vec![0.0; n], &mut scratch)
+        .map_err(|joint| Stopped::NotPositiveDefinite { sample: 0, joint })?;
+    let fastest = (0..n)
+        .map(|j| {
+            let m = dynamics.mass[(j, j)].max(f64::MIN_POSITIVE);
+            (pid.kd[j] / m).max((pid.kp[j] / m).sqrt()).max((pid.ki[j] / m).cbrt())
+        })
+        .fold(0.0, f64::max);
+    Ok(((fastest * step / 0.5).ceil() as usize).clamp(1, 1000))
+}
+
 /// A PID position controller per joint, as robotid's simulator runs it:
 /// u = kp·(r − q) + kd·(ṙ − q̇) + ki·∫(r − q).
 #[derive(Debug, Clone, PartialEq)]
@@ -512,35 +549,12 @@ pub fn closed_loop(
     (q, qd): (&[Vec<f64>], &[Vec<f64>]),
 ) -> Result<ClosedLoop, Stopped> {
     let (n, samples) = (q.len(), time.len());
-    let rd: Vec<Vec<f64>> = reference
-        .iter()
-        .map(|r| {
-            (0..samples)
-                .map(|s| {
-                    let (a, b) = (s.saturating_sub(1), (s + 1).min(samples - 1));
-                    match b > a {
-                        true => (r[b] - r[a]) / (time[b] - time[a]),
-                        false => 0.0,
-                    }
-                })
-                .collect()
-        })
-        .collect();
+    let rd = velocity(time, reference);
     // State [q | q̇ | ∫(r − q)], stage buffers: allocated once.
     let mut x: Vec<f64> = (0..n).map(|j| q[j][0]).chain((0..n).map(|j| qd[j][0])).collect();
     x.extend(std::iter::repeat_n(0.0, n));
-    let mut scratch = vec![0.0; n];
-    dynamics
-        .accelerations(&x[..n], &vec![0.0; n], &vec![0.0; n], &mut scratch)
-        .map_err(|joint| Stopped::NotPositiveDefinite { sample: 0, joint })?;
     let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
-    let fastest = (0..n)
-        .map(|j| {
-            let m = dynamics.mass[(j, j)].max(f64::MIN_POSITIVE);
-            (pid.kd[j] / m).max((pid.kp[j] / m).sqrt()).max((pid.ki[j] / m).cbrt())
-        })
-        .fold(0.0, f64::max);
-    let substeps = ((fastest * step / 0.5).ceil() as usize).clamp(1, 1000);
+    let substeps = loop_substeps(dynamics, pid, &x[..n], step)?;
     dynamics.settle(0.5 * step / substeps as f64);
     let mut out = ClosedLoop {
         q: vec![vec![0.0; samples]; n],
