@@ -422,9 +422,8 @@ fn rollout_window(
     let next = fits.iter().copied().find(|&t| t > chosen);
     let rms: Vec<f64> = residue.iter().map(|r| std_dev(r)).collect();
     let said = format!(
-        "{chosen} s, chosen from the noise: the torque the model leaves unexplained on this record (RMS {:.2e}–{:.2e} N·m, its spectrum kept, its phases drawn) and the start states' noise move it by {:.2} % of the motion of the joint they move most within it{}",
-        rms.iter().copied().fold(f64::INFINITY, f64::min),
-        rms.iter().copied().fold(0.0, f64::max),
+        "{chosen} s, chosen from the noise: the torque the model leaves unexplained on this record (RMS {} N·m, its spectrum kept, its phases drawn) and the start states' noise move it by {:.2} % of the motion of the joint they move most within it{}",
+        span(&rms),
         100.0 * share(chosen),
         match next {
             Some(t) => format!(" ({:.2} % within {t} s; at most {:.0} % taken)", 100.0 * share(t), 100.0 * NOISE_SHARE),
@@ -432,6 +431,18 @@ fn rollout_window(
         }
     );
     Ok((samples(chosen), said))
+}
+
+/// The smallest and largest of `x`, or the one value they share.
+fn span(x: &[f64]) -> String {
+    let (lo, hi) = (
+        x.iter().copied().fold(f64::INFINITY, f64::min),
+        x.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    );
+    match format!("{lo:.2e}") == format!("{hi:.2e}") {
+        true => format!("{lo:.2e}"),
+        false => format!("{lo:.2e}–{hi:.2e}"),
+    }
 }
 
 fn std_dev(x: &[f64]) -> f64 {
