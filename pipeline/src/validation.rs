@@ -612,17 +612,18 @@ pub struct ClosedLoopRun {
 /// The parameters table at `parameters` (of `robot`) simulated in closed
 /// loop on each raw recording of `recordings` (a table with each joint's
 /// position and reference, `q_<joint>` and `ref_<joint>`, as `robotid
-/// simulate` writes): under `controller`, tracking the recorded
-/// reference from the first sample's state; the robot file's parameters
-/// the same way.
+/// simulate` writes): under the controller the file `controller` declares
+/// ([`read_controller`]), tracking the recorded reference from the first
+/// sample's state; the robot file's parameters the same way.
 pub fn closed_loop_rollouts(
     parameters: &Path,
     robot: &Path,
     recordings: &[PathBuf],
-    controller: &robotid_stages::dynamics::Pid,
+    controller: &Path,
 ) -> Result<Vec<ClosedLoopRun>> {
     use robotid_stages::dynamics::{closed_loop, BaseDynamics};
     let (params, model, base) = crate::tables::identified(robot, parameters)?;
+    let controller = &read_controller(controller, model.dof())?;
     let theta: Vec<f64> = params.values.iter().copied().collect();
     let prior: Option<Vec<f64>> = base.base_values(&model).map(|v| v.iter().copied().collect());
     let mut out = Vec::new();

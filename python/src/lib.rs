@@ -449,11 +449,7 @@ fn closed_loop<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let batch = py
         .detach(|| {
-            let joints = robotid_stages::dynamics::load_robot(&robot)
-                .map_err(robotid::Error::Stage)?
-                .dof();
-            let pid = robotid::validation::read_controller(&controller, joints)?;
-            let runs = robotid::validation::closed_loop_rollouts(&parameters, &robot, &recordings, &pid)?;
+            let runs = robotid::validation::closed_loop_rollouts(&parameters, &robot, &recordings, &controller)?;
             robotid::validation::closed_loop_table(&runs)
         })
         .map_err(py_error)?;

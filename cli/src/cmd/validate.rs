@@ -60,8 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     print!("{}", rollouts_said(&rolled));
     if let (Some(robot), Some(controller)) = (&args.robot, &args.controller) {
-        let pid = robotid::validation::read_controller(controller, args.closed_loop_joints(robot)?)?;
-        let runs = robotid::validation::closed_loop_rollouts(&args.parameters, robot, &args.closed_loop, &pid)?;
+        let runs = robotid::validation::closed_loop_rollouts(&args.parameters, robot, &args.closed_loop, controller)?;
         print!("{}", closed_loop_said(&runs));
     }
     if let Some(dir) = &args.plot {
@@ -133,13 +132,6 @@ pub fn said(v: &Validated, parameters: &Path) -> String {
         s.push_str(&format!("verdict: {msg}\n"));
     }
     s
-}
-
-impl Args {
-    /// How many joints the robot has (the controller's gains are per joint).
-    fn closed_loop_joints(&self, robot: &Path) -> anyhow::Result<usize> {
-        Ok(robotid_stages::dynamics::load_robot(robot)?.dof())
-    }
 }
 
 /// Closed-loop rollouts as text: per recording and joint, the simulated

@@ -470,10 +470,12 @@ fn closed_loop_judges_the_model(w: &Path, parameters: &Path, robot: &Path) {
         .collect();
     for rec in ["kuka_axis3", "kuka_axis3_validation"] {
         let dir = w.join("recordings").join(rec);
-        let pid = robotid::validation::read_controller(&dir.join(format!("{rec}.truth.toml")), 1).unwrap();
+        let declared = dir.join(format!("{rec}.truth.toml"));
+        let pid = robotid::validation::read_controller(&declared, 1).unwrap();
         let recording = dir.join(format!("{rec}.parquet"));
-        let runs = robotid::validation::closed_loop_rollouts(parameters, robot, std::slice::from_ref(&recording), &pid)
-            .unwrap();
+        let runs =
+            robotid::validation::closed_loop_rollouts(parameters, robot, std::slice::from_ref(&recording), &declared)
+                .unwrap();
         let (ours, exact) = (
             runs[0].estimate.as_ref().unwrap().q_rms[0],
             runs[0].prior.as_ref().unwrap().as_ref().unwrap().q_rms[0],
