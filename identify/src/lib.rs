@@ -20,7 +20,7 @@ use robotid_report::export::Exported;
 use robotid_stages::stage::estimate::Outcome;
 use robotid_stages::stage::read::ReadConfig;
 
-pub use work::identify;
+pub use work::{identify, payload_from_tables};
 
 /// What to identify, and how strictly.
 #[derive(Clone, Debug)]
@@ -52,6 +52,25 @@ pub struct Request {
     /// The user's own MJCF of the robot: the MJCF export is it, patched
     /// (else MJCF made from the robot file).
     pub mjcf: Option<PathBuf>,
+    /// Records of the robot carrying a payload: the payload identified
+    /// against the robot identified from `recordings`.
+    pub payload: Option<PayloadRequest>,
+}
+
+/// The payload to identify (`estimation::payload`).
+#[derive(Clone, Debug)]
+pub struct PayloadRequest {
+    /// Recordings of the robot with the payload on.
+    pub loaded: Vec<PathBuf>,
+    /// The link holding it: the last moving link or one welded to it
+    /// (a flange, `tool0`); the payload is given in its frame.
+    pub link: String,
+    /// Its mass, kg, when known: the drives' gains are identified (the
+    /// efforts as read times a scale per joint).
+    pub known_mass: Option<f64>,
+    /// Where its mass can be, in the link's frame: an ellipsoid's centre
+    /// and semi-axes, m (the bounded estimate keeps inside it).
+    pub bound: Option<([f64; 3], [f64; 3])>,
 }
 
 impl Request {
@@ -72,6 +91,7 @@ impl Request {
             accept_inadequate: false,
             threads: None,
             mjcf: None,
+            payload: None,
         }
     }
 }
@@ -81,6 +101,8 @@ impl Request {
 pub enum Role {
     Excitation,
     Validation,
+    /// The robot with a payload.
+    Loaded,
 }
 
 impl Role {
@@ -88,6 +110,7 @@ impl Role {
         match self {
             Role::Excitation => "excitation",
             Role::Validation => "validation",
+            Role::Loaded => "loaded",
         }
     }
 }
@@ -157,6 +180,8 @@ pub struct Identification {
     /// identification one), the estimate's and the robot file's position
     /// and velocity errors; Err: why there are none, as the report says.
     pub rollouts: robotid_report::report::Rolled,
+    /// The payload identified (`payload.parquet`), when asked for.
+    pub payload: Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
 }
 
 impl Identification {

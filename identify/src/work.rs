@@ -7,11 +7,12 @@ use robotid::validation::Validated;
 use robotid::verdict::{Measured, Verdict};
 use robotid::{Observer, RunOptions};
 use robotid_report::export::{Export, Format};
-use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
+use robotid_stages::estimation::payload::{identify_payload, PayloadFit, PayloadOptions, Robot as PayloadRobot};
+use robotid_stages::estimation::{Covariance, Ellipsoid, Estimate, Estimator, System};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
 
 use crate::script::Script;
-use crate::{Error, Identification, Physical, Ran, Recording, Request, Result, Role};
+use crate::{Error, Identification, PayloadRequest, Physical, Ran, Recording, Request, Result, Role};
 
 /// Identifies the robot of `request` (see the crate's documentation),
 /// `observer` told of each pipeline's steps and of the physical fit. A
@@ -19,6 +20,9 @@ use crate::{Error, Identification, Physical, Ran, Recording, Request, Result, Ro
 /// files written and marked; errors are for what could not be judged.
 pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
     let paths = Paths::of(request)?;
+    if let Some(p) = &request.payload {
+        payload_frame(&robotid_stages::dynamics::load_robot(&paths.robot)?, &p.link)?;
+    }
     // Everything is written into a staging folder and appears at once when
     // identify ends, refused or not (robotid::output): a kill or a failure
     // leaves the folder as it was. One identify or run at a time holds it.
@@ -39,9 +43,14 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     let runs = run_pipelines(request, (staged, &paths.out), &recordings, &mut script, observer)?;
     let tables: Vec<PathBuf> = recordings
         .iter()
-        .map(|r| Path::new(&r.name).join(&r.name).join("regressor.parquet"))
+        // Each pipeline runs one log, which it names by its stem.
+        .map(|r| {
+            let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
+            Path::new(&r.name).join(&own[0]).join("regressor.parquet")
+        })
         .collect();
-    let (id_tables, val_tables) = tables.split_at(paths.identifying);
+    let (id_tables, rest) = tables.split_at(paths.identifying);
+    let (val_tables, loaded_tables) = rest.split_at(paths.held.len());
     let mut recordings = recordings;
     let mut judged = estimate(request, (staged, &paths), &recordings, id_tables, val_tables)?;
     if own_delays(request, (staged, &paths), &mut recordings, val_tables, observer)? {
@@ -55,6 +64,10 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
+    let payload = match &request.payload {
+        Some(p) => Some(Box::new(payload(p, (staged, &paths), id_tables, loaded_tables)?)),
+        None => None,
+    };
     let physical = physical_or_why(
         request,
         &judged,
@@ -65,6 +78,9 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         observer,
     )?;
     let fitted = matches!(physical, Physical::Fitted { .. });
+    if let (Some(p), Some(fit), true) = (&request.payload, &payload, fitted) {
+        payload_export(&p.link, fit, (staged, &paths))?;
+    }
     let rollouts = robotid_report::report::write(&robotid_report::report::Page {
         parameters: "parameters.parquet".into(),
         excitation: id_tables.to_vec(),
@@ -90,7 +106,108 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         validation,
         physical,
         rollouts,
+        payload,
     })
+}
+
+/// The payload identified from the loaded records' tables against the
+/// robot's, written as `payload.parquet`.
+fn payload(
+    request: &PayloadRequest,
+    (staged, paths): (&Path, &Paths),
+    id_tables: &[PathBuf],
+    loaded_tables: &[PathBuf],
+) -> Result<PayloadFit> {
+    let fit = payload_from_tables(request, &paths.robot, staged, id_tables, loaded_tables)?;
+    let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
+    let table = robotid_stages::estimation::payload::payload_table(&fit, &request.link, &model)?;
+    robotid_stages::formats::parquet::write_parquet(&staged.join("payload.parquet"), &table)?;
+    Ok(fit)
+}
+
+/// The identified URDF with the payload on (`identified_payload.urdf`), or
+/// why not (`identified_payload.txt`).
+fn payload_export(link: &str, fit: &PayloadFit, (staged, paths): (&Path, &Paths)) -> Result<()> {
+    let urdf = staged.join("identified.urdf");
+    let Ok(text) = std::fs::read_to_string(&urdf) else {
+        return Ok(());
+    };
+    let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
+    let last = model.joints.last().map(|j| j.name.clone()).unwrap_or_default();
+    let (rot, pos) = payload_frame(&model, link)?;
+    match robotid_stages::estimation::payload::urdf_with_payload(&text, (link, &last), (&rot, &pos), fit) {
+        Ok(with) => std::fs::write(staged.join("identified_payload.urdf"), with),
+        Err(why) => std::fs::write(
+            staged.join("identified_payload.txt"),
+            format!("no URDF with the payload: {why}\n"),
+        ),
+    }
+    .map_err(io(&urdf))
+}
+
+/// Where `link` is in the last moving link's frame: that link (named by
+/// its joint or its own name) or one welded to it.
+pub(crate) fn payload_frame(
+    model: &robotid_stages::dynamics::Model,
+    link: &str,
+) -> Result<(nalgebra::Matrix3<f64>, nalgebra::Vector3<f64>)> {
+    let last = model.joints.last().map(|j| j.name.clone()).unwrap_or_default();
+    if link == last {
+        return Ok((nalgebra::Matrix3::identity(), nalgebra::Vector3::zeros()));
+    }
+    match model.end_frames.iter().find(|(n, _, _)| n == link) {
+        Some((_, r, p)) => Ok((*r, *p)),
+        None => {
+            let mut held: Vec<String> = model.end_frames.iter().map(|f| f.0.clone()).collect();
+            held.push(last);
+            Err(Error::Request(format!(
+                "--payload-on {link}: not a link the last moving joint carries; one of {}",
+                held.join(", ")
+            )))
+        }
+    }
+}
+
+/// The payload of `request` from the `regressor` tables (paths under
+/// `within`) of records of `robot` without it (`unloaded`) and with it
+/// (`loaded`, made with the payload's columns): identified
+/// (`estimation::payload`) and given about the requested link.
+pub fn payload_from_tables(
+    request: &PayloadRequest,
+    robot: &Path,
+    within: &Path,
+    unloaded: &[PathBuf],
+    loaded: &[PathBuf],
+) -> Result<PayloadFit> {
+    let model = robotid_stages::dynamics::load_robot(robot)?;
+    let (rot, pos) = payload_frame(&model, &request.link)?;
+    let unloaded = robotid::tables::load_system(within, unloaded)?;
+    let loaded = robotid::tables::load_system(within, loaded)?;
+    // The bound is declared in the link's frame, the fit is in the last
+    // moving link's: its centre moved there, its semi-axes permuted where
+    // the frames' axes map onto each other (flanges turned by multiples of
+    // 90°), else the sphere holding it.
+    let bound = request.bound.map(|(c, a)| {
+        let a = nalgebra::Vector3::from(a);
+        let aligned = rot.iter().all(|v| v.abs() < 1e-9 || (v.abs() - 1.0).abs() < 1e-9);
+        Ellipsoid {
+            centre: rot * nalgebra::Vector3::from(c) + pos,
+            semi_axes: if aligned {
+                (rot * a).abs()
+            } else {
+                nalgebra::Vector3::repeat(a.max())
+            },
+        }
+    });
+    let fit = identify_payload(
+        &loaded,
+        PayloadRobot::Unloaded(&unloaded),
+        &PayloadOptions {
+            known_mass: request.known_mass,
+            bound,
+        },
+    )?;
+    Ok(fit.in_frame(&rot, &pos))
 }
 
 /// The physical fit, or why there is none: refused (and not written
@@ -142,6 +259,12 @@ impl Paths {
         let held = absolutes(&request.validate)?;
         let identifying = all.len();
         all.extend(held.iter().cloned());
+        if let Some(p) = &request.payload {
+            if p.loaded.is_empty() {
+                return Err(Error::Request("--payload-on: no recording with the payload".into()));
+            }
+            all.extend(absolutes(&p.loaded)?);
+        }
         if identifying == 0 {
             return Err(Error::Request("no recording to identify from".into()));
         }
@@ -221,6 +344,16 @@ fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Recording>, Optio
         )?;
         designs.push(d);
     }
+    // The loaded records' regressor carries the payload's columns.
+    for d in designs.iter_mut().skip(paths.identifying + paths.held.len()) {
+        d.regressor.payload = true;
+        for stage in d.plan.stages.iter_mut() {
+            if let robotid::plan::StageConfig::Regressor(c) = stage {
+                c.payload = true;
+            }
+        }
+        d.text = robotid::identify::file_text(&d.plan)?;
+    }
     let locked = lock_unrecorded(&mut designs, paths.identifying)?;
     let recordings = designs
         .into_iter()
@@ -228,8 +361,10 @@ fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Recording>, Optio
         .map(|(i, design)| Recording {
             role: if i < paths.identifying {
                 Role::Excitation
-            } else {
+            } else if i < paths.identifying + paths.held.len() {
                 Role::Validation
+            } else {
+                Role::Loaded
             },
             name: paths.names[i].clone(),
             log: paths.all[i].clone(),

@@ -378,7 +378,7 @@ fn table_needs(t: TableKind) -> Product {
         TableKind::PeriodMean => Product::PeriodMean,
         TableKind::Noise => Product::Noise,
         TableKind::Regressor | TableKind::RFactor => Product::Regressor,
-        TableKind::Kinematics | TableKind::Parameters => Product::Kinematics,
+        TableKind::Kinematics | TableKind::Parameters | TableKind::Payload => Product::Kinematics,
     }
 }
 

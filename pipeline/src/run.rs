@@ -91,14 +91,15 @@ pub struct RecordingResult {
 }
 
 /// Output folder names: the file stem, or stem and extension where two
-/// logs share a stem.
+/// logs share a stem, numbered from the second where two share both.
 pub fn recording_names(logs: &[PathBuf]) -> Vec<String> {
     let stem = |p: &PathBuf| {
         p.file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default()
     };
-    logs.iter()
+    let first: Vec<String> = logs
+        .iter()
         .map(|p| {
             let clash = logs.iter().filter(|q| stem(q) == stem(p)).count() > 1;
             let ext = p
@@ -109,6 +110,20 @@ pub fn recording_names(logs: &[PathBuf]) -> Vec<String> {
                 format!("{}_{ext}", stem(p))
             } else {
                 stem(p)
+            }
+        })
+        .collect();
+    // The same file name in two folders (`a/run.csv`, `b/run.csv`): the
+    // later ones numbered.
+    first
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let before = first[..i].iter().filter(|m| *m == n).count();
+            if before == 0 {
+                n.clone()
+            } else {
+                format!("{n}_{}", before + 1)
             }
         })
         .collect()
@@ -152,11 +167,11 @@ pub fn tables_of(
                 m.metadata = with(&m.metadata);
                 m.to_record_batch()?
             }
-            TableKind::Parameters => {
+            TableKind::Parameters | TableKind::Payload => {
                 return Err(robotid_stages::Error::setting(
                     "output.tables",
                     "a table made per recording (parameters come from the estimate, over all recordings)",
-                    "parameters",
+                    kind.name(),
                 ))
             }
             TableKind::Kinematics => {

@@ -1,7 +1,7 @@
 """Type stubs of the native module (python/src/lib.rs)."""
 
 from os import PathLike
-from typing import Dict, List, Optional, Sequence, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import pyarrow as pa
 
@@ -61,6 +61,7 @@ class Identification:
     parameters: pa.Table
     physical: Optional[pa.Table]
     exports: List[str]
+    payload: Optional[pa.Table]
 
 def identify(
     recordings: Sequence[Union[str, PathLike]],
@@ -73,12 +74,20 @@ def identify(
     torque_per_amp: Sequence[float] = (),
     threads: Optional[int] = None,
     mjcf: Optional[Union[str, PathLike]] = None,
+    payload_on: Optional[str] = None,
+    unloaded: Sequence[Union[str, PathLike]] = (),
+    known_payload_mass: Optional[float] = None,
+    payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
     result (`identified` False, `refused` the cause), not an error. With
     `mjcf` (the user's own MJCF of the robot), `identified.xml` is it with
-    the identified dynamics written in."""
+    the identified dynamics written in. With `payload_on` (a link), the
+    `recordings` carry a payload, the robot is identified from `unloaded`,
+    and `payload` is the payload's table (in that link's frame; with
+    `known_payload_mass`, the drives' gains too; `payload_ellipsoid`:
+    centre and semi-axes, m, the bounded estimate's region)."""
 
 def rollout(
     parameters: Union[str, PathLike],

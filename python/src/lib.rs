@@ -320,6 +320,9 @@ struct Identification {
     physical: Option<Py<PyAny>>,
     /// The exports written (URDF, MJCF, sidecar).
     exports: Vec<PathBuf>,
+    /// `payload.parquet` when a payload was identified (mass, centre of
+    /// mass, inertia at it, the drives' gains; values, std, intervals).
+    payload: Option<Py<PyAny>>,
 }
 
 #[pymethods]
@@ -344,7 +347,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -358,8 +361,31 @@ fn identify(
     torque_per_amp: Vec<f64>,
     threads: Option<usize>,
     mjcf: Option<PathBuf>,
+    payload_on: Option<String>,
+    unloaded: Vec<PathBuf>,
+    known_payload_mass: Option<f64>,
+    payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
 ) -> PyResult<Identification> {
-    use robotid_identify::{Physical, Request};
+    use robotid_identify::{PayloadRequest, Physical, Request};
+    // As the command line: with a payload, `recordings` carry it and the
+    // robot is identified from `unloaded`.
+    let (recordings, payload) = match payload_on {
+        Some(link) => {
+            if unloaded.is_empty() {
+                return Err(pyo3::exceptions::PyValueError::new_err(
+                    "payload_on: give the recordings without the payload as `unloaded`",
+                ));
+            }
+            let p = PayloadRequest {
+                loaded: recordings,
+                link,
+                known_mass: known_payload_mass,
+                bound: payload_ellipsoid,
+            };
+            (unloaded, Some(p))
+        }
+        None => (recordings, None),
+    };
     let request = Request {
         validate,
         out,
@@ -368,6 +394,7 @@ fn identify(
         accept_inadequate,
         threads,
         mjcf,
+        payload,
         ..Request::new(recordings, robot)
     };
     let id = py
@@ -405,6 +432,10 @@ fn identify(
         parameters: written(py, &id.path("parameters.parquet"))?,
         physical,
         exports,
+        payload: match id.payload {
+            Some(_) => Some(written(py, &id.path("payload.parquet"))?),
+            None => None,
+        },
         out: id.out,
     })
 }

@@ -168,6 +168,17 @@ const PARAMETERS: &[ColumnSpec] = &[
     col!("expression", "parameter_expression", Dimensionless, Utf8, false, Optional, "the standard parameters a base parameter regroups"),
 ];
 
+#[rustfmt::skip]
+const PAYLOAD: &[ColumnSpec] = &[
+    col!("name", "quantity_name", Dimensionless, Utf8, false, Required, "mass, com_x…, ixx… (inertia at the centre of mass, the link frame's axes), gain_<joint>, torque_constant_<joint>"),
+    col!("unit", "quantity_unit", Dimensionless, Utf8, false, Required, "unit of the value"),
+    col!("value", "estimate", Dimensionless, F64, false, Required, "least-squares estimate"),
+    col!("std", "standard_deviation", Dimensionless, F64, false, Required, "its standard deviation (first order through the map from the ten standard parameters)"),
+    col!("ci_low", "confidence_low", Dimensionless, F64, false, Required, "lower end of the Student-t interval (level and degrees of freedom in the schema metadata)"),
+    col!("ci_high", "confidence_high", Dimensionless, F64, false, Required, "upper end of that interval"),
+    col!("bounded", "bounded_estimate", Dimensionless, F64, false, Optional, "the physically consistent estimate inside the declared bound (the gains: the least-squares value)"),
+];
+
 /// The kinds of table robotid reads and writes. Each has a name and a
 /// version stored in the schema metadata, and a fixed column layout.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -187,10 +198,13 @@ pub enum TableKind {
     RFactor,
     /// Identified parameters with uncertainty.
     Parameters,
+    /// A payload's mass, centre of mass and inertia, and drives' gains,
+    /// identified with uncertainty.
+    Payload,
 }
 
 impl TableKind {
-    pub const ALL: [TableKind; 7] = [
+    pub const ALL: [TableKind; 8] = [
         TableKind::RawSamples,
         TableKind::Kinematics,
         TableKind::PeriodMean,
@@ -198,6 +212,7 @@ impl TableKind {
         TableKind::Regressor,
         TableKind::RFactor,
         TableKind::Parameters,
+        TableKind::Payload,
     ];
 
     pub fn name(self) -> &'static str {
@@ -209,6 +224,7 @@ impl TableKind {
             TableKind::Regressor => "regressor",
             TableKind::RFactor => "r_factor",
             TableKind::Parameters => "parameters",
+            TableKind::Payload => "payload",
         }
     }
 
@@ -225,6 +241,7 @@ impl TableKind {
             TableKind::Regressor => REGRESSOR,
             TableKind::RFactor => R_FACTOR,
             TableKind::Parameters => PARAMETERS,
+            TableKind::Payload => PAYLOAD,
         }
     }
 

@@ -65,7 +65,18 @@ CASES = {
     "sensors_1k_1p6": dict(
         filter=None, friction="sign", periods=1.6, ramp_in=3.0, ramp_out=3.0, fs=1000.0, tracking=2e-4, form="txt"
     ),
+    # The same arm and excitation (3 periods of 10 s) without and with a
+    # payload on tool0: a 2.5 kg body off the flange's axis. The loaded
+    # record draws its noise apart.
+    "payload_unloaded": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=3),
+    "payload_loaded": dict(
+        filter=("butter", 4, 30.0, None), friction="sign", periods=3, seed_case="payload_unloaded", payload=True
+    ),
 }
+
+# The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its
+# centre of mass (a 12 × 8 × 6 cm box turned 0.3 rad about z).
+PAYLOAD = dict(mass=2.5, com=[0.05, -0.03, 0.07], box=[0.12, 0.08, 0.06], yaw=0.3)
 
 # What "gripper" adds to the URDF: a revolute gripper on tool0 and a
 # prismatic finger on it, each with a body the arm carries.
@@ -122,6 +133,16 @@ def main(urdf, out, case):
         with open(urdf, "w") as f:
             f.write(text[:at] + GRIPPER + text[at:])
     full = pin.buildModelFromUrdf(urdf)
+    truth_payload = None
+    if spec.get("payload"):
+        # Carried by the joint tool0 hangs from, placed at tool0.
+        frame = full.frames[full.getFrameId("tool0")]
+        m, (x, y, z), yaw = PAYLOAD["mass"], PAYLOAD["box"], PAYLOAD["yaw"]
+        inertia_box = np.diag([y * y + z * z, x * x + z * z, x * x + y * y]) * m / 12
+        rz = pin.utils.rotate("z", yaw)
+        inertia_com = rz @ inertia_box @ rz.T
+        full.appendBodyToJoint(frame.parentJoint, pin.Inertia(m, np.array(PAYLOAD["com"]), inertia_com), frame.placement)
+        truth_payload = dict(link="tool0", mass=m, com=PAYLOAD["com"], inertia_com=inertia_com.tolist())
     # The gripper held at its zero: the arm carries it as one body.
     arm_ids = [i for i in range(1, full.njoints) if full.names[i] not in ("gripper_joint", "finger_joint")]
     locked = [i for i in range(1, full.njoints) if i not in arm_ids]
@@ -130,7 +151,7 @@ def main(urdf, out, case):
     nq = model.nq
     names = [model.names[i] for i in range(1, model.njoints)]
     # Seeded by the case's place: new cases go last, so the others keep theirs.
-    rng = np.random.default_rng(list(CASES).index(case) + 1)
+    rng = np.random.default_rng(list(CASES).index(spec.get("seed_case", case)) + 1)
     f0, harmonics = 0.1, 5
     w = 2 * np.pi * f0 * np.arange(1, harmonics + 1)
     a = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
@@ -248,6 +269,9 @@ def main(urdf, out, case):
         tau = np.concatenate([np.repeat(tau[:1], late, axis=0), tau[:-late]])
     logged = slice(0, None, FINE)
     t, q, tau = t[logged], q[logged], tau[logged]
+    if spec.get("seed_case"):
+        # The excitation and the arm another case's, the noise its own.
+        rng = np.random.default_rng(list(CASES).index(case) + 1)
     tau = tau + rng.normal(0, NOISE, tau.shape)
     step = 2 * np.pi / COUNTS
     if held:
@@ -283,6 +307,8 @@ def main(urdf, out, case):
         encoder_counts_per_rev=COUNTS,
         locked={full.names[i]: 0.0 for i in locked},
     )
+    if truth_payload:
+        truth["payload"] = truth_payload
     if held:
         # The joint-wise (decoupled) model of each moving joint, the others
         # at rest: τ = Mi·q̈ + Gs·sin q + Gc·cos q + friction.

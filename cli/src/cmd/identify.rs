@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use robotid::identify::Found;
-use robotid_identify::{Identification, Physical, Request};
+use robotid_identify::{Identification, PayloadRequest, Physical, Request};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -56,6 +56,33 @@ pub struct Args {
     /// MJCF made from the robot file.
     #[arg(long)]
     pub mjcf: Option<PathBuf>,
+    /// The recordings carry a payload held by this link (the last moving
+    /// link, or one welded to it: a flange, `tool0`): its mass, centre of
+    /// mass and inertia are identified against the robot identified from
+    /// the `--unloaded` recordings, given in that link's frame, and written
+    /// to `payload.parquet`.
+    #[arg(long, value_name = "LINK", requires = "unloaded")]
+    pub payload_on: Option<String>,
+    /// With `--payload-on`: recordings of the robot without the payload.
+    #[arg(long, num_args = 1.., requires = "payload_on")]
+    pub unloaded: Vec<PathBuf>,
+    /// With `--payload-on`: the payload's mass, kg, known: the drives'
+    /// gains are identified too (each joint's torque over its effort as
+    /// read).
+    #[arg(long, value_name = "KG", requires = "payload_on")]
+    pub known_payload_mass: Option<f64>,
+    /// With `--payload-on`: where the payload's mass can be, an ellipsoid
+    /// in the link's frame: centre x,y,z and semi-axes a,b,c, m. The
+    /// physically consistent estimate keeps inside it.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 6,
+        value_name = "M",
+        requires = "payload_on",
+        allow_negative_numbers = true
+    )]
+    pub payload_ellipsoid: Vec<f64>,
 }
 
 /// The exit code of an identification refused as inadequate.
@@ -74,6 +101,21 @@ impl std::fmt::Display for Inadequate {
 impl std::error::Error for Inadequate {}
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // With a payload the recordings named are the loaded ones; the robot
+    // is identified from the unloaded.
+    let (recordings, payload) = match args.payload_on {
+        Some(link) => {
+            let e = &args.payload_ellipsoid;
+            let payload = PayloadRequest {
+                loaded: args.recordings,
+                link,
+                known_mass: args.known_payload_mass,
+                bound: (e.len() == 6).then(|| ([e[0], e[1], e[2]], [e[3], e[4], e[5]])),
+            };
+            (args.unloaded, Some(payload))
+        }
+        None => (args.recordings, None),
+    };
     let request = Request {
         out: args.out,
         read: args.read.as_deref().map(read_table).transpose()?,
@@ -85,7 +127,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         accept_inadequate: args.accept_inadequate,
         validate: args.validate,
         mjcf: args.mjcf,
-        ..Request::new(args.recordings, args.robot)
+        payload,
+        ..Request::new(recordings, args.robot)
     };
     let id = robotid_identify::identify(&request, &crate::progress::Bars::new(false, |_| {}))?;
     print_designs(&id, args.print_pipeline);
@@ -102,6 +145,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("refused, written anyway (--accept-inadequate): {why}");
     }
     print_physical(&id);
+    print_payload(&id);
     println!("report in {}", id.path("report.html").display());
     println!("\nidentified: {out} (pipelines in {out}/pipelines, commands in {out}/identify.sh)");
     Ok(())
@@ -185,6 +229,30 @@ fn print_estimate(id: &Identification) {
     if let Some(v) = &id.validation {
         print!("\n{}", super::validate::said(v, "parameters.parquet".as_ref()));
     }
+}
+
+/// The payload, with its intervals and the drives' gains.
+fn print_payload(id: &Identification) {
+    let Some(fit) = &id.payload else { return };
+    let Some(body) = &fit.body else { return };
+    let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
+    println!("\npayload ({} degrees of freedom, 95 % intervals):", fit.estimate.dof);
+    let listed = body.listed();
+    let bounded = fit.bounded.as_ref().map(|b| b.body.listed());
+    for (k, (name, unit)) in robotid_stages::estimation::payload::LISTED.iter().enumerate() {
+        let b = bounded.map(|b| format!("   bounded {:+.5}", b[k])).unwrap_or_default();
+        println!("  {name:<7} {:+.5} ± {:.5} {unit}{b}", listed[k], t * fit.body_std[k]);
+    }
+    for g in &fit.gains {
+        println!("  gain {:<24} {:.5} ± {:.5}", g.joint, g.scale, t * g.std);
+    }
+    if !fit.undetermined.is_empty() {
+        println!(
+            "  undetermined at the payload's size (the records do not tell them from any body of that mass and size; move the wrist more, or longer): {}",
+            robotid_stages::estimation::payload::said_undetermined(&fit.undetermined)
+        );
+    }
+    println!("payload in {}", id.path("payload.parquet").display());
 }
 
 /// The physically consistent estimate, its validation and the exports.

@@ -2,7 +2,7 @@ use robotid_schemas::TableKind;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Table kind: raw_samples, kinematics, period_mean, noise, regressor, r_factor, parameters.
+    /// Table kind: raw_samples, kinematics, period_mean, noise, regressor, r_factor, parameters, payload.
     pub kind: String,
     /// Joint names to lay out per-joint columns for.
     #[arg(long, value_delimiter = ',', default_value = "j1,j2")]

@@ -33,4 +33,5 @@ mod cli;
 mod export;
 mod foreign;
 mod identify;
+mod payload;
 mod pipeline;

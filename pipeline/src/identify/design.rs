@@ -26,7 +26,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
     let mean = chain.mean.as_ref().expect("averaged");
     findings.push((Found::Steady, steady_said(p, tol)));
     let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
-    let moving = joint_wise(log, period, &joints, &sets, &mut findings)?;
+    let moving = joint_wise(log, period, &joints, &sets, &mut findings, own_regressor)?;
     let held_at = moving.map(|m| held_positions(m, &joints, &mean.q));
     same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
     findings.push((Found::Harmonics, harmonics_said));

@@ -108,13 +108,16 @@ pub(super) fn excited(
 /// The joint that moves when it is the only one (the others held: a
 /// joint-wise experiment, Bona §3, identified with the decoupled model from
 /// its rows), said in `findings`; None when every joint moves. Joints that
-/// do not move beside others that do are refused.
+/// do not move beside others that do are refused where the record is
+/// identified from (`own`); a record checked against the identification's
+/// parameters (validation, a payload's) may hold some still: said.
 pub(super) fn joint_wise(
     log: &Path,
     period: f64,
     joints: &[String],
     sets: &[Vec<u32>],
     findings: &mut Vec<(Found, String)>,
+    own: bool,
 ) -> Result<Option<usize>> {
     let still: Vec<&str> = sets
         .iter()
@@ -133,7 +136,12 @@ pub(super) fn joint_wise(
         ));
         return Ok(Some(m));
     }
-    if !still.is_empty() {
+    if !still.is_empty() && !own {
+        findings.push((
+            Found::Harmonics,
+            format!("joint(s) {} do not move at any harmonic: held", still.join(", ")),
+        ));
+    } else if !still.is_empty() {
         return Err(refuse(
             log,
             format!(

@@ -59,6 +59,12 @@ pub struct RegressorModel {
     /// Swevers eq. 9: gravity-spring terms on one joint as a Fourier series
     /// in its angle.
     pub spring: Option<SpringConfig>,
+    /// Ten more columns, after the base ones: the standard columns of the
+    /// last moving link, for a payload it carries (`XX_payload` …
+    /// `M_payload`, about that link's frame). They are not regrouped: a
+    /// payload changes that link's ten parameters, and records with and
+    /// without it tell the change apart (`estimation::payload`).
+    pub payload: bool,
 }
 
 /// The chain model with symmetric friction (Swevers' and Bona's), rotor
@@ -73,6 +79,7 @@ impl Default for RegressorModel {
             offset: false,
             coulomb_transition_rad_s: None,
             spring: None,
+            payload: false,
         }
     }
 }
@@ -133,6 +140,21 @@ pub struct BaseRegressor {
     /// The chain's kernel for whole tables, four samples per pass.
     batched: Option<Batched>,
 }
+
+/// The payload's columns (`RegressorModel::payload`), in the order of a
+/// link's ten standard parameters.
+pub const PAYLOAD_COLUMNS: [&str; 10] = [
+    "XX_payload",
+    "XY_payload",
+    "XZ_payload",
+    "YY_payload",
+    "YZ_payload",
+    "ZZ_payload",
+    "MX_payload",
+    "MY_payload",
+    "MZ_payload",
+    "M_payload",
+];
 
 /// Preallocated buffers for [`BaseRegressor::rows`].
 pub struct Workspace {
@@ -221,6 +243,24 @@ impl BaseRegressor {
                 )
             }
         };
+        let mut columns: Vec<(usize, String, String)> = columns;
+        if spec.payload {
+            if spec.model != ModelKind::Chain {
+                return Err(Error::setting(
+                    "payload",
+                    "used with model = \"chain\" (the decoupled model has no links)",
+                    "model = \"decoupled\"",
+                ));
+            }
+            let last = 10 * (n - 1);
+            for (c, name) in PAYLOAD_COLUMNS.iter().enumerate() {
+                columns.push((
+                    last + c,
+                    (*name).to_string(),
+                    format!("payload {name} about the last link's frame"),
+                ));
+            }
+        }
         let batched = (spec.model == ModelKind::Chain).then(|| Batched::new(&model));
         Ok(BaseRegressor {
             batched,
@@ -236,10 +276,13 @@ impl BaseRegressor {
     /// The base parameters of a model's own standard parameters (its
     /// inertials, rotors, friction): the truth a simulation of `model`
     /// identifies. None for the decoupled model.
+    /// With payload columns, the payload's values are zero: the robot
+    /// alone carries none.
     pub fn base_values(&self, model: &Model) -> Option<nalgebra::DVector<f64>> {
         let map = self.map.as_ref()?;
         let std = crate::dynamics::standard_parameters(model, self.terms);
-        Some(map * nalgebra::DVector::from_vec(std))
+        let robot = map * nalgebra::DVector::from_vec(std);
+        Some(robot.resize_vertically(self.columns.len(), 0.0))
     }
 
     /// θ_base = map·θ_standard (chain models).

@@ -28,7 +28,7 @@ mod urdf_patch;
 
 pub use agreement::{torque_agreement, Agreement};
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
-pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace};
+pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace, PAYLOAD_COLUMNS};
 pub use batch::{BatchData, Batched, LANES};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};

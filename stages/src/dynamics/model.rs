@@ -240,6 +240,10 @@ pub struct Model {
     /// The base's shapes (the links before the first moving joint), in the
     /// base frame.
     pub base_shapes: Vec<Shape>,
+    /// The description's links held rigidly by the last moving link (it
+    /// too, first), each with its frame in that link's: (name, rotation,
+    /// position). Where a payload can be declared.
+    pub end_frames: Vec<(String, Matrix3<f64>, Vector3<f64>)>,
 }
 
 /// A shape of a link, placed in its frame.
@@ -404,6 +408,7 @@ impl Model {
             extents: Vec::new(),
             shapes: Vec::new(),
             base_shapes: Vec::new(),
+            end_frames: Vec::new(),
         }
     }
 

@@ -383,6 +383,7 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     }
     close_link(&mut model, &found);
     model.end_effector = tool_point(link, frame, &children, &rigid);
+    welded(link, frame, &children, &rigid, &mut model.end_frames);
     model.warnings = warnings;
     model.locked = locked.into_iter().collect();
     if model.joints.is_empty() {
@@ -452,6 +453,20 @@ fn shapes_extent(shapes: &[Shape]) -> Option<Extent> {
         out = Some(out.map_or(e, |o| o.union(&e)));
     }
     out
+}
+
+/// `link` at `frame` and every link rigidly held by it, with their frames.
+fn welded<'a>(
+    link: &'a str,
+    frame: Frame,
+    children: &HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    rigid: &dyn Fn(&urdf_rs::Joint) -> Frame,
+    out: &mut Vec<(String, Matrix3<f64>, Vector3<f64>)>,
+) {
+    out.push((link.to_string(), frame.0, frame.1));
+    for j in children.get(link).cloned().unwrap_or_default() {
+        welded(&j.child.link, compose(&frame, &rigid(j)), children, rigid, out);
+    }
 }
 
 fn lump_fixed<'a>(

@@ -14,6 +14,7 @@ pub mod dedicated;
 mod identifiability;
 mod least_squares;
 mod ml;
+pub mod payload;
 mod physical;
 pub mod projection;
 mod robust;

@@ -64,6 +64,9 @@ pub struct RegressorConfig {
     /// only its rows enter the system (a held joint's rows would fit
     /// friction to the velocity noise).
     pub joint_wise: bool,
+    /// Records of the robot carrying a payload: ten more columns, the last
+    /// moving link's standard ones (see [`RegressorModel::payload`]).
+    pub payload: bool,
 }
 
 impl Default for RegressorConfig {
@@ -84,6 +87,7 @@ impl RegressorConfig {
             band_limit_hz: None,
             projection: None,
             joint_wise: false,
+            payload: m.payload,
         }
     }
 
@@ -96,6 +100,7 @@ impl RegressorConfig {
             offset: self.offset,
             coulomb_transition_rad_s: self.coulomb_transition_rad_s,
             spring: self.spring.clone(),
+            payload: self.payload,
         }
     }
 
