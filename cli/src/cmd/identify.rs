@@ -77,8 +77,7 @@ pub struct Args {
     #[arg(
         long,
         value_delimiter = ',',
-        num_args = 6,
-        value_name = "M",
+        value_name = "X,Y,Z,A,B,C",
         requires = "payload_on",
         allow_negative_numbers = true
     )]
@@ -106,6 +105,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (recordings, payload) = match args.payload_on {
         Some(link) => {
             let e = &args.payload_ellipsoid;
+            if !(e.is_empty() || e.len() == 6) {
+                anyhow::bail!(
+                    "--payload-ellipsoid: {} values; give six, the centre x,y,z and the semi-axes a,b,c (m)",
+                    e.len()
+                );
+            }
             let payload = PayloadRequest {
                 loaded: args.recordings,
                 link,
@@ -241,6 +246,10 @@ fn print_payload(id: &Identification) {
     let bounded = fit.bounded.as_ref().map(|b| b.body.listed());
     for (k, (name, unit)) in robotid_stages::estimation::payload::LISTED.iter().enumerate() {
         let b = bounded.map(|b| format!("   bounded {:+.5}", b[k])).unwrap_or_default();
+        if k == 0 && !fit.gains.is_empty() {
+            println!("  {name:<7} {:+.5} {unit} (known)", listed[k]);
+            continue;
+        }
         println!("  {name:<7} {:+.5} ± {:.5} {unit}{b}", listed[k], t * fit.body_std[k]);
     }
     for g in &fit.gains {

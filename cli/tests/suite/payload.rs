@@ -310,6 +310,8 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
         "ee_link",
         "--unloaded",
         dir.path().join("unloaded.csv").to_str().unwrap(),
+        "--payload-ellipsoid",
+        "0.04,-0.03,0.06,0.05,0.05,0.06",
         "--accept-inadequate",
         "--out",
         dir.path().join("cli").to_str().unwrap(),

@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use robotid_schemas::TableKind;
 
 use super::{physically_consistent, pseudo_inertia, Covariance, Ellipsoid, Estimate, Known, LinkBound, System};
-use crate::dynamics::PAYLOAD_COLUMNS;
+use crate::dynamics::{inertial_parameters, PAYLOAD_COLUMNS};
 use crate::{Error, Result};
 
 /// Where the robot's own parameters come from.
@@ -511,19 +511,7 @@ pub fn standard_in(t: &[f64; 10], rot: &Matrix3<f64>, pos: &Vector3<f64>) -> [f6
         + h * p.transpose()
         + p * h.transpose();
     let hu = rot.transpose() * (h - p * m);
-    let iu = rot.transpose() * ip * rot;
-    [
-        iu[(0, 0)],
-        iu[(0, 1)],
-        iu[(0, 2)],
-        iu[(1, 1)],
-        iu[(1, 2)],
-        iu[(2, 2)],
-        hu.x,
-        hu.y,
-        hu.z,
-        m,
-    ]
+    inertial_parameters(&(rot.transpose() * ip * rot), &hu, m)
 }
 
 impl PayloadFit {
@@ -620,19 +608,19 @@ pub fn urdf_with_payload(
         (child.to_string(), (*pos, Vector3::new(r, pi, y)))
     };
     let end = urdf.rfind("</robot>").ok_or("the URDF has no </robot>")?;
-    let (c, i) = (body.com, body.inertia_com);
+    let l = body.listed();
     let added = format!(
         "  <!-- robotid: the identified payload ({from}, payload.parquet), on `{link}` -->\n  <link name=\"robotid_payload\">\n    <inertial>\n      <origin xyz=\"{:e} {:e} {:e}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:e}\"/>\n      <inertia ixx=\"{:e}\" ixy=\"{:e}\" ixz=\"{:e}\" iyy=\"{:e}\" iyz=\"{:e}\" izz=\"{:e}\"/>\n    </inertial>\n  </link>\n  <joint name=\"robotid_payload_joint\" type=\"fixed\">\n    <parent link=\"{parent}\"/>\n    <child link=\"robotid_payload\"/>\n    <origin xyz=\"{:e} {:e} {:e}\" rpy=\"{:e} {:e} {:e}\"/>\n  </joint>\n",
-        c.x,
-        c.y,
-        c.z,
-        body.mass,
-        i[(0, 0)],
-        i[(0, 1)],
-        i[(0, 2)],
-        i[(1, 1)],
-        i[(1, 2)],
-        i[(2, 2)],
+        l[1],
+        l[2],
+        l[3],
+        l[0],
+        l[4],
+        l[5],
+        l[6],
+        l[7],
+        l[8],
+        l[9],
         xyz.x,
         xyz.y,
         xyz.z,
@@ -730,20 +718,8 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
 /// The ten standard parameters of `b` (inertia about the frame's origin).
 pub fn standard_of(b: &Body) -> [f64; 10] {
     let c = b.com;
-    let o = b.inertia_com + (Matrix3::identity() * c.dot(&c) - c * c.transpose()) * b.mass;
-    let h = c * b.mass;
-    [
-        o[(0, 0)],
-        o[(0, 1)],
-        o[(0, 2)],
-        o[(1, 1)],
-        o[(1, 2)],
-        o[(2, 2)],
-        h.x,
-        h.y,
-        h.z,
-        b.mass,
-    ]
+    let origin = b.inertia_com + (Matrix3::identity() * c.dot(&c) - c * c.transpose()) * b.mass;
+    inertial_parameters(&origin, &(c * b.mass), b.mass)
 }
 
 #[cfg(test)]
