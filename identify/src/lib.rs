@@ -20,7 +20,7 @@ use robotid_report::export::Exported;
 use robotid_stages::stage::estimate::Outcome;
 use robotid_stages::stage::read::ReadConfig;
 
-pub use work::{identify, payload_from_tables};
+pub use work::{identify, payload_against_parameters, payload_from_tables};
 
 /// What to identify, and how strictly.
 #[derive(Clone, Debug)]

@@ -125,6 +125,119 @@ fn payload(
     Ok(fit)
 }
 
+/// The payload of `request` from its loaded recordings against the robot's
+/// parameters given as a table (`parameters`, of an earlier identify of
+/// `robot`), into `out` (`payload.parquet` and the loaded records'
+/// pipelines and tables), appearing at once. The loaded records'
+/// pipelines are designed from them (filter, delay, periods) with the
+/// table's regressor model and the payload's columns; the table's
+/// covariance is carried into the payload's.
+pub fn payload_against_parameters(
+    request: &PayloadRequest,
+    robot: &Path,
+    parameters: &Path,
+    out: &Path,
+    observer: &dyn Observer,
+) -> Result<PayloadFit> {
+    let robot = absolute(robot)?;
+    let loaded = request
+        .loaded
+        .iter()
+        .map(|p| absolute(p))
+        .collect::<robotid::Result<Vec<_>>>()?;
+    if loaded.is_empty() {
+        return Err(Error::Request("--payload-on: no recording with the payload".into()));
+    }
+    let model = robotid_stages::dynamics::load_robot(&robot)?;
+    payload_frame(&model, &request.link)?;
+    let table = robotid_stages::formats::parquet::read_parquet(parameters)?;
+    let given = robotid_stages::estimation::parameters_from_table(&table)?;
+    let mut regressor = robotid_stages::stage::regressor::RegressorConfig::of_metadata(&given.metadata)?;
+    regressor.payload = true;
+    let staging = robotid::output::prepare(&absolute_path(out)?, None, &loaded)?;
+    if holds_anything(out) {
+        return Err(Error::Request(format!(
+            "{}: the output folder is not empty; give another, or remove it",
+            out.display()
+        )));
+    }
+    let names = robotid::run::recording_names(&loaded);
+    let mut recordings: Vec<Recording> = Vec::new();
+    for (log, name) in loaded.iter().zip(names) {
+        let mut design = design_with(log, &robot, recordings.first().map(|r| &r.design), None, None)?;
+        // The table's model, this record's band.
+        let band = design.regressor.band_limit_hz;
+        design.regressor = robotid_stages::stage::regressor::RegressorConfig {
+            band_limit_hz: band,
+            ..regressor.clone()
+        };
+        for stage in design.plan.stages.iter_mut() {
+            if let robotid::plan::StageConfig::Regressor(c) = stage {
+                *c = design.regressor.clone();
+            }
+        }
+        design.text = robotid::identify::file_text(&design.plan)?;
+        recordings.push(Recording {
+            role: Role::Loaded,
+            name,
+            log: log.clone(),
+            design,
+        });
+    }
+    let staged = staging.staged_out().to_path_buf();
+    let runner = Request::new(Vec::new(), robot.clone());
+    run_pipelines(&runner, (&staged, out), &recordings, &mut Script::new(&robot), observer)?;
+    let tables: Vec<PathBuf> = recordings
+        .iter()
+        .map(|r| {
+            let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
+            Path::new(&r.name).join(&own[0]).join("regressor.parquet")
+        })
+        .collect();
+    let system = robotid::tables::load_system(&staged, &tables)?;
+    let known = robotid_stages::estimation::Known {
+        names: given.names.clone(),
+        values: given.values.clone(),
+        covariance: given.covariance.clone(),
+    };
+    let (rot, pos) = payload_frame(&model, &request.link)?;
+    let fit = identify_payload(
+        &system,
+        PayloadRobot::Known(&known),
+        &PayloadOptions {
+            known_mass: None,
+            bound: bound_in_last_link(request, (&rot, &pos)),
+        },
+    )?
+    .in_frame(&rot, &pos);
+    let table = robotid_stages::estimation::payload::payload_table(&fit, &request.link, &model)?;
+    robotid_stages::formats::parquet::write_parquet(&staged.join("payload.parquet"), &table)?;
+    staging.commit()?;
+    Ok(fit)
+}
+
+/// The declared bound (in the payload link's frame) in the last moving
+/// link's: its centre moved there, its semi-axes permuted where the
+/// frames' axes map onto each other (flanges turned by multiples of 90°),
+/// else the sphere holding it.
+fn bound_in_last_link(
+    request: &PayloadRequest,
+    (rot, pos): (&nalgebra::Matrix3<f64>, &nalgebra::Vector3<f64>),
+) -> Option<Ellipsoid> {
+    request.bound.map(|(c, a)| {
+        let a = nalgebra::Vector3::from(a);
+        let aligned = rot.iter().all(|v| v.abs() < 1e-9 || (v.abs() - 1.0).abs() < 1e-9);
+        Ellipsoid {
+            centre: rot * nalgebra::Vector3::from(c) + pos,
+            semi_axes: if aligned {
+                (rot * a).abs()
+            } else {
+                nalgebra::Vector3::repeat(a.max())
+            },
+        }
+    })
+}
+
 /// The identified URDF with the payload on (`identified_payload.urdf`), or
 /// why not (`identified_payload.txt`).
 fn payload_export(link: &str, fit: &PayloadFit, (staged, paths): (&Path, &Paths)) -> Result<()> {
@@ -183,22 +296,7 @@ pub fn payload_from_tables(
     let (rot, pos) = payload_frame(&model, &request.link)?;
     let unloaded = robotid::tables::load_system(within, unloaded)?;
     let loaded = robotid::tables::load_system(within, loaded)?;
-    // The bound is declared in the link's frame, the fit is in the last
-    // moving link's: its centre moved there, its semi-axes permuted where
-    // the frames' axes map onto each other (flanges turned by multiples of
-    // 90°), else the sphere holding it.
-    let bound = request.bound.map(|(c, a)| {
-        let a = nalgebra::Vector3::from(a);
-        let aligned = rot.iter().all(|v| v.abs() < 1e-9 || (v.abs() - 1.0).abs() < 1e-9);
-        Ellipsoid {
-            centre: rot * nalgebra::Vector3::from(c) + pos,
-            semi_axes: if aligned {
-                (rot * a).abs()
-            } else {
-                nalgebra::Vector3::repeat(a.max())
-            },
-        }
-    });
+    let bound = bound_in_last_link(request, (&rot, &pos));
     let fit = identify_payload(
         &loaded,
         PayloadRobot::Unloaded(&unloaded),

@@ -61,11 +61,16 @@ pub struct Args {
     /// mass and inertia are identified against the robot identified from
     /// the `--unloaded` recordings, given in that link's frame, and written
     /// to `payload.parquet`.
-    #[arg(long, value_name = "LINK", requires = "unloaded")]
+    #[arg(long, value_name = "LINK")]
     pub payload_on: Option<String>,
     /// With `--payload-on`: recordings of the robot without the payload.
-    #[arg(long, num_args = 1.., requires = "payload_on")]
+    #[arg(long, num_args = 1.., requires = "payload_on", conflicts_with = "parameters")]
     pub unloaded: Vec<PathBuf>,
+    /// With `--payload-on`, instead of `--unloaded`: the robot's parameters
+    /// table (an earlier identify's `parameters.parquet`), its covariance
+    /// carried into the payload's. Only the payload is written.
+    #[arg(long, value_name = "PARAMETERS", requires = "payload_on")]
+    pub parameters: Option<PathBuf>,
     /// With `--payload-on`: the payload's mass, kg, known: the drives'
     /// gains are identified too (each joint's torque over its effort as
     /// read).
@@ -117,6 +122,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 known_mass: args.known_payload_mass,
                 bound: (e.len() == 6).then(|| ([e[0], e[1], e[2]], [e[3], e[4], e[5]])),
             };
+            if let Some(given) = &args.parameters {
+                return payload_only(&payload, &args.robot, given, args.out.as_deref());
+            }
+            if args.unloaded.is_empty() {
+                anyhow::bail!("--payload-on: give the records without the payload (--unloaded) or the robot's parameters (--parameters)");
+            }
             (args.unloaded, Some(payload))
         }
         None => (args.recordings, None),
@@ -153,6 +164,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print_payload(&id);
     println!("report in {}", id.path("report.html").display());
     println!("\nidentified: {out} (pipelines in {out}/pipelines, commands in {out}/identify.sh)");
+    Ok(())
+}
+
+/// The payload against the robot's parameters given: only it identified.
+fn payload_only(
+    payload: &PayloadRequest,
+    robot: &std::path::Path,
+    given: &std::path::Path,
+    out: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    let out = out.map(PathBuf::from).unwrap_or_else(|| {
+        let stem = payload.loaded[0]
+            .file_stem()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        PathBuf::from("out/payload").join(stem)
+    });
+    let fit = robotid_identify::payload_against_parameters(
+        payload,
+        robot,
+        given,
+        &out,
+        &crate::progress::Bars::new(false, |_| {}),
+    )?;
+    print_payload_fit(&fit);
+    println!("payload in {}", out.join("payload.parquet").display());
     Ok(())
 }
 
@@ -239,6 +277,11 @@ fn print_estimate(id: &Identification) {
 /// The payload, with its intervals and the drives' gains.
 fn print_payload(id: &Identification) {
     let Some(fit) = &id.payload else { return };
+    print_payload_fit(fit);
+    println!("payload in {}", id.path("payload.parquet").display());
+}
+
+fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
     let Some(body) = &fit.body else { return };
     let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
     println!("\npayload ({} degrees of freedom, 95 % intervals):", fit.estimate.dof);
@@ -261,7 +304,6 @@ fn print_payload(id: &Identification) {
             robotid_stages::estimation::payload::said_undetermined(&fit.undetermined)
         );
     }
-    println!("payload in {}", id.path("payload.parquet").display());
 }
 
 /// The physically consistent estimate, its validation and the exports.
