@@ -71,6 +71,18 @@ pub struct PayloadRequest {
     /// Where its mass can be, in the link's frame: an ellipsoid's centre
     /// and semi-axes, m (the bounded estimate keeps inside it).
     pub bound: Option<([f64; 3], [f64; 3])>,
+    /// Held-out recordings with the payload: the robot and payload
+    /// identified predict their torques (not with a known mass).
+    pub validate: Vec<PathBuf>,
+}
+
+/// The payload's model on held-out loaded records: the relative error of
+/// the predicted torque, and per joint the mean squared residue over the
+/// record's noise floor (None: no floor).
+#[derive(Clone, Debug)]
+pub struct PayloadValidation {
+    pub relative_error: f64,
+    pub joints: Vec<(String, Option<f64>)>,
 }
 
 impl Request {
@@ -182,6 +194,8 @@ pub struct Identification {
     pub rollouts: robotid_report::report::Rolled,
     /// The payload identified (`payload.parquet`), when asked for.
     pub payload: Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
+    /// The payload's model on its held-out records.
+    pub payload_validation: Option<PayloadValidation>,
 }
 
 impl Identification {

@@ -12,7 +12,9 @@ use robotid_stages::estimation::{Covariance, Ellipsoid, Estimate, Estimator, Sys
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
 
 use crate::script::Script;
-use crate::{Error, Identification, PayloadRequest, Physical, Ran, Recording, Request, Result, Role};
+use crate::{
+    Error, Identification, PayloadRequest, PayloadValidation, Physical, Ran, Recording, Request, Result, Role,
+};
 
 /// Identifies the robot of `request` (see the crate's documentation),
 /// `observer` told of each pipeline's steps and of the physical fit. A
@@ -64,9 +66,14 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
+    let (fit_tables, held_loaded) = loaded_tables.split_at(request.payload.as_ref().map_or(0, |p| p.loaded.len()));
     let payload = match &request.payload {
-        Some(p) => Some(Box::new(payload(p, (staged, &paths), id_tables, loaded_tables)?)),
+        Some(p) => Some(Box::new(payload(p, (staged, &paths), id_tables, fit_tables)?)),
         None => None,
+    };
+    let payload_validation = match &payload {
+        Some(fit) if !held_loaded.is_empty() => payload_validated(fit, staged, held_loaded)?,
+        _ => None,
     };
     let physical = physical_or_why(
         request,
@@ -107,7 +114,27 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         physical,
         rollouts,
         payload,
+        payload_validation,
     })
+}
+
+/// The robot and payload identified, predicting the held-out loaded
+/// records' torques (None with a known mass: the gains' model predicts
+/// efforts, not these columns).
+fn payload_validated(fit: &PayloadFit, staged: &Path, held: &[PathBuf]) -> Result<Option<PayloadValidation>> {
+    let sys = robotid::tables::load_system(staged, held)?;
+    if sys.names != fit.estimate.names {
+        return Ok(None);
+    }
+    let predicted = &sys.a * &fit.estimate.values;
+    let stats = robotid::validation::residues(&sys, &predicted);
+    Ok(Some(PayloadValidation {
+        relative_error: robotid::validation::relative_error(&stats),
+        joints: stats
+            .iter()
+            .map(|r| (r.joint.clone(), r.noise_floor.filter(|f| *f > 0.0).map(|f| r.msr / f)))
+            .collect(),
+    }))
 }
 
 /// The payload identified from the loaded records' tables against the
@@ -362,6 +389,7 @@ impl Paths {
                 return Err(Error::Request("--payload-on: no recording with the payload".into()));
             }
             all.extend(absolutes(&p.loaded)?);
+            all.extend(absolutes(&p.validate)?);
         }
         if identifying == 0 {
             return Err(Error::Request("no recording to identify from".into()));

@@ -381,6 +381,7 @@ fn identify(
                 link,
                 known_mass: known_payload_mass,
                 bound: payload_ellipsoid,
+                validate: Vec::new(),
             };
             (unloaded, Some(p))
         }

@@ -66,6 +66,10 @@ pub struct Args {
     /// With `--payload-on`: recordings of the robot without the payload.
     #[arg(long, num_args = 1.., requires = "payload_on", conflicts_with = "parameters")]
     pub unloaded: Vec<PathBuf>,
+    /// With `--payload-on` and `--unloaded`: held-out recordings with the
+    /// payload, whose torques the robot and payload identified predict.
+    #[arg(long, num_args = 1.., requires = "unloaded")]
+    pub validate_loaded: Vec<PathBuf>,
     /// With `--payload-on`, instead of `--unloaded`: the robot's parameters
     /// table (an earlier identify's `parameters.parquet`), its covariance
     /// carried into the payload's. Only the payload is written.
@@ -121,6 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 link,
                 known_mass: args.known_payload_mass,
                 bound: (e.len() == 6).then(|| ([e[0], e[1], e[2]], [e[3], e[4], e[5]])),
+                validate: args.validate_loaded,
             };
             if let Some(given) = &args.parameters {
                 return payload_only(&payload, &args.robot, given, args.out.as_deref());
@@ -278,6 +283,21 @@ fn print_estimate(id: &Identification) {
 fn print_payload(id: &Identification) {
     let Some(fit) = &id.payload else { return };
     print_payload_fit(fit);
+    if let Some(v) = &id.payload_validation {
+        let joints: Vec<String> = v
+            .joints
+            .iter()
+            .map(|(j, r)| match r {
+                Some(r) => format!("{j} {r:.2}×"),
+                None => format!("{j} (no floor)"),
+            })
+            .collect();
+        println!(
+            "  on the held-out loaded records: relative error {:.2} %; residue over the noise floor: {}",
+            100.0 * v.relative_error,
+            joints.join(", ")
+        );
+    }
     println!("payload in {}", id.path("payload.parquet").display());
 }
 

@@ -827,6 +827,7 @@ fn a_payload_on_foreign_records_is_identified() {
         link: "tool0".into(),
         known_mass: None,
         bound: Some(([0.0, 0.0, 0.05], [0.15, 0.15, 0.15])),
+        validate: Vec::new(),
     });
     let id = robotid_identify::identify_quietly(&request).unwrap();
     let fit = id.payload.as_ref().unwrap();

@@ -108,6 +108,7 @@ fn identified(
         link: "ee_link".into(),
         known_mass: None,
         bound: None,
+        validate: Vec::new(),
     };
     edit(&mut p);
     let mut request = Request::new(vec![unloaded], robot.to_path_buf());
@@ -129,10 +130,23 @@ fn a_payload_is_identified_with_the_robot() {
     let truth = payload();
     let unloaded = record(dir.path(), &model, 1, "unloaded", true);
     let loaded = record(dir.path(), &carrying(&model, &truth), 2, "loaded", true);
+    let held = record(dir.path(), &carrying(&model, &truth), 7, "held", true);
     let id = identified(dir.path(), &robot, (unloaded, loaded), |p| {
         p.bound = Some(([0.0, 0.0, 0.06], [0.12, 0.12, 0.12]));
+        p.validate = vec![held];
     })
     .unwrap();
+    // On a held-out record with the payload: within 3× its floor on every
+    // joint (identify's strict refusal), under 1 % of the torque.
+    // Measured: 0.42 %, 1.02–1.93×, the base joint highest as in every
+    // held-out record of this chain.
+    let v = id.payload_validation.as_ref().expect("validated");
+    eprintln!("held out: {:.3} % {:?}", 100.0 * v.relative_error, v.joints);
+    assert!(v.relative_error < 0.01, "{}", v.relative_error);
+    for (j, r) in &v.joints {
+        let r = r.unwrap_or_else(|| panic!("{j}: no floor"));
+        assert!(r < 3.0, "{j}: {r}× its floor");
+    }
     let fit = id.payload.as_ref().expect("the payload");
     let body = fit.body.unwrap();
     let mass_error = (body.mass - truth.mass).abs() / truth.mass;
@@ -392,6 +406,7 @@ fn the_payloads_intervals_cover_the_truth() {
         link: "ee_link".into(),
         known_mass: None,
         bound: None,
+        validate: Vec::new(),
     };
     let z = |fit: &robotid_stages::estimation::payload::PayloadFit| -> Vec<(f64, f64)> {
         let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
