@@ -62,6 +62,7 @@ class Identification:
     physical: Optional[pa.Table]
     exports: List[str]
     payload: Optional[pa.Table]
+    payload_validation: Optional[Tuple[float, List[Tuple[str, Optional[float]]]]]
 
 def identify(
     recordings: Sequence[Union[str, PathLike]],
@@ -78,6 +79,7 @@ def identify(
     unloaded: Sequence[Union[str, PathLike]] = (),
     known_payload_mass: Optional[float] = None,
     payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
+    validate_loaded: Sequence[Union[str, PathLike]] = (),
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
@@ -87,7 +89,9 @@ def identify(
     `recordings` carry a payload, the robot is identified from `unloaded`,
     and `payload` is the payload's table (in that link's frame; with
     `known_payload_mass`, the drives' gains too; `payload_ellipsoid`:
-    centre and semi-axes, m, the bounded estimate's region)."""
+    centre and semi-axes, m, the bounded estimate's region;
+    `validate_loaded`: held-out loaded records, whose prediction is
+    `payload_validation`)."""
 
 def rollout(
     parameters: Union[str, PathLike],

@@ -298,6 +298,9 @@ fn py_identify_error(e: robotid_identify::Error) -> PyErr {
     }
 }
 
+/// Per joint, a residue over its noise floor (None: no floor).
+type JointRatios = Vec<(String, Option<f64>)>;
+
 /// What `identify` found and wrote (`robotid identify`'s output folder,
 /// typed): `identified` False with `refused` saying why when the fit is
 /// refused (the folder then holds the estimate and report marked so).
@@ -323,6 +326,9 @@ struct Identification {
     /// `payload.parquet` when a payload was identified (mass, centre of
     /// mass, inertia at it, the drives' gains; values, std, intervals).
     payload: Option<Py<PyAny>>,
+    /// The payload's model on the held-out loaded records: its relative
+    /// error and each joint's residue over its floor (None: no floor).
+    payload_validation: Option<(f64, JointRatios)>,
 }
 
 #[pymethods]
@@ -347,7 +353,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -365,6 +371,7 @@ fn identify(
     unloaded: Vec<PathBuf>,
     known_payload_mass: Option<f64>,
     payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
+    validate_loaded: Vec<PathBuf>,
 ) -> PyResult<Identification> {
     use robotid_identify::{PayloadRequest, Physical, Request};
     // As the command line: with a payload, `recordings` carry it and the
@@ -381,7 +388,7 @@ fn identify(
                 link,
                 known_mass: known_payload_mass,
                 bound: payload_ellipsoid,
-                validate: Vec::new(),
+                validate: validate_loaded,
             };
             (unloaded, Some(p))
         }
@@ -433,6 +440,10 @@ fn identify(
         parameters: written(py, &id.path("parameters.parquet"))?,
         physical,
         exports,
+        payload_validation: id
+            .payload_validation
+            .as_ref()
+            .map(|v| (v.relative_error, v.joints.clone())),
         payload: match id.payload {
             Some(_) => Some(written(py, &id.path("payload.parquet"))?),
             None => None,
