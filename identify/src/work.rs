@@ -43,14 +43,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     let staged = staging.staged_out();
     let mut script = Script::new(&paths.robot);
     let runs = run_pipelines(request, (staged, &paths.out), &recordings, &mut script, observer)?;
-    let tables: Vec<PathBuf> = recordings
-        .iter()
-        // Each pipeline runs one log, which it names by its stem.
-        .map(|r| {
-            let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
-            Path::new(&r.name).join(&own[0]).join("regressor.parquet")
-        })
-        .collect();
+    let tables: Vec<PathBuf> = recordings.iter().map(regressor_table).collect();
     let (id_tables, rest) = tables.split_at(paths.identifying);
     let (val_tables, loaded_tables) = rest.split_at(paths.held.len());
     let mut recordings = recordings;
@@ -214,13 +207,7 @@ pub fn payload_against_parameters(
     let staged = staging.staged_out().to_path_buf();
     let runner = Request::new(Vec::new(), robot.clone());
     run_pipelines(&runner, (&staged, out), &recordings, &mut Script::new(&robot), observer)?;
-    let tables: Vec<PathBuf> = recordings
-        .iter()
-        .map(|r| {
-            let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
-            Path::new(&r.name).join(&own[0]).join("regressor.parquet")
-        })
-        .collect();
+    let tables: Vec<PathBuf> = recordings.iter().map(regressor_table).collect();
     let system = robotid::tables::load_system(&staged, &tables)?;
     let known = robotid_stages::estimation::Known {
         names: given.names.clone(),
@@ -263,6 +250,13 @@ fn bound_in_last_link(
             },
         }
     })
+}
+
+/// A recording's regressor table, relative to the staging folder: its
+/// pipeline runs one log, which it names by the log's stem.
+fn regressor_table(r: &Recording) -> PathBuf {
+    let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
+    Path::new(&r.name).join(&own[0]).join("regressor.parquet")
 }
 
 /// The identified URDF with the payload on (`identified_payload.urdf`), or

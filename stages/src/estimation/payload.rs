@@ -338,7 +338,6 @@ fn gains_fit(sys: &System, mass: f64) -> Result<Estimate> {
         ));
     }
     let rows = sys.rows();
-    let mut weights: Option<DVector<f64>> = None;
     let mut last = None;
     let mut steps = 0;
     for _ in 0..30 {
@@ -360,15 +359,14 @@ fn gains_fit(sys: &System, mass: f64) -> Result<Estimate> {
             count[sys.joint[i]] += 1;
         }
         let var: Vec<f64> = (0..n).map(|j| (ss[j] / count[j].max(1) as f64).max(1e-300)).collect();
-        let w = weights.get_or_insert_with(|| DVector::from_fn(rows, |i, _| 1.0 / var[sys.joint[i]]));
-        let step = super::solve_least_squares(&gn, Some(w), Covariance::Residual)?;
+        let w = DVector::from_fn(rows, |i, _| 1.0 / var[sys.joint[i]]);
+        let step = super::solve_least_squares(&gn, Some(&w), Covariance::Residual)?;
         x += step.values.rows(0, p);
         let mut moved = 0.0f64;
         for j in 0..n {
             s[j] += step.values[p + j];
             moved = moved.max((step.values[p + j] / s[j]).abs());
         }
-        *w = DVector::from_fn(rows, |i, _| 1.0 / var[sys.joint[i]]);
         last = Some(step);
         if moved < 1e-10 {
             break;
