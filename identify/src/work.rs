@@ -88,6 +88,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         physical: fitted.then(|| "parameters_physical.parquet".into()),
         robot: Some(paths.robot.clone()),
         rollout: true,
+        payload: payload.as_ref().map(|_| "payload.parquet".into()),
         out: "report.html".into(),
         within: staged.to_path_buf(),
     })?;
@@ -259,24 +260,41 @@ fn regressor_table(r: &Recording) -> PathBuf {
     Path::new(&r.name).join(&own[0]).join("regressor.parquet")
 }
 
-/// The identified URDF with the payload on (`identified_payload.urdf`), or
-/// why not (`identified_payload.txt`).
+/// The identified URDF and MJCF with the payload on
+/// (`identified_payload.urdf`, `.xml`), or why not
+/// (`identified_payload.txt`).
 fn payload_export(link: &str, fit: &PayloadFit, (staged, paths): (&Path, &Paths)) -> Result<()> {
-    let urdf = staged.join("identified.urdf");
-    let Ok(text) = std::fs::read_to_string(&urdf) else {
-        return Ok(());
-    };
+    use robotid_stages::estimation::payload::{mjcf_with_payload, urdf_with_payload};
     let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
     let last = model.joints.last().map(|j| j.name.clone()).unwrap_or_default();
     let (rot, pos) = payload_frame(&model, link)?;
-    match robotid_stages::estimation::payload::urdf_with_payload(&text, (link, &last), (&rot, &pos), fit) {
-        Ok(with) => std::fs::write(staged.join("identified_payload.urdf"), with),
-        Err(why) => std::fs::write(
-            staged.join("identified_payload.txt"),
-            format!("no URDF with the payload: {why}\n"),
+    let mut why = Vec::new();
+    let read = |name: &str| std::fs::read_to_string(staged.join(name)).ok();
+    let made = [
+        (
+            "urdf",
+            "URDF",
+            read("identified.urdf").map(|t| urdf_with_payload(&t, (link, &last), (&rot, &pos), fit)),
         ),
+        (
+            "xml",
+            "MJCF",
+            read("identified.xml").map(|t| mjcf_with_payload(&t, &model, (&rot, &pos), fit)),
+        ),
+    ];
+    for (ext, format, text) in made {
+        let path = staged.join(format!("identified_payload.{ext}"));
+        match text {
+            Some(Ok(text)) => std::fs::write(&path, text).map_err(io(&path))?,
+            Some(Err(w)) => why.push(format!("no {format} with the payload: {w}\n")),
+            None => {}
+        }
     }
-    .map_err(io(&urdf))
+    if !why.is_empty() {
+        let path = staged.join("identified_payload.txt");
+        std::fs::write(&path, why.concat()).map_err(io(&path))?;
+    }
+    Ok(())
 }
 
 /// Where `link` is in the last moving link's frame: that link (named by

@@ -188,6 +188,9 @@ def test_a_payload_from_python(examples, tmp_path):
         logs[name] = tmp_path / "rec" / f"{name}.csv"
     out = tmp_path / "out"
     args = [logs["loaded"], "--robot", urdf, "--payload-on", "ee_link", "--unloaded", logs["unloaded"]]
+    # The payload's size declared (a 10 cm ellipsoid about its centre):
+    # the bounded estimate is what the exports carry.
+    args += ["--payload-ellipsoid", "0.04,-0.03,0.06,0.1,0.1,0.1"]
     cli("identify", *args, "--accept-inadequate", "--out", out)
     by_cli = (out / "payload.parquet").read_bytes()
     shutil.rmtree(out)
@@ -197,6 +200,7 @@ def test_a_payload_from_python(examples, tmp_path):
         payload_on="ee_link",
         unloaded=[logs["unloaded"]],
         validate_loaded=[logs["held"]],
+        payload_ellipsoid=((0.04, -0.03, 0.06), (0.1, 0.1, 0.1)),
         accept_inadequate=True,
         out=out,
     )
@@ -209,3 +213,37 @@ def test_a_payload_from_python(examples, tmp_path):
     # A held-out loaded record: predicted to within 1 % of its torque.
     relative, joints = result.payload_validation
     assert relative < 0.01 and len(joints) == 6, result.payload_validation
+    # The MJCF export with the payload, as MuJoCo loads it: its torques
+    # less the same export's without the payload are the payload's alone
+    # (dynamics are linear in the bodies; the joints' damping is the same
+    # in both), and equal Pinocchio's for the identified payload fixed to
+    # ee_link in the URDF.
+    import mujoco
+    import numpy as np
+    import pinocchio
+
+    body = {r["name"]: r["bounded"] for r in result.payload.to_pylist()}
+    link = PAYLOAD_LINK.replace("0.04 -0.03 0.06", "{com_x!r} {com_y!r} {com_z!r}").replace(
+        '<mass value="3.0"/>', '<mass value="{mass!r}"/>'
+    )
+    link = link.replace(
+        'ixx="0.0052" ixy="0" ixz="0" iyy="0.0061" iyz="0" izz="0.0041"',
+        'ixx="{ixx!r}" ixy="{ixy!r}" ixz="{ixz!r}" iyy="{iyy!r}" iyz="{iyz!r}" izz="{izz!r}"',
+    ).format(**body)
+    pin = [pinocchio.buildModelFromXML(t) for t in (text.replace("</robot>", link + "</robot>"), text)]
+    mj = [mujoco.MjModel.from_xml_path(str(out / f)) for f in ("identified_payload.xml", "identified.xml")]
+    for m in mj:
+        m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
+    assert mj[0].nbody == mj[1].nbody + 1 and mj[0].nv == 6
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, v, a = (rng.uniform(-1.5, 1.5, 6) for _ in range(3))
+        by_pin = [pinocchio.rnea(m, m.createData(), q, v, a).copy() for m in pin]
+        by_mj = []
+        for m in mj:
+            d = mujoco.MjData(m)
+            d.qpos[:], d.qvel[:], d.qacc[:] = q, v, a
+            mujoco.mj_inverse(m, d)
+            by_mj.append(d.qfrc_inverse.copy())
+        want, got = by_pin[0] - by_pin[1], by_mj[0] - by_mj[1]
+        assert np.abs(got - want).max() < 1e-9 * np.abs(want).max() + 1e-12, (got, want)

@@ -496,6 +496,75 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
     Ok(h)
 }
 
+/// The payload's section: a `payload` table as it is written (its body
+/// about its link, intervals, the bounded estimate, drive gains) and what
+/// its metadata says.
+fn payload_html(table: &arrow::array::RecordBatch, path: &std::path::Path) -> Result<String> {
+    use arrow::array::{Array, Float64Array, StringArray};
+    let bad = |what: &str| Error::Output {
+        what: "report".into(),
+        msg: format!("{}: not a payload table ({what})", path.display()),
+    };
+    let text = |name: &str| {
+        table
+            .column_by_name(name)
+            .and_then(|c| c.as_any().downcast_ref::<StringArray>())
+            .ok_or_else(|| bad(name))
+    };
+    let number = |name: &str| {
+        table
+            .column_by_name(name)
+            .and_then(|c| c.as_any().downcast_ref::<Float64Array>())
+    };
+    let (names, units) = (text("name")?, text("unit")?);
+    let [value, std, low, high] = ["value", "std", "ci_low", "ci_high"].map(number);
+    let (Some(value), Some(std), Some(low), Some(high)) = (value, std, low, high) else {
+        return Err(bad("value, std, ci_low, ci_high"));
+    };
+    let bounded = number("bounded");
+    let md = table.schema_ref().metadata().clone();
+    let get = |k: &str| md.get(k).map(String::as_str).unwrap_or("-");
+    let mut h = format!(
+        "<h2 id=\"payload\">Payload</h2>\n<p class=\"note\">{} (covariance: {}): identified on <code>{}</code>; {}. {} % Student-t intervals, {} degrees of freedom.{}</p>\n",
+        esc(&path.display().to_string()),
+        esc(get("robotid.estimate.covariance")),
+        esc(get("robotid.payload.link")),
+        esc(get("robotid.payload.frame")),
+        get("robotid.estimate.confidence").parse::<f64>().map_or("-".into(), |c| format!("{}", c * 100.0)),
+        esc(get("robotid.estimate.dof")),
+        match bounded {
+            Some(_) => " The bounded estimate (inside the declared ellipsoid) is what the exports carry.",
+            None => "",
+        }
+    );
+    if let Some(u) = md.get("robotid.payload.undetermined") {
+        h.push_str(&format!("<p class=\"warn\"><b>Undetermined:</b> {}</p>\n", esc(u)));
+    }
+    h.push_str("<table>\n<tr><th>value</th><th>unit</th><th>estimate</th><th>std</th><th>interval</th>");
+    if bounded.is_some() {
+        h.push_str("<th>bounded</th>");
+    }
+    h.push_str("</tr>\n");
+    for r in 0..table.num_rows() {
+        // Every figure to the std's second digit.
+        let at = |x: f64| rounded(x, std.value(r)).0;
+        let (v, sd) = rounded(value.value(r), std.value(r));
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{v}</td><td>{sd}</td><td>[{}, {}]</td>",
+            esc(names.value(r)),
+            esc(units.value(r)),
+            at(low.value(r)),
+            at(high.value(r))
+        ));
+        if let Some(b) = bounded {
+            h.push_str(&format!("<td>{}</td>", at(b.value(r))));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+    Ok(h)
+}
+
 /// A report asked for: the files it is made of and where it goes.
 #[derive(Clone, Debug)]
 pub struct Page {
@@ -516,6 +585,9 @@ pub struct Page {
     /// [`robotid::validation::rollouts`]), over windows chosen from each
     /// record's noise.
     pub rollout: bool,
+    /// An identified payload (`payload.parquet`): its body, intervals,
+    /// bounded estimate and drive gains shown.
+    pub payload: Option<std::path::PathBuf>,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
     /// The folder the paths above are read and written in, named in the
@@ -587,6 +659,13 @@ pub fn write(page: &Page) -> Result<Rolled> {
         &sets,
         physical.as_ref(),
     )?;
+    let mut sections = String::new();
+    if let Some(p) = &page.payload {
+        sections.push_str(&payload_html(
+            &robotid_stages::formats::parquet::read_parquet(&within(p))?,
+            p,
+        )?);
+    }
     if let Some(rolled) = &rolled {
         let section = match rolled {
             Ok(rolled) => rollouts_html(rolled)?,
@@ -595,9 +674,10 @@ pub fn write(page: &Page) -> Result<Rolled> {
                 esc(e)
             ),
         };
-        let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
-        text.insert_str(end, &section);
+        sections.push_str(&section);
     }
+    let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
+    text.insert_str(end, &sections);
     crate::plot::write_text(&within(&page.out), &text)?;
     Ok(rolled)
 }

@@ -26,6 +26,10 @@ pub struct Args {
     /// validation records (else the excitation's), beside the robot file's.
     #[arg(long, requires = "robot")]
     pub rollout: bool,
+    /// An identified payload (`payload.parquet`, from `identify
+    /// --payload-on`): its body, intervals and drive gains shown.
+    #[arg(long)]
+    pub payload: Option<PathBuf>,
     /// Output HTML page (self-contained: pictures inline).
     #[arg(long, short, default_value = "report.html")]
     pub out: PathBuf,
@@ -39,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         physical: args.physical,
         robot: args.robot,
         rollout: args.rollout,
+        payload: args.payload,
         out: args.out.clone(),
         within: PathBuf::new(),
     })?;

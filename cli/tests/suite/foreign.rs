@@ -852,7 +852,7 @@ fn a_payload_on_foreign_records_is_identified() {
         i(1, 2),
         i(2, 2),
     ];
-    let est = body.listed();
+    let est = robotid_stages::estimation::payload::listed(&body);
     let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
     let covered = (0..10)
         .filter(|&k| (est[k] - listed[k]).abs() <= t * fit.body_std[k])

@@ -151,13 +151,8 @@ fn a_payload_is_identified_with_the_robot() {
     let body = fit.body.unwrap();
     let mass_error = (body.mass - truth.mass).abs() / truth.mass;
     let com_error = (body.com - truth.com).norm();
-    let listed = body.listed();
-    let truth_listed = robotid_stages::estimation::payload::Body {
-        mass: truth.mass,
-        com: truth.com,
-        inertia_com: truth.inertia_com,
-    }
-    .listed();
+    let listed = robotid_stages::estimation::payload::listed(&body);
+    let truth_listed = robotid_stages::estimation::payload::listed(&truth);
     for k in 0..10 {
         eprintln!(
             "{k}: {:+.5} ± {:.5} truth {:+.5} z {:+.2}",
@@ -218,6 +213,13 @@ fn a_payload_is_identified_with_the_robot() {
     let without = load_robot(&id.path("identified.urdf")).unwrap();
     let (a, b) = (with.links.last().unwrap().mass, without.links.last().unwrap().mass);
     assert!((a - b - bounded.mass).abs() < 1e-9 * a, "{a} = {b} + {}", bounded.mass);
+    // and the MJCF, as a body welded to the wrist's (MuJoCo's own torques
+    // are checked in python/tests/test_identify.py).
+    let mjcf = std::fs::read_to_string(id.path("identified_payload.xml")).unwrap();
+    assert!(
+        mjcf.contains("<body name=\"robotid_payload\">") && mjcf.contains(&format!("mass=\"{:?}\"", bounded.mass)),
+        "{mjcf}"
+    );
     assert!(fit.undetermined.is_empty(), "{:?}", fit.undetermined);
     // Against the robot's parameters given (this identify's table): the
     // same payload, its intervals no narrower.
@@ -307,7 +309,10 @@ fn drive_gains_come_from_a_known_payload_mass() {
             100.0 * error
         );
     }
-    eprintln!("payload {:?}", fit.body.map(|b| b.listed()));
+    eprintln!(
+        "payload {:?}",
+        fit.body.map(|b| robotid_stages::estimation::payload::listed(&b))
+    );
     for (g, f) in fit.gains.iter().zip(off) {
         let error = g.scale * f - 1.0;
         assert!(
@@ -338,7 +343,7 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
     let body = fit.body.unwrap();
     eprintln!(
         "still wrist: {:?} ± {:?}; undetermined {:?}",
-        body.listed(),
+        robotid_stages::estimation::payload::listed(&body),
         fit.body_std,
         fit.undetermined
     );
@@ -384,11 +389,12 @@ fn the_payloads_intervals_cover_the_truth() {
     let truth = payload();
     let (r, p) = ee(&model);
     let in_ee = robotid_stages::estimation::payload::standard_in(
-        &robotid_stages::estimation::payload::standard_of(&robotid_stages::estimation::payload::Body {
+        &robotid_stages::dynamics::Inertial {
             mass: truth.mass,
             com: r * truth.com + p,
             inertia_com: r * truth.inertia_com * r.transpose(),
-        }),
+        }
+        .standard(),
         &r,
         &p,
     );

@@ -197,6 +197,28 @@ impl MjcfPatch {
         })
     }
 
+    /// The MJCF with `carried` (given in `model`'s last moving link's
+    /// frame) as a body of its own, `name`, welded to the last moving
+    /// joint's body (a body without a joint moves with its parent); every
+    /// other byte kept. `note` goes into a comment beside it.
+    pub fn with_body(&self, name: &str, carried: &Inertial, note: &str) -> Result<String, String> {
+        if self.mjcf.bodies.iter().any(|b| b.name == name) {
+            return Err(format!("it has a body `{name}` already"));
+        }
+        let p = self.placed.last().ok_or("it moves no joint")?;
+        let parent = &self.mjcf.bodies[p.body];
+        let pad = &parent.indent;
+        let element = format!(
+            "\n{pad}<!-- robotid: {} -->\n{pad}<body name=\"{name}\">\n{pad}  {}\n{pad}</body>",
+            xml_comment(note),
+            inertial(&p.link_in_body.inertial(carried))
+        );
+        Ok(super::urdf_patch::apply(
+            &self.text,
+            vec![(parent.open_end..parent.open_end, element)],
+        ))
+    }
+
     fn names(&self, bodies: &[usize]) -> String {
         bodies
             .iter()
@@ -322,7 +344,7 @@ fn carried_share(mjcf: &Mjcf, body: usize, carried: &[(usize, Pose)]) -> Result<
             ));
         };
         let own = pose.inertial(own);
-        share = Some(share.map_or(own.clone(), |s| s.merge(&own)));
+        share = Some(share.map_or(own, |s| s.merge(&own)));
     }
     Ok(share)
 }
@@ -503,7 +525,7 @@ mod tests {
         let (text, patched) = patch.apply(&model, "identified").unwrap();
         let back = Mjcf::read(&text).unwrap();
         let fore = back.bodies.iter().position(|b| b.name == "fore").unwrap();
-        let mut total = back.bodies[fore].inertial.as_ref().unwrap().1.clone();
+        let mut total = back.bodies[fore].inertial.as_ref().unwrap().1;
         let grip = &back.bodies[fore + 2];
         let at = back.bodies[fore + 1]
             .local
@@ -530,6 +552,46 @@ mod tests {
         let shoulder = &back.bodies[0].joints[0];
         assert_eq!(value(shoulder, 0), model.drives[0].reflected_inertia());
         assert!(patched[1].said.as_deref().unwrap().contains("armature (class `wrist`)"));
+    }
+
+    /// A body carried by the last link (a payload), given in the model's
+    /// link frame, is welded to the forearm's body (turned and off its
+    /// joint's axis in this MJCF) where the model has it; nothing else
+    /// changes.
+    #[test]
+    fn a_carried_body_is_welded_where_the_model_has_it() {
+        let model = identified();
+        let patch = MjcfPatch::new(MJCF.to_string(), &model).unwrap();
+        let carried = Inertial {
+            mass: 1.7,
+            com: Vector3::new(0.12, -0.03, 0.05),
+            inertia_com: Matrix3::new(0.004, 0.0005, -0.0002, 0.0005, 0.006, 0.0003, -0.0002, 0.0003, 0.005),
+        };
+        let text = patch.with_body("payload", &carried, "a payload").unwrap();
+        let back = Mjcf::read(&text).unwrap();
+        let fore = back.bodies.iter().position(|b| b.name == "fore").unwrap();
+        let p = back.bodies.iter().find(|b| b.name == "payload").unwrap();
+        assert_eq!(p.parent, Some(fore));
+        assert!(p.joints.is_empty());
+        let in_fore = p.local.inertial(&p.inertial.as_ref().unwrap().1);
+        let in_link = patch.placed[1].link_in_body.inverse().inertial(&in_fore);
+        assert!((in_link.mass - carried.mass).abs() < 1e-15);
+        assert!(
+            (in_link.com - carried.com).norm() < 1e-15,
+            "{} vs {}",
+            in_link.com,
+            carried.com
+        );
+        assert!((in_link.inertia_com - carried.inertia_com).amax() < 1e-15);
+        let start = text.find("<!-- robotid: a payload").unwrap();
+        let end = text[start..].find("</body>").unwrap() + start + "</body>".len();
+        let line = text[..start].rfind('\n').unwrap();
+        assert_eq!(format!("{}{}", &text[..line], &text[end..]), MJCF);
+        let e = MjcfPatch::new(text, &model)
+            .unwrap()
+            .with_body("payload", &carried, "again")
+            .unwrap_err();
+        assert!(e.contains("a body `payload` already"), "{e}");
     }
 
     #[test]

@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, Unit, Vector3};
 
 /// Rigid-body inertia of one link, in the link frame (the frame of the joint
 /// that moves it, after the joint rotation).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Inertial {
     /// kg
     pub mass: f64,
@@ -20,6 +20,24 @@ pub struct Inertial {
 }
 
 impl Inertial {
+    /// The body of ten standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M]
+    /// (inertia about the frame's origin); None without mass.
+    pub fn of_standard(t: &[f64]) -> Option<Inertial> {
+        let mass = t[9];
+        if !(mass > 0.0) {
+            return None;
+        }
+        let com = Vector3::new(t[6], t[7], t[8]) / mass;
+        let origin = Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
+        let inertia_com = origin - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
+        Some(Inertial { mass, com, inertia_com })
+    }
+
+    /// Its ten standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M].
+    pub fn standard(&self) -> [f64; 10] {
+        super::inertial_parameters(&self.inertia_origin(), &self.first_moment(), self.mass)
+    }
+
     /// First moment of mass h = m·c, kg·m.
     pub fn first_moment(&self) -> Vector3<f64> {
         self.com * self.mass
@@ -62,7 +80,7 @@ impl Inertial {
     pub fn merge(&self, other: &Inertial) -> Inertial {
         let m = self.mass + other.mass;
         if m == 0.0 {
-            return self.clone();
+            return *self;
         }
         let com = (self.com * self.mass + other.com * other.mass) / m;
         let shift = |i: &Inertial| {

@@ -204,7 +204,7 @@ fn body_edits(
             carried.join(", ")
         );
     }
-    let written = rest.flatten().unwrap_or_else(|| body.clone());
+    let written = rest.flatten().unwrap_or(*body);
     let link = &tree.links[link_name];
     edits.push(replace_inertial(
         text,

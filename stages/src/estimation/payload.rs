@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use robotid_schemas::TableKind;
 
 use super::{physically_consistent, pseudo_inertia, Covariance, Ellipsoid, Estimate, Known, LinkBound, System};
-use crate::dynamics::{inertial_parameters, PAYLOAD_COLUMNS};
+use crate::dynamics::{inertial_parameters, Inertial, PAYLOAD_COLUMNS};
 use crate::{Error, Result};
 
 /// Where the robot's own parameters come from.
@@ -36,51 +36,25 @@ pub enum Robot<'a> {
     Unloaded(&'a System),
 }
 
-/// A rigid body: mass, centre of mass and inertia about it, in one frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Body {
-    /// kg
-    pub mass: f64,
-    /// m
-    pub com: Vector3<f64>,
-    /// kg·m², about the centre of mass, the frame's axes.
-    pub inertia_com: Matrix3<f64>,
+/// The ten values [mass, com x y z, Ixx Ixy Ixz Iyy Iyz Izz at the com]
+/// the payload table lists.
+pub fn listed(b: &Inertial) -> [f64; 10] {
+    let (c, i) = (b.com, b.inertia_com);
+    [
+        b.mass,
+        c.x,
+        c.y,
+        c.z,
+        i[(0, 0)],
+        i[(0, 1)],
+        i[(0, 2)],
+        i[(1, 1)],
+        i[(1, 2)],
+        i[(2, 2)],
+    ]
 }
 
-impl Body {
-    /// The body of ten standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M]
-    /// (inertia about the frame's origin); None without mass.
-    pub fn of(t: &[f64]) -> Option<Body> {
-        let mass = t[9];
-        if !(mass > 0.0) {
-            return None;
-        }
-        let com = Vector3::new(t[6], t[7], t[8]) / mass;
-        let origin = Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
-        let inertia_com = origin - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
-        Some(Body { mass, com, inertia_com })
-    }
-
-    /// The ten values [mass, com x y z, Ixx Ixy Ixz Iyy Iyz Izz at the com]
-    /// the payload table lists.
-    pub fn listed(&self) -> [f64; 10] {
-        let (c, i) = (self.com, self.inertia_com);
-        [
-            self.mass,
-            c.x,
-            c.y,
-            c.z,
-            i[(0, 0)],
-            i[(0, 1)],
-            i[(0, 2)],
-            i[(1, 1)],
-            i[(1, 2)],
-            i[(2, 2)],
-        ]
-    }
-}
-
-/// Names and units of [`Body::listed`].
+/// Names and units of [`listed`].
 pub const LISTED: [(&str, &str); 10] = [
     ("mass", "kg"),
     ("com_x", "m"),
@@ -115,7 +89,7 @@ pub struct PayloadFit {
     pub covariance: DMatrix<f64>,
     /// The body they describe (None: no positive mass), and the standard
     /// deviations of its listed values (first-order).
-    pub body: Option<Body>,
+    pub body: Option<Inertial>,
     pub body_std: [f64; 10],
     /// The physically consistent estimate inside the declared bound, when
     /// one was declared.
@@ -136,7 +110,7 @@ pub struct PayloadFit {
 /// The payload fitted inside its bounding ellipsoid.
 #[derive(Debug, Clone)]
 pub struct Bounded {
-    pub body: Body,
+    pub body: Inertial,
     pub standard: [f64; 10],
     /// What keeping inside cost: (φ − φ̂)ᵀΣ⁻¹(φ − φ̂).
     pub chi2: f64,
@@ -248,7 +222,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
             }
         }
     }
-    let body = Body::of(&standard);
+    let body = Inertial::of_standard(&standard);
     let body_std = listed_std(&standard, &covariance);
     let bounded = match (options.bound, body) {
         (Some(e), Some(b)) => Some(bounded(&standard, &covariance, &e, b.mass)?),
@@ -287,7 +261,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
 /// at least 2 cm): the mass against itself, the centre of mass against r,
 /// the inertia at it against m·r². Such a value says nothing the size
 /// did not.
-fn undetermined(b: &Body, std: &[f64; 10], bound_size: Option<f64>, dof: usize) -> Vec<(String, f64, f64)> {
+fn undetermined(b: &Inertial, std: &[f64; 10], bound_size: Option<f64>, dof: usize) -> Vec<(String, f64, f64)> {
     let t = super::student_t_quantile(0.975, dof);
     let r = bound_size.unwrap_or(b.com.norm()).max(0.02);
     (0..10)
@@ -422,10 +396,10 @@ fn with_gains(sys: &mut System, mass: f64) -> Result<Vec<(String, usize)>> {
     Ok(out)
 }
 
-/// First-order standard deviations of [`Body::listed`] from the ten
+/// First-order standard deviations of [`listed`] from the ten
 /// parameters' covariance (central differences of the map).
 fn listed_std(t: &[f64; 10], cov: &DMatrix<f64>) -> [f64; 10] {
-    if Body::of(t).is_none() {
+    if Inertial::of_standard(t).is_none() {
         return [f64::NAN; 10];
     }
     let mut jac = DMatrix::zeros(10, 10);
@@ -434,8 +408,8 @@ fn listed_std(t: &[f64; 10], cov: &DMatrix<f64>) -> [f64; 10] {
         let (mut up, mut down) = (*t, *t);
         up[k] += h;
         down[k] -= h;
-        if let (Some(u), Some(d)) = (Body::of(&up), Body::of(&down)) {
-            let (u, d) = (u.listed(), d.listed());
+        if let (Some(u), Some(d)) = (Inertial::of_standard(&up), Inertial::of_standard(&down)) {
+            let (u, d) = (listed(&u), listed(&d));
             for r in 0..10 {
                 jac[(r, k)] = (u[r] - d[r]) / (2.0 * h);
             }
@@ -457,12 +431,12 @@ fn bounded(t: &[f64; 10], cov: &DMatrix<f64>, e: &Ellipsoid, mass: f64) -> Resul
     let names: Vec<String> = PAYLOAD_COLUMNS.iter().map(|s| s.to_string()).collect();
     let a = e.semi_axes;
     let (cx, cy, cz) = (a.y * a.y + a.z * a.z, a.x * a.x + a.z * a.z, a.x * a.x + a.y * a.y);
-    let solid = Body {
+    let solid = Inertial {
         mass,
         com: e.centre,
         inertia_com: Matrix3::from_diagonal(&Vector3::new(cx, cy, cz)) * (mass / 5.0),
     };
-    let prior = standard_of(&solid);
+    let prior = solid.standard();
     // A known mass leaves its variance zero: a small ridge keeps the
     // covariance definite (the fit then holds the mass as it is).
     let mut cov = cov.clone();
@@ -487,7 +461,7 @@ fn bounded(t: &[f64; 10], cov: &DMatrix<f64>, e: &Ellipsoid, mass: f64) -> Resul
     )?;
     let mut standard = [0.0; 10];
     standard.copy_from_slice(&fit.standard[..10]);
-    let body = Body::of(&standard).ok_or_else(|| Error::numerical("bounded payload", "no mass left"))?;
+    let body = Inertial::of_standard(&standard).ok_or_else(|| Error::numerical("bounded payload", "no mass left"))?;
     debug_assert!(pseudo_inertia(&standard).symmetric_eigenvalues().min() > -1e-6 * mass);
     Ok(Bounded {
         body,
@@ -530,12 +504,12 @@ impl PayloadFit {
         let bounded = self.bounded.as_ref().map(|b| {
             let standard = standard_in(&b.standard, rot, pos);
             Bounded {
-                body: Body::of(&standard).unwrap_or(b.body),
+                body: Inertial::of_standard(&standard).unwrap_or(b.body),
                 standard,
                 chi2: b.chi2,
             }
         });
-        let body = Body::of(&standard);
+        let body = Inertial::of_standard(&standard);
         let body_std = listed_std(&standard, &covariance);
         PayloadFit {
             estimate: self.estimate.clone(),
@@ -561,19 +535,11 @@ pub fn said_undetermined(u: &[(String, f64, f64)]) -> String {
         .join(", ")
 }
 
-/// `urdf` (a URDF's text) with the payload as a link of its own, fixed to
-/// `link` at its origin, or, where the URDF has no such link (one made from
-/// a robot file), to the child link of `last_joint` at `link`'s frame in
-/// it (`rot`, `pos`): the bounded estimate where there is one, else the
-/// least-squares body when it is one a simulator can take (an inertia at
-/// its centre of mass positive definite, its moments within the triangle
-/// inequality). Why not otherwise.
-pub fn urdf_with_payload(
-    urdf: &str,
-    (link, last_joint): (&str, &str),
-    (rot, pos): (&Matrix3<f64>, &Vector3<f64>),
-    fit: &PayloadFit,
-) -> std::result::Result<String, String> {
+/// The body the exports write: the bounded estimate when there is one,
+/// else the least-squares one when a simulator can take it (an inertia at
+/// its centre of mass that is positive definite and keeps the triangle
+/// inequality); with which it is, or why there is none.
+pub fn exported(fit: &PayloadFit) -> std::result::Result<(Inertial, &'static str), String> {
     let (body, from) = match (&fit.bounded, &fit.body) {
         (Some(b), _) => (b.body, "the bounded estimate"),
         (None, Some(b)) => (*b, "the least-squares estimate"),
@@ -588,6 +554,43 @@ pub fn urdf_with_payload(
             p[0], p[1], p[2]
         ));
     }
+    Ok((body, from))
+}
+
+/// `mjcf` (an MJCF of `model`, the identified one) with the payload
+/// exported as a body `robotid_payload` welded to the last moving
+/// joint's body; `(rot, pos)`: the frame the fit is given in, in the
+/// last moving link's frame.
+pub fn mjcf_with_payload(
+    mjcf: &str,
+    model: &crate::dynamics::Model,
+    (rot, pos): (&Matrix3<f64>, &Vector3<f64>),
+    fit: &PayloadFit,
+) -> std::result::Result<String, String> {
+    let (body, from) = exported(fit)?;
+    let in_last = Inertial {
+        mass: body.mass,
+        com: pos + rot * body.com,
+        inertia_com: rot * body.inertia_com * rot.transpose(),
+    };
+    crate::dynamics::MjcfPatch::new(mjcf.to_string(), model)?.with_body(
+        "robotid_payload",
+        &in_last,
+        &format!("the identified payload ({from}, payload.parquet)"),
+    )
+}
+
+/// `urdf` (a URDF's text) with the payload as a link of its own, fixed to
+/// `link` at its origin, or, where the URDF has no such link (one made from
+/// a robot file), to the child link of `last_joint` at `link`'s frame in
+/// it (`rot`, `pos`): the [`exported`] body, or why not.
+pub fn urdf_with_payload(
+    urdf: &str,
+    (link, last_joint): (&str, &str),
+    (rot, pos): (&Matrix3<f64>, &Vector3<f64>),
+    fit: &PayloadFit,
+) -> std::result::Result<String, String> {
+    let (body, from) = exported(fit)?;
     let doc = roxmltree::Document::parse(urdf).map_err(|e| format!("the URDF: {e}"))?;
     let has = |name: &str| {
         doc.descendants()
@@ -606,7 +609,7 @@ pub fn urdf_with_payload(
         (child.to_string(), (*pos, Vector3::new(r, pi, y)))
     };
     let end = urdf.rfind("</robot>").ok_or("the URDF has no </robot>")?;
-    let l = body.listed();
+    let l = listed(&body);
     let added = format!(
         "  <!-- robotid: the identified payload ({from}, payload.parquet), on `{link}` -->\n  <link name=\"robotid_payload\">\n    <inertial>\n      <origin xyz=\"{:e} {:e} {:e}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:e}\"/>\n      <inertia ixx=\"{:e}\" ixy=\"{:e}\" ixz=\"{:e}\" iyy=\"{:e}\" iyz=\"{:e}\" izz=\"{:e}\"/>\n    </inertial>\n  </link>\n  <joint name=\"robotid_payload_joint\" type=\"fixed\">\n    <parent link=\"{parent}\"/>\n    <child link=\"robotid_payload\"/>\n    <origin xyz=\"{:e} {:e} {:e}\" rpy=\"{:e} {:e} {:e}\"/>\n  </joint>\n",
         l[1],
@@ -651,8 +654,8 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
     // (name, unit, value, std, bounded value)
     type Row = (String, String, f64, f64, f64);
     let mut rows: Vec<Row> = Vec::new();
-    let bounded = fit.bounded.as_ref().map(|b| b.body.listed());
-    for (k, ((name, unit), value)) in LISTED.iter().zip(body.listed()).enumerate() {
+    let bounded = fit.bounded.as_ref().map(|b| listed(&b.body));
+    for (k, ((name, unit), value)) in LISTED.iter().zip(listed(&body)).enumerate() {
         rows.push((
             name.to_string(),
             unit.to_string(),
@@ -713,13 +716,6 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
     RecordBatch::try_new(schema, columns).map_err(|e| Error::numerical("the payload table", e.to_string()))
 }
 
-/// The ten standard parameters of `b` (inertia about the frame's origin).
-pub fn standard_of(b: &Body) -> [f64; 10] {
-    let c = b.com;
-    let origin = b.inertia_com + (Matrix3::identity() * c.dot(&c) - c * c.transpose()) * b.mass;
-    inertial_parameters(&origin, &(c * b.mass), b.mass)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -727,12 +723,12 @@ mod tests {
     /// The body of a body's standard parameters is itself.
     #[test]
     fn body_and_standard_parameters_are_inverse() {
-        let b = Body {
+        let b = Inertial {
             mass: 2.5,
             com: Vector3::new(0.03, -0.02, 0.08),
             inertia_com: Matrix3::new(0.01, 0.001, -0.002, 0.001, 0.012, 0.0005, -0.002, 0.0005, 0.008),
         };
-        let back = Body::of(&standard_of(&b)).unwrap();
+        let back = Inertial::of_standard(&b.standard()).unwrap();
         assert!((back.mass - b.mass).abs() < 1e-15);
         assert!((back.com - b.com).norm() < 1e-15);
         assert!((back.inertia_com - b.inertia_com).norm() < 1e-15);
@@ -778,7 +774,7 @@ mod tests {
 
     /// Noise-free torques of the UR5 without and with `payload`: the
     /// unloaded system, the loaded one.
-    fn systems(payload: &Body, loaded_moves_all: bool) -> (System, System) {
+    fn systems(payload: &Inertial, loaded_moves_all: bool) -> (System, System) {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
         let model = load_robot(&path).unwrap();
         let n = model.dof();
@@ -794,7 +790,7 @@ mod tests {
         let theta = robot.base_values(&model).unwrap();
         let mut with = carried.base_values(&model).unwrap();
         let p = with.len() - 10;
-        for (k, v) in standard_of(payload).iter().enumerate() {
+        for (k, v) in payload.standard().iter().enumerate() {
             with[p + k] = *v;
         }
         let make = |base: &BaseRegressor, kin: &Kinematics, values: &DVector<f64>| {
@@ -814,8 +810,8 @@ mod tests {
         )
     }
 
-    fn a_payload() -> Body {
-        Body {
+    fn a_payload() -> Inertial {
+        Inertial {
             mass: 2.0,
             com: Vector3::new(0.02, -0.05, 0.09),
             inertia_com: Matrix3::new(0.006, 0.0008, -0.0005, 0.0008, 0.004, 0.0002, -0.0005, 0.0002, 0.005),
@@ -829,7 +825,7 @@ mod tests {
         let truth = a_payload();
         let (unloaded, loaded) = systems(&truth, true);
         let fit = identify_payload(&loaded, Robot::Unloaded(&unloaded), &PayloadOptions::default()).unwrap();
-        let t = standard_of(&truth);
+        let t = truth.standard();
         for k in 0..10 {
             assert!(
                 (fit.standard[k] - t[k]).abs() < 1e-9 * (1.0 + t[k].abs()),
@@ -867,14 +863,14 @@ mod tests {
     /// mass and inertia moved and turned as a rigid body's are.
     #[test]
     fn another_frame_moves_and_turns_the_body() {
-        let b = Body {
+        let b = Inertial {
             mass: 1.7,
             com: Vector3::new(0.05, 0.01, -0.03),
             inertia_com: Matrix3::new(0.02, 0.002, 0.0, 0.002, 0.015, -0.001, 0.0, -0.001, 0.01),
         };
         let rot = *nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 1.1).matrix();
         let pos = Vector3::new(0.1, -0.2, 0.05);
-        let u = Body::of(&standard_in(&standard_of(&b), &rot, &pos)).unwrap();
+        let u = Inertial::of_standard(&standard_in(&b.standard(), &rot, &pos)).unwrap();
         assert!((u.com - rot.transpose() * (b.com - pos)).norm() < 1e-15);
         assert!((u.inertia_com - rot.transpose() * b.inertia_com * rot).norm() < 1e-15);
         assert_eq!(u.mass, b.mass);
