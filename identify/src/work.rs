@@ -185,7 +185,12 @@ pub fn payload_against_parameters(
     let names = robotid::run::recording_names(&loaded);
     let mut recordings: Vec<Recording> = Vec::new();
     for (log, name) in loaded.iter().zip(names) {
-        let mut design = design_with(log, &robot, recordings.first().map(|r| &r.design), None, None)?;
+        // The robot file lacks the payload: the first record's torques
+        // are not held against its own.
+        let mut design = match recordings.first() {
+            Some(r) => design_with(log, &robot, Some(&r.design), None, None)?,
+            None => robotid::identify::design_loaded(log, &robot)?,
+        };
         // The table's model, this record's band.
         let band = design.regressor.band_limit_hz;
         design.regressor = robotid_stages::stage::regressor::RegressorConfig {

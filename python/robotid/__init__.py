@@ -15,6 +15,10 @@ files in `out`, the verdict and tables returned):
     result = robotid.identify(["excitation.mcap"], "robot.urdf", validate=["validation.mcap"], out="out/id")
     result.identified, result.refused, result.parameters  # pyarrow.Table
 
+A payload against a robot identified before (its parameters table):
+
+    table = robotid.payload(["loaded.mcap"], "robot.urdf", "out/id/parameters.parquet", "tool0", "out/payload")
+
 A model judged by simulation error (its forward dynamics driven by the
 measured torque, from the measured state, every `window_s` restarted):
 
@@ -45,6 +49,7 @@ from ._robotid import (
     closed_loop,
     identify,
     merge,
+    payload,
     rollout,
     sample,
 )
@@ -65,4 +70,4 @@ def solve(summaries: Summaries, pipeline: Pipeline) -> pa.Table:
     return pipeline.solve(summaries)
 
 
-__all__ = ["Identification", "Pipeline", "RobotidError", "closed_loop", "identify", "merge", "rollout", "sample", "solve", "__version__"]
+__all__ = ["Identification", "Pipeline", "RobotidError", "closed_loop", "identify", "merge", "payload", "rollout", "sample", "solve", "__version__"]

@@ -93,6 +93,20 @@ def identify(
     `validate_loaded`: held-out loaded records, whose prediction is
     `payload_validation`)."""
 
+def payload(
+    loaded: Sequence[Union[str, PathLike]],
+    robot: Union[str, PathLike],
+    parameters: Union[str, PathLike],
+    payload_on: str,
+    out: Union[str, PathLike],
+    payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
+) -> pa.Table:
+    """The payload on the link `payload_on` from `loaded` (records with
+    it) against a robot already identified (its `parameters` table, whose
+    covariance is carried), as `robotid identify LOADED… --payload-on LINK
+    --parameters P`: `payload.parquet` written into `out` (an empty or new
+    folder) and returned."""
+
 def rollout(
     parameters: Union[str, PathLike],
     robot: Union[str, PathLike],

@@ -452,6 +452,34 @@ fn identify(
     })
 }
 
+/// The payload on `payload_on` from `loaded` (records with it) against a
+/// robot already identified (its `parameters` table, whose regressor
+/// model the loaded records are run with, its covariance carried), as
+/// `robotid identify LOADED… --payload-on LINK --parameters P`: the same
+/// `payload.parquet` written into `out`, returned as a pyarrow table.
+#[pyfunction]
+#[pyo3(signature = (loaded, robot, parameters, payload_on, out, payload_ellipsoid=None))]
+fn payload<'py>(
+    py: Python<'py>,
+    loaded: Vec<PathBuf>,
+    robot: PathBuf,
+    parameters: PathBuf,
+    payload_on: String,
+    out: PathBuf,
+    payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let request = robotid_identify::PayloadRequest {
+        loaded,
+        link: payload_on,
+        known_mass: None,
+        bound: payload_ellipsoid,
+        validate: Vec::new(),
+    };
+    py.detach(|| robotid_identify::payload_against_parameters(&request, &robot, &parameters, &out, &robotid::Quiet))
+        .map_err(py_identify_error)?;
+    Ok(written(py, &out.join("payload.parquet"))?.into_bound(py))
+}
+
 /// The parameters table `parameters` of `robot` rolled out on the
 /// kinematics table beside each regressor table of `regressors`, as
 /// `robotid validate --rollout`: per record, model (`estimate`,
@@ -556,6 +584,7 @@ fn _robotid(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Pipeline>()?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(payload, m)?)?;
     m.add_function(wrap_pyfunction!(rollout, m)?)?;
     m.add_function(wrap_pyfunction!(sample, m)?)?;
     m.add_function(wrap_pyfunction!(closed_loop, m)?)?;

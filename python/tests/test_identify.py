@@ -247,3 +247,17 @@ def test_a_payload_from_python(examples, tmp_path):
             by_mj.append(d.qfrc_inverse.copy())
         want, got = by_pin[0] - by_pin[1], by_mj[0] - by_mj[1]
         assert np.abs(got - want).max() < 1e-9 * np.abs(want).max() + 1e-12, (got, want)
+    # Against the robot identified above (its parameters table): the
+    # payload alone, the command line's table byte for byte, its mass as
+    # close and its intervals no narrower.
+    given = tmp_path / "given.parquet"
+    shutil.copy(out / "parameters.parquet", given)
+    cli("identify", logs["loaded"], "--robot", urdf, "--payload-on", "ee_link", "--parameters", given, "--out", tmp_path / "p_cli")
+    alone = robotid.payload([logs["loaded"]], urdf, given, "ee_link", tmp_path / "p_py")
+    assert (tmp_path / "p_py" / "payload.parquet").read_bytes() == (tmp_path / "p_cli" / "payload.parquet").read_bytes()
+    again = {r["name"]: r for r in alone.to_pylist()}
+    assert abs(again["mass"]["value"] - 3.0) / 3.0 < 0.02, again["mass"]
+    assert again["mass"]["std"] >= 0.99 * rows["mass"]["std"], (again["mass"], rows["mass"])
+    with pytest.raises(robotid.RobotidError, match="not a link the last moving joint carries"):
+        robotid.payload([logs["loaded"]], urdf, given, "no_such_link", tmp_path / "p_bad")
+    assert not (tmp_path / "p_bad").exists()

@@ -18,6 +18,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         mut findings,
         mut regressor,
         mut inverse,
+        torque_check,
     } = d;
     let (own_regressor, joints) = (first.is_none(), model.joint_names());
     let mut delay = first.and_then(|d| d.delay_s);
@@ -53,6 +54,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
                 declared: inverse.as_ref().map(|(f, _)| *f),
                 fs,
                 stages_after: &stages_after,
+                torque_check,
             },
             &positions_stage,
             torques_stage.as_ref(),

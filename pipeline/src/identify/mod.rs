@@ -338,6 +338,23 @@ pub fn design_with(
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> Result<Design> {
+    design_checked(log, robot, first, (stated, torque_per_amp), true)
+}
+
+/// The design of a record of the robot carrying a payload its robot file
+/// does not hold, on its own: its torques are not checked against the
+/// robot file's (a payload's own can be many times a light wrist's).
+pub fn design_loaded(log: &Path, robot: &Path) -> Result<Design> {
+    design_checked(log, robot, None, (None, None), false)
+}
+
+fn design_checked(
+    log: &Path,
+    robot: &Path,
+    first: Option<&Design>,
+    (stated, torque_per_amp): (Option<&ReadConfig>, Option<&[f64]>),
+    torque_check: bool,
+) -> Result<Design> {
     let (model, locked) = unheld_locked(log, robot, first, stated)?;
     let joints = model.joint_names();
     let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
@@ -399,6 +416,7 @@ pub fn design_with(
             findings,
             regressor,
             inverse,
+            torque_check,
         },
         period,
     )
@@ -470,6 +488,9 @@ struct Draft<'a> {
     findings: Vec<(Found, String)>,
     regressor: RegressorConfig,
     inverse: Option<(FilterSpec, f64)>,
+    /// Refuse torques the robot file's model disagrees with (not for a
+    /// record with a payload the file lacks).
+    torque_check: bool,
 }
 
 /// The absolute form of a path that exists.

@@ -123,6 +123,8 @@ pub(super) struct Scoring<'a> {
     pub(super) declared: Option<FilterSpec>,
     pub(super) fs: f64,
     pub(super) stages_after: &'a StagesAfter<'a>,
+    /// Whether the torques are checked against the robot file's.
+    pub(super) torque_check: bool,
 }
 
 /// The positions' band or the torques', each with its best filter and
@@ -143,7 +145,7 @@ pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) 
             break;
         }
         let chain = probe(sc.plan, (sc.stages_after)(None, None, stage), sc.log, sc.raw)?;
-        if tried.is_empty() {
+        if tried.is_empty() && sc.torque_check {
             if let Some(why) = torque_check(chain.kinematics()?, sc.model) {
                 return Err(refuse(sc.log, why));
             }
