@@ -327,7 +327,8 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
         println!("  {name:<7} {:+.5} ± {:.5} {unit}{b}", listed[k], t * fit.body_std[k]);
     }
     for g in &fit.gains {
-        println!("  gain {:<24} {:.5} ± {:.5}", g.joint, g.scale, t * g.std);
+        let b = g.bounded.map(|b| format!("   bounded {b:.5}")).unwrap_or_default();
+        println!("  gain {:<24} {:.5} ± {:.5}{b}", g.joint, g.scale, t * g.std);
     }
     if !fit.undetermined.is_empty() {
         println!(

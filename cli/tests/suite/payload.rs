@@ -261,7 +261,8 @@ fn a_payload_is_identified_with_the_robot() {
 
 /// Drives whose torque constants the robot file has wrong by −15 to
 /// +20 %: with the payload's mass known, each joint's scale within 1 %
-/// of the truth's (file's constant × scale = the simulator's).
+/// of the truth's (file's constant × scale = the simulator's), and as
+/// close, positive, given the payload bounded to its declared size.
 #[test]
 fn drive_gains_come_from_a_known_payload_mass() {
     let dir = tempfile::tempdir().unwrap();
@@ -293,7 +294,8 @@ fn drive_gains_come_from_a_known_payload_mass() {
     let unloaded = record(dir.path(), &model, 3, "unloaded", true);
     let loaded = record(dir.path(), &carrying(&model, &truth), 4, "loaded", true);
     let id = identified(dir.path(), &robot, (unloaded, loaded), |p| {
-        p.known_mass = Some(truth.mass)
+        p.known_mass = Some(truth.mass);
+        p.bound = Some(([0.0, 0.0, 0.06], [0.12, 0.12, 0.12]));
     })
     .unwrap();
     let fit = id.payload.as_ref().unwrap();
@@ -301,12 +303,13 @@ fn drive_gains_come_from_a_known_payload_mass() {
     for (g, f) in fit.gains.iter().zip(off) {
         let error = g.scale * f - 1.0;
         eprintln!(
-            "{}: scale {:.5} ± {:.5}, truth {:.5} ({:+.3} %)",
+            "{}: scale {:.5} ± {:.5}, truth {:.5} ({:+.3} %), bounded {:?}",
             g.joint,
             g.scale,
             g.std,
             1.0 / f,
-            100.0 * error
+            100.0 * error,
+            g.bounded
         );
     }
     eprintln!(
@@ -320,6 +323,13 @@ fn drive_gains_come_from_a_known_payload_mass() {
             "{}: scale {} where the truth is {}",
             g.joint,
             g.scale,
+            1.0 / f
+        );
+        let bounded = g.bounded.expect("a bound was declared");
+        assert!(
+            bounded > 0.0 && (bounded * f - 1.0).abs() < 0.01,
+            "{}: bounded {bounded} where the truth is {}",
+            g.joint,
             1.0 / f
         );
     }

@@ -74,6 +74,8 @@ pub struct Gain {
     pub joint: String,
     pub scale: f64,
     pub std: f64,
+    /// With the payload bounded: the scale given it there (positive).
+    pub bounded: Option<f64>,
 }
 
 /// The payload as identified.
@@ -233,6 +235,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
         Some(b) => undetermined(&b, &body_std, bound_size_m, estimate.dof),
         None => Vec::new(),
     };
+    let held = bounded.as_ref().map(|b| &b.standard);
     let gains = gains
         .unwrap_or_default()
         .into_iter()
@@ -240,8 +243,21 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
             joint,
             scale: estimate.values[i],
             std: estimate.covariance[(i, i)].max(0.0).sqrt(),
+            bounded: held.map(|held| given_payload(&estimate.values, &estimate.covariance, i, &at, held)),
         })
-        .collect();
+        .collect::<Vec<_>>();
+    if let Some(g) = gains.iter().find(|g| g.bounded.is_some_and(|b| !(b > 0.0))) {
+        return Err(Error::numerical(
+            "drive gains",
+            format!(
+                "`{}`: its gain given the bounded payload came out {:.4} (not a drive's; {:.4} ± {:.4} without the bound): does the known mass move that joint's torque?",
+                g.joint,
+                g.bounded.unwrap_or_default(),
+                g.scale,
+                g.std
+            ),
+        ));
+    }
     Ok(PayloadFit {
         estimate,
         standard,
@@ -253,6 +269,27 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
         undetermined,
         bound_size_m,
     })
+}
+
+/// Parameter `i` of an estimate (`values`, `cov`) given the payload held
+/// at `held` (`at`: the payload's ten in the estimate, usize::MAX for a
+/// known one): the estimate's Gaussian conditioned on it, x̂_i +
+/// Σ_iφ Σ_φφ⁺ (φ_held − φ̂), which is what minimising the whole
+/// estimate's χ² with the payload held there gives.
+fn given_payload(values: &DVector<f64>, cov: &DMatrix<f64>, i: usize, at: &[usize], held: &[f64; 10]) -> f64 {
+    let free: Vec<(usize, usize)> = at
+        .iter()
+        .enumerate()
+        .filter(|(_, &c)| c != usize::MAX)
+        .map(|(k, &c)| (k, c))
+        .collect();
+    let n = free.len();
+    let s_pp = DMatrix::from_fn(n, n, |r, c| cov[(free[r].1, free[c].1)]);
+    let s_ip = DVector::from_fn(n, |r, _| cov[(i, free[r].1)]);
+    let d = DVector::from_fn(n, |r, _| held[free[r].0] - values[free[r].1]);
+    let tol = 1e-12 * s_pp.amax().max(f64::MIN_POSITIVE);
+    let inv = s_pp.pseudo_inverse(tol).expect("a nonnegative tolerance");
+    values[i] + s_ip.dot(&(inv * d))
 }
 
 /// The listed values of `b` whose 95 % interval is wider than the range a
@@ -665,7 +702,8 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
         ));
     }
     for g in &fit.gains {
-        rows.push((format!("gain_{}", g.joint), "1".into(), g.scale, g.std, g.scale));
+        let b = g.bounded.unwrap_or(g.scale);
+        rows.push((format!("gain_{}", g.joint), "1".into(), g.scale, g.std, b));
         if let Some(j) = model.joints.iter().position(|j| j.name == g.joint) {
             let k = model.drives[j].torque_constant;
             rows.push((
@@ -673,7 +711,7 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
                 "N*m/A".into(),
                 g.scale * k,
                 g.std * k,
-                g.scale * k,
+                b * k,
             ));
         }
     }
@@ -719,6 +757,38 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A parameter given the payload held is the one the whole χ² picks
+    /// with it held: x̂_o − P_oo⁻¹ P_oφ (φ_held − φ̂), P = Σ⁻¹ (the
+    /// precision's form, not the covariance's the code uses).
+    #[test]
+    fn a_parameter_given_the_payload_minimises_the_whole_chi2() {
+        let n = 12;
+        let r = DMatrix::from_fn(n, n, |i, j| {
+            ((i * 7 + j * 3) % 11) as f64 / 11.0 - 0.4 + if i == j { 2.0 } else { 0.0 }
+        });
+        let cov = &r * r.transpose();
+        let values = DVector::from_fn(n, |i, _| (i as f64 * 0.37).sin());
+        // The payload's ten at 2..12, its mass (the last) known.
+        let mut at: Vec<usize> = (2..12).collect();
+        at[9] = usize::MAX;
+        let held: [f64; 10] = std::array::from_fn(|k| values[k + 2] + 0.1 * (k as f64 - 4.0));
+        let p = cov.clone().try_inverse().unwrap();
+        // Free: the two others and the known mass's column (index 11).
+        let (others, fixed) = ([0usize, 1, 11], (2..11).collect::<Vec<_>>());
+        let p_oo = DMatrix::from_fn(3, 3, |a, b| p[(others[a], others[b])]);
+        let p_of = DMatrix::from_fn(3, 9, |a, b| p[(others[a], fixed[b])]);
+        let d = DVector::from_fn(9, |k, _| held[k] - values[k + 2]);
+        let want = DVector::from_fn(3, |a, _| values[others[a]]) - p_oo.try_inverse().unwrap() * p_of * d;
+        for (a, &i) in others[..2].iter().enumerate() {
+            let got = given_payload(&values, &cov, i, &at, &held);
+            assert!(
+                (got - want[a]).abs() < 1e-10 * want[a].abs().max(1.0),
+                "{got} vs {}",
+                want[a]
+            );
+        }
+    }
 
     /// The body of a body's standard parameters is itself.
     #[test]
