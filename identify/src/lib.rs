@@ -55,6 +55,11 @@ pub struct Request {
     /// Records of the robot carrying a payload: the payload identified
     /// against the robot identified from `recordings`.
     pub payload: Option<PayloadRequest>,
+    /// The controller the `validate` recordings ran under (a TOML file's
+    /// `[controller]` table, kp, kd, ki per joint): the estimate and the
+    /// robot file's parameters simulated under it in closed loop, tracking
+    /// each record's reference (its `ref_<joint>` channels), in the report.
+    pub controller: Option<PathBuf>,
 }
 
 /// The payload to identify (`estimation::payload`).
@@ -104,6 +109,7 @@ impl Request {
             threads: None,
             mjcf: None,
             payload: None,
+            controller: None,
         }
     }
 }
@@ -192,6 +198,10 @@ pub struct Identification {
     /// identification one), the estimate's and the robot file's position
     /// and velocity errors; Err: why there are none, as the report says.
     pub rollouts: robotid_report::report::Rolled,
+    /// The closed-loop runs on the validation records under the declared
+    /// controller, when one is; Err: why there are none, as the report
+    /// says.
+    pub closed_loop: robotid_report::report::ClosedLooped,
     /// The payload identified (`payload.parquet`), when asked for.
     pub payload: Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
     /// The payload's model on its held-out records.

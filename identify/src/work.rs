@@ -7,9 +7,11 @@ use robotid::validation::Validated;
 use robotid::verdict::{Measured, Verdict};
 use robotid::{Observer, RunOptions};
 use robotid_report::export::{Export, Format};
+use robotid_schemas::TableKind;
 use robotid_stages::estimation::payload::{identify_payload, PayloadFit, PayloadOptions, Robot as PayloadRobot};
 use robotid_stages::estimation::{Covariance, Ellipsoid, Estimate, Estimator, System};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
+use robotid_stages::stage::read::mcap_has_reference;
 
 use crate::script::Script;
 use crate::{
@@ -81,7 +83,12 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     if let (Some(p), Some(fit), true) = (&request.payload, &payload, fitted) {
         payload_export(&p.link, fit, (staged, &paths))?;
     }
-    let rollouts = robotid_report::report::write(&robotid_report::report::Page {
+    let raw_tables: Vec<PathBuf> = recordings
+        .iter()
+        .filter(|r| r.role == Role::Validation)
+        .map(|r| recording_table(r, TableKind::RawSamples))
+        .collect();
+    let simulated = robotid_report::report::write(&robotid_report::report::Page {
         parameters: "parameters.parquet".into(),
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
@@ -89,9 +96,21 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         robot: Some(paths.robot.clone()),
         rollout: true,
         payload: payload.as_ref().map(|_| "payload.parquet".into()),
+        closed_loop: paths.controller.clone().map(|c| (c, raw_tables)),
         out: "report.html".into(),
         within: staged.to_path_buf(),
     })?;
+    // Each run named where its table will be, not where it was read.
+    let closed_loop = simulated.closed_loop.map(|runs| {
+        runs.map(|mut runs| {
+            for r in &mut runs {
+                if let Ok(rel) = r.recording.strip_prefix(staged) {
+                    r.recording = paths.out.join(rel);
+                }
+            }
+            runs
+        })
+    });
     script.report(id_tables, val_tables, fitted);
     std::fs::write(staged.join("identify.sh"), script.text()).map_err(io(&paths.out.join("identify.sh")))?;
     staging.commit()?;
@@ -106,7 +125,8 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         unjudged: judged.unjudged,
         validation,
         physical,
-        rollouts,
+        rollouts: simulated.rolled,
+        closed_loop,
         payload,
         payload_validation,
     })
@@ -258,11 +278,18 @@ fn bound_in_last_link(
     })
 }
 
-/// A recording's regressor table, relative to the staging folder: its
-/// pipeline runs one log, which it names by the log's stem.
+/// A recording's regressor table, relative to the staging folder.
 fn regressor_table(r: &Recording) -> PathBuf {
+    recording_table(r, TableKind::Regressor)
+}
+
+/// A recording's table of `kind`, relative to the staging folder: its
+/// pipeline runs one log, which it names by the log's stem.
+fn recording_table(r: &Recording, kind: TableKind) -> PathBuf {
     let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
-    Path::new(&r.name).join(&own[0]).join("regressor.parquet")
+    Path::new(&r.name)
+        .join(&own[0])
+        .join(format!("{}.parquet", kind.name()))
 }
 
 /// The identified URDF and MJCF with the payload on
@@ -381,6 +408,8 @@ struct Paths {
     robot: PathBuf,
     /// The user's MJCF, to patch.
     mjcf: Option<PathBuf>,
+    /// The validation records' controller, read.
+    controller: Option<PathBuf>,
     /// The identification recordings, then the validation ones.
     all: Vec<PathBuf>,
     identifying: usize,
@@ -399,6 +428,17 @@ impl Paths {
         }
         let mut all = absolutes(&request.recordings)?;
         let held = absolutes(&request.validate)?;
+        let controller = request.controller.as_deref().map(absolute).transpose()?;
+        if let Some(c) = &controller {
+            if held.is_empty() {
+                return Err(Error::Request(format!(
+                    "--controller {}: no --validate recording to run it on",
+                    c.display()
+                )));
+            }
+            let dof = robotid_stages::dynamics::load_robot(&robot)?.dof();
+            robotid::validation::read_controller(c, dof)?;
+        }
         let identifying = all.len();
         all.extend(held.iter().cloned());
         if let Some(p) = &request.payload {
@@ -440,6 +480,7 @@ impl Paths {
         Ok(Paths {
             robot,
             mjcf,
+            controller,
             all,
             identifying,
             held,
@@ -496,6 +537,31 @@ fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Recording>, Optio
             }
         }
         d.text = robotid::identify::file_text(&d.plan)?;
+    }
+    // Under a declared controller, the validation records' raw samples
+    // (their references with them) are kept for the closed loop.
+    if paths.controller.is_some() {
+        for (d, log) in designs
+            .iter_mut()
+            .zip(&paths.all)
+            .skip(paths.identifying)
+            .take(paths.held.len())
+        {
+            if !d.plan.tables.contains(&TableKind::RawSamples) {
+                d.plan.tables.push(TableKind::RawSamples);
+            }
+            // An MCAP log's reference topic is read only when asked for
+            // (a text log's `ref_` columns are found with the others).
+            if d.plan.read.reference.is_none() && mcap_has_reference(log) {
+                d.plan.read.reference = Some(robotid_stages::stage::read::Channel {
+                    column: None,
+                    topic: None,
+                    field: None,
+                    unit: None,
+                });
+            }
+            d.text = robotid::identify::file_text(&d.plan)?;
+        }
     }
     let locked = lock_unrecorded(&mut designs, paths.identifying)?;
     let recordings = designs

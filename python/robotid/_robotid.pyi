@@ -63,6 +63,7 @@ class Identification:
     exports: List[str]
     payload: Optional[pa.Table]
     payload_validation: Optional[Tuple[float, List[Tuple[str, Optional[float]]]]]
+    closed_loop: Optional[pa.Table]
 
 def identify(
     recordings: Sequence[Union[str, PathLike]],
@@ -80,6 +81,7 @@ def identify(
     known_payload_mass: Optional[float] = None,
     payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
     validate_loaded: Sequence[Union[str, PathLike]] = (),
+    controller: Optional[Union[str, PathLike]] = None,
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
@@ -91,7 +93,11 @@ def identify(
     `known_payload_mass`, the drives' gains too; `payload_ellipsoid`:
     centre and semi-axes, m, the bounded estimate's region;
     `validate_loaded`: held-out loaded records, whose prediction is
-    `payload_validation`)."""
+    `payload_validation`). With `controller` (a TOML file's
+    `[controller]` table, the `validate` records' PID), `closed_loop` is
+    the estimate's and the robot file's closed-loop runs on them (a
+    ValueError when they cannot be run, e.g. without reference channels;
+    the folder is written all the same)."""
 
 def payload(
     loaded: Sequence[Union[str, PathLike]],

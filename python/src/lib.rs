@@ -329,6 +329,10 @@ struct Identification {
     /// The payload's model on the held-out loaded records: its relative
     /// error and each joint's residue over its floor (None: no floor).
     payload_validation: Option<(f64, JointRatios)>,
+    /// With a `controller`: the closed-loop runs on the validation
+    /// records, as `robotid.closed_loop` returns them (recording, model,
+    /// joint, position RMS error).
+    closed_loop: Option<Py<PyAny>>,
 }
 
 #[pymethods]
@@ -353,7 +357,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new()))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new(), controller=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -372,6 +376,7 @@ fn identify(
     known_payload_mass: Option<f64>,
     payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
     validate_loaded: Vec<PathBuf>,
+    controller: Option<PathBuf>,
 ) -> PyResult<Identification> {
     use robotid_identify::{PayloadRequest, Physical, Request};
     // As the command line: with a payload, `recordings` carry it and the
@@ -403,6 +408,7 @@ fn identify(
         threads,
         mjcf,
         payload,
+        controller,
         ..Request::new(recordings, robot)
     };
     let id = py
@@ -446,6 +452,17 @@ fn identify(
             .map(|v| (v.relative_error, v.joints.clone())),
         payload: match id.payload {
             Some(_) => Some(written(py, &id.path("payload.parquet"))?),
+            None => None,
+        },
+        closed_loop: match &id.closed_loop {
+            Some(Ok(runs)) => {
+                Some(table(py, robotid::validation::closed_loop_table(runs).map_err(py_error)?)?.unbind())
+            }
+            Some(Err(why)) => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "the closed loop: {why}"
+                )))
+            }
             None => None,
         },
         out: id.out,

@@ -93,6 +93,19 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     ).to_pylist()
     by = {r["model"]: r["q_rms"] for r in looped}
     assert by["estimate"] <= 1.3 * by["robot_file"], by
+    # The same from identify itself, the controller declared: its
+    # validation record's raw samples (read from the MCAP, references with
+    # them) run in closed loop, the same figures.
+    again = robotid.identify(
+        [examples / "recordings" / "kuka_axis3" / "kuka_axis3.mcap"],
+        examples / "robots" / "kuka_axis3.toml",
+        validate=[validation / "kuka_axis3_validation.mcap"],
+        controller=validation / "kuka_axis3_validation.truth.toml",
+        out=tmp_path / "with_controller",
+    )
+    from_identify = {r["model"]: r["q_rms"] for r in again.closed_loop.to_pylist()}
+    assert from_identify == pytest.approx(by, rel=1e-9), (from_identify, by)
+    assert result.closed_loop is None
     # Domain randomization from Python: the command line's files, byte for
     # byte; each drawn MJCF loads in MuJoCo with the drawn masses.
     physical = out / "parameters_physical.parquet"

@@ -581,34 +581,81 @@ pub fn plot_rollouts(dir: &Path, rolled: &[robotid::validation::RolledOut]) -> R
 
 /// One record's rollout picture (see [`plot_rollouts`]), as SVG text.
 pub fn rollout_svg(r: &robotid::validation::RolledOut) -> Result<String> {
-    // Simulated angles held to the measured span's ±50 % (a model far
-    // off would otherwise flatten the measured curve).
-    let series = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
-        let (lo, hi) = r.measured[j]
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-        let pad = 0.5 * (hi - lo).max(1e-3);
+    angles_svg(
+        (&r.joints, &r.time, &r.measured),
+        [
+            r.estimate.as_ref().ok().map(|e| &e.q),
+            r.prior.as_ref().and_then(|p| p.as_ref().ok()).map(|p| &p.q),
+        ],
+        &format!("{:.2} s windows", r.window_s),
+    )
+}
+
+/// One recording's closed-loop errors: per joint, the identified and
+/// the robot file's model's simulated angle less the measured, mrad (the
+/// feedback holds both within a few mrad of the measurement: their
+/// angles would lie on it).
+pub fn closed_loop_svg(r: &robotid::validation::ClosedLoopRun) -> Result<String> {
+    let error = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
         r.time
             .iter()
-            .copied()
-            .zip(q[j].iter().map(|x| x.clamp(lo - pad, hi + pad)))
+            .zip(q[j].iter().zip(&r.measured[j]))
+            .map(|(&t, (s, m))| (t, 1e3 * (s - m)))
             .collect()
     };
     figure_svg(r.joints.len(), 1, |areas| {
         for (j, joint) in r.joints.iter().enumerate() {
-            let mut lines = vec![(series(&r.measured, j), GREY, "measured")];
+            let mut lines = Vec::new();
             if let Ok(e) = &r.estimate {
-                lines.push((series(&e.q, j), BLUE_, "identified model"));
+                lines.push((error(&e.q, j), BLUE_, "identified model"));
             }
             if let Some(Ok(p)) = &r.prior {
-                lines.push((series(&p.q, j), ORANGE, "robot file's model"));
+                lines.push((error(&p.q, j), ORANGE, "robot file's model"));
             }
             chart(
                 &areas[j],
-                &format!(
-                    "{joint}: joint angle, measured and simulated ({:.2} s windows)",
-                    r.window_s
-                ),
+                &format!("{joint}: closed-loop angle less the measured"),
+                "time, s",
+                "mrad",
+                &lines,
+                &[],
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// Per joint, the measured angle and the identified and robot file's
+/// models' simulated ones (`how` they were simulated, in the titles).
+fn angles_svg(
+    (joints, time, measured): (&[String], &[f64], &[Vec<f64>]),
+    [estimate, prior]: [Option<&Vec<Vec<f64>>>; 2],
+    how: &str,
+) -> Result<String> {
+    // Simulated angles held to the measured span's ±50 % (a model far
+    // off would otherwise flatten the measured curve).
+    let series = |q: &[Vec<f64>], j: usize| -> Vec<(f64, f64)> {
+        let (lo, hi) = measured[j]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        let pad = 0.5 * (hi - lo).max(1e-3);
+        time.iter()
+            .copied()
+            .zip(q[j].iter().map(|x| x.clamp(lo - pad, hi + pad)))
+            .collect()
+    };
+    figure_svg(joints.len(), 1, |areas| {
+        for (j, joint) in joints.iter().enumerate() {
+            let mut lines = vec![(series(measured, j), GREY, "measured")];
+            if let Some(q) = estimate {
+                lines.push((series(q, j), BLUE_, "identified model"));
+            }
+            if let Some(q) = prior {
+                lines.push((series(q, j), ORANGE, "robot file's model"));
+            }
+            chart(
+                &areas[j],
+                &format!("{joint}: joint angle, measured and simulated ({how})"),
                 "time, s",
                 "rad",
                 &lines,

@@ -585,6 +585,11 @@ pub struct Page {
     /// [`robotid::validation::rollouts`]), over windows chosen from each
     /// record's noise.
     pub rollout: bool,
+    /// Closed-loop rollouts: the controller the recordings declare (a TOML
+    /// file's `[controller]` table) and their raw tables (with the
+    /// references): the estimate and the robot file's parameters under
+    /// it, tracking the recorded reference.
+    pub closed_loop: Option<(std::path::PathBuf, Vec<std::path::PathBuf>)>,
     /// An identified payload (`payload.parquet`): its body, intervals,
     /// bounded estimate and drive gains shown.
     pub payload: Option<std::path::PathBuf>,
@@ -600,8 +605,17 @@ pub struct Page {
 /// page says).
 pub type Rolled = Option<std::result::Result<Vec<robotid::validation::RolledOut>, String>>;
 
-/// The report of `page`, written to `page.out`; its rollouts returned.
-pub fn write(page: &Page) -> Result<Rolled> {
+/// What a page ran in closed loop, as [`Rolled`].
+pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::ClosedLoopRun>, String>>;
+
+/// What a page simulated.
+pub struct Simulated {
+    pub rolled: Rolled,
+    pub closed_loop: ClosedLooped,
+}
+
+/// The report of `page`, written to `page.out`; what it simulated returned.
+pub fn write(page: &Page) -> Result<Simulated> {
     let within = |p: &std::path::Path| page.within.join(p);
     let params = robotid::tables::read_parameters(&within(&page.parameters))?;
     let load = |tables: &[std::path::PathBuf]| {
@@ -676,10 +690,80 @@ pub fn write(page: &Page) -> Result<Rolled> {
         };
         sections.push_str(&section);
     }
+    let closed_loop = match (&page.robot, &page.closed_loop) {
+        (Some(robot), Some((controller, tables))) => {
+            let tables: Vec<std::path::PathBuf> = tables.iter().map(|t| within(t)).collect();
+            let runs = robotid::validation::closed_loop_rollouts(
+                &within(&page.parameters),
+                robot,
+                &tables,
+                &within(controller),
+            )
+            .map_err(|e| e.to_string());
+            sections.push_str(&match &runs {
+                Ok(runs) => closed_loop_html(runs, page)?,
+                Err(e) => format!(
+                    "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"warn\">Not run: {}</p>\n",
+                    esc(e)
+                ),
+            });
+            Some(runs)
+        }
+        _ => None,
+    };
     let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
     text.insert_str(end, &sections);
     crate::plot::write_text(&within(&page.out), &text)?;
-    Ok(rolled)
+    Ok(Simulated { rolled, closed_loop })
+}
+
+/// The closed-loop section: per recording, a table per joint (the
+/// estimate's position RMS error, the robot file's, their ratio) and the
+/// measured and simulated angles.
+fn closed_loop_html(runs: &[robotid::validation::ClosedLoopRun], page: &Page) -> Result<String> {
+    use robotid_stages::dynamics::{ClosedLoop, Stopped};
+    let mut h = format!(
+        "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"note\">The identified model and the robot file's, each under the controller declared in <code>{}</code>, tracking the recorded reference from the first sample's state, held there by the controller's integral, over the whole record (no measured torque drives them): what a model-based controller or a simulator of the closed loop would see.</p>\n",
+        esc(&page.closed_loop.as_ref().map_or(String::new(), |c| c.0.display().to_string()))
+    );
+    let said = |r: &robotid::validation::ClosedLoopRun, x: &std::result::Result<ClosedLoop, Stopped>| match x {
+        Ok(c) => Ok(c.q_rms.clone()),
+        Err(Stopped::NotPositiveDefinite { sample, joint }) => Err(format!(
+            "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+            r.joints[*joint]
+        )),
+    };
+    let shown = page.closed_loop.as_ref().map_or(&[][..], |c| c.1.as_slice());
+    for (k, r) in runs.iter().enumerate() {
+        h.push_str(&format!(
+            "<p class=\"note\">{}: {:.1} s</p>\n",
+            esc(&shown.get(k).unwrap_or(&r.recording).display().to_string()),
+            r.time.last().unwrap_or(&0.0) - r.time.first().unwrap_or(&0.0)
+        ));
+        match (said(r, &r.estimate), r.prior.as_ref().map(|p| said(r, p))) {
+            (Err(why), _) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
+            (Ok(ours), file) => {
+                h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>robot file's, mrad</th><th>ratio</th></tr>\n");
+                for (j, joint) in r.joints.iter().enumerate() {
+                    let (theirs, ratio) = match &file {
+                        Some(Ok(f)) => (format!("{:.4}", 1e3 * f[j]), format!("{:.3}", ours[j] / f[j])),
+                        Some(Err(why)) => (why.clone(), "-".into()),
+                        None => ("-".into(), "-".into()),
+                    };
+                    h.push_str(&format!(
+                        "<tr><td class=\"l\">{}</td><td>{:.4}</td><td>{}</td><td>{ratio}</td></tr>\n",
+                        esc(joint),
+                        1e3 * ours[j],
+                        esc(&theirs)
+                    ));
+                }
+                h.push_str("</table>\n");
+            }
+        }
+        h.push_str(&crate::plot::closed_loop_svg(r)?);
+        h.push('\n');
+    }
+    Ok(h)
 }
 
 /// The report of a run with an `estimate` stage: its parameters against

@@ -56,6 +56,14 @@ pub struct Args {
     /// MJCF made from the robot file.
     #[arg(long)]
     pub mjcf: Option<PathBuf>,
+    /// The controller the `--validate` recordings ran under: a TOML file
+    /// with a `[controller]` table (kp, kd, ki per joint; `robotid
+    /// simulate`'s truth file declares its own). The estimate and the
+    /// robot file's parameters are simulated under it in closed loop,
+    /// tracking each record's reference (`ref_<joint>`), and compared
+    /// with the measured angles (printed, and in the report).
+    #[arg(long, requires = "validate")]
+    pub controller: Option<PathBuf>,
     /// The recordings carry a payload held by this link (the last moving
     /// link, or one welded to it: a flange, `tool0`): its mass, centre of
     /// mass and inertia are identified against the robot identified from
@@ -148,6 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         accept_inadequate: args.accept_inadequate,
         validate: args.validate,
         mjcf: args.mjcf,
+        controller: args.controller,
         payload,
         ..Request::new(recordings, args.robot)
     };
@@ -166,6 +175,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("refused, written anyway (--accept-inadequate): {why}");
     }
     print_physical(&id);
+    match &id.closed_loop {
+        Some(Ok(runs)) => print!("\n{}", super::validate::closed_loop_said(runs)),
+        Some(Err(why)) => println!("\nnot run in closed loop: {why}"),
+        None => {}
+    }
     print_payload(&id);
     println!("report in {}", id.path("report.html").display());
     println!("\nidentified: {out} (pipelines in {out}/pipelines, commands in {out}/identify.sh)");

@@ -26,6 +26,15 @@ pub struct Args {
     /// validation records (else the excitation's), beside the robot file's.
     #[arg(long, requires = "robot")]
     pub rollout: bool,
+    /// Raw tables with the recorded references (`q_<joint>` and
+    /// `ref_<joint>`, as `robotid simulate` writes) to simulate in closed
+    /// loop under `--controller`, the estimate beside the robot file.
+    #[arg(long, num_args = 1.., requires_all = ["robot", "controller"])]
+    pub closed_loop: Vec<PathBuf>,
+    /// The recordings' controller: a TOML file with a `[controller]` table
+    /// (kp, kd, ki per joint), as `robotid simulate`'s truth file declares.
+    #[arg(long)]
+    pub controller: Option<PathBuf>,
     /// An identified payload (`payload.parquet`, from `identify
     /// --payload-on`): its body, intervals and drive gains shown.
     #[arg(long)]
@@ -44,6 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         robot: args.robot,
         rollout: args.rollout,
         payload: args.payload,
+        closed_loop: args.controller.map(|c| (c, args.closed_loop)),
         out: args.out.clone(),
         within: PathBuf::new(),
     })?;

@@ -141,7 +141,7 @@ pub fn closed_loop_said(runs: &[robotid::validation::ClosedLoopRun]) -> String {
     let mut s = String::new();
     for r in runs {
         s.push_str(&format!(
-            "closed loop on {}: the declared controller tracking the recorded reference, from the first sample's state over {:.1} s\n",
+            "closed loop on {}: the declared controller tracking the recorded reference, from the first sample's state (held there) over {:.1} s\n",
             r.recording.display(),
             r.time.last().unwrap_or(&0.0) - r.time[0]
         ));

@@ -388,9 +388,28 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
         s(&robot),
         "--validate",
         s(&val),
+        "--controller",
+        s(&w.join("recordings/kuka_axis3_validation/kuka_axis3_validation.truth.toml")),
         "--out",
         s(&out),
     ]);
+    // Under the simulator's PID, declared: the validation record run in
+    // closed loop from its raw samples (read from the MCAP, references
+    // with them), the estimate within 1.3× of the robot file's (the
+    // truth) error, printed and in the report.
+    let said = text
+        .lines()
+        .skip_while(|l| !l.starts_with("closed loop on"))
+        .nth(2)
+        .unwrap_or_else(|| panic!("no closed loop said:\n{text}"));
+    let ratio: f64 = said.split_whitespace().last().unwrap().parse().unwrap();
+    println!("closed loop from identify: {said}");
+    assert!(ratio <= 1.3, "{said}");
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        report.contains("<h2 id=\"closed-loop\">") && !report.contains("Not run"),
+        "the report's closed loop"
+    );
     let pipeline = std::fs::read_to_string(out.join("pipelines/kuka_axis3.toml")).unwrap();
     assert!(pipeline.contains("kind = \"inverse_filter\""), "{pipeline}");
     let v: f64 = pipeline
@@ -450,12 +469,13 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
 
 /// In closed loop (the simulator's PID, declared in its truth file,
 /// tracking the recorded reference over the whole record from its first
-/// state): the identified model within 1.3× of the truth's position error
-/// (measured 1.001× on the excitation, 1.245× on the validation run, whose
-/// error is 15 µrad), and a link 10 % heavier or the friction left out at
-/// least 1.5× the truth's (measured 1.9× and 3.5× on the excitation, where
-/// the feedback hides most of a model error, 41× and 54× on the
-/// validation run).
+/// state, held there by the integral as the simulator held it): the
+/// identified model within 1.3× of the truth's position error (measured
+/// 1.07× on the excitation, 1.25× on the validation run, errors of 13–15
+/// µrad), and a link 10 % heavier or the friction left out at least 10×
+/// the truth's (measured 37× and 76× on the excitation, 41× and 54× on
+/// the validation run; with the integral started at zero instead, the
+/// start's transient was most of every error: 1.9× and 3.5×).
 fn closed_loop_judges_the_model(w: &Path, parameters: &Path, robot: &Path) {
     use robotid_stages::dynamics::{closed_loop, BaseDynamics};
     let (_, model, base) = robotid::tables::identified(robot, parameters).unwrap();
@@ -499,7 +519,7 @@ fn closed_loop_judges_the_model(w: &Path, parameters: &Path, robot: &Path) {
             .unwrap();
             println!("{rec}, {what}: {:.4} mrad", 1e3 * wrong.q_rms[0]);
             assert!(
-                wrong.q_rms[0] >= 1.5 * exact,
+                wrong.q_rms[0] >= 10.0 * exact,
                 "{rec}, {what}: {:?} against {exact}",
                 wrong.q_rms
             );

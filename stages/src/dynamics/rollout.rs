@@ -536,8 +536,10 @@ pub struct ClosedLoop {
 /// The model `dynamics` under `pid`, tracking `reference` (per joint, at
 /// each sample of `time`; linear between samples, its velocity the
 /// reference's central differences), from the measured state at the first
-/// sample (`q`, `qd`) with the integral at zero (a record that starts at
-/// rest): no measured torque drives it, so the whole record is one run,
+/// sample (`q`, `qd`) with the integral holding the model there (its
+/// torque at that state, at rest, less the other terms': a record starts
+/// where the controller held the robot, as the simulator's do): no
+/// measured torque drives it, so the whole record is one run,
 /// held near the measurement by the feedback as the robot was. RK4 with
 /// enough steps per sample for the loop's fastest mode at the start
 /// (ω = max(kd/M, √(kp/M), ∛(ki/M)) per joint, ω·h ≤ 0.5).
@@ -552,7 +554,12 @@ pub fn closed_loop(
     let rd = velocity(time, reference);
     // State [q | q̇ | ∫(r − q)], stage buffers: allocated once.
     let mut x: Vec<f64> = (0..n).map(|j| q[j][0]).chain((0..n).map(|j| qd[j][0])).collect();
-    x.extend(std::iter::repeat_n(0.0, n));
+    let zero = vec![0.0; n];
+    let held = dynamics.torque(&x[..n], &zero, &zero).to_vec();
+    x.extend((0..n).map(|j| match pid.ki[j] > 0.0 {
+        true => (held[j] - pid.kp[j] * (reference[j][0] - q[j][0]) - pid.kd[j] * (rd[j][0] - qd[j][0])) / pid.ki[j],
+        false => 0.0,
+    }));
     let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
     let substeps = loop_substeps(dynamics, pid, &x[..n], step)?;
     dynamics.settle(0.5 * step / substeps as f64);

@@ -442,6 +442,14 @@ pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
     out
 }
 
+/// Whether an MCAP log at `path` holds the reference topic robotid reads
+/// by default (`/joint_reference`, as `robotid simulate` writes it).
+pub fn mcap_has_reference(path: &Path) -> bool {
+    let is_mcap = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+    is_mcap
+        && matches!(mcap::mcap_topics(path), Ok(Some(topics)) if topics.iter().any(|t| t.topic == crate::formats::mcap::TOPIC_REFERENCE))
+}
+
 /// The joint names an MCAP log's position messages carry (JointState and
 /// its kin); None for other formats and for messages without names.
 pub fn log_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
