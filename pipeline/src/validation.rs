@@ -314,15 +314,36 @@ pub struct RolloutRow {
     pub ratio: String,
 }
 
+/// Why a model was not simulated, said (`joints`: the record's).
+fn stopped_said(joints: &[String], stopped: &robotid_stages::dynamics::Stopped) -> String {
+    match stopped {
+        robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample, joint } => format!(
+            "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
+            joints[*joint]
+        ),
+    }
+}
+
+/// The robot file's model's figure beside the estimate's `ours` (rad):
+/// its own (mrad, `digits` decimals) and the ratio, or why not.
+fn beside_file<T>(
+    joints: &[String],
+    prior: &Option<std::result::Result<T, robotid_stages::dynamics::Stopped>>,
+    q_rms: impl Fn(&T) -> f64,
+    ours: f64,
+    digits: usize,
+) -> (String, String) {
+    match prior {
+        Some(Ok(p)) => (format!("{:.digits$}", 1e3 * q_rms(p)), figure(ours / q_rms(p))),
+        Some(Err(e)) => (stopped_said(joints, e), "-".into()),
+        None => ("-".into(), "-".into()),
+    }
+}
+
 impl RolledOut {
     /// Why a model was not simulated, said.
     pub fn stopped_said(&self, stopped: &robotid_stages::dynamics::Stopped) -> String {
-        match stopped {
-            robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample, joint } => format!(
-                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
-                self.joints[*joint]
-            ),
-        }
+        stopped_said(&self.joints, stopped)
     }
 
     /// Per joint, the figures said; Err: why the estimate was not simulated.
@@ -333,11 +354,7 @@ impl RolledOut {
             .iter()
             .enumerate()
             .map(|(j, joint)| {
-                let (file, ratio) = match &self.prior {
-                    Some(Ok(p)) => (format!("{:.3}", 1e3 * p.q_rms[j]), figure(est.q_rms[j] / p.q_rms[j])),
-                    Some(Err(e)) => (self.stopped_said(e), "-".into()),
-                    None => ("-".into(), "-".into()),
-                };
+                let (file, ratio) = beside_file(&self.joints, &self.prior, |p| p.q_rms[j], est.q_rms[j], 3);
                 RolloutRow {
                     joint: joint.clone(),
                     q_mrad: 1e3 * est.q_rms[j],
@@ -607,6 +624,36 @@ pub struct ClosedLoopRun {
     pub measured: Vec<Vec<f64>>,
     pub estimate: std::result::Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>,
     pub prior: Option<std::result::Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>>,
+}
+
+/// One joint's closed-loop figures, said: the estimate's position RMS
+/// error (mrad), the robot file's (or why not), their ratio.
+pub struct ClosedLoopRow {
+    pub joint: String,
+    pub q_mrad: f64,
+    pub file: String,
+    pub ratio: String,
+}
+
+impl ClosedLoopRun {
+    /// Per joint, the figures said; Err: why the estimate was not simulated.
+    pub fn rows(&self) -> std::result::Result<Vec<ClosedLoopRow>, String> {
+        let est = self.estimate.as_ref().map_err(|e| stopped_said(&self.joints, e))?;
+        Ok(self
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| {
+                let (file, ratio) = beside_file(&self.joints, &self.prior, |p| p.q_rms[j], est.q_rms[j], 4);
+                ClosedLoopRow {
+                    joint: joint.clone(),
+                    q_mrad: 1e3 * est.q_rms[j],
+                    file,
+                    ratio,
+                }
+            })
+            .collect())
+    }
 }
 
 /// The parameters table at `parameters` (of `robot`) simulated in closed

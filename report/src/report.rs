@@ -721,18 +721,10 @@ pub fn write(page: &Page) -> Result<Simulated> {
 /// estimate's position RMS error, the robot file's, their ratio) and the
 /// measured and simulated angles.
 fn closed_loop_html(runs: &[robotid::validation::ClosedLoopRun], page: &Page) -> Result<String> {
-    use robotid_stages::dynamics::{ClosedLoop, Stopped};
     let mut h = format!(
         "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"note\">The identified model and the robot file's, each under the controller declared in <code>{}</code>, tracking the recorded reference from the first sample's state, held there by the controller's integral, over the whole record (no measured torque drives them): what a model-based controller or a simulator of the closed loop would see.</p>\n",
         esc(&page.closed_loop.as_ref().map_or(String::new(), |c| c.0.display().to_string()))
     );
-    let said = |r: &robotid::validation::ClosedLoopRun, x: &std::result::Result<ClosedLoop, Stopped>| match x {
-        Ok(c) => Ok(c.q_rms.clone()),
-        Err(Stopped::NotPositiveDefinite { sample, joint }) => Err(format!(
-            "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
-            r.joints[*joint]
-        )),
-    };
     let shown = page.closed_loop.as_ref().map_or(&[][..], |c| c.1.as_slice());
     for (k, r) in runs.iter().enumerate() {
         h.push_str(&format!(
@@ -740,21 +732,17 @@ fn closed_loop_html(runs: &[robotid::validation::ClosedLoopRun], page: &Page) ->
             esc(&shown.get(k).unwrap_or(&r.recording).display().to_string()),
             r.time.last().unwrap_or(&0.0) - r.time.first().unwrap_or(&0.0)
         ));
-        match (said(r, &r.estimate), r.prior.as_ref().map(|p| said(r, p))) {
-            (Err(why), _) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
-            (Ok(ours), file) => {
+        match r.rows() {
+            Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
+            Ok(rows) => {
                 h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>robot file's, mrad</th><th>ratio</th></tr>\n");
-                for (j, joint) in r.joints.iter().enumerate() {
-                    let (theirs, ratio) = match &file {
-                        Some(Ok(f)) => (format!("{:.4}", 1e3 * f[j]), format!("{:.3}", ours[j] / f[j])),
-                        Some(Err(why)) => (why.clone(), "-".into()),
-                        None => ("-".into(), "-".into()),
-                    };
+                for row in rows {
                     h.push_str(&format!(
-                        "<tr><td class=\"l\">{}</td><td>{:.4}</td><td>{}</td><td>{ratio}</td></tr>\n",
-                        esc(joint),
-                        1e3 * ours[j],
-                        esc(&theirs)
+                        "<tr><td class=\"l\">{}</td><td>{:.4}</td><td>{}</td><td>{}</td></tr>\n",
+                        esc(&row.joint),
+                        row.q_mrad,
+                        esc(&row.file),
+                        row.ratio
                     ));
                 }
                 h.push_str("</table>\n");

@@ -145,26 +145,14 @@ pub fn closed_loop_said(runs: &[robotid::validation::ClosedLoopRun]) -> String {
             r.recording.display(),
             r.time.last().unwrap_or(&0.0) - r.time[0]
         ));
-        let said = |x: &Result<robotid_stages::dynamics::ClosedLoop, robotid_stages::dynamics::Stopped>| match x {
-            Ok(c) => Ok(c.q_rms.clone()),
-            Err(robotid_stages::dynamics::Stopped::NotPositiveDefinite { sample, joint }) => Err(format!(
-                "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
-                r.joints[*joint]
-            )),
-        };
-        match (said(&r.estimate), r.prior.as_ref().map(said)) {
-            (Err(why), _) => s.push_str(&format!("  estimate {why}\n")),
-            (Ok(ours), file) => {
+        match r.rows() {
+            Err(why) => s.push_str(&format!("  estimate {why}\n")),
+            Ok(rows) => {
                 s.push_str("  joint                    position RMS (mrad)  robot file's (mrad)  ratio\n");
-                for (j, joint) in r.joints.iter().enumerate() {
-                    let (theirs, ratio) = match &file {
-                        Some(Ok(f)) => (format!("{:.4}", 1e3 * f[j]), format!("{:.3}", ours[j] / f[j])),
-                        Some(Err(why)) => (why.clone(), "-".into()),
-                        None => ("-".into(), "-".into()),
-                    };
+                for row in rows {
                     s.push_str(&format!(
-                        "  {joint:<24} {:>19.4}  {theirs:>19}  {ratio}\n",
-                        1e3 * ours[j]
+                        "  {:<24} {:>19.4}  {:>19}  {}\n",
+                        row.joint, row.q_mrad, row.file, row.ratio
                     ));
                 }
             }
