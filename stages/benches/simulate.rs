@@ -79,5 +79,58 @@ fn bench_rollout(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_simulate, bench_dynamics, bench_rollout);
+/// A closed-loop run (identify --controller, validate --closed-loop) of
+/// the UR5's true base parameters under a PID tracking the same 130 s
+/// reference at 200 Hz, from its start over the whole record (RK4 with
+/// the substeps the loop's fastest mode needs): simulated samples per
+/// second.
+fn bench_closed_loop(c: &mut Criterion) {
+    use robotid_stages::dynamics::{closed_loop, BaseDynamics, BaseRegressor, Pid, RegressorModel};
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let regressor = BaseRegressor::new(&model, &RegressorModel::default()).unwrap();
+    let theta: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
+    let (n, rate, samples) = (model.dof(), 200.0, 26_000);
+    let time: Vec<f64> = (0..samples).map(|s| s as f64 / rate).collect();
+    let reference: Vec<Vec<f64>> = (0..n)
+        .map(|j| {
+            let w = std::f64::consts::TAU * (0.2 + 0.05 * j as f64);
+            time.iter().map(|t| 0.5 * (w * t).sin()).collect()
+        })
+        .collect();
+    let start: Vec<Vec<f64>> = (0..n).map(|_| vec![0.0]).collect();
+    // The simulator's default loop: 5 Hz on each joint's own inertia (the
+    // mass matrix's diagonal at the start), damping 0.8, its integral at
+    // 0.5 Hz.
+    let mm = dynamics::mass_matrix(&model, &mut dynamics::Data::new(&model), &vec![0.0; n]).clone();
+    let (w, wi) = (std::f64::consts::TAU * 5.0, std::f64::consts::TAU * 0.5);
+    let pid = Pid {
+        kp: (0..n).map(|i| mm[(i, i)] * w * w).collect(),
+        kd: (0..n).map(|i| 2.0 * 0.8 * mm[(i, i)] * w).collect(),
+        ki: (0..n).map(|i| mm[(i, i)] * w * w * wi).collect(),
+    };
+    let mut g = c.benchmark_group("closed_loop");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(samples as u64));
+    g.bench_function(BenchmarkId::new("ur5_130s_200Hz", samples), |b| {
+        b.iter(|| {
+            closed_loop(
+                &mut BaseDynamics::new(&regressor, &theta),
+                &time,
+                &reference,
+                &pid,
+                (&reference, &start),
+            )
+            .unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    bench_simulate,
+    bench_dynamics,
+    bench_rollout,
+    bench_closed_loop
+);
 criterion_main!(benches);
