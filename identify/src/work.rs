@@ -240,16 +240,16 @@ pub fn payload_against_parameters(
         values: given.values.clone(),
         covariance: given.covariance.clone(),
     };
-    let (rot, pos) = payload_frame(&model, &request.link)?;
-    let fit = identify_payload(
-        &system,
-        PayloadRobot::Known(&known),
-        &PayloadOptions {
-            known_mass: None,
-            bound: bound_in_last_link(request, (&rot, &pos)),
-        },
-    )?
-    .in_frame(&rot, &pos);
+    let fit = bounded_payload(request, &model, |bound| {
+        identify_payload(
+            &system,
+            PayloadRobot::Known(&known),
+            &PayloadOptions {
+                known_mass: None,
+                bound,
+            },
+        )
+    })?;
     let table = robotid_stages::estimation::payload::payload_table(&fit, &request.link, &model)?;
     robotid_stages::formats::parquet::write_parquet(&staged.join("payload.parquet"), &table)?;
     staging.commit()?;
@@ -261,10 +261,10 @@ pub fn payload_against_parameters(
 /// frames' axes map onto each other (flanges turned by multiples of 90°),
 /// else the sphere holding it.
 fn bound_in_last_link(
-    request: &PayloadRequest,
+    bound: Option<([f64; 3], [f64; 3])>,
     (rot, pos): (&nalgebra::Matrix3<f64>, &nalgebra::Vector3<f64>),
 ) -> Option<Ellipsoid> {
-    request.bound.map(|(c, a)| {
+    bound.map(|(c, a)| {
         let a = nalgebra::Vector3::from(a);
         let aligned = rot.iter().all(|v| v.abs() < 1e-9 || (v.abs() - 1.0).abs() < 1e-9);
         Ellipsoid {
@@ -364,19 +364,72 @@ pub fn payload_from_tables(
     loaded: &[PathBuf],
 ) -> Result<PayloadFit> {
     let model = robotid_stages::dynamics::load_robot(robot)?;
-    let (rot, pos) = payload_frame(&model, &request.link)?;
     let unloaded = robotid::tables::load_system(within, unloaded)?;
     let loaded = robotid::tables::load_system(within, loaded)?;
-    let bound = bound_in_last_link(request, (&rot, &pos));
-    let fit = identify_payload(
-        &loaded,
-        PayloadRobot::Unloaded(&unloaded),
-        &PayloadOptions {
-            known_mass: request.known_mass,
-            bound,
-        },
-    )?;
-    Ok(fit.in_frame(&rot, &pos))
+    bounded_payload(request, &model, |bound| {
+        identify_payload(
+            &loaded,
+            PayloadRobot::Unloaded(&unloaded),
+            &PayloadOptions {
+                known_mass: request.known_mass,
+                bound,
+            },
+        )
+    })
+}
+
+/// The payload `fit` gives (with its bound in the last moving link's
+/// frame), about the requested link, bounded by the declared ellipsoid,
+/// else by the robot file's shapes of that link (a tool's geometry) when
+/// they hold the least-squares centre of mass: where the bound came from
+/// said, or why the shapes were not taken.
+fn bounded_payload(
+    request: &PayloadRequest,
+    model: &robotid_stages::dynamics::Model,
+    fit: impl Fn(Option<Ellipsoid>) -> robotid_stages::Result<PayloadFit>,
+) -> Result<PayloadFit> {
+    let (rot, pos) = payload_frame(model, &request.link)?;
+    let frame = (&rot, &pos);
+    if let Some(declared) = request.bound {
+        let mut f = fit(bound_in_last_link(Some(declared), frame))?.in_frame(&rot, &pos);
+        f.bound_said = Some("the declared ellipsoid (--payload-ellipsoid)".into());
+        return Ok(f);
+    }
+    let at = model.end_frames.iter().position(|f| f.0 == request.link);
+    let shapes = at.and_then(|k| model.end_extents.get(k).copied().flatten());
+    let free = fit(None)?.in_frame(&rot, &pos);
+    let Some(extent) = shapes else {
+        return Ok(free);
+    };
+    let e = Ellipsoid::around(&extent);
+    let box_said = format!(
+        "the robot file's shapes of `{}` (a box {:.3} × {:.3} × {:.3} m about ({:.3}, {:.3}, {:.3}) m, in the ellipsoid through its corners)",
+        request.link,
+        extent.max.x - extent.min.x,
+        extent.max.y - extent.min.y,
+        extent.max.z - extent.min.z,
+        e.centre.x,
+        e.centre.y,
+        e.centre.z
+    );
+    match free.body.filter(|b| e.holds(&b.com)) {
+        Some(_) => {
+            let c = e.centre.into();
+            let a = e.semi_axes.into();
+            let mut f = fit(bound_in_last_link(Some((c, a)), frame))?.in_frame(&rot, &pos);
+            f.bound_said = Some(box_said);
+            Ok(f)
+        }
+        None => Ok(PayloadFit {
+            bound_said: Some(format!(
+                "none: {box_said} do not hold the least-squares centre of mass{}, so they are not the payload's; declare its size with --payload-ellipsoid",
+                free.body
+                    .map(|b| format!(" ({:.3}, {:.3}, {:.3}) m", b.com.x, b.com.y, b.com.z))
+                    .unwrap_or_default()
+            )),
+            ..free
+        }),
+    }
 }
 
 /// The physical fit, or why there is none: refused (and not written

@@ -537,6 +537,9 @@ fn payload_html(table: &arrow::array::RecordBatch, path: &std::path::Path) -> Re
             None => "",
         }
     );
+    if let Some(b) = md.get("robotid.payload.bound") {
+        h.push_str(&format!("<p class=\"note\">The bound: {}.</p>\n", esc(b)));
+    }
     if let Some(u) = md.get("robotid.payload.undetermined") {
         h.push_str(&format!("<p class=\"warn\"><b>Undetermined:</b> {}</p>\n", esc(u)));
     }

@@ -344,6 +344,9 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
         let b = g.bounded.map(|b| format!("   bounded {b:.5}")).unwrap_or_default();
         println!("  gain {:<24} {:.5} ± {:.5}{b}", g.joint, g.scale, t * g.std);
     }
+    if let Some(said) = &fit.bound_said {
+        println!("  bound: {said}");
+    }
     if !fit.undetermined.is_empty() {
         println!(
             "  undetermined at the payload's size (the records do not tell them from any body of that mass and size; move the wrist more, or longer): {}",

@@ -262,6 +262,10 @@ pub struct Model {
     /// too, first), each with its frame in that link's: (name, rotation,
     /// position). Where a payload can be declared.
     pub end_frames: Vec<(String, Matrix3<f64>, Vector3<f64>)>,
+    /// Each end frame's link's own shapes, the box they fill in its own
+    /// frame (None: it has none): a tool's geometry, where the description
+    /// carries one.
+    pub end_extents: Vec<Option<Extent>>,
 }
 
 /// A shape of a link, placed in its frame.
@@ -427,6 +431,7 @@ impl Model {
             shapes: Vec::new(),
             base_shapes: Vec::new(),
             end_frames: Vec::new(),
+            end_extents: Vec::new(),
         }
     }
 

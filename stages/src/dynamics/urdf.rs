@@ -384,6 +384,15 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     close_link(&mut model, &found);
     model.end_effector = tool_point(link, frame, &children, &rigid);
     welded(link, frame, &children, &rigid, &mut model.end_frames);
+    let identity = (Matrix3::identity(), Vector3::zeros());
+    model.end_extents = model
+        .end_frames
+        .iter()
+        .map(|(name, _, _)| {
+            let l = robot.links.iter().find(|l| &l.name == name)?;
+            shapes_extent(&link_shapes(l, &identity, path))
+        })
+        .collect();
     model.warnings = warnings;
     model.locked = locked.into_iter().collect();
     if model.joints.is_empty() {

@@ -107,6 +107,9 @@ pub struct PayloadFit {
     /// of mass from the frame's origin: a body held there spans at least
     /// that).
     pub bound_size_m: Option<f64>,
+    /// Where the bound came from (declared, or the robot file's shapes of
+    /// the payload's link), or why the shapes were not taken.
+    pub bound_said: Option<String>,
 }
 
 /// The payload fitted inside its bounding ellipsoid.
@@ -268,6 +271,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
         gains,
         undetermined,
         bound_size_m,
+        bound_said: None,
     })
 }
 
@@ -560,6 +564,7 @@ impl PayloadFit {
             bounded,
             gains: self.gains.clone(),
             bound_size_m: self.bound_size_m,
+            bound_said: self.bound_said.clone(),
         }
     }
 }
@@ -729,6 +734,9 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
     );
     if let Some(b) = &fit.bounded {
         md.insert("robotid.payload.bounded_chi2".to_string(), b.chi2.to_string());
+    }
+    if let Some(said) = &fit.bound_said {
+        md.insert("robotid.payload.bound".to_string(), said.clone());
     }
     if !fit.undetermined.is_empty() {
         md.insert(

@@ -77,6 +77,21 @@ pub struct Ellipsoid {
 }
 
 impl Ellipsoid {
+    /// The ellipsoid through a box's corners (semi-axes √3 × its half
+    /// sides, at least 1 cm each): what a body filling the box fits in.
+    pub fn around(e: &crate::dynamics::Extent) -> Ellipsoid {
+        let half = ((e.max - e.min) * 0.5).map(|h| h.max(0.01));
+        Ellipsoid {
+            centre: (e.max + e.min) * 0.5,
+            semi_axes: half * 3f64.sqrt(),
+        }
+    }
+
+    /// Whether `p` is inside.
+    pub fn holds(&self, p: &nalgebra::Vector3<f64>) -> bool {
+        (p - self.centre).component_div(&self.semi_axes).norm_squared() <= 1.0
+    }
+
     /// The coefficients g of g·θ = ∫(1 − (x−c)ᵀQ⁻¹(x−c)) dm over a link's
     /// [XX XY XZ YY YZ ZZ MX MY MZ M] (second moments Σ = ½tr(I)·1 − I).
     pub fn coefficients(&self) -> [f64; 10] {
@@ -124,11 +139,7 @@ pub fn link_bounds(model: &crate::dynamics::Model, prior: &[f64]) -> Vec<LinkBou
                 "mass ≥ 0 (the robot file gives none)".to_string()
             };
             let ellipsoid = model.extent(l).map(|e| {
-                let half = ((e.max - e.min) * 0.5).map(|h| h.max(0.01));
-                let mut el = Ellipsoid {
-                    centre: (e.max + e.min) * 0.5,
-                    semi_axes: half * 3f64.sqrt(),
-                };
+                let mut el = Ellipsoid::around(&e);
                 // ∫(x−c)ᵀQ⁻¹(x−c) dm of the file's body: scaling Q by s²
                 // brings it inside when s² ≥ that / m.
                 let g = el.coefficients();
