@@ -136,7 +136,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 validate: args.validate_loaded,
             };
             if let Some(given) = &args.parameters {
-                return payload_only(&payload, &args.robot, given, args.out.as_deref());
+                return payload_only(
+                    &payload,
+                    &args.robot,
+                    given,
+                    (args.out.as_deref(), args.accept_inadequate),
+                );
             }
             if args.unloaded.is_empty() {
                 anyhow::bail!("--payload-on: give the records without the payload (--unloaded) or the robot's parameters (--parameters)");
@@ -183,7 +188,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     print_payload(&id);
     println!("report in {}", id.path("report.html").display());
     println!("\nidentified: {out} (pipelines in {out}/pipelines, commands in {out}/identify.sh)");
-    Ok(())
+    match &id.payload {
+        Some(fit) if !args.accept_inadequate => payload_determined(fit, &id.path("payload.parquet")),
+        _ => Ok(()),
+    }
+}
+
+/// Refused (exit 3) when the records leave some of the payload's values
+/// undetermined at its size: named, the table written all the same.
+fn payload_determined(
+    fit: &robotid_stages::estimation::payload::PayloadFit,
+    table: &std::path::Path,
+) -> anyhow::Result<()> {
+    if fit.undetermined.is_empty() {
+        return Ok(());
+    }
+    Err(Inadequate(format!(
+        "the payload is not identified: the records do not determine {} at its size (move the wrist more, or longer). {} holds every value with its interval all the same; to exit 0 with it: --accept-inadequate",
+        robotid_stages::estimation::payload::said_undetermined(&fit.undetermined),
+        table.display()
+    ))
+    .into())
 }
 
 /// The payload against the robot's parameters given: only it identified.
@@ -191,7 +216,7 @@ fn payload_only(
     payload: &PayloadRequest,
     robot: &std::path::Path,
     given: &std::path::Path,
-    out: Option<&std::path::Path>,
+    (out, accept_inadequate): (Option<&std::path::Path>, bool),
 ) -> anyhow::Result<()> {
     let out = out.map(PathBuf::from).unwrap_or_else(|| {
         let stem = payload.loaded[0]
@@ -210,7 +235,10 @@ fn payload_only(
     )?;
     print_payload_fit(&fit);
     println!("payload in {}", out.join("payload.parquet").display());
-    Ok(())
+    match accept_inadequate {
+        true => Ok(()),
+        false => payload_determined(&fit, &out.join("payload.parquet")),
+    }
 }
 
 /// The `[read]` table of a `--read` file.

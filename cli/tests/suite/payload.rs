@@ -383,6 +383,29 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
         printed.contains("undetermined at the payload's size") && printed.contains(named[0]),
         "{printed}"
     );
+    // Without --accept-inadequate: refused (exit 3), naming them, the
+    // table written all the same.
+    let refused = super::robotid(&[
+        "identify",
+        dir.path().join("loaded.csv").to_str().unwrap(),
+        "--robot",
+        robot.to_str().unwrap(),
+        "--payload-on",
+        "ee_link",
+        "--parameters",
+        dir.path().join("cli/parameters.parquet").to_str().unwrap(),
+        "--payload-ellipsoid",
+        "0.04,-0.03,0.06,0.05,0.05,0.06",
+        "--out",
+        dir.path().join("refused").to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(3), "{said}");
+    assert!(
+        said.contains("the payload is not identified") && named.iter().any(|n| said.contains(n)),
+        "{said}"
+    );
+    assert!(dir.path().join("refused/payload.parquet").is_file());
 }
 
 /// The least-squares intervals of the payload's ten parameters (about

@@ -18,7 +18,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         mut findings,
         mut regressor,
         mut inverse,
-        torque_check,
+        loaded,
     } = d;
     let (own_regressor, joints) = (first.is_none(), model.joint_names());
     let mut delay = first.and_then(|d| d.delay_s);
@@ -27,7 +27,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
     let mean = chain.mean.as_ref().expect("averaged");
     findings.push((Found::Steady, steady_said(p, tol)));
     let (sets, union, harmonics_said) = excited(p, &mean.q, &joints, &mut findings);
-    let moving = joint_wise(log, period, &joints, &sets, &mut findings, own_regressor)?;
+    let moving = joint_wise(log, period, &joints, &sets, &mut findings, own_regressor && !loaded)?;
     let held_at = moving.map(|m| held_positions(m, &joints, &mean.q));
     same_kind(log, moving.is_some(), own_regressor, &mut regressor)?;
     findings.push((Found::Harmonics, harmonics_said));
@@ -54,7 +54,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
                 declared: inverse.as_ref().map(|(f, _)| *f),
                 fs,
                 stages_after: &stages_after,
-                torque_check,
+                torque_check: !loaded,
             },
             &positions_stage,
             torques_stage.as_ref(),

@@ -338,14 +338,16 @@ pub fn design_with(
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> Result<Design> {
-    design_checked(log, robot, first, (stated, torque_per_amp), true)
+    design_checked(log, robot, first, (stated, torque_per_amp), false)
 }
 
 /// The design of a record of the robot carrying a payload its robot file
-/// does not hold, on its own: its torques are not checked against the
-/// robot file's (a payload's own can be many times a light wrist's).
+/// does not hold, on its own (its robot's parameters come from elsewhere):
+/// its torques are not checked against the robot file's (a payload's own
+/// can be many times a light wrist's), and joints it holds still are
+/// said, not refused.
 pub fn design_loaded(log: &Path, robot: &Path) -> Result<Design> {
-    design_checked(log, robot, None, (None, None), false)
+    design_checked(log, robot, None, (None, None), true)
 }
 
 fn design_checked(
@@ -353,7 +355,7 @@ fn design_checked(
     robot: &Path,
     first: Option<&Design>,
     (stated, torque_per_amp): (Option<&ReadConfig>, Option<&[f64]>),
-    torque_check: bool,
+    loaded: bool,
 ) -> Result<Design> {
     let (model, locked) = unheld_locked(log, robot, first, stated)?;
     let joints = model.joint_names();
@@ -416,7 +418,7 @@ fn design_checked(
             findings,
             regressor,
             inverse,
-            torque_check,
+            loaded,
         },
         period,
     )
@@ -488,9 +490,9 @@ struct Draft<'a> {
     findings: Vec<(Found, String)>,
     regressor: RegressorConfig,
     inverse: Option<(FilterSpec, f64)>,
-    /// Refuse torques the robot file's model disagrees with (not for a
-    /// record with a payload the file lacks).
-    torque_check: bool,
+    /// A record with a payload the robot file lacks, designed on its own
+    /// (see [`design_loaded`]).
+    loaded: bool,
 }
 
 /// The absolute form of a path that exists.
