@@ -90,6 +90,25 @@ pub struct PayloadValidation {
     pub joints: Vec<(String, Option<f64>)>,
 }
 
+impl PayloadValidation {
+    /// The relative error and each joint's residue over its floor, said.
+    pub fn said(&self) -> String {
+        let joints: Vec<String> = self
+            .joints
+            .iter()
+            .map(|(j, r)| match r {
+                Some(r) => format!("{j} {r:.2}×"),
+                None => format!("{j} (no floor)"),
+            })
+            .collect();
+        format!(
+            "relative error {:.2} %; residue over the noise floor: {}",
+            100.0 * self.relative_error,
+            joints.join(", ")
+        )
+    }
+}
+
 impl Request {
     /// The request of `recordings` of `robot` with every default: no
     /// validation recordings, the default policy.

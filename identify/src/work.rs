@@ -63,13 +63,22 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     script.validate("parameters.parquet", val_tables);
     let (fit_tables, held_loaded) = loaded_tables.split_at(request.payload.as_ref().map_or(0, |p| p.loaded.len()));
     let payload = match &request.payload {
-        Some(p) => Some(Box::new(payload(p, (staged, &paths), id_tables, fit_tables)?)),
+        Some(p) => Some(Box::new(payload_from_tables(
+            p,
+            &paths.robot,
+            staged,
+            id_tables,
+            fit_tables,
+        )?)),
         None => None,
     };
     let payload_validation = match &payload {
         Some(fit) if !held_loaded.is_empty() => payload_validated(fit, staged, held_loaded)?,
         _ => None,
     };
+    if let (Some(p), Some(fit)) = (&request.payload, &payload) {
+        write_payload(p, fit, payload_validation.as_ref(), (staged, &paths))?;
+    }
     let physical = physical_or_why(
         request,
         &judged,
@@ -151,19 +160,29 @@ fn payload_validated(fit: &PayloadFit, staged: &Path, held: &[PathBuf]) -> Resul
     }))
 }
 
-/// The payload identified from the loaded records' tables against the
-/// robot's, written as `payload.parquet`.
-fn payload(
+/// The payload identified, written as `payload.parquet`, its held-out
+/// validation said in the metadata (`robotid.payload.validation`).
+fn write_payload(
     request: &PayloadRequest,
+    fit: &PayloadFit,
+    validation: Option<&PayloadValidation>,
     (staged, paths): (&Path, &Paths),
-    id_tables: &[PathBuf],
-    loaded_tables: &[PathBuf],
-) -> Result<PayloadFit> {
-    let fit = payload_from_tables(request, &paths.robot, staged, id_tables, loaded_tables)?;
+) -> Result<()> {
     let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
-    let table = robotid_stages::estimation::payload::payload_table(&fit, &request.link, &model)?;
+    let mut table = robotid_stages::estimation::payload::payload_table(fit, &request.link, &model)?;
+    if let Some(v) = validation {
+        let mut md = table.schema().metadata().clone();
+        md.insert(
+            "robotid.payload.validation".to_string(),
+            format!("on the held-out loaded records: {}", v.said()),
+        );
+        let schema = std::sync::Arc::new(table.schema().as_ref().clone().with_metadata(md));
+        table = table
+            .with_schema(schema)
+            .map_err(|e| robotid_stages::Error::numerical("the payload table", e.to_string()))?;
+    }
     robotid_stages::formats::parquet::write_parquet(&staged.join("payload.parquet"), &table)?;
-    Ok(fit)
+    Ok(())
 }
 
 /// The payload of `request` from its loaded recordings against the robot's

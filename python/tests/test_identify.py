@@ -204,7 +204,7 @@ def test_a_payload_from_python(examples, tmp_path):
     # The payload's size declared (a 10 cm ellipsoid about its centre):
     # the bounded estimate is what the exports carry.
     args += ["--payload-ellipsoid", "0.04,-0.03,0.06,0.1,0.1,0.1"]
-    cli("identify", *args, "--accept-inadequate", "--out", out)
+    cli("identify", *args, "--validate-loaded", logs["held"], "--accept-inadequate", "--out", out)
     by_cli = (out / "payload.parquet").read_bytes()
     shutil.rmtree(out)
     result = robotid.identify(
@@ -226,6 +226,8 @@ def test_a_payload_from_python(examples, tmp_path):
     # A held-out loaded record: predicted to within 1 % of its torque.
     relative, joints = result.payload_validation
     assert relative < 0.01 and len(joints) == 6, result.payload_validation
+    said = result.payload.schema.metadata[b"robotid.payload.validation"].decode()
+    assert said.startswith("on the held-out loaded records: relative error"), said
     # The MJCF export with the payload, as MuJoCo loads it: its torques
     # less the same export's without the payload are the payload's alone
     # (dynamics are linear in the bodies; the joints' damping is the same

@@ -537,6 +537,9 @@ fn payload_html(table: &arrow::array::RecordBatch, path: &std::path::Path) -> Re
             None => "",
         }
     );
+    if let Some(v) = md.get("robotid.payload.validation") {
+        h.push_str(&format!("<p>The robot and payload identified, {}.</p>\n", esc(v)));
+    }
     if let Some(b) = md.get("robotid.payload.bound") {
         h.push_str(&format!("<p class=\"note\">The bound: {}.</p>\n", esc(b)));
     }

@@ -326,19 +326,7 @@ fn print_payload(id: &Identification) {
     let Some(fit) = &id.payload else { return };
     print_payload_fit(fit);
     if let Some(v) = &id.payload_validation {
-        let joints: Vec<String> = v
-            .joints
-            .iter()
-            .map(|(j, r)| match r {
-                Some(r) => format!("{j} {r:.2}×"),
-                None => format!("{j} (no floor)"),
-            })
-            .collect();
-        println!(
-            "  on the held-out loaded records: relative error {:.2} %; residue over the noise floor: {}",
-            100.0 * v.relative_error,
-            joints.join(", ")
-        );
+        println!("  on the held-out loaded records: {}", v.said());
     }
     println!("payload in {}", id.path("payload.parquet").display());
     for f in ["identified_payload.urdf", "identified_payload.xml"] {
