@@ -24,9 +24,16 @@ use crate::{
 /// files written and marked; errors are for what could not be judged.
 pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
     let paths = Paths::of(request)?;
-    if let Some(p) = &request.payload {
-        payload_frame(&robotid_stages::dynamics::load_robot(&paths.robot)?, &p.link)?;
-    }
+    // The robot file as the payload's table and exports see it, its link
+    // checked before anything runs.
+    let payload_model = match &request.payload {
+        Some(p) => {
+            let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
+            payload_frame(&model, &p.link)?;
+            Some(model)
+        }
+        None => None,
+    };
     // Everything is written into a staging folder and appears at once when
     // identify ends, refused or not (robotid::output): a kill or a failure
     // leaves the folder as it was. One identify or run at a time holds it.
@@ -76,8 +83,8 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         Some(fit) if !held_loaded.is_empty() => payload_validated(fit, staged, held_loaded)?,
         _ => None,
     };
-    if let (Some(p), Some(fit)) = (&request.payload, &payload) {
-        write_payload(p, fit, payload_validation.as_ref(), (staged, &paths))?;
+    if let (Some(p), Some(fit), Some(model)) = (&request.payload, &payload, &payload_model) {
+        write_payload(p, fit, payload_validation.as_ref(), model, staged)?;
     }
     let physical = physical_or_why(
         request,
@@ -89,8 +96,8 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         observer,
     )?;
     let fitted = matches!(physical, Physical::Fitted { .. });
-    if let (Some(p), Some(fit), true) = (&request.payload, &payload, fitted) {
-        payload_export(&p.link, fit, (staged, &paths))?;
+    if let (Some(p), Some(fit), Some(model), true) = (&request.payload, &payload, &payload_model, fitted) {
+        payload_export(&p.link, fit, model, staged)?;
     }
     let raw_tables: Vec<PathBuf> = recordings
         .iter()
@@ -166,10 +173,10 @@ fn write_payload(
     request: &PayloadRequest,
     fit: &PayloadFit,
     validation: Option<&PayloadValidation>,
-    (staged, paths): (&Path, &Paths),
+    model: &robotid_stages::dynamics::Model,
+    staged: &Path,
 ) -> Result<()> {
-    let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
-    let mut table = robotid_stages::estimation::payload::payload_table(fit, &request.link, &model)?;
+    let mut table = robotid_stages::estimation::payload::payload_table(fit, &request.link, model)?;
     if let Some(v) = validation {
         let mut md = table.schema().metadata().clone();
         md.insert(
@@ -314,11 +321,10 @@ fn recording_table(r: &Recording, kind: TableKind) -> PathBuf {
 /// The identified URDF and MJCF with the payload on
 /// (`identified_payload.urdf`, `.xml`), or why not
 /// (`identified_payload.txt`).
-fn payload_export(link: &str, fit: &PayloadFit, (staged, paths): (&Path, &Paths)) -> Result<()> {
+fn payload_export(link: &str, fit: &PayloadFit, model: &robotid_stages::dynamics::Model, staged: &Path) -> Result<()> {
     use robotid_stages::estimation::payload::{mjcf_with_payload, urdf_with_payload};
-    let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
     let last = model.joints.last().map(|j| j.name.clone()).unwrap_or_default();
-    let (rot, pos) = payload_frame(&model, link)?;
+    let (rot, pos) = payload_frame(model, link)?;
     let mut why = Vec::new();
     let read = |name: &str| std::fs::read_to_string(staged.join(name)).ok();
     let made = [
@@ -330,7 +336,7 @@ fn payload_export(link: &str, fit: &PayloadFit, (staged, paths): (&Path, &Paths)
         (
             "xml",
             "MJCF",
-            read("identified.xml").map(|t| mjcf_with_payload(&t, &model, (&rot, &pos), fit)),
+            read("identified.xml").map(|t| mjcf_with_payload(&t, model, (&rot, &pos), fit)),
         ),
     ];
     for (ext, format, text) in made {

@@ -87,19 +87,8 @@ pub struct Sampled {
     pub files: Vec<PathBuf>,
 }
 
-/// The quantities of a link's body and of a joint, with their units.
-const BODY: [(&str, &str); 10] = [
-    ("mass", "kg"),
-    ("com_x", "m"),
-    ("com_y", "m"),
-    ("com_z", "m"),
-    ("ixx", "kg*m^2"),
-    ("ixy", "kg*m^2"),
-    ("ixz", "kg*m^2"),
-    ("iyy", "kg*m^2"),
-    ("iyz", "kg*m^2"),
-    ("izz", "kg*m^2"),
-];
+/// The quantities of a joint, with their units (a link's body's:
+/// [`robotid_stages::dynamics::LISTED`]).
 const JOINT: [(&str, &str); 3] = [
     ("damping", "N*m*s/rad"),
     ("frictionloss", "N*m"),
@@ -113,9 +102,7 @@ const JOINT: [(&str, &str); 3] = [
 fn values(model: &Model) -> Vec<f64> {
     let mut v = Vec::with_capacity(13 * model.dof());
     for l in &model.links {
-        let i = (l.inertia_com + l.inertia_com.transpose()) * 0.5;
-        v.extend([l.mass, l.com.x, l.com.y, l.com.z]);
-        v.extend([i[(0, 0)], i[(0, 1)], i[(0, 2)], i[(1, 1)], i[(1, 2)], i[(2, 2)]]);
+        v.extend(l.listed());
     }
     for (f, d) in model.friction.iter().zip(&model.drives) {
         v.extend([
@@ -137,7 +124,7 @@ fn quantities(model: &Model) -> Vec<(String, &'static str, &'static str)> {
             .flat_map(move |j| q.clone().into_iter().map(|(n, u)| (j.name.clone(), n, u)))
             .collect::<Vec<_>>()
     };
-    let mut out = of(&BODY);
+    let mut out = of(&robotid_stages::dynamics::LISTED);
     out.extend(of(&JOINT));
     out
 }

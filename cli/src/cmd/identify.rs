@@ -343,12 +343,9 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
     let Some(body) = &fit.body else { return };
     let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
     println!("\npayload ({} degrees of freedom, 95 % intervals):", fit.estimate.dof);
-    let listed = robotid_stages::estimation::payload::listed(body);
-    let bounded = fit
-        .bounded
-        .as_ref()
-        .map(|b| robotid_stages::estimation::payload::listed(&b.body));
-    for (k, (name, unit)) in robotid_stages::estimation::payload::LISTED.iter().enumerate() {
+    let listed = body.listed();
+    let bounded = fit.bounded.as_ref().map(|b| b.body.listed());
+    for (k, (name, unit)) in robotid_stages::dynamics::LISTED.iter().enumerate() {
         let b = bounded.map(|b| format!("   bounded {:+.5}", b[k])).unwrap_or_default();
         if k == 0 && !fit.gains.is_empty() {
             println!("  {name:<7} {:+.5} {unit} (known)", listed[k]);

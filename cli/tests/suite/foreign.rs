@@ -852,7 +852,7 @@ fn a_payload_on_foreign_records_is_identified() {
         i(1, 2),
         i(2, 2),
     ];
-    let est = robotid_stages::estimation::payload::listed(&body);
+    let est = body.listed();
     let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
     let covered = (0..10)
         .filter(|&k| (est[k] - listed[k]).abs() <= t * fit.body_std[k])
@@ -860,7 +860,7 @@ fn a_payload_on_foreign_records_is_identified() {
     for k in 0..10 {
         eprintln!(
             "{}: {:+.5} ± {:.5} truth {:+.5} (z {:+.2})",
-            robotid_stages::estimation::payload::LISTED[k].0,
+            robotid_stages::dynamics::LISTED[k].0,
             est[k],
             t * fit.body_std[k],
             listed[k],
@@ -878,7 +878,7 @@ fn a_payload_on_foreign_records_is_identified() {
         assert!(
             (est[k] - listed[k]).abs() < 1e-3,
             "{}: {} against {}",
-            robotid_stages::estimation::payload::LISTED[k].0,
+            robotid_stages::dynamics::LISTED[k].0,
             est[k],
             listed[k]
         );

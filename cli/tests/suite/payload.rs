@@ -151,8 +151,8 @@ fn a_payload_is_identified_with_the_robot() {
     let body = fit.body.unwrap();
     let mass_error = (body.mass - truth.mass).abs() / truth.mass;
     let com_error = (body.com - truth.com).norm();
-    let listed = robotid_stages::estimation::payload::listed(&body);
-    let truth_listed = robotid_stages::estimation::payload::listed(&truth);
+    let listed = body.listed();
+    let truth_listed = truth.listed();
     for k in 0..10 {
         eprintln!(
             "{k}: {:+.5} ± {:.5} truth {:+.5} z {:+.2}",
@@ -177,11 +177,7 @@ fn a_payload_is_identified_with_the_robot() {
     // each within 4 of its standard deviations.
     for k in 0..10 {
         let z = (listed[k] - truth_listed[k]) / fit.body_std[k];
-        assert!(
-            z.abs() < 4.0,
-            "{}: z = {z}",
-            robotid_stages::estimation::payload::LISTED[k].0
-        );
+        assert!(z.abs() < 4.0, "{}: z = {z}", robotid_stages::dynamics::LISTED[k].0);
     }
     let bounded = fit.bounded.as_ref().expect("a bound was declared").body;
     let inside = (bounded.com - Vector3::new(0.0, 0.0, 0.06)).component_div(&Vector3::repeat(0.12));
@@ -312,10 +308,7 @@ fn drive_gains_come_from_a_known_payload_mass() {
             g.bounded
         );
     }
-    eprintln!(
-        "payload {:?}",
-        fit.body.map(|b| robotid_stages::estimation::payload::listed(&b))
-    );
+    eprintln!("payload {:?}", fit.body.map(|b| b.listed()));
     for (g, f) in fit.gains.iter().zip(off) {
         let error = g.scale * f - 1.0;
         assert!(
@@ -353,7 +346,7 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
     let body = fit.body.unwrap();
     eprintln!(
         "still wrist: {:?} ± {:?}; undetermined {:?}",
-        robotid_stages::estimation::payload::listed(&body),
+        body.listed(),
         fit.body_std,
         fit.undetermined
     );
@@ -364,41 +357,39 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
         !named.is_empty() && named.iter().all(|n| n.starts_with('i')),
         "{named:?}"
     );
-    let printed = super::ok(&[
-        "identify",
-        dir.path().join("loaded.csv").to_str().unwrap(),
-        "--robot",
-        robot.to_str().unwrap(),
-        "--payload-on",
-        "ee_link",
-        "--unloaded",
-        dir.path().join("unloaded.csv").to_str().unwrap(),
-        "--payload-ellipsoid",
-        "0.04,-0.03,0.06,0.05,0.05,0.06",
-        "--accept-inadequate",
-        "--out",
-        dir.path().join("cli").to_str().unwrap(),
-    ]);
+    // The loaded record, its link and size, against the robot `from`.
+    let path = |f: &str| dir.path().join(f).to_str().unwrap().to_string();
+    let args = |from: [String; 2], rest: &[&str]| -> Vec<String> {
+        let mut a: Vec<String> = ["identify", &path("loaded.csv"), "--robot", robot.to_str().unwrap()]
+            .map(String::from)
+            .into();
+        a.extend(
+            [
+                "--payload-on",
+                "ee_link",
+                "--payload-ellipsoid",
+                "0.04,-0.03,0.06,0.05,0.05,0.06",
+            ]
+            .map(String::from),
+        );
+        a.extend(from);
+        a.extend(rest.iter().map(|s| s.to_string()));
+        a
+    };
+    let printed = super::ok(&args(
+        ["--unloaded".into(), path("unloaded.csv")],
+        &["--accept-inadequate", "--out", &path("cli")],
+    ));
     assert!(
         printed.contains("undetermined at the payload's size") && printed.contains(named[0]),
         "{printed}"
     );
     // Without --accept-inadequate: refused (exit 3), naming them, the
     // table written all the same.
-    let refused = super::robotid(&[
-        "identify",
-        dir.path().join("loaded.csv").to_str().unwrap(),
-        "--robot",
-        robot.to_str().unwrap(),
-        "--payload-on",
-        "ee_link",
-        "--parameters",
-        dir.path().join("cli/parameters.parquet").to_str().unwrap(),
-        "--payload-ellipsoid",
-        "0.04,-0.03,0.06,0.05,0.05,0.06",
-        "--out",
-        dir.path().join("refused").to_str().unwrap(),
-    ]);
+    let refused = super::robotid(&args(
+        ["--parameters".into(), path("cli/parameters.parquet")],
+        &["--out", &path("refused")],
+    ));
     let said = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(3), "{said}");
     assert!(

@@ -7,6 +7,21 @@
 use crate::Problem;
 use nalgebra::{Matrix3, Unit, Vector3};
 
+/// Names and units of [`Inertial::listed`]: what a simulator's body
+/// holds (the payload table, the domain-randomisation samples).
+pub const LISTED: [(&str, &str); 10] = [
+    ("mass", "kg"),
+    ("com_x", "m"),
+    ("com_y", "m"),
+    ("com_z", "m"),
+    ("ixx", "kg*m^2"),
+    ("ixy", "kg*m^2"),
+    ("ixz", "kg*m^2"),
+    ("iyy", "kg*m^2"),
+    ("iyz", "kg*m^2"),
+    ("izz", "kg*m^2"),
+];
+
 /// Rigid-body inertia of one link, in the link frame (the frame of the joint
 /// that moves it, after the joint rotation).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +46,24 @@ impl Inertial {
         let origin = Matrix3::new(t[0], t[1], t[2], t[1], t[3], t[4], t[2], t[4], t[5]);
         let inertia_com = origin - (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
         Some(Inertial { mass, com, inertia_com })
+    }
+
+    /// [mass, com x y z, Ixx Ixy Ixz Iyy Iyz Izz at the centre of mass]
+    /// ([`LISTED`]), the inertia's off-diagonal the mean of its two.
+    pub fn listed(&self) -> [f64; 10] {
+        let (c, i) = (self.com, (self.inertia_com + self.inertia_com.transpose()) * 0.5);
+        [
+            self.mass,
+            c.x,
+            c.y,
+            c.z,
+            i[(0, 0)],
+            i[(0, 1)],
+            i[(0, 2)],
+            i[(1, 1)],
+            i[(1, 2)],
+            i[(2, 2)],
+        ]
     }
 
     /// Its ten standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M].

@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use robotid_schemas::TableKind;
 
 use super::{physically_consistent, pseudo_inertia, Covariance, Ellipsoid, Estimate, Known, LinkBound, System};
-use crate::dynamics::{inertial_parameters, Inertial, PAYLOAD_COLUMNS};
+use crate::dynamics::{inertial_parameters, Inertial, LISTED, PAYLOAD_COLUMNS};
 use crate::{Error, Result};
 
 /// Where the robot's own parameters come from.
@@ -35,38 +35,6 @@ pub enum Robot<'a> {
     /// Estimated with the payload from records of the robot without it.
     Unloaded(&'a System),
 }
-
-/// The ten values [mass, com x y z, Ixx Ixy Ixz Iyy Iyz Izz at the com]
-/// the payload table lists.
-pub fn listed(b: &Inertial) -> [f64; 10] {
-    let (c, i) = (b.com, b.inertia_com);
-    [
-        b.mass,
-        c.x,
-        c.y,
-        c.z,
-        i[(0, 0)],
-        i[(0, 1)],
-        i[(0, 2)],
-        i[(1, 1)],
-        i[(1, 2)],
-        i[(2, 2)],
-    ]
-}
-
-/// Names and units of [`listed`].
-pub const LISTED: [(&str, &str); 10] = [
-    ("mass", "kg"),
-    ("com_x", "m"),
-    ("com_y", "m"),
-    ("com_z", "m"),
-    ("ixx", "kg*m^2"),
-    ("ixy", "kg*m^2"),
-    ("ixz", "kg*m^2"),
-    ("iyy", "kg*m^2"),
-    ("iyz", "kg*m^2"),
-    ("izz", "kg*m^2"),
-];
 
 /// One drive's gain: the torque is `scale` times the effort as read.
 #[derive(Debug, Clone, PartialEq)]
@@ -238,7 +206,9 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
         Some(b) => undetermined(&b, &body_std, bound_size_m, estimate.dof),
         None => Vec::new(),
     };
-    let held = bounded.as_ref().map(|b| &b.standard);
+    let given = bounded
+        .as_ref()
+        .map(|b| given_payload(&estimate.values, &estimate.covariance, &at, &b.standard));
     let gains = gains
         .unwrap_or_default()
         .into_iter()
@@ -246,7 +216,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
             joint,
             scale: estimate.values[i],
             std: estimate.covariance[(i, i)].max(0.0).sqrt(),
-            bounded: held.map(|held| given_payload(&estimate.values, &estimate.covariance, i, &at, held)),
+            bounded: given.as_ref().map(|g| g[i]),
         })
         .collect::<Vec<_>>();
     if let Some(g) = gains.iter().find(|g| g.bounded.is_some_and(|b| !(b > 0.0))) {
@@ -275,12 +245,12 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
     })
 }
 
-/// Parameter `i` of an estimate (`values`, `cov`) given the payload held
-/// at `held` (`at`: the payload's ten in the estimate, usize::MAX for a
-/// known one): the estimate's Gaussian conditioned on it, x̂_i +
-/// Σ_iφ Σ_φφ⁺ (φ_held − φ̂), which is what minimising the whole
-/// estimate's χ² with the payload held there gives.
-fn given_payload(values: &DVector<f64>, cov: &DMatrix<f64>, i: usize, at: &[usize], held: &[f64; 10]) -> f64 {
+/// An estimate (`values`, `cov`) given the payload held at `held` (`at`:
+/// the payload's ten in the estimate, usize::MAX for a known one): the
+/// estimate's Gaussian conditioned on it, x̂ + Σ_xφ Σ_φφ⁺ (φ_held − φ̂),
+/// which is what minimising the whole estimate's χ² with the payload held
+/// there gives.
+fn given_payload(values: &DVector<f64>, cov: &DMatrix<f64>, at: &[usize], held: &[f64; 10]) -> DVector<f64> {
     let free: Vec<(usize, usize)> = at
         .iter()
         .enumerate()
@@ -289,11 +259,11 @@ fn given_payload(values: &DVector<f64>, cov: &DMatrix<f64>, i: usize, at: &[usiz
         .collect();
     let n = free.len();
     let s_pp = DMatrix::from_fn(n, n, |r, c| cov[(free[r].1, free[c].1)]);
-    let s_ip = DVector::from_fn(n, |r, _| cov[(i, free[r].1)]);
+    let s_xp = DMatrix::from_fn(values.len(), n, |i, c| cov[(i, free[c].1)]);
     let d = DVector::from_fn(n, |r, _| held[free[r].0] - values[free[r].1]);
     let tol = 1e-12 * s_pp.amax().max(f64::MIN_POSITIVE);
     let inv = s_pp.pseudo_inverse(tol).expect("a nonnegative tolerance");
-    values[i] + s_ip.dot(&(inv * d))
+    values + s_xp * (inv * d)
 }
 
 /// The listed values of `b` whose 95 % interval is wider than the range a
@@ -437,7 +407,7 @@ fn with_gains(sys: &mut System, mass: f64) -> Result<Vec<(String, usize)>> {
     Ok(out)
 }
 
-/// First-order standard deviations of [`listed`] from the ten
+/// First-order standard deviations of [`Inertial::listed`] from the ten
 /// parameters' covariance (central differences of the map).
 fn listed_std(t: &[f64; 10], cov: &DMatrix<f64>) -> [f64; 10] {
     if Inertial::of_standard(t).is_none() {
@@ -450,7 +420,7 @@ fn listed_std(t: &[f64; 10], cov: &DMatrix<f64>) -> [f64; 10] {
         up[k] += h;
         down[k] -= h;
         if let (Some(u), Some(d)) = (Inertial::of_standard(&up), Inertial::of_standard(&down)) {
-            let (u, d) = (listed(&u), listed(&d));
+            let (u, d) = (u.listed(), d.listed());
             for r in 0..10 {
                 jac[(r, k)] = (u[r] - d[r]) / (2.0 * h);
             }
@@ -651,7 +621,7 @@ pub fn urdf_with_payload(
         (child.to_string(), (*pos, Vector3::new(r, pi, y)))
     };
     let end = urdf.rfind("</robot>").ok_or("the URDF has no </robot>")?;
-    let l = listed(&body);
+    let l = body.listed();
     let added = format!(
         "  <!-- robotid: the identified payload ({from}, payload.parquet), on `{link}` -->\n  <link name=\"robotid_payload\">\n    <inertial>\n      <origin xyz=\"{:e} {:e} {:e}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:e}\"/>\n      <inertia ixx=\"{:e}\" ixy=\"{:e}\" ixz=\"{:e}\" iyy=\"{:e}\" iyz=\"{:e}\" izz=\"{:e}\"/>\n    </inertial>\n  </link>\n  <joint name=\"robotid_payload_joint\" type=\"fixed\">\n    <parent link=\"{parent}\"/>\n    <child link=\"robotid_payload\"/>\n    <origin xyz=\"{:e} {:e} {:e}\" rpy=\"{:e} {:e} {:e}\"/>\n  </joint>\n",
         l[1],
@@ -696,8 +666,8 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
     // (name, unit, value, std, bounded value)
     type Row = (String, String, f64, f64, f64);
     let mut rows: Vec<Row> = Vec::new();
-    let bounded = fit.bounded.as_ref().map(|b| listed(&b.body));
-    for (k, ((name, unit), value)) in LISTED.iter().zip(listed(&body)).enumerate() {
+    let bounded = fit.bounded.as_ref().map(|b| b.body.listed());
+    for (k, ((name, unit), value)) in LISTED.iter().zip(body.listed()).enumerate() {
         rows.push((
             name.to_string(),
             unit.to_string(),
@@ -789,7 +759,7 @@ mod tests {
         let d = DVector::from_fn(9, |k, _| held[k] - values[k + 2]);
         let want = DVector::from_fn(3, |a, _| values[others[a]]) - p_oo.try_inverse().unwrap() * p_of * d;
         for (a, &i) in others[..2].iter().enumerate() {
-            let got = given_payload(&values, &cov, i, &at, &held);
+            let got = given_payload(&values, &cov, &at, &held)[i];
             assert!(
                 (got - want[a]).abs() < 1e-10 * want[a].abs().max(1.0),
                 "{got} vs {}",
