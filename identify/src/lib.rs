@@ -239,6 +239,20 @@ impl Identification {
     }
 }
 
+/// Why the payload `fit` (written to `table`) is not identified: the
+/// values its records leave undetermined at its size, named (the command
+/// line exits 3 with it unless told to accept it); None when every value
+/// is determined.
+pub fn payload_undetermined(fit: &robotid_stages::estimation::payload::PayloadFit, table: &Path) -> Option<String> {
+    (!fit.undetermined.is_empty()).then(|| {
+        format!(
+            "the payload is not identified: the records do not determine {} at its size (move the wrist more, or longer). {} holds every value with its interval all the same; to take it: accept inadequate (--accept-inadequate)",
+            robotid_stages::estimation::payload::said_undetermined(&fit.undetermined),
+            table.display()
+        )
+    })
+}
+
 /// Why identify did not run to a verdict.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

@@ -115,6 +115,10 @@ pub enum Refusal {
     /// `--strict`: these joints' residues are over [`REFUSE_RATIO`]× the
     /// floor (joint, ratio).
     OverFloor(Vec<(String, f64)>),
+    /// `--strict`: every joint's noise floor is over twice the fit's
+    /// residue (joint, ratio): the floors the strict rule judges by hold
+    /// more than noise, and none can vouch for the fit.
+    FloorSuspect(Vec<(String, f64)>),
     /// A friction the model lacks: functions of each joint's own velocity
     /// explain most of its residue (joint, share, ratio).
     MissingFriction(Vec<(String, f64, f64)>),
@@ -135,6 +139,15 @@ impl std::fmt::Display for Refusal {
                 joints
                     .iter()
                     .map(|(j, r)| format!("{j} ({r:.1}×)"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Refusal::FloorSuspect(joints) => write!(
+                f,
+                "the noise floor is over twice the fit's residue on every joint, {} (the fit's residue over it): it holds more than noise (a transient or a ramp in the stretch it came from), and the strict policy has no floor to judge the fit by; record steady periods, or judge by the held-out tolerance (without --strict)",
+                joints
+                    .iter()
+                    .map(|(j, r)| format!("{j} ({r:.2}×)"))
                     .collect::<Vec<_>>()
                     .join(", ")
             ),
@@ -202,7 +215,7 @@ impl Verdict {
     fn judged(&self) -> String {
         let (rel, measured) = self.relative;
         let rule = if self.policy.strict {
-            format!("strict: refused over {REFUSE_RATIO}× the noise floor on any joint")
+            format!("strict: refused over {REFUSE_RATIO}× the noise floor on any joint, or a floor over twice the residue on every joint")
         } else {
             format!(
                 "tolerance {:.1} % of the torque; relative error {:.2} % {}",
@@ -278,8 +291,13 @@ fn refusal(v: &Verdict) -> Option<Refusal> {
     let over = v.over_floor();
     let ratio = |j: &JointFigures| j.ratio.unwrap_or(f64::NAN);
     if v.policy.strict {
-        return (!over.is_empty())
-            .then(|| Refusal::OverFloor(over.iter().map(|j| (j.joint.clone(), ratio(j))).collect()));
+        let said = |js: Vec<&JointFigures>| js.iter().map(|j| (j.joint.clone(), ratio(j))).collect();
+        let suspect = v.floor_suspect();
+        return if !over.is_empty() {
+            Some(Refusal::OverFloor(said(over)))
+        } else {
+            (!suspect.is_empty() && suspect.len() == v.joints.len()).then(|| Refusal::FloorSuspect(said(suspect)))
+        };
     }
     let friction: Vec<(String, f64, f64)> = over
         .iter()
@@ -414,6 +432,20 @@ mod tests {
         assert_eq!(refused(verdict(strict, 2.9, None, 0.2)), None);
         assert!(refused(verdict(strict, 3.1, None, 0.0)).unwrap().contains("j1 (3.1×)"));
         assert!(refused(verdict(strict, f64::NAN, None, 0.0)).is_some());
+        // A floor over twice the residue cannot vouch for a strict fit; the
+        // lax rule judges by the tolerance and says it.
+        assert_eq!(refused(verdict(strict, 0.51, None, 0.0)), None);
+        let why = refused(verdict(strict, 0.49, None, 0.0)).unwrap();
+        assert!(why.contains("j1 (0.49×)") && why.contains("more than noise"), "{why}");
+        assert_eq!(refused(verdict(lax, 0.49, None, 0.0)), None);
+        // A joint whose floor can judge leaves the rule something to go by.
+        let mut two = verdict(strict, 0.49, None, 0.0);
+        two.joints.push(JointFigures {
+            joint: "j2".into(),
+            ratio: Some(1.0),
+            ..two.joints[0].clone()
+        });
+        assert_eq!(refused(two), None);
         let said = verdict(lax, 50.0, None, 0.02).said();
         assert!(
             said.starts_with("model error dominates: j1 3.00 % (50.0× the floor)"),

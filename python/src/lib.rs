@@ -436,9 +436,16 @@ fn identify(
         ),
         _ => (None, Vec::new()),
     };
+    // A payload the records leave undetermined refuses as the command
+    // line's exit code 3 does, unless accepted.
+    let payload_refused = id
+        .payload
+        .as_deref()
+        .filter(|_| !accept_inadequate)
+        .and_then(|fit| robotid_identify::payload_undetermined(fit, &id.path("payload.parquet")));
     Ok(Identification {
-        identified: !id.is_refused(),
-        refused: id.refused.clone(),
+        identified: !id.is_refused() && payload_refused.is_none(),
+        refused: id.refused.clone().or(payload_refused),
         verdict: id.verdict.said(),
         relative_error: id.verdict.relative.0,
         measured: id.verdict.relative.1.said().to_string(),
@@ -473,9 +480,13 @@ fn identify(
 /// robot already identified (its `parameters` table, whose regressor
 /// model the loaded records are run with, its covariance carried), as
 /// `robotid identify LOADED… --payload-on LINK --parameters P`: the same
-/// `payload.parquet` written into `out`, returned as a pyarrow table.
+/// `payload.parquet` written into `out`, returned as a pyarrow table. A
+/// payload the records leave undetermined at its size raises
+/// `RobotidError` naming the values (the table written all the same)
+/// unless `accept_inadequate`.
 #[pyfunction]
-#[pyo3(signature = (loaded, robot, parameters, payload_on, out, payload_ellipsoid=None))]
+#[pyo3(signature = (loaded, robot, parameters, payload_on, out, payload_ellipsoid=None, accept_inadequate=false))]
+#[allow(clippy::too_many_arguments)]
 fn payload<'py>(
     py: Python<'py>,
     loaded: Vec<PathBuf>,
@@ -484,6 +495,7 @@ fn payload<'py>(
     payload_on: String,
     out: PathBuf,
     payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
+    accept_inadequate: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let request = robotid_identify::PayloadRequest {
         loaded,
@@ -492,8 +504,13 @@ fn payload<'py>(
         bound: payload_ellipsoid,
         validate: Vec::new(),
     };
-    py.detach(|| robotid_identify::payload_against_parameters(&request, &robot, &parameters, &out, &robotid::Quiet))
+    let fit = py
+        .detach(|| robotid_identify::payload_against_parameters(&request, &robot, &parameters, &out, &robotid::Quiet))
         .map_err(py_identify_error)?;
+    let table = out.join("payload.parquet");
+    if let Some(why) = robotid_identify::payload_undetermined(&fit, &table).filter(|_| !accept_inadequate) {
+        return Err(RobotidError::new_err(why));
+    }
     Ok(written(py, &out.join("payload.parquet"))?.into_bound(py))
 }
 

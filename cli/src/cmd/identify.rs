@@ -37,8 +37,10 @@ pub struct Args {
     /// the model lacks, measured, is refused whatever the tolerance.
     #[arg(long, default_value_t = 100.0 * robotid::verdict::DEFAULT_TOLERANCE, value_name = "PERCENT")]
     pub tolerance: f64,
-    /// Refuse any fit whose residue is over 3× the noise floor on a joint:
-    /// for simulated and regression data, whose model is exact.
+    /// Refuse any fit whose residue is over 3× the noise floor on a joint,
+    /// or whose floors are over twice its residue on every joint (floors
+    /// holding more than noise judge nothing): for simulated and regression
+    /// data, whose model is exact.
     #[arg(long)]
     pub strict: bool,
     /// Where the channels are, for every recording: a TOML file with a
@@ -200,15 +202,10 @@ fn payload_determined(
     fit: &robotid_stages::estimation::payload::PayloadFit,
     table: &std::path::Path,
 ) -> anyhow::Result<()> {
-    if fit.undetermined.is_empty() {
-        return Ok(());
+    match robotid_identify::payload_undetermined(fit, table) {
+        Some(why) => Err(Inadequate(why).into()),
+        None => Ok(()),
     }
-    Err(Inadequate(format!(
-        "the payload is not identified: the records do not determine {} at its size (move the wrist more, or longer). {} holds every value with its interval all the same; to exit 0 with it: --accept-inadequate",
-        robotid_stages::estimation::payload::said_undetermined(&fit.undetermined),
-        table.display()
-    ))
-    .into())
 }
 
 /// The payload against the robot's parameters given: only it identified.

@@ -357,6 +357,9 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
         !named.is_empty() && named.iter().all(|n| n.starts_with('i')),
         "{named:?}"
     );
+    // What refuses it, from the command line and from Python alike.
+    let why = robotid_identify::payload_undetermined(fit, Path::new("payload.parquet")).expect("refused");
+    assert!(why.contains(named[0]) && why.contains("payload.parquet"), "{why}");
     // The loaded record, its link and size, against the robot `from`.
     let path = |f: &str| dir.path().join(f).to_str().unwrap().to_string();
     let args = |from: [String; 2], rest: &[&str]| -> Vec<String> {
