@@ -60,6 +60,10 @@ pub struct Request {
     /// robot file's parameters simulated under it in closed loop, tracking
     /// each record's reference (its `ref_<joint>` channels), in the report.
     pub controller: Option<PathBuf>,
+    /// A Python with the `mujoco` package: the exported MJCF rolled out
+    /// by MuJoCo itself beside robotid's rollouts, in the report
+    /// ([`robotid_report::mujoco`]).
+    pub mujoco: Option<PathBuf>,
 }
 
 /// The payload to identify (`estimation::payload`).
@@ -129,6 +133,7 @@ impl Request {
             mjcf: None,
             payload: None,
             controller: None,
+            mujoco: None,
         }
     }
 }
@@ -221,6 +226,9 @@ pub struct Identification {
     /// controller, when one is; Err: why there are none, as the report
     /// says.
     pub closed_loop: robotid_report::report::ClosedLooped,
+    /// The exported MJCF rolled out by MuJoCo on each record of
+    /// `rollouts`, with `Request::mujoco`.
+    pub mujoco: robotid_report::report::InMujoco,
     /// The payload identified (`payload.parquet`), when asked for.
     pub payload: Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
     /// The payload's model on its held-out records.

@@ -113,6 +113,11 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         rollout: true,
         payload: payload.as_ref().map(|_| "payload.parquet".into()),
         closed_loop: paths.controller.clone().map(|c| (c, raw_tables)),
+        mujoco: request
+            .mujoco
+            .clone()
+            .filter(|_| fitted)
+            .map(|python| ("identified.xml".into(), python)),
         out: "report.html".into(),
         within: staged.to_path_buf(),
     })?;
@@ -143,6 +148,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         physical,
         rollouts: simulated.rolled,
         closed_loop,
+        mujoco: simulated.mujoco,
         payload,
         payload_validation,
     })

@@ -64,6 +64,7 @@ class Identification:
     payload: Optional[pa.Table]
     payload_validation: Optional[Tuple[float, List[Tuple[str, Optional[float]]]]]
     closed_loop: Optional[pa.Table]
+    mujoco_rollout: Optional[pa.Table]
 
 def identify(
     recordings: Sequence[Union[str, PathLike]],
@@ -82,6 +83,7 @@ def identify(
     payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
     validate_loaded: Sequence[Union[str, PathLike]] = (),
     controller: Optional[Union[str, PathLike]] = None,
+    mujoco: bool = False,
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
     identify`: the same files in `out`, byte for byte. A refused fit is a
@@ -97,7 +99,10 @@ def identify(
     `[controller]` table, the `validate` records' PID), `closed_loop` is
     the estimate's and the robot file's closed-loop runs on them (a
     ValueError when they cannot be run, e.g. without reference channels;
-    the folder is written all the same)."""
+    the folder is written all the same). With `mujoco`, this interpreter's
+    MuJoCo rolls the exported MJCF out in the windows of robotid's
+    rollouts: `mujoco_rollout` (table, joint, q_rms in rad, qd_rms in
+    rad/s), in the report beside robotid's."""
 
 def payload(
     loaded: Sequence[Union[str, PathLike]],
@@ -106,12 +111,15 @@ def payload(
     payload_on: str,
     out: Union[str, PathLike],
     payload_ellipsoid: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None,
+    accept_inadequate: bool = False,
 ) -> pa.Table:
     """The payload on the link `payload_on` from `loaded` (records with
     it) against a robot already identified (its `parameters` table, whose
     covariance is carried), as `robotid identify LOADED… --payload-on LINK
     --parameters P`: `payload.parquet` written into `out` (an empty or new
-    folder) and returned."""
+    folder) and returned. Values the records leave undetermined at the
+    payload's size raise RobotidError naming them (the table written all
+    the same) unless `accept_inadequate`."""
 
 def rollout(
     parameters: Union[str, PathLike],

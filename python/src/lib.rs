@@ -333,6 +333,10 @@ struct Identification {
     /// records, as `robotid.closed_loop` returns them (recording, model,
     /// joint, position RMS error).
     closed_loop: Option<Py<PyAny>>,
+    /// With `mujoco`: the exported MJCF rolled out by MuJoCo on each
+    /// record robotid rolled out on, in its windows (table, joint,
+    /// position and velocity RMS error).
+    mujoco_rollout: Option<Py<PyAny>>,
 }
 
 #[pymethods]
@@ -357,7 +361,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new(), controller=None))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new(), controller=None, mujoco=false))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -377,6 +381,7 @@ fn identify(
     payload_ellipsoid: Option<([f64; 3], [f64; 3])>,
     validate_loaded: Vec<PathBuf>,
     controller: Option<PathBuf>,
+    mujoco: bool,
 ) -> PyResult<Identification> {
     use robotid_identify::{PayloadRequest, Physical, Request};
     // As the command line: with a payload, `recordings` carry it and the
@@ -409,6 +414,11 @@ fn identify(
         mjcf,
         payload,
         controller,
+        // MuJoCo run by this interpreter, which has it when the caller does.
+        mujoco: match mujoco {
+            true => Some(py.import("sys")?.getattr("executable")?.extract::<PathBuf>()?),
+            false => None,
+        },
         ..Request::new(recordings, robot)
     };
     let id = py
@@ -472,8 +482,32 @@ fn identify(
             }
             None => None,
         },
+        mujoco_rollout: mujoco_rollout(py, &id)?,
         out: id.out,
     })
+}
+
+/// identify's MuJoCo rollouts as a pyarrow table; a ValueError naming the
+/// record where MuJoCo could not run.
+fn mujoco_rollout(py: Python<'_>, id: &robotid_identify::Identification) -> PyResult<Option<Py<PyAny>>> {
+    let (Some(runs), Some(Ok(rolled))) = (&id.mujoco, &id.rollouts) else {
+        return Ok(None);
+    };
+    let mut done = Vec::new();
+    for (r, m) in rolled.iter().zip(runs) {
+        match m {
+            Ok(m) => done.push((r.table.clone(), m.clone())),
+            Err(why) => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "MuJoCo's rollout on {}: {why}",
+                    r.table.display()
+                )))
+            }
+        }
+    }
+    let batch =
+        robotid_report::mujoco::table(&done).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+    Ok(Some(table(py, batch)?.unbind()))
 }
 
 /// The payload on `payload_on` from `loaded` (records with it) against a

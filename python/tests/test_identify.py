@@ -95,17 +95,34 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     assert by["estimate"] <= 1.3 * by["robot_file"], by
     # The same from identify itself, the controller declared: its
     # validation record's raw samples (read from the MCAP, references with
-    # them) run in closed loop, the same figures.
+    # them) run in closed loop, the same figures. With `mujoco`, the
+    # exported MJCF rolled out by this interpreter's MuJoCo in the windows
+    # robotid chose: within 1.5× of robotid's own rollout of the estimate
+    # there (the export carries the physical fit, friction as MuJoCo's
+    # frictionloss; measured 1.08×), and in the report.
     again = robotid.identify(
         [examples / "recordings" / "kuka_axis3" / "kuka_axis3.mcap"],
         examples / "robots" / "kuka_axis3.toml",
         validate=[validation / "kuka_axis3_validation.mcap"],
         controller=validation / "kuka_axis3_validation.truth.toml",
+        mujoco=True,
         out=tmp_path / "with_controller",
     )
     from_identify = {r["model"]: r["q_rms"] for r in again.closed_loop.to_pylist()}
     assert from_identify == pytest.approx(by, rel=1e-9), (from_identify, by)
-    assert result.closed_loop is None
+    assert result.closed_loop is None and result.mujoco_rollout is None
+    in_mujoco = again.mujoco_rollout.to_pylist()
+    assert again.mujoco_rollout.schema.field("q_rms").metadata == {b"unit": b"rad"}
+    assert [r["joint"] for r in in_mujoco] == ["a3"], in_mujoco
+    ours = robotid.rollout(
+        tmp_path / "with_controller" / "parameters.parquet",
+        examples / "robots" / "kuka_axis3.toml",
+        [tmp_path / "with_controller" / "kuka_axis3_validation" / "kuka_axis3_validation" / "regressor.parquet"],
+    ).to_pylist()
+    windows = [r["q_rms"] for r in ours if r["model"] == "estimate"]
+    pooled = (sum(x * x for x in windows) / len(windows)) ** 0.5
+    assert pooled / 1.5 <= in_mujoco[0]["q_rms"] <= 1.5 * pooled, (in_mujoco, pooled)
+    assert "in MuJoCo (the export)" in (tmp_path / "with_controller" / "report.html").read_text()
     # Domain randomization from Python: the command line's files, byte for
     # byte; each drawn MJCF loads in MuJoCo with the drawn masses.
     physical = out / "parameters_physical.parquet"

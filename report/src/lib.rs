@@ -1,9 +1,11 @@
 //! What people look at, apart from the numbers: each recording's pictures
 //! and page (`plot`), the estimate's HTML report (`report`), the validation
-//! table (`validation`), the exports for simulators (`export`), and the [`Plots`] observer that draws a run's.
+//! table (`validation`), the exports for simulators (`export`) and their
+//! rollout in MuJoCo itself (`mujoco`), and the [`Plots`] observer that draws a run's.
 //! Owns plotters; the library (`robotid`) computes, this crate shows.
 
 pub mod export;
+pub mod mujoco;
 pub mod plot;
 pub mod report;
 pub mod sample;

@@ -459,13 +459,24 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
 }
 
 /// The rollouts' section: per record, a table per joint (the estimate's
-/// position and velocity RMS error, the robot file's, their ratio) and the
-/// measured and simulated angles.
-fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
+/// position and velocity RMS error, the robot file's, their ratio; the
+/// exported MJCF's in MuJoCo when `mujoco` gives it: the MJCF and the
+/// Python, and per record what MuJoCo gave) and the measured and
+/// simulated angles.
+fn rollouts_html(
+    rolled: &[robotid::validation::RolledOut],
+    mujoco: Option<(&std::path::Path, &MujocoRuns)>,
+) -> Result<String> {
     let mut h = String::from(
         "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"note\">The identified model's forward dynamics, driven by the measured torque from the measured state and restarted from it at every window (multiple shooting), against the measured joint angles; the robot file's own parameters the same way. A model whose mass matrix is not positive definite along the record is said, not simulated.</p>\n",
     );
-    for r in rolled {
+    if let Some((mjcf, _)) = mujoco {
+        h.push_str(&format!(
+            "<p class=\"note\">In MuJoCo: <code>{}</code> (the physically consistent estimate as exported) loaded and stepped by MuJoCo itself in the same windows, its joint limits and contacts off: friction as its <code>frictionloss</code> constraint and <code>damping</code>, the rotors as <code>armature</code>. The export cannot carry the torque offsets, friction that differs by direction (the means are written) or a smooth Coulomb turn-over; each joint's comment in the file gives them.</p>\n",
+            esc(&mjcf.display().to_string())
+        ));
+    }
+    for (k, r) in rolled.iter().enumerate() {
         h.push_str(&format!(
             "<p class=\"note\">{}: windows of {} samples ({:.3} s): {}</p>\n",
             esc(&r.table.display().to_string()),
@@ -473,13 +484,35 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut]) -> Result<String> {
             r.window_s,
             esc(&r.window_said)
         ));
+        let in_mujoco = mujoco.and_then(|(_, runs)| runs.get(k));
+        if let Some(Err(why)) = in_mujoco {
+            h.push_str(&format!(
+                "<p class=\"warn\">Not rolled out in MuJoCo: {}</p>\n",
+                esc(why)
+            ));
+        }
+        let mujoco_of = |joint: &str| match in_mujoco {
+            Some(Ok(m)) => Some(
+                m.joints
+                    .iter()
+                    .position(|j| j == joint)
+                    .map_or("not in the MJCF".to_string(), |i| format!("{:.3}", 1e3 * m.q_rms[i])),
+            ),
+            _ => None,
+        };
         match r.rows() {
             Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
             Ok(rows) => {
-                h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th></tr>\n");
+                let head = if matches!(in_mujoco, Some(Ok(_))) {
+                    "<th>in MuJoCo (the export), mrad</th>"
+                } else {
+                    ""
+                };
+                h.push_str(&format!("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th>{head}</tr>\n"));
                 for row in rows {
+                    let cell = mujoco_of(&row.joint).map_or(String::new(), |m| format!("<td>{}</td>", esc(&m)));
                     h.push_str(&format!(
-                        "<tr><td class=\"l\">{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td></tr>\n",
+                        "<tr><td class=\"l\">{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td>{cell}</tr>\n",
                         esc(&row.joint),
                         row.q_mrad,
                         row.qd_mrad_s,
@@ -599,6 +632,10 @@ pub struct Page {
     /// An identified payload (`payload.parquet`): its body, intervals,
     /// bounded estimate and drive gains shown.
     pub payload: Option<std::path::PathBuf>,
+    /// The exported MJCF (under `within`) and the Python that runs MuJoCo:
+    /// the export rolled out by MuJoCo itself on each record `rollout`
+    /// rolls out on, in the same windows ([`crate::mujoco`]).
+    pub mujoco: Option<(std::path::PathBuf, std::path::PathBuf)>,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
     /// The folder the paths above are read and written in, named in the
@@ -614,10 +651,18 @@ pub type Rolled = Option<std::result::Result<Vec<robotid::validation::RolledOut>
 /// What a page ran in closed loop, as [`Rolled`].
 pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::ClosedLoopRun>, String>>;
 
+/// What a page rolled out in MuJoCo, per record of [`Rolled`] (None: not
+/// asked for, or nothing rolled out; Err: why not, as the page says).
+pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
+
+/// Per record, MuJoCo's rollout or why there is none.
+type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
+
 /// What a page simulated.
 pub struct Simulated {
     pub rolled: Rolled,
     pub closed_loop: ClosedLooped,
+    pub mujoco: InMujoco,
 }
 
 /// The report of `page`, written to `page.out`; what it simulated returned.
@@ -686,9 +731,23 @@ pub fn write(page: &Page) -> Result<Simulated> {
             p,
         )?);
     }
+    let mujoco: InMujoco = match (&rolled, &page.mujoco) {
+        (Some(Ok(rolled)), Some((mjcf, python))) => Some(
+            rolled
+                .iter()
+                .map(|r| crate::mujoco::rollout(python, &within(mjcf), &within(&r.table), r.window_s))
+                .collect(),
+        ),
+        _ => None,
+    };
     if let Some(rolled) = &rolled {
+        let in_mujoco = page
+            .mujoco
+            .as_ref()
+            .map(|(mjcf, _)| mjcf.as_path())
+            .zip(mujoco.as_deref());
         let section = match rolled {
-            Ok(rolled) => rollouts_html(rolled)?,
+            Ok(rolled) => rollouts_html(rolled, in_mujoco)?,
             Err(e) => format!(
                 "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
                 esc(e)
@@ -720,7 +779,11 @@ pub fn write(page: &Page) -> Result<Simulated> {
     let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
     text.insert_str(end, &sections);
     crate::plot::write_text(&within(&page.out), &text)?;
-    Ok(Simulated { rolled, closed_loop })
+    Ok(Simulated {
+        rolled,
+        closed_loop,
+        mujoco,
+    })
 }
 
 /// The closed-loop section: per recording, a table per joint (the

@@ -66,6 +66,12 @@ pub struct Args {
     /// with the measured angles (printed, and in the report).
     #[arg(long, requires = "validate")]
     pub controller: Option<PathBuf>,
+    /// Roll the exported MJCF (`identified.xml`, the physical estimate)
+    /// out in MuJoCo itself too, in the windows of robotid's rollouts, and
+    /// report both (printed, and in the report): a Python with the
+    /// `mujoco` package runs it ($ROBOTID_PYTHON, else python3).
+    #[arg(long)]
+    pub mujoco: bool,
     /// The recordings carry a payload held by this link (the last moving
     /// link, or one welded to it: a flange, `tool0`): its mass, centre of
     /// mass and inertia are identified against the robot identified from
@@ -164,6 +170,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         validate: args.validate,
         mjcf: args.mjcf,
         controller: args.controller,
+        mujoco: args.mujoco.then(robotid_report::mujoco::default_python),
         payload,
         ..Request::new(recordings, args.robot)
     };
@@ -182,6 +189,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("refused, written anyway (--accept-inadequate): {why}");
     }
     print_physical(&id);
+    print_mujoco(&id);
     match &id.closed_loop {
         Some(Ok(runs)) => print!("\n{}", super::validate::closed_loop_said(runs)),
         Some(Err(why)) => println!("\nnot run in closed loop: {why}"),
@@ -366,6 +374,30 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
 }
 
 /// The physically consistent estimate, its validation and the exports.
+/// The exported MJCF rolled out by MuJoCo, per record: each joint's
+/// position RMS error (mrad), or why not.
+fn print_mujoco(id: &Identification) {
+    let (Some(runs), Some(Ok(rolled))) = (&id.mujoco, &id.rollouts) else {
+        return;
+    };
+    for (r, m) in rolled.iter().zip(runs) {
+        match m {
+            Ok(m) => println!(
+                "in MuJoCo: identified.xml on {} (windows of {:.3} s), position RMS: {}",
+                r.table.display(),
+                r.window_s,
+                m.joints
+                    .iter()
+                    .zip(&m.q_rms)
+                    .map(|(j, q)| format!("{j} {:.4} mrad", 1e3 * q))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Err(why) => eprintln!("warning: not rolled out in MuJoCo on {}: {why}", r.table.display()),
+        }
+    }
+}
+
 fn print_physical(id: &Identification) {
     match &id.physical {
         Physical::Refused => {}

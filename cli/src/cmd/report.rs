@@ -39,6 +39,12 @@ pub struct Args {
     /// --payload-on`): its body, intervals and drive gains shown.
     #[arg(long)]
     pub payload: Option<PathBuf>,
+    /// With --rollout: this MJCF (the physical estimate's export,
+    /// `identified.xml`) rolled out by MuJoCo itself in the same windows,
+    /// by a Python with the `mujoco` package ($ROBOTID_PYTHON, else
+    /// python3).
+    #[arg(long, requires = "rollout")]
+    pub mujoco: Option<PathBuf>,
     /// Output HTML page (self-contained: pictures inline).
     #[arg(long, short, default_value = "report.html")]
     pub out: PathBuf,
@@ -54,6 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rollout: args.rollout,
         payload: args.payload,
         closed_loop: args.controller.map(|c| (c, args.closed_loop)),
+        mujoco: args.mujoco.map(|m| (m, robotid_report::mujoco::default_python())),
         out: args.out.clone(),
         within: PathBuf::new(),
     })?;

@@ -183,6 +183,7 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
             &urdf,
             Path::new("--validate"),
             &dir.join("validation.mcap"),
+            Path::new("--mujoco"),
             Path::new("--out"),
             &out,
         ]);
@@ -296,7 +297,7 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
         // the true parameters' over all joints (root mean square) and
         // 1.25× on each, and the robot file's (its URDF has no friction)
         // at least 5× the estimate's on each.
-        let (estimate, exact, file, window_s) = rollout_errors(&out, &urdf, &truth);
+        let (estimate, exact, file) = rollout_errors(&out, &urdf, &truth);
         eprintln!(
             "{arm}: rollout position RMS (mrad), estimate {estimate:.3?}, truth {exact:.3?}, robot file {file:.1?}"
         );
@@ -311,14 +312,22 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
                 "{arm}: joint {j}: estimate {estimate:?}, truth {exact:?}, robot file {file:?}"
             );
         }
-        // The exported MJCF rolled out by MuJoCo itself (its frictionloss
-        // constraint as exported, contacts and limits off): pooled within
+        // The exported MJCF rolled out by MuJoCo itself in identify's
+        // windows (`--mujoco`: its frictionloss constraint as exported,
+        // contacts and limits off): pooled within
         // 1.2× of the true parameters' error in robotid's rollout, each
         // joint within 1.5× of it and at least 5× under the robot file's.
         // Measured: 0.86–1.08× (UR5), 0.86–1.11× (Panda), 0.90–1.06×
         // (ur5_lab): both hold a joint at rest by a friction-loss
         // constraint.
-        let mujoco = mujoco_rollout(&out, window_s);
+        let mujoco = mujoco_printed(&said);
+        assert_eq!(mujoco.len(), exact.len(), "{arm}: {said}");
+        assert!(
+            std::fs::read_to_string(out.join("report.html"))
+                .unwrap()
+                .contains("in MuJoCo (the export)"),
+            "{arm}: MuJoCo's figures in the report"
+        );
         eprintln!("{arm}: the exported MJCF rolled out by MuJoCo (mrad): {mujoco:.3?}");
         assert!(
             rms(&mujoco) <= 1.2 * rms(&exact),
@@ -333,32 +342,24 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
     }
 }
 
-/// Position RMS errors (mrad) of `identified.xml` in `out` rolled out by
-/// MuJoCo on the validation record (`scripts/mujoco_rollout.py`) with
-/// windows of `window_s`.
-fn mujoco_rollout(out: &Path, window_s: f64) -> Vec<f64> {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/mujoco_rollout.py");
-    let o = Command::new(robotid_tests::python())
-        .arg(&script)
-        .arg(out.join("identified.xml"))
-        .arg(out.join("validation/validation/kinematics.parquet"))
-        .args(["--window-s", &window_s.to_string()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    v["q_rms"]
-        .as_array()
+/// Position RMS errors (mrad) of `identified.xml` rolled out by MuJoCo,
+/// as identify `--mujoco` printed them.
+fn mujoco_printed(said: &str) -> Vec<f64> {
+    let line = said
+        .lines()
+        .find(|l| l.starts_with("in MuJoCo: "))
+        .unwrap_or_else(|| panic!("no MuJoCo rollout printed:\n{said}"));
+    line.split_once("position RMS: ")
         .unwrap()
-        .iter()
-        .map(|x| 1e3 * x.as_f64().unwrap())
+        .1
+        .split(", ")
+        .map(|j| j.split(' ').nth(1).unwrap().parse().unwrap())
         .collect()
 }
 
 /// Position RMS errors (mrad) of rollouts on the validation record of the
-/// estimate, of the true parameters and of the robot file's own; and the
-/// window chosen (s).
-fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>, f64) {
+/// estimate, of the true parameters and of the robot file's own.
+fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
     let table = PathBuf::from("validation/validation/regressor.parquet");
     let rolled = ::robotid::validation::rollouts(out, Path::new("parameters.parquet"), urdf, &[table], None).unwrap();
@@ -381,7 +382,7 @@ fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>
         r.window,
     )
     .expect("the truth simulates");
-    (estimate, mrad(&exact.q_rms), file, r.window_s)
+    (estimate, mrad(&exact.q_rms), file)
 }
 
 /// Figures of a validation record, per joint: the mean squared residue
