@@ -22,8 +22,9 @@ pub struct Args {
     #[arg(long)]
     pub robot: Option<PathBuf>,
     /// Add rollouts: the estimate's forward dynamics driven by the measured
-    /// torque, restarted from the measured state every 0.5 s, on the
-    /// validation records (else the excitation's), beside the robot file's.
+    /// torque, restarted from the measured state every window (chosen from
+    /// each record's noise, said), on the validation records (else the
+    /// excitation's), beside the robot file's.
     #[arg(long, requires = "robot")]
     pub rollout: bool,
     /// Raw tables with the recorded references (`q_<joint>` and
