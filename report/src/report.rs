@@ -458,19 +458,25 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
     Ok(h)
 }
 
+/// What a rollouts' section shows beside the estimate's: per record, the
+/// physically consistent estimate's rollout in the same windows, and the
+/// exported MJCF's in MuJoCo (its path, and what MuJoCo gave).
+#[derive(Clone, Copy, Default)]
+struct Beside<'a> {
+    physical: Option<&'a [std::result::Result<Rollout, String>]>,
+    mujoco: Option<(&'a std::path::Path, &'a MujocoRuns)>,
+}
+
 /// The rollouts' section: per record, a table per joint (the estimate's
 /// position and velocity RMS error, the robot file's, their ratio; the
-/// exported MJCF's in MuJoCo when `mujoco` gives it: the MJCF and the
-/// Python, and per record what MuJoCo gave) and the measured and
-/// simulated angles.
-fn rollouts_html(
-    rolled: &[robotid::validation::RolledOut],
-    mujoco: Option<(&std::path::Path, &MujocoRuns)>,
-) -> Result<String> {
+/// physical estimate's and the export's in MuJoCo as `beside` gives them)
+/// and the measured and simulated angles. A model that could not be
+/// simulated is said in its cells; the others' figures stay.
+fn rollouts_html(rolled: &[robotid::validation::RolledOut], beside: Beside) -> Result<String> {
     let mut h = String::from(
-        "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"note\">The identified model's forward dynamics, driven by the measured torque from the measured state and restarted from it at every window (multiple shooting), against the measured joint angles; the robot file's own parameters the same way. A model whose mass matrix is not positive definite along the record is said, not simulated.</p>\n",
+        "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"note\">The identified model's forward dynamics, driven by the measured torque from the measured state and restarted from it at every window (multiple shooting), against the measured joint angles; the robot file's own parameters the same way, and the physically consistent estimate's. A model whose mass matrix is not positive definite along the record is said, not simulated.</p>\n",
     );
-    if let Some((mjcf, _)) = mujoco {
+    if let Some((mjcf, _)) = beside.mujoco {
         h.push_str(&format!(
             "<p class=\"note\">In MuJoCo: <code>{}</code> (the physically consistent estimate as exported) loaded and stepped by MuJoCo itself in the same windows, its joint limits and contacts off: friction as its <code>frictionloss</code> constraint and <code>damping</code>, the rotors as <code>armature</code>. The export cannot carry the torque offsets, friction that differs by direction (the means are written) or a smooth Coulomb turn-over; each joint's comment in the file gives them.</p>\n",
             esc(&mjcf.display().to_string())
@@ -484,45 +490,86 @@ fn rollouts_html(
             r.window_s,
             esc(&r.window_said)
         ));
-        let in_mujoco = mujoco.and_then(|(_, runs)| runs.get(k));
-        if let Some(Err(why)) = in_mujoco {
-            h.push_str(&format!(
+        // Each column beside the estimate's: its header and, per joint,
+        // its cell; what stopped it said once above the table.
+        let mut extra: Vec<(&str, Vec<String>)> = Vec::new();
+        match beside.physical.and_then(|p| p.get(k)) {
+            Some(Ok(Ok(e))) => extra.push((
+                "physical estimate's position RMS, mrad",
+                e.q_rms.iter().map(|q| format!("{:.3}", 1e3 * q)).collect(),
+            )),
+            Some(Ok(Err(stop))) => h.push_str(&format!(
+                "<p class=\"warn\">The physically consistent estimate: {}</p>\n",
+                esc(&r.stopped_said(stop))
+            )),
+            Some(Err(why)) => h.push_str(&format!(
+                "<p class=\"warn\">The physically consistent estimate not rolled out: {}</p>\n",
+                esc(why)
+            )),
+            None => {}
+        }
+        match beside.mujoco.and_then(|(_, runs)| runs.get(k)) {
+            Some(Ok(m)) => extra.push((
+                "in MuJoCo (the export), mrad",
+                r.joints
+                    .iter()
+                    .map(|joint| {
+                        m.joints
+                            .iter()
+                            .position(|j| j == joint)
+                            .map_or("not in the MJCF".to_string(), |i| format!("{:.3}", 1e3 * m.q_rms[i]))
+                    })
+                    .collect(),
+            )),
+            Some(Err(why)) => h.push_str(&format!(
                 "<p class=\"warn\">Not rolled out in MuJoCo: {}</p>\n",
                 esc(why)
+            )),
+            None => {}
+        }
+        let rows: Vec<[String; 5]> = match r.rows() {
+            Ok(rows) => rows
+                .into_iter()
+                .map(|row| {
+                    [
+                        row.joint,
+                        format!("{:.3}", row.q_mrad),
+                        format!("{:.3}", row.qd_mrad_s),
+                        row.file,
+                        row.ratio,
+                    ]
+                })
+                .collect(),
+            Err(why) => {
+                h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why)));
+                r.joints
+                    .iter()
+                    .enumerate()
+                    .map(|(j, joint)| {
+                        let file = match &r.prior {
+                            Some(Ok(p)) => format!("{:.3}", 1e3 * p.q_rms[j]),
+                            Some(Err(stop)) => r.stopped_said(stop),
+                            None => "-".into(),
+                        };
+                        [joint.clone(), "not simulated".into(), "-".into(), file, "-".into()]
+                    })
+                    .collect()
+            }
+        };
+        let heads: String = extra.iter().map(|(t, _)| format!("<th>{t}</th>")).collect();
+        h.push_str(&format!("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th>{heads}</tr>\n"));
+        for (j, row) in rows.iter().enumerate() {
+            let cells: String = extra.iter().map(|(_, c)| format!("<td>{}</td>", esc(&c[j]))).collect();
+            h.push_str(&format!(
+                "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>{cells}</tr>\n",
+                esc(&row[0]),
+                esc(&row[1]),
+                esc(&row[2]),
+                esc(&row[3]),
+                esc(&row[4])
             ));
         }
-        let mujoco_of = |joint: &str| match in_mujoco {
-            Some(Ok(m)) => Some(
-                m.joints
-                    .iter()
-                    .position(|j| j == joint)
-                    .map_or("not in the MJCF".to_string(), |i| format!("{:.3}", 1e3 * m.q_rms[i])),
-            ),
-            _ => None,
-        };
-        match r.rows() {
-            Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
-            Ok(rows) => {
-                let head = if matches!(in_mujoco, Some(Ok(_))) {
-                    "<th>in MuJoCo (the export), mrad</th>"
-                } else {
-                    ""
-                };
-                h.push_str(&format!("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th>{head}</tr>\n"));
-                for row in rows {
-                    let cell = mujoco_of(&row.joint).map_or(String::new(), |m| format!("<td>{}</td>", esc(&m)));
-                    h.push_str(&format!(
-                        "<tr><td class=\"l\">{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td>{cell}</tr>\n",
-                        esc(&row.joint),
-                        row.q_mrad,
-                        row.qd_mrad_s,
-                        esc(&row.file),
-                        row.ratio
-                    ));
-                }
-                h.push_str("</table>\n");
-            }
-        }
+        h.push_str("</table>\n");
         h.push_str(&crate::plot::rollout_svg(r)?);
         h.push('\n');
     }
@@ -655,6 +702,9 @@ pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::Clos
 /// asked for, or nothing rolled out; Err: why not, as the page says).
 pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
 
+/// A rollout, or where it stopped.
+type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>;
+
 /// Per record, MuJoCo's rollout or why there is none.
 type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
 
@@ -740,14 +790,30 @@ pub fn write(page: &Page) -> Result<Simulated> {
         ),
         _ => None,
     };
+    // The physical estimate rolled out in the estimate's windows.
+    let physical_rolled: Option<Vec<std::result::Result<Rollout, String>>> =
+        match (&rolled, &page.physical, &page.robot) {
+            (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
+                rolled
+                    .iter()
+                    .map(|r| {
+                        robotid::validation::rolled_alike(&page.within, physical, robot, r).map_err(|e| e.to_string())
+                    })
+                    .collect(),
+            ),
+            _ => None,
+        };
     if let Some(rolled) = &rolled {
-        let in_mujoco = page
-            .mujoco
-            .as_ref()
-            .map(|(mjcf, _)| mjcf.as_path())
-            .zip(mujoco.as_deref());
+        let beside = Beside {
+            physical: physical_rolled.as_deref(),
+            mujoco: page
+                .mujoco
+                .as_ref()
+                .map(|(mjcf, _)| mjcf.as_path())
+                .zip(mujoco.as_deref()),
+        };
         let section = match rolled {
-            Ok(rolled) => rollouts_html(rolled, in_mujoco)?,
+            Ok(rolled) => rollouts_html(rolled, beside)?,
             Err(e) => format!(
                 "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
                 esc(e)

@@ -267,6 +267,16 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     for k in ["report.html", "identified.urdf", "identified.xml", "identify.sh"] {
         assert!(out.join(k).is_file(), "{k} missing:\n{text}");
     }
+    // The report's rollouts on files 2 and 3: least squares' mass matrix
+    // is not positive definite (said), the physical estimate's rolled out
+    // in the same windows beside the robot file's.
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert_eq!(
+        html.matches("physical estimate's position RMS, mrad").count(),
+        2,
+        "{text}"
+    );
+    assert!(html.contains("The estimate: not simulated: the mass matrix is not positive definite"));
     // The exported URDF is the user's own: links, visuals, collisions,
     // meshes and comments as they wrote them, only the bodies and the
     // friction replaced.
