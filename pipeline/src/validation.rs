@@ -822,7 +822,7 @@ pub fn rollout_table(rolled: &[RolledOut]) -> Result<arrow::record_batch::Record
 
 /// A table of `columns` (name, unit, values), each unit in its field's
 /// metadata; `what` names it in an error.
-fn units_table(
+pub fn units_table(
     what: &str,
     columns: Vec<(&str, &str, arrow::array::ArrayRef)>,
 ) -> Result<arrow::record_batch::RecordBatch> {

@@ -130,26 +130,27 @@ pub enum Refusal {
     },
 }
 
+/// Joints with their ratios, "j1 (3.1×), j2 (4.0×)" (`digits` decimals).
+fn ratios_said(joints: &[(String, f64)], digits: usize) -> String {
+    joints
+        .iter()
+        .map(|(j, r)| format!("{j} ({r:.digits$}×)"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 impl std::fmt::Display for Refusal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Refusal::OverFloor(joints) => write!(
                 f,
                 "the fit's residue is over {REFUSE_RATIO}× the noise floor on {} (the strict policy)",
-                joints
-                    .iter()
-                    .map(|(j, r)| format!("{j} ({r:.1}×)"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                ratios_said(joints, 1)
             ),
             Refusal::FloorSuspect(joints) => write!(
                 f,
                 "the noise floor is over twice the fit's residue on every joint, {} (the fit's residue over it): it holds more than noise (a transient or a ramp in the stretch it came from), and the strict policy has no floor to judge the fit by; record steady periods, or judge by the held-out tolerance (without --strict)",
-                joints
-                    .iter()
-                    .map(|(j, r)| format!("{j} ({r:.2}×)"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                ratios_said(joints, 2)
             ),
             Refusal::MissingFriction(joints) => write!(
                 f,

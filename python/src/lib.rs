@@ -505,8 +505,7 @@ fn mujoco_rollout(py: Python<'_>, id: &robotid_identify::Identification) -> PyRe
             }
         }
     }
-    let batch =
-        robotid_report::mujoco::table(&done).map_err(|e| pyo3::exceptions::PyValueError::new_err(e.to_string()))?;
+    let batch = robotid_report::mujoco::table(&done).map_err(py_error)?;
     Ok(Some(table(py, batch)?.unbind()))
 }
 

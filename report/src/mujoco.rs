@@ -62,55 +62,41 @@ pub fn rollout(python: &Path, mjcf: &Path, kinematics: &Path, window_s: f64) -> 
 /// MuJoCo's rollouts as a table: per record (its kinematics table) and
 /// joint, the position and velocity RMS error (rad, rad/s), units in the
 /// fields' metadata.
-pub fn table(
-    runs: &[(std::path::PathBuf, MujocoRollout)],
-) -> Result<arrow::array::RecordBatch, arrow::error::ArrowError> {
+pub fn table(runs: &[(std::path::PathBuf, MujocoRollout)]) -> robotid::Result<arrow::array::RecordBatch> {
     use arrow::array::{ArrayRef, Float64Array, StringArray};
-    use arrow::datatypes::{Field, Schema};
     use std::sync::Arc;
     let rows = || {
         runs.iter()
             .flat_map(|(t, m)| (0..m.joints.len()).map(move |j| (t, m, j)))
     };
-    let columns: [(&str, &str, ArrayRef); 4] = [
-        (
-            "table",
-            "1",
-            Arc::new(StringArray::from_iter_values(
-                rows().map(|(t, _, _)| t.display().to_string()),
-            )),
-        ),
-        (
-            "joint",
-            "1",
-            Arc::new(StringArray::from_iter_values(
-                rows().map(|(_, m, j)| m.joints[j].clone()),
-            )),
-        ),
-        (
-            "q_rms",
-            "rad",
-            Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.q_rms[j]))),
-        ),
-        (
-            "qd_rms",
-            "rad/s",
-            Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.qd_rms[j]))),
-        ),
-    ];
-    let fields: Vec<Field> = columns
-        .iter()
-        .map(|(name, unit, a)| {
-            Field::new(*name, a.data_type().clone(), false).with_metadata(
-                [(robotid_schemas::metadata::UNIT.to_string(), unit.to_string())]
-                    .into_iter()
-                    .collect::<std::collections::HashMap<_, _>>(),
-            )
-        })
-        .collect();
-    arrow::array::RecordBatch::try_new(
-        Arc::new(Schema::new(fields)),
-        columns.into_iter().map(|c| c.2).collect(),
+    robotid::validation::units_table(
+        "MuJoCo's rollout table",
+        vec![
+            (
+                "table",
+                "1",
+                Arc::new(StringArray::from_iter_values(
+                    rows().map(|(t, _, _)| t.display().to_string()),
+                )) as ArrayRef,
+            ),
+            (
+                "joint",
+                "1",
+                Arc::new(StringArray::from_iter_values(
+                    rows().map(|(_, m, j)| m.joints[j].clone()),
+                )),
+            ),
+            (
+                "q_rms",
+                "rad",
+                Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.q_rms[j]))),
+            ),
+            (
+                "qd_rms",
+                "rad/s",
+                Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.qd_rms[j]))),
+            ),
+        ],
     )
 }
 
