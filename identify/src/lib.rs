@@ -226,6 +226,9 @@ pub struct Identification {
     /// controller, when one is; Err: why there are none, as the report
     /// says.
     pub closed_loop: robotid_report::report::ClosedLooped,
+    /// The physically consistent estimate rolled out on each record of
+    /// `rollouts`, in its windows.
+    pub physical_rollouts: robotid_report::report::PhysicalRolled,
     /// The exported MJCF rolled out by MuJoCo on each record of
     /// `rollouts`, with `Request::mujoco`.
     pub mujoco: robotid_report::report::InMujoco,

@@ -149,6 +149,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         rollouts: simulated.rolled,
         closed_loop,
         mujoco: simulated.mujoco,
+        physical_rollouts: simulated.physical,
         payload,
         payload_validation,
     })

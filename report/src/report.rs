@@ -703,7 +703,7 @@ pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::Clos
 pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
 
 /// A rollout, or where it stopped.
-type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>;
+pub type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>;
 
 /// Per record, MuJoCo's rollout or why there is none.
 type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
@@ -713,7 +713,15 @@ pub struct Simulated {
     pub rolled: Rolled,
     pub closed_loop: ClosedLooped,
     pub mujoco: InMujoco,
+    /// The physically consistent estimate rolled out as `rolled`'s
+    /// records were.
+    pub physical: PhysicalRolled,
 }
+
+/// The physically consistent estimate rolled out on each record of
+/// [`Rolled`] in its windows (None: no physical estimate, or nothing
+/// rolled out; Err: why not).
+pub type PhysicalRolled = Option<Vec<std::result::Result<Rollout, String>>>;
 
 /// The report of `page`, written to `page.out`; what it simulated returned.
 pub fn write(page: &Page) -> Result<Simulated> {
@@ -791,18 +799,15 @@ pub fn write(page: &Page) -> Result<Simulated> {
         _ => None,
     };
     // The physical estimate rolled out in the estimate's windows.
-    let physical_rolled: Option<Vec<std::result::Result<Rollout, String>>> =
-        match (&rolled, &page.physical, &page.robot) {
-            (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
-                rolled
-                    .iter()
-                    .map(|r| {
-                        robotid::validation::rolled_alike(&page.within, physical, robot, r).map_err(|e| e.to_string())
-                    })
-                    .collect(),
-            ),
-            _ => None,
-        };
+    let physical_rolled: PhysicalRolled = match (&rolled, &page.physical, &page.robot) {
+        (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
+            rolled
+                .iter()
+                .map(|r| robotid::validation::rolled_alike(&page.within, physical, robot, r).map_err(|e| e.to_string()))
+                .collect(),
+        ),
+        _ => None,
+    };
     if let Some(rolled) = &rolled {
         let beside = Beside {
             physical: physical_rolled.as_deref(),
@@ -849,6 +854,7 @@ pub fn write(page: &Page) -> Result<Simulated> {
         rolled,
         closed_loop,
         mujoco,
+        physical: physical_rolled,
     })
 }
 

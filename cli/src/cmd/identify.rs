@@ -189,7 +189,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("refused, written anyway (--accept-inadequate): {why}");
     }
     print_physical(&id);
-    print_mujoco(&id);
+    print_rollouts(&id);
     match &id.closed_loop {
         Some(Ok(runs)) => print!("\n{}", super::validate::closed_loop_said(runs)),
         Some(Err(why)) => println!("\nnot run in closed loop: {why}"),
@@ -374,26 +374,85 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
 }
 
 /// The physically consistent estimate, its validation and the exports.
-/// The exported MJCF rolled out by MuJoCo, per record: each joint's
-/// position RMS error (mrad), or why not.
-fn print_mujoco(id: &Identification) {
-    let (Some(runs), Some(Ok(rolled))) = (&id.mujoco, &id.rollouts) else {
+/// A model rolled out this many times the robot file's position error on
+/// a joint is warned of: for simulating that joint the robot file does
+/// better.
+const ROLLOUT_WORSE: f64 = 2.0;
+
+/// The rollouts, per record: each joint's position RMS error (mrad) of
+/// the estimate, the physically consistent estimate, the robot file and
+/// the export in MuJoCo, as far as each was run; a warning where an
+/// estimate rolls out over [`ROLLOUT_WORSE`]× the robot file's.
+fn print_rollouts(id: &Identification) {
+    let Some(Ok(rolled)) = &id.rollouts else {
         return;
     };
-    for (r, m) in rolled.iter().zip(runs) {
-        match m {
-            Ok(m) => println!(
-                "in MuJoCo: identified.xml on {} (windows of {:.3} s), position RMS: {}",
-                r.table.display(),
-                r.window_s,
-                m.joints
-                    .iter()
-                    .zip(&m.q_rms)
-                    .map(|(j, q)| format!("{j} {:.4} mrad", 1e3 * q))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+    for (k, r) in rolled.iter().enumerate() {
+        let stopped = |x: &robotid_report::report::Rollout| x.as_ref().ok().map(|x| x.q_rms.clone());
+        let mut columns: Vec<(&str, Option<Vec<f64>>)> = vec![
+            ("estimate", stopped(&r.estimate)),
+            (
+                "physical",
+                id.physical_rollouts
+                    .as_ref()
+                    .and_then(|p| p.get(k)?.as_ref().ok())
+                    .and_then(stopped),
             ),
-            Err(why) => eprintln!("warning: not rolled out in MuJoCo on {}: {why}", r.table.display()),
+            ("robot file", r.prior.as_ref().and_then(stopped)),
+        ];
+        if let Some(m) = id.mujoco.as_ref().map(|m| m.get(k)) {
+            match m {
+                Some(Ok(m)) => columns.push((
+                    "MuJoCo",
+                    Some(
+                        r.joints
+                            .iter()
+                            .map(|j| m.joints.iter().position(|x| x == j).map_or(f64::NAN, |i| m.q_rms[i]))
+                            .collect(),
+                    ),
+                )),
+                Some(Err(why)) => eprintln!("warning: not rolled out in MuJoCo on {}: {why}", r.table.display()),
+                None => {}
+            }
+        }
+        println!(
+            "\nrollout on {} (windows of {:.3} s), position RMS error, mrad (\"-\": not simulated; the report says why):",
+            r.table.display(),
+            r.window_s
+        );
+        let width = r.joints.iter().map(String::len).max().unwrap_or(5).max(5);
+        print!("{:width$}", "joint");
+        for (name, _) in &columns {
+            print!(" {name:>10}");
+        }
+        println!();
+        for (j, joint) in r.joints.iter().enumerate() {
+            print!("{joint:width$}");
+            for (_, values) in &columns {
+                match values {
+                    Some(v) => print!(" {:>10.4}", 1e3 * v[j]),
+                    None => print!(" {:>10}", "-"),
+                }
+            }
+            println!();
+        }
+        let file = columns[2].1.clone();
+        for (name, values) in &columns[..2] {
+            let (Some(v), Some(f)) = (values, &file) else { continue };
+            let worse: Vec<String> = r
+                .joints
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| v[j] > ROLLOUT_WORSE * f[j])
+                .map(|(j, joint)| format!("{joint} ({:.1}×)", v[j] / f[j]))
+                .collect();
+            if !worse.is_empty() {
+                eprintln!(
+                    "warning: the {} rolls out over {ROLLOUT_WORSE}× the robot file's position error on {}: for simulating these joints the robot file's model does better than the fit's (the report's Rollouts)",
+                    if *name == "estimate" { "least-squares estimate" } else { "physically consistent estimate" },
+                    worse.join(", ")
+                );
+            }
         }
     }
 }

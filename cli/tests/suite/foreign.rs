@@ -343,17 +343,17 @@ fn foreign_arms_are_identified_from_the_urdf_alone() {
 }
 
 /// Position RMS errors (mrad) of `identified.xml` rolled out by MuJoCo,
-/// as identify `--mujoco` printed them.
+/// as identify `--mujoco` printed them (the rollout table's last column).
 fn mujoco_printed(said: &str) -> Vec<f64> {
-    let line = said
-        .lines()
-        .find(|l| l.starts_with("in MuJoCo: "))
-        .unwrap_or_else(|| panic!("no MuJoCo rollout printed:\n{said}"));
-    line.split_once("position RMS: ")
-        .unwrap()
-        .1
-        .split(", ")
-        .map(|j| j.split(' ').nth(1).unwrap().parse().unwrap())
+    let mut lines = said.lines().skip_while(|l| !l.starts_with("rollout on "));
+    lines.next().unwrap_or_else(|| panic!("no rollout printed:\n{said}"));
+    let head = lines.next().unwrap();
+    assert!(head.trim_end().ends_with("MuJoCo"), "{head}");
+    lines
+        .map_while(|l| {
+            let cells: Vec<&str> = l.split_whitespace().collect();
+            (cells.len() == 5).then(|| cells[4].parse().ok()).flatten()
+        })
         .collect()
 }
 

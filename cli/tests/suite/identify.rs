@@ -277,6 +277,12 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
         "{text}"
     );
     assert!(html.contains("The estimate: not simulated: the mass matrix is not positive definite"));
+    let physical = id.physical_rollouts.as_ref().expect("rolled out");
+    assert_eq!(physical.len(), 2);
+    for p in physical {
+        let p = p.as_ref().expect("run").as_ref().expect("simulated");
+        assert!(p.q_rms.iter().all(|q| q.is_finite() && *q > 0.0), "{:?}", p.q_rms);
+    }
     // The exported URDF is the user's own: links, visuals, collisions,
     // meshes and comments as they wrote them, only the bodies and the
     // friction replaced.
