@@ -190,6 +190,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     print_physical(&id);
     print_rollouts(&id);
+    if args.mujoco && id.mujoco.is_none() {
+        eprintln!("note: nothing rolled out in MuJoCo: no MJCF was exported (no physically consistent estimate) or no record was rolled out");
+    }
     match &id.closed_loop {
         Some(Ok(runs)) => print!("\n{}", super::validate::closed_loop_said(runs)),
         Some(Err(why)) => println!("\nnot run in closed loop: {why}"),
