@@ -55,20 +55,31 @@ impl Script {
         ));
     }
 
-    pub fn report(&mut self, excitation: &[PathBuf], validation: &[PathBuf], physical: bool) {
+    /// The report as identify wrote it: rollouts always (the robot is
+    /// known), the physical estimate beside when `physical`, the export in
+    /// MuJoCo with `mujoco`, the payload with `payload`.
+    pub fn report(
+        &mut self,
+        (excitation, validation): (&[PathBuf], &[PathBuf]),
+        physical: bool,
+        mujoco: bool,
+        payload: bool,
+    ) {
         let validation = if validation.is_empty() {
             String::new()
         } else {
             format!(" --validation {}", joined(validation))
         };
-        let physical = if physical {
-            format!(" --physical parameters_physical.parquet --robot {}", self.robot)
-        } else {
-            String::new()
+        let physical = match (physical, mujoco) {
+            (false, _) => String::new(),
+            (true, false) => " --physical parameters_physical.parquet".to_string(),
+            (true, true) => " --physical parameters_physical.parquet --mujoco identified.xml".to_string(),
         };
+        let payload = if payload { " --payload payload.parquet" } else { "" };
         self.line(format!(
-            "robotid report -p parameters.parquet --excitation {}{validation}{physical} -o report.html",
-            joined(excitation)
+            "robotid report -p parameters.parquet --excitation {}{validation} --robot {} --rollout{physical}{payload} -o report.html",
+            joined(excitation),
+            self.robot
         ));
     }
 

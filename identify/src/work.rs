@@ -132,7 +132,12 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
             runs
         })
     });
-    script.report(id_tables, val_tables, fitted);
+    script.report(
+        (id_tables, val_tables),
+        fitted,
+        request.mujoco.is_some(),
+        payload.is_some(),
+    );
     std::fs::write(staged.join("identify.sh"), script.text()).map_err(io(&paths.out.join("identify.sh")))?;
     staging.commit()?;
     Ok(Identification {
