@@ -57,13 +57,15 @@ impl Script {
 
     /// The report as identify wrote it: rollouts always (the robot is
     /// known), the physical estimate beside when `physical`, the export in
-    /// MuJoCo with `mujoco`, the payload with `payload`.
+    /// MuJoCo with `mujoco`, the payload with `payload`, the closed loop
+    /// under a controller on raw tables.
     pub fn report(
         &mut self,
         (excitation, validation): (&[PathBuf], &[PathBuf]),
         physical: bool,
         mujoco: bool,
         payload: bool,
+        closed_loop: Option<(&Path, &[PathBuf])>,
     ) {
         let validation = if validation.is_empty() {
             String::new()
@@ -76,8 +78,11 @@ impl Script {
             (true, true) => " --physical parameters_physical.parquet --mujoco identified.xml".to_string(),
         };
         let payload = if payload { " --payload payload.parquet" } else { "" };
+        let closed_loop = closed_loop.map_or(String::new(), |(c, raw)| {
+            format!(" --controller {} --closed-loop {}", c.display(), joined(raw))
+        });
         self.line(format!(
-            "robotid report -p parameters.parquet --excitation {}{validation} --robot {} --rollout{physical}{payload} -o report.html",
+            "robotid report -p parameters.parquet --excitation {}{validation} --robot {} --rollout{physical}{payload}{closed_loop} -o report.html",
             joined(excitation),
             self.robot
         ));

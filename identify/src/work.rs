@@ -112,7 +112,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         robot: Some(paths.robot.clone()),
         rollout: true,
         payload: payload.as_ref().map(|_| "payload.parquet".into()),
-        closed_loop: paths.controller.clone().map(|c| (c, raw_tables)),
+        closed_loop: paths.controller.clone().map(|c| (c, raw_tables.clone())),
         mujoco: request
             .mujoco
             .clone()
@@ -137,6 +137,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         fitted,
         request.mujoco.is_some(),
         payload.is_some(),
+        paths.controller.as_deref().map(|c| (c, raw_tables.as_slice())),
     );
     std::fs::write(staged.join("identify.sh"), script.text()).map_err(io(&paths.out.join("identify.sh")))?;
     staging.commit()?;

@@ -814,3 +814,114 @@ fn identify_writes_the_same_bytes_at_any_blas_thread_count() {
     let differ: Vec<&String> = made[0].keys().filter(|k| made[0].get(*k) != made[1].get(*k)).collect();
     assert!(differ.is_empty() && made[0].len() == made[1].len(), "{differ:?}");
 }
+
+/// `identify.sh` replays what identify wrote: run from a copy of the
+/// folder (its tables, pipelines and the robot file where they were), its
+/// commands write the same bytes into every file but the two that carry
+/// identify's own verdict (`parameters.parquet`'s
+/// `robotid.identify.verdict`, the report's paragraph saying it), whose
+/// tables and pages are otherwise equal. On the simulated KUKA axis with
+/// a validation record and its declared controller.
+#[test]
+fn identify_sh_replays_what_identify_wrote() {
+    let ws = robotid_tests::workspace(&["kuka_axis3", "kuka_axis3_validation"]);
+    let w = ws.path();
+    let val = w.join("recordings/kuka_axis3_validation");
+    let out = w.join("id");
+    ok(&[
+        "identify",
+        s(&w.join("recordings/kuka_axis3/kuka_axis3.mcap")),
+        "--robot",
+        s(&w.join("robots/kuka_axis3.toml")),
+        "--validate",
+        s(&val.join("kuka_axis3_validation.mcap")),
+        "--controller",
+        s(&val.join("kuka_axis3_validation.truth.toml")),
+        "--out",
+        s(&out),
+    ]);
+    let replay = w.join("replay");
+    let copied = Command::new("cp").arg("-r").arg(&out).arg(&replay).status().unwrap();
+    assert!(copied.success());
+    let bin = Path::new(env!("CARGO_BIN_EXE_robotid")).parent().unwrap();
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    let ran = Command::new("bash")
+        .arg(replay.join("identify.sh"))
+        .env("PATH", path)
+        .output()
+        .unwrap();
+    assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
+    let script = std::fs::read_to_string(out.join("identify.sh")).unwrap();
+    assert!(
+        script.contains("--rollout") && script.contains("--closed-loop"),
+        "{script}"
+    );
+    let mut files = Vec::new();
+    let mut stack = vec![out.clone()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(d).unwrap().flatten() {
+            if e.path().is_dir() {
+                stack.push(e.path());
+            } else {
+                files.push(e.path().strip_prefix(&out).unwrap().to_path_buf());
+            }
+        }
+    }
+    assert!(files.len() > 20, "{files:?}");
+    for f in &files {
+        let (a, b) = (
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(replay.join(f)).unwrap(),
+        );
+        match f.to_str().unwrap() {
+            "parameters.parquet" => {
+                let (a, b) = (
+                    read_parquet(&out.join(f)).unwrap(),
+                    read_parquet(&replay.join(f)).unwrap(),
+                );
+                assert_eq!(a.columns(), b.columns(), "{f:?}");
+                let verdict = robotid_schemas::metadata::VERDICT;
+                let mut md = a.schema().metadata().clone();
+                assert!(md.remove(verdict).is_some());
+                md.remove(robotid_schemas::metadata::CONTENT_CRC32);
+                let mut theirs = b.schema().metadata().clone();
+                theirs.remove(robotid_schemas::metadata::CONTENT_CRC32);
+                assert_eq!(md, theirs, "{f:?}");
+            }
+            "report.html" => {
+                let (a, b) = (String::from_utf8(a).unwrap(), String::from_utf8(b).unwrap());
+                let said = a.find("<p><b>identify:</b>").expect("identify's verdict in its report");
+                let end = said + a[said..].find("</p>\n").unwrap() + "</p>\n".len();
+                let a = format!("{}{}", &a[..said], &a[end..]);
+                let at = a
+                    .bytes()
+                    .zip(b.bytes())
+                    .position(|(x, y)| x != y)
+                    .unwrap_or(a.len().min(b.len()));
+                let around = |t: &str| {
+                    t.get(at.saturating_sub(200)..(at + 200).min(t.len()))
+                        .unwrap_or("")
+                        .to_string()
+                };
+                assert!(
+                    a == b,
+                    "{f:?} differs at byte {at}:\n{}\n--- replayed ---\n{}",
+                    around(&a),
+                    around(&b)
+                );
+            }
+            "identify.sh" => {}
+            // The pipeline file named as each was given it (identify: its
+            // folder's path; the script: relative).
+            name if name.ends_with("run.json") => {
+                let json = |x: &[u8]| {
+                    let mut v: serde_json::Value = serde_json::from_slice(x).unwrap();
+                    v.as_object_mut().unwrap().remove("pipeline_file");
+                    v
+                };
+                assert_eq!(json(&a), json(&b), "{f:?}");
+            }
+            _ => assert!(a == b, "{f:?} differs"),
+        }
+    }
+}
