@@ -283,7 +283,7 @@ fn verdicts_html(
             }
         }
     }
-    h.push_str("<p class=\"note\">Each cell: the mean squared residue over the noise floor of the torque, and what it means (adequate up to 1.2; on a record that does not repeat, up to the bound its length allows for its own floor and residue, about 1.5 on 24 s at 500 Hz).</p>\n<table>\n<tr><th>joint</th>");
+    h.push_str("<p class=\"note\">Each cell: the mean squared residue over the noise floor of the torque, and what it means (adequate up to 1.2; on a record that does not repeat, up to the bound its length allows for its own floor and residue: Fisher's F at 3 σ of their degrees of freedom, about 1.6 on 24 s at 500 Hz).</p>\n<table>\n<tr><th>joint</th>");
     for (title, _) in &columns {
         h.push_str(&format!("<th>{}</th>", esc(title)));
     }
