@@ -64,7 +64,7 @@ class Identification:
     payload: Optional[pa.Table]
     payload_validation: Optional[Tuple[float, List[Tuple[str, Optional[float]]]]]
     closed_loop: Optional[pa.Table]
-    mujoco_rollout: Optional[pa.Table]
+    rollouts: Optional[pa.Table]
 
 def identify(
     recordings: Sequence[Union[str, PathLike]],
@@ -99,10 +99,11 @@ def identify(
     `[controller]` table, the `validate` records' PID), `closed_loop` is
     the estimate's and the robot file's closed-loop runs on them (a
     ValueError when they cannot be run, e.g. without reference channels;
-    the folder is written all the same). With `mujoco`, this interpreter's
-    MuJoCo rolls the exported MJCF out in the windows of robotid's
-    rollouts: `mujoco_rollout` (table, joint, q_rms in rad, qd_rms in
-    rad/s), in the report beside robotid's."""
+    the folder is written all the same). `rollouts`: the models
+    rolled out on each validation record in robotid's windows (table,
+    model: estimate, physical, robot_file, and with `mujoco` the exported
+    MJCF run by this interpreter's MuJoCo; joint, q_rms in rad, qd_rms in
+    rad/s), as the report shows them."""
 
 def payload(
     loaded: Sequence[Union[str, PathLike]],

@@ -333,10 +333,11 @@ struct Identification {
     /// records, as `robotid.closed_loop` returns them (recording, model,
     /// joint, position RMS error).
     closed_loop: Option<Py<PyAny>>,
-    /// With `mujoco`: the exported MJCF rolled out by MuJoCo on each
-    /// record robotid rolled out on, in its windows (table, joint,
-    /// position and velocity RMS error).
-    mujoco_rollout: Option<Py<PyAny>>,
+    /// The rollouts on each validation record (else the identification
+    /// records) in robotid's windows: per record, model (`estimate`,
+    /// `physical`, `robot_file`, and `mujoco` with `mujoco`: the export in
+    /// MuJoCo) and joint, the position and velocity RMS error.
+    rollouts: Option<Py<PyAny>>,
 }
 
 #[pymethods]
@@ -482,30 +483,28 @@ fn identify(
             }
             None => None,
         },
-        mujoco_rollout: mujoco_rollout(py, &id)?,
+        rollouts: rollouts(py, &id)?,
         out: id.out,
     })
 }
 
-/// identify's MuJoCo rollouts as a pyarrow table; a ValueError naming the
-/// record where MuJoCo could not run.
-fn mujoco_rollout(py: Python<'_>, id: &robotid_identify::Identification) -> PyResult<Option<Py<PyAny>>> {
-    let (Some(runs), Some(Ok(rolled))) = (&id.mujoco, &id.rollouts) else {
+/// identify's rollouts as a pyarrow table (`report::rollout_summary`);
+/// with `mujoco`, a ValueError naming the record where MuJoCo could not
+/// run.
+fn rollouts(py: Python<'_>, id: &robotid_identify::Identification) -> PyResult<Option<Py<PyAny>>> {
+    let Some(Ok(rolled)) = &id.rollouts else {
         return Ok(None);
     };
-    let mut done = Vec::new();
-    for (r, m) in rolled.iter().zip(runs) {
-        match m {
-            Ok(m) => done.push((r.table.clone(), m.clone())),
-            Err(why) => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "MuJoCo's rollout on {}: {why}",
-                    r.table.display()
-                )))
-            }
+    if let Some(runs) = &id.mujoco {
+        if let Some((r, Err(why))) = rolled.iter().zip(runs).find(|(_, m)| m.is_err()) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "MuJoCo's rollout on {}: {why}",
+                r.table.display()
+            )));
         }
     }
-    let batch = robotid_report::mujoco::table(&done).map_err(py_error)?;
+    let batch = robotid_report::report::rollout_summary(rolled, id.physical_rollouts.as_deref(), id.mujoco.as_deref())
+        .map_err(py_error)?;
     Ok(Some(table(py, batch)?.unbind()))
 }
 

@@ -110,9 +110,10 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     )
     from_identify = {r["model"]: r["q_rms"] for r in again.closed_loop.to_pylist()}
     assert from_identify == pytest.approx(by, rel=1e-9), (from_identify, by)
-    assert result.closed_loop is None and result.mujoco_rollout is None
-    in_mujoco = again.mujoco_rollout.to_pylist()
-    assert again.mujoco_rollout.schema.field("q_rms").metadata == {b"unit": b"rad"}
+    assert result.closed_loop is None
+    assert {r["model"] for r in result.rollouts.to_pylist()} == {"estimate", "physical", "robot_file"}
+    assert again.rollouts.schema.field("q_rms").metadata == {b"unit": b"rad"}
+    in_mujoco = [r for r in again.rollouts.to_pylist() if r["model"] == "mujoco"]
     assert [r["joint"] for r in in_mujoco] == ["a3"], in_mujoco
     ours = robotid.rollout(
         tmp_path / "with_controller" / "parameters.parquet",

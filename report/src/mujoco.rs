@@ -59,47 +59,6 @@ pub fn rollout(python: &Path, mjcf: &Path, kinematics: &Path, window_s: f64) -> 
     }
 }
 
-/// MuJoCo's rollouts as a table: per record (its kinematics table) and
-/// joint, the position and velocity RMS error (rad, rad/s), units in the
-/// fields' metadata.
-pub fn table(runs: &[(std::path::PathBuf, MujocoRollout)]) -> robotid::Result<arrow::array::RecordBatch> {
-    use arrow::array::{ArrayRef, Float64Array, StringArray};
-    use std::sync::Arc;
-    let rows = || {
-        runs.iter()
-            .flat_map(|(t, m)| (0..m.joints.len()).map(move |j| (t, m, j)))
-    };
-    robotid::validation::units_table(
-        "MuJoCo's rollout table",
-        vec![
-            (
-                "table",
-                "1",
-                Arc::new(StringArray::from_iter_values(
-                    rows().map(|(t, _, _)| t.display().to_string()),
-                )) as ArrayRef,
-            ),
-            (
-                "joint",
-                "1",
-                Arc::new(StringArray::from_iter_values(
-                    rows().map(|(_, m, j)| m.joints[j].clone()),
-                )),
-            ),
-            (
-                "q_rms",
-                "rad",
-                Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.q_rms[j]))),
-            ),
-            (
-                "qd_rms",
-                "rad/s",
-                Arc::new(Float64Array::from_iter_values(rows().map(|(_, m, j)| m.qd_rms[j]))),
-            ),
-        ],
-    )
-}
-
 /// The Python to run MuJoCo with when none is named: `ROBOTID_PYTHON`,
 /// else `python3`.
 pub fn default_python() -> std::path::PathBuf {

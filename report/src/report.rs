@@ -702,11 +702,79 @@ pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::Clos
 /// asked for, or nothing rolled out; Err: why not, as the page says).
 pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
 
+/// A page's rollouts as one table: per record (its kinematics table),
+/// model (`estimate`, `physical`, `robot_file`, `mujoco`: each where it
+/// was run and could be simulated) and joint, the position and velocity
+/// RMS error over the record (rad, rad/s), units in the fields' metadata.
+pub fn rollout_summary(
+    rolled: &[robotid::validation::RolledOut],
+    physical: Option<&[std::result::Result<Rollout, String>]>,
+    mujoco: Option<&MujocoRuns>,
+) -> Result<arrow::array::RecordBatch> {
+    use arrow::array::{ArrayRef, Float64Array, StringArray};
+    use std::sync::Arc;
+    let mut rows: Vec<(String, &str, String, f64, f64)> = Vec::new();
+    for (k, r) in rolled.iter().enumerate() {
+        let table = r.table.display().to_string();
+        let ours = |x: &Rollout| x.as_ref().ok().map(|x| (x.q_rms.clone(), x.qd_rms.clone()));
+        let models = [
+            ("estimate", ours(&r.estimate)),
+            (
+                "physical",
+                physical.and_then(|p| p.get(k)?.as_ref().ok()).and_then(ours),
+            ),
+            ("robot_file", r.prior.as_ref().and_then(ours)),
+        ];
+        for (model, figures) in models {
+            if let Some((q, qd)) = figures {
+                for (j, joint) in r.joints.iter().enumerate() {
+                    rows.push((table.clone(), model, joint.clone(), q[j], qd[j]));
+                }
+            }
+        }
+        if let Some(Some(Ok(m))) = mujoco.map(|m| m.get(k)) {
+            for (j, joint) in m.joints.iter().enumerate() {
+                rows.push((table.clone(), "mujoco", joint.clone(), m.q_rms[j], m.qd_rms[j]));
+            }
+        }
+    }
+    robotid::validation::units_table(
+        "the rollouts' table",
+        vec![
+            (
+                "table",
+                "1",
+                Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.0.clone()))) as ArrayRef,
+            ),
+            (
+                "model",
+                "1",
+                Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.1))),
+            ),
+            (
+                "joint",
+                "1",
+                Arc::new(StringArray::from_iter_values(rows.iter().map(|r| r.2.clone()))),
+            ),
+            (
+                "q_rms",
+                "rad",
+                Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.3))),
+            ),
+            (
+                "qd_rms",
+                "rad/s",
+                Arc::new(Float64Array::from_iter_values(rows.iter().map(|r| r.4))),
+            ),
+        ],
+    )
+}
+
 /// A rollout, or where it stopped.
 pub type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>;
 
 /// Per record, MuJoCo's rollout or why there is none.
-type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
+pub type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
 
 /// What a page simulated.
 pub struct Simulated {
