@@ -513,26 +513,25 @@ fn kinematics_of(
 }
 
 /// The parameters table at `parameters` (of `robot`, both read `within`
-/// a folder) rolled out as `rolled` was: its record, its windows (another
-/// estimate beside `rolled`'s, the robot file's not again).
+/// a folder) rolled out as each of `rolled` was: its record, its windows
+/// (another estimate beside theirs, the robot file's not again).
 pub fn rolled_alike(
     within: &Path,
     parameters: &Path,
     robot: &Path,
-    rolled: &RolledOut,
-) -> Result<std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>> {
+    rolled: &[RolledOut],
+) -> Result<Vec<std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>>> {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
     let (params, model, base) = crate::tables::identified(&within.join(robot), &within.join(parameters))?;
     let theta: Vec<f64> = params.values.iter().copied().collect();
-    let (kin, tau) = kinematics_of(&within.join(&rolled.table), &model)?;
-    Ok(rollout(
-        &mut BaseDynamics::new(&base, &theta),
-        &kin.time,
-        &kin.q,
-        &kin.qd,
-        &tau,
-        rolled.window,
-    ))
+    rolled
+        .iter()
+        .map(|r| {
+            let (kin, tau) = kinematics_of(&within.join(&r.table), &model)?;
+            let mut dynamics = BaseDynamics::new(&base, &theta);
+            Ok(rollout(&mut dynamics, &kin.time, &kin.q, &kin.qd, &tau, r.window))
+        })
+        .collect()
 }
 
 /// The parameters table at `parameters` (of `robot`) rolled out on the

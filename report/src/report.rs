@@ -869,10 +869,10 @@ pub fn write(page: &Page) -> Result<Simulated> {
     // The physical estimate rolled out in the estimate's windows.
     let physical_rolled: PhysicalRolled = match (&rolled, &page.physical, &page.robot) {
         (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
-            rolled
-                .iter()
-                .map(|r| robotid::validation::rolled_alike(&page.within, physical, robot, r).map_err(|e| e.to_string()))
-                .collect(),
+            match robotid::validation::rolled_alike(&page.within, physical, robot, rolled) {
+                Ok(runs) => runs.into_iter().map(Ok).collect(),
+                Err(e) => vec![Err(e.to_string()); rolled.len()],
+            },
         ),
         _ => None,
     };

@@ -47,17 +47,30 @@ fn bench_dynamics(c: &mut Criterion) {
     g.finish();
 }
 
+/// The UR5, its base regressor and true base parameters, and the 130 s of
+/// sample times at 200 Hz (26 000) the simulation benches run on.
+fn ur5_130s() -> (
+    dynamics::Model,
+    robotid_stages::dynamics::BaseRegressor,
+    Vec<f64>,
+    Vec<f64>,
+) {
+    use robotid_stages::dynamics::{BaseRegressor, RegressorModel};
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let regressor = BaseRegressor::new(&model, &RegressorModel::default()).unwrap();
+    let theta: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
+    let time: Vec<f64> = (0..26_000).map(|s| s as f64 / 200.0).collect();
+    (model, regressor, theta, time)
+}
+
 /// A rollout (validation by simulation error) of the UR5's true base
 /// parameters on a 130 s record at 200 Hz (26 000 samples, 0.5 s
 /// windows): the throughput is simulated samples per second; a simulated
 /// second is 200 of them.
 fn bench_rollout(c: &mut Criterion) {
-    use robotid_stages::dynamics::{rollout, BaseDynamics, BaseRegressor, RegressorModel};
-    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
-    let regressor = BaseRegressor::new(&model, &RegressorModel::default()).unwrap();
-    let theta: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
-    let (n, rate, samples) = (model.dof(), 200.0, 26_000);
-    let time: Vec<f64> = (0..samples).map(|s| s as f64 / rate).collect();
+    use robotid_stages::dynamics::{rollout, BaseDynamics};
+    let (model, regressor, theta, time) = ur5_130s();
+    let (n, samples) = (model.dof(), time.len());
     let wave = |j: usize, d: usize| -> Vec<f64> {
         let w = std::f64::consts::TAU * (0.2 + 0.05 * j as f64);
         time.iter()
@@ -85,12 +98,9 @@ fn bench_rollout(c: &mut Criterion) {
 /// the substeps the loop's fastest mode needs): simulated samples per
 /// second.
 fn bench_closed_loop(c: &mut Criterion) {
-    use robotid_stages::dynamics::{closed_loop, BaseDynamics, BaseRegressor, Pid, RegressorModel};
-    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
-    let regressor = BaseRegressor::new(&model, &RegressorModel::default()).unwrap();
-    let theta: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
-    let (n, rate, samples) = (model.dof(), 200.0, 26_000);
-    let time: Vec<f64> = (0..samples).map(|s| s as f64 / rate).collect();
+    use robotid_stages::dynamics::{closed_loop, BaseDynamics, Pid};
+    let (model, regressor, theta, time) = ur5_130s();
+    let (n, samples) = (model.dof(), time.len());
     let reference: Vec<Vec<f64>> = (0..n)
         .map(|j| {
             let w = std::f64::consts::TAU * (0.2 + 0.05 * j as f64);

@@ -44,7 +44,7 @@ pub use rollout::{
     closed_loop, noise_growth, noise_std, rollout, BaseDynamics, Channels, ClosedLoop, Pid, Rollout, Stopped, Window,
 };
 pub use torque_regressor::{
-    friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters,
+    friction_names, inertial_parameters, parameter_names, parameter_unit, regressor, standard_parameters, upper,
     with_standard_parameters, FrictionTerms, ParameterKind, RegressorTerms, Spring,
 };
 pub use urdf::{load_urdf, load_urdf_with, parse_urdf, parse_urdf_with, Locks};

@@ -51,19 +51,9 @@ impl Inertial {
     /// [mass, com x y z, Ixx Ixy Ixz Iyy Iyz Izz at the centre of mass]
     /// ([`LISTED`]), the inertia's off-diagonal the mean of its two.
     pub fn listed(&self) -> [f64; 10] {
-        let (c, i) = (self.com, (self.inertia_com + self.inertia_com.transpose()) * 0.5);
-        [
-            self.mass,
-            c.x,
-            c.y,
-            c.z,
-            i[(0, 0)],
-            i[(0, 1)],
-            i[(0, 2)],
-            i[(1, 1)],
-            i[(1, 2)],
-            i[(2, 2)],
-        ]
+        let c = self.com;
+        let [xx, xy, xz, yy, yz, zz] = super::upper(&((self.inertia_com + self.inertia_com.transpose()) * 0.5));
+        [self.mass, c.x, c.y, c.z, xx, xy, xz, yy, yz, zz]
     }
 
     /// Its ten standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M].

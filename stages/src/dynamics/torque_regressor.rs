@@ -218,18 +218,13 @@ pub fn parameter_unit(name: &str) -> &'static str {
 /// A link's 10 standard parameters [XX XY XZ YY YZ ZZ MX MY MZ M] from its
 /// inertia about the link origin, first moment and mass.
 pub fn inertial_parameters(i: &Matrix3<f64>, h: &Vector3<f64>, mass: f64) -> [f64; 10] {
-    [
-        i[(0, 0)],
-        i[(0, 1)],
-        i[(0, 2)],
-        i[(1, 1)],
-        i[(1, 2)],
-        i[(2, 2)],
-        h.x,
-        h.y,
-        h.z,
-        mass,
-    ]
+    let [xx, xy, xz, yy, yz, zz] = upper(i);
+    [xx, xy, xz, yy, yz, zz, h.x, h.y, h.z, mass]
+}
+
+/// An inertia's six values [xx xy xz yy yz zz] (its upper triangle).
+pub fn upper(i: &Matrix3<f64>) -> [f64; 6] {
+    [i[(0, 0)], i[(0, 1)], i[(0, 2)], i[(1, 1)], i[(1, 2)], i[(2, 2)]]
 }
 
 /// The model's own parameter values in [`parameter_names`] order. With
@@ -237,7 +232,7 @@ pub fn inertial_parameters(i: &Matrix3<f64>, h: &Vector3<f64>, mass: f64) -> [f6
 pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
     let mut theta = Vec::with_capacity(terms.count(model.dof()));
     for l in &model.links {
-        theta.extend(inertial_parameters(&l.inertia_origin(), &l.first_moment(), l.mass));
+        theta.extend(l.standard());
     }
     for (d, f) in model.drives.iter().zip(&model.friction) {
         if terms.rotor {
