@@ -250,11 +250,31 @@ impl Identification {
     }
 }
 
-/// Why the payload `fit` (written to `table`) is not identified: the
-/// values its records leave undetermined at its size, named (the command
-/// line exits 3 with it unless told to accept it); None when every value
-/// is determined.
-pub fn payload_undetermined(fit: &robotid_stages::estimation::payload::PayloadFit, table: &Path) -> Option<String> {
+/// Drive gains (the torque over the effort as read, relative to the robot
+/// file's constants) plausible for a robot whose file is right: outside
+/// them the robot's identified masses would be as far off the file's.
+pub const GAINS_PLAUSIBLE: (f64, f64) = (1.0 / 1.5, 1.5);
+
+/// Why the payload `fit` (written to `table`) is not identified: drive
+/// gains a known mass implies that contradict the robot file, or values
+/// its records leave undetermined at its size, named (the command line
+/// exits 3 with it unless told to accept it); None when it stands.
+pub fn payload_refused(fit: &robotid_stages::estimation::payload::PayloadFit, table: &Path) -> Option<String> {
+    let implausible: Vec<String> = fit
+        .gains
+        .iter()
+        .filter(|g| !(GAINS_PLAUSIBLE.0..=GAINS_PLAUSIBLE.1).contains(&g.scale))
+        .map(|g| format!("{} {:.3}×", g.joint, g.scale))
+        .collect();
+    if !implausible.is_empty() {
+        return Some(format!(
+            "the drives' gains the known payload mass implies contradict the robot file: {} (outside {:.2}–{:.2}×, which would make the robot's own masses as far from the robot file's); the known mass, the payload's link or the torque constants are wrong. {} holds every value all the same; to take it: accept inadequate (--accept-inadequate)",
+            implausible.join(", "),
+            GAINS_PLAUSIBLE.0,
+            GAINS_PLAUSIBLE.1,
+            table.display()
+        ));
+    }
     (!fit.undetermined.is_empty()).then(|| {
         format!(
             "the payload is not identified: the records do not determine {} at its size (move the wrist more, or longer). {} holds every value with its interval all the same; to take it: accept inadequate (--accept-inadequate)",

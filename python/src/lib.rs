@@ -453,7 +453,7 @@ fn identify(
         .payload
         .as_deref()
         .filter(|_| !accept_inadequate)
-        .and_then(|fit| robotid_identify::payload_undetermined(fit, &id.path("payload.parquet")));
+        .and_then(|fit| robotid_identify::payload_refused(fit, &id.path("payload.parquet")));
     Ok(Identification {
         identified: !id.is_refused() && payload_refused.is_none(),
         refused: id.refused.clone().or(payload_refused),
@@ -540,7 +540,7 @@ fn payload<'py>(
         .detach(|| robotid_identify::payload_against_parameters(&request, &robot, &parameters, &out, &robotid::Quiet))
         .map_err(py_identify_error)?;
     let table = out.join("payload.parquet");
-    if let Some(why) = robotid_identify::payload_undetermined(&fit, &table).filter(|_| !accept_inadequate) {
+    if let Some(why) = robotid_identify::payload_refused(&fit, &table).filter(|_| !accept_inadequate) {
         return Err(RobotidError::new_err(why));
     }
     Ok(written(py, &out.join("payload.parquet"))?.into_bound(py))

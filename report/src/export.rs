@@ -87,6 +87,13 @@ pub enum ExportError {
     Column { parameters: PathBuf, column: String },
     #[error("{0} draw(s) mapped to bodies: at least 2 are needed for a spread")]
     Draws(usize),
+    #[error("{draws} draws: over the ceiling of {ceiling}{with_files} (each is a bounded fit{files_cost}); nothing was drawn: draw fewer, or run several seeds into separate folders")]
+    DrawsCeiling {
+        draws: u64,
+        ceiling: usize,
+        with_files: &'static str,
+        files_cost: String,
+    },
     #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
     Patch { robot: PathBuf, problem: String },
     #[error("--mjcf {}: the identified dynamics cannot be written into it: {problem}", mjcf.display())]
@@ -207,6 +214,21 @@ pub fn export(args: &Export) -> Result<Exported> {
     if let Some(w) = args.prior_weight.filter(|w| !(*w > 0.0 && w.is_finite())) {
         return Err(ExportError::PriorWeight(w));
     }
+    let stem = stem(&args.out, &args.formats);
+    let writes: Vec<PathBuf> = dedup(&args.formats)
+        .iter()
+        .flat_map(|f| match f {
+            Format::Urdf => &["urdf"][..],
+            Format::Mjcf => &["xml"][..],
+            Format::Sidecar => &["sidecar.json", "sidecar.parquet"][..],
+        })
+        .map(|ext| args.within.join(with_ext(&stem, ext)))
+        .collect();
+    let reads: Vec<PathBuf> = [args.robot.clone(), args.within.join(&args.parameters)]
+        .into_iter()
+        .chain(args.mjcf.clone())
+        .collect();
+    robotid_stages::formats::refuse_inputs(writes.iter().map(PathBuf::as_path), reads.iter().map(PathBuf::as_path))?;
     let (params, base) = physical_table(&args.robot, &args.within.join(&args.parameters), &args.parameters)?;
     let map = base.map().ok_or(ExportError::Decoupled)?;
     let names = parameter_names(&base.model, base.terms);
@@ -241,7 +263,6 @@ pub fn export(args: &Export) -> Result<Exported> {
         true => mjcf_of(args, &identified, &note, &mut warnings)?,
         false => (String::new(), None),
     };
-    let stem = stem(&args.out, &args.formats);
     // Everything is made before anything is written.
     let mut files: Vec<(PathBuf, Output)> = Vec::new();
     for f in dedup(&args.formats) {

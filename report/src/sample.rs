@@ -279,6 +279,39 @@ impl Drawing {
     }
 }
 
+/// The most draws one `sample` makes: each is a bounded fit (about 1–3 ms
+/// on a 7-joint arm, one core), and all are held to compute their spread,
+/// so 100 000 take a few minutes and well under 1 GB.
+pub const MAX_DRAWS: usize = 100_000;
+/// The most draws written as one model file each: a URDF or MJCF is
+/// 10–60 kB, so 10 000 of them are up to about 600 MB per format.
+pub const MAX_FILE_DRAWS: usize = 10_000;
+
+/// Refuses, before any work, a count of draws over the ceiling, with the
+/// figure it would cost.
+pub fn draws_within_ceiling(draws: u64, files: bool) -> Result<()> {
+    let (ceiling, with_files) = match files {
+        false => (MAX_DRAWS, ""),
+        true => (MAX_FILE_DRAWS, " with a model file per draw"),
+    };
+    if draws > ceiling as u64 {
+        let files_cost = match files {
+            true => format!(
+                " and a file of up to 60 kB: about {:.1} GB per format",
+                draws as f64 * 60e3 / 1e9
+            ),
+            false => String::new(),
+        };
+        return Err(ExportError::DrawsCeiling {
+            draws,
+            ceiling,
+            with_files,
+            files_cost,
+        });
+    }
+    Ok(())
+}
+
 /// Draws `args.draws` parameter sets from the estimate's distribution,
 /// maps each to bodies, and writes `samples.parquet` (one row per draw
 /// and quantity), `randomization.json` and `.yaml` (each quantity's value,
@@ -287,6 +320,7 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
     if args.draws < 2 {
         return Err(ExportError::Draws(args.draws));
     }
+    draws_within_ceiling(args.draws as u64, !args.formats.is_empty())?;
     let drawing = Drawing::of(args)?;
     let identified = with_standard_parameters(&drawing.base.model, drawing.base.terms, &drawing.own);
     // Drawn around the estimate's own bodies (the exported model) with the

@@ -47,6 +47,14 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let inputs: Vec<&std::path::Path> = args
+        .regressors
+        .iter()
+        .chain(&args.known)
+        .chain(&args.robot)
+        .map(PathBuf::as_path)
+        .collect();
+    robotid_stages::formats::refuse_inputs([args.out.as_path()], inputs)?;
     let out = if args.physical {
         crate::progress::spinning("physical fit: semidefinite programs", || estimate(&args, None))?
     } else {

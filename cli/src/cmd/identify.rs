@@ -94,7 +94,7 @@ pub struct Args {
     /// With `--payload-on`: the payload's mass, kg, known: the drives'
     /// gains are identified too (each joint's torque over its effort as
     /// read).
-    #[arg(long, value_name = "KG", requires = "payload_on")]
+    #[arg(long, value_name = "KG", requires = "payload_on", conflicts_with = "parameters")]
     pub known_payload_mass: Option<f64>,
     /// With `--payload-on`: where the payload's mass can be, an ellipsoid
     /// in the link's frame: centre x,y,z and semi-axes a,b,c, m. The
@@ -213,7 +213,7 @@ fn payload_determined(
     fit: &robotid_stages::estimation::payload::PayloadFit,
     table: &std::path::Path,
 ) -> anyhow::Result<()> {
-    match robotid_identify::payload_undetermined(fit, table) {
+    match robotid_identify::payload_refused(fit, table) {
         Some(why) => Err(Inadequate(why).into()),
         None => Ok(()),
     }

@@ -23,6 +23,10 @@ pub struct Args {
 /// τ = Φ_base(q, q̇, q̈)·θ̂, the base regressor rebuilt from the robot and
 /// the regressor configuration the parameters carry.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    robotid_stages::formats::refuse_inputs(
+        [args.out.as_path()],
+        [args.robot.as_path(), &args.parameters, &args.kinematics],
+    )?;
     let (params, model, base) = robotid::tables::identified(&args.robot, &args.parameters)?;
     let batch = read_parquet(&args.kinematics)?;
     let mut kin =

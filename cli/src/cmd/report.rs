@@ -52,6 +52,19 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let inputs: Vec<&std::path::Path> = [&args.parameters]
+        .into_iter()
+        .chain(&args.excitation)
+        .chain(&args.validation)
+        .chain(&args.physical)
+        .chain(&args.robot)
+        .chain(&args.closed_loop)
+        .chain(&args.controller)
+        .chain(&args.payload)
+        .chain(&args.mujoco)
+        .map(PathBuf::as_path)
+        .collect();
+    robotid_stages::formats::refuse_inputs([args.out.as_path()], inputs)?;
     write(&Page {
         parameters: args.parameters,
         excitation: args.excitation,

@@ -482,3 +482,236 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         assert_eq!(&bytes_of(d), before, "{}: an input changed", d.display());
     }
 }
+
+/// Round 5 of the fault campaign: names and counts an attacker chooses.
+/// Each class at least five variants, each refused before any work (in
+/// seconds), naming what is wrong, with nothing written outside the output
+/// folder and no input changed: a simulation's recording name that leaves
+/// `--out`; an output that is one of the inputs (by its name, a link, a
+/// hard link or `..`); `sample` counts past their ceiling; XML nested too
+/// deep; numbers that are not finite in a user's URDF; and a flag another
+/// makes meaningless.
+#[test]
+fn round_five_names_and_counts_are_refused_before_work() {
+    let ws = workspace(&["kuka_axis3"]);
+    let w = ws.path();
+    let s = |p: &Path| p.display().to_string();
+    let out = w.join("out");
+    let pipeline = w.join("pipelines/kuka_axis3.toml");
+    let (ok, text, _) = run(&["run".into(), s(&pipeline), "--out".into(), s(&out)]);
+    assert!(ok, "{text}");
+    let params = out.join("parameters.parquet");
+    let robot = w.join("robots/kuka_axis3.toml");
+    let urdf = w.join("robots/ur5.urdf");
+    let mjcf = w.join("robots/arm_gripper.xml");
+    let mut cases = Vec::new();
+    let args = |a: &[&str]| -> Vec<String> { a.iter().map(|x| x.to_string()).collect() };
+    // A simulation's `[output] name` that would leave `--out`.
+    let victim = w.join("victim");
+    std::fs::create_dir_all(&victim).unwrap();
+    std::fs::write(victim.join("keep.mcap"), b"the user's").unwrap();
+    let sim = w.join("sims/kuka_axis3.toml");
+    for (k, name) in [
+        s(&victim.join("keep")),
+        "../../victim/keep".to_string(),
+        "../keep".to_string(),
+        "sub/keep".to_string(),
+        "..".to_string(),
+        String::new(),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let f = w.join(format!("sims/name_{k}.toml"));
+        edit(&sim, &f, &[("name = \"kuka_axis3\"", &format!("name = {name:?}"))]);
+        cases.push(Case {
+            name: "a recording name outside --out",
+            args: vec!["simulate".into(), s(&f), "--out".into(), s(&w.join("simout"))],
+            says: vec![format!("name_{k}.toml"), "output.name".into()],
+        });
+    }
+    // Outputs that are inputs.
+    std::os::unix::fs::symlink(&urdf, w.join("robots/link.urdf")).unwrap();
+    std::fs::hard_link(&urdf, w.join("robots/hard.urdf")).unwrap();
+    for (o, extra) in [
+        (s(&urdf), vec![]),
+        (s(&w.join("robots/link.urdf")), vec![]),
+        (s(&w.join("robots/hard.urdf")), vec![]),
+        (s(&w.join("robots/../robots/ur5.urdf")), vec![]),
+        (s(&mjcf), vec!["--format", "mjcf", "--mjcf", mjcf.to_str().unwrap()]),
+    ] {
+        let mut a = args(&[
+            "export",
+            "--robot",
+            urdf.to_str().unwrap(),
+            "-p",
+            params.to_str().unwrap(),
+            "-o",
+            &o,
+        ]);
+        if extra.is_empty() {
+            a.extend(args(&["--format", "urdf"]));
+        }
+        a.extend(args(&extra));
+        cases.push(Case {
+            name: "export over its input",
+            args: a,
+            says: vec!["is the input".into()],
+        });
+    }
+    let regressor = out.join("kuka_axis3/regressor.parquet");
+    let kinematics = out.join("kuka_axis3/kinematics.parquet");
+    for a in [
+        args(&[
+            "estimate",
+            regressor.to_str().unwrap(),
+            "-o",
+            regressor.to_str().unwrap(),
+        ]),
+        args(&[
+            "predict",
+            "--robot",
+            robot.to_str().unwrap(),
+            "-p",
+            params.to_str().unwrap(),
+            kinematics.to_str().unwrap(),
+            "-o",
+            kinematics.to_str().unwrap(),
+        ]),
+        args(&[
+            "report",
+            "-p",
+            params.to_str().unwrap(),
+            "--excitation",
+            regressor.to_str().unwrap(),
+            "-o",
+            params.to_str().unwrap(),
+        ]),
+    ] {
+        cases.push(Case {
+            name: "a table written over its input",
+            args: a,
+            says: vec!["is the input".into()],
+        });
+    }
+    // `sample` counts past their ceiling, refused before the table is read.
+    for (n, format) in [
+        ("18446744073709551615", None),
+        ("4294967296", None),
+        ("10000000", None),
+        ("100001", None),
+        ("100000", Some("urdf")),
+        ("20000", Some("urdf,mjcf")),
+    ] {
+        let mut a = args(&[
+            "sample",
+            n,
+            "--robot",
+            robot.to_str().unwrap(),
+            "-p",
+            params.to_str().unwrap(),
+            "-o",
+            w.join("samples").to_str().unwrap(),
+        ]);
+        if let Some(f) = format {
+            a.extend(args(&["--format", f]));
+        }
+        cases.push(Case {
+            name: "sample past its ceiling",
+            args: a,
+            says: vec![format!("{n} draws"), "ceiling".into()],
+        });
+    }
+    // XML nested deeper than any robot's, and numbers that are not finite.
+    let good = std::fs::read_to_string(&urdf).unwrap();
+    let xml_cases = [
+        (
+            "deep.urdf",
+            good.replacen("<robot", &format!("{}<robot", "<x>".repeat(200_000)), 1),
+            "nested over",
+        ),
+        (
+            "deep_link.urdf",
+            good.replacen(
+                "</robot>",
+                &format!(
+                    "<link name=\"deep\">{}</link></robot>",
+                    "<a>".repeat(600) + &"</a>".repeat(600)
+                ),
+                1,
+            ),
+            "nested over",
+        ),
+        (
+            "nan_origin.urdf",
+            good.replacen("<origin xyz=\"0 0 0.089159\"", "<origin xyz=\"nan 0 0.089159\"", 1),
+            "`xyz`",
+        ),
+        (
+            "inf_mass.urdf",
+            good.replacen("<mass value=\"3.7\"/>", "<mass value=\"inf\"/>", 1),
+            "`value`",
+        ),
+        (
+            "nan_inertia.urdf",
+            good.replacen("ixx=\"0.0149723583\"", "ixx=\"NaN\"", 1),
+            "`ixx`",
+        ),
+        (
+            "huge.urdf",
+            good.replacen("<mass value=\"3.7\"/>", "<mass value=\"1e400\"/>", 1),
+            "not finite",
+        ),
+    ];
+    for (name, text, says) in xml_cases {
+        assert_ne!(text, good, "{name}: the edit took");
+        let f = w.join("robots").join(name);
+        std::fs::write(&f, text).unwrap();
+        cases.push(Case {
+            name: "a URDF a parser must not trust",
+            args: args(&["model", "inspect", f.to_str().unwrap()]),
+            says: vec![name.into(), says.into()],
+        });
+    }
+    // A flag another makes meaningless is an error, not ignored.
+    cases.push(Case {
+        name: "--known-payload-mass with --parameters",
+        args: args(&[
+            "identify",
+            regressor.to_str().unwrap(),
+            "--robot",
+            robot.to_str().unwrap(),
+            "--payload-on",
+            "a3",
+            "--parameters",
+            params.to_str().unwrap(),
+            "--known-payload-mass",
+            "30",
+        ]),
+        says: vec!["--known-payload-mass".into(), "--parameters".into()],
+    });
+    let before_out = bytes_of(&out);
+    let before_all = bytes_of(w);
+    for c in &cases {
+        let (ok, text, took) = run(&c.args);
+        println!(
+            "{:<40} {:>6.2} s  {}",
+            c.name,
+            took.as_secs_f64(),
+            text.lines().last().unwrap_or("")
+        );
+        assert!(!ok, "{}: exit 0\n{text}", c.name);
+        assert!(!text.contains("panicked"), "{}: panic\n{text}", c.name);
+        for needle in &c.says {
+            assert!(text.contains(needle.as_str()), "{}: no `{needle}` in\n{text}", c.name);
+        }
+        assert!(took < Duration::from_secs(10), "{}: took {took:?}", c.name);
+        assert_eq!(bytes_of(&out), before_out, "{}: the output folder changed", c.name);
+    }
+    // Nothing anywhere in the workspace changed (the refused simulations'
+    // `--out` aside: made empty at most), the user's file kept.
+    let mut after = bytes_of(w);
+    after.retain(|k, _| !k.starts_with("simout"));
+    assert_eq!(after, before_all, "a file changed or appeared");
+    assert_eq!(std::fs::read(victim.join("keep.mcap")).unwrap(), b"the user's");
+}

@@ -358,7 +358,7 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
         "{named:?}"
     );
     // What refuses it, from the command line and from Python alike.
-    let why = robotid_identify::payload_undetermined(fit, Path::new("payload.parquet")).expect("refused");
+    let why = robotid_identify::payload_refused(fit, Path::new("payload.parquet")).expect("refused");
     assert!(why.contains(named[0]) && why.contains("payload.parquet"), "{why}");
     // The loaded record, its link and size, against the robot `from`.
     let path = |f: &str| dir.path().join(f).to_str().unwrap().to_string();

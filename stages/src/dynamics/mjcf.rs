@@ -475,7 +475,7 @@ impl<'a> Reader<'a> {
 impl Mjcf {
     /// The MJCF `text` read.
     pub fn read(text: &str) -> Result<Mjcf, String> {
-        let doc = roxmltree::Document::parse(text).map_err(|e| format!("invalid XML: {e}"))?;
+        let doc = super::xml::parse(text)?;
         let root = doc.root_element();
         if !root.has_tag_name("mujoco") {
             return Err(format!("not an MJCF: its root element is <{}>", root.tag_name().name()));

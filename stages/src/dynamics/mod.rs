@@ -25,6 +25,7 @@ mod torque_regressor;
 mod urdf;
 mod urdf_export;
 mod urdf_patch;
+pub mod xml;
 
 pub use agreement::{torque_agreement, Agreement};
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};

@@ -320,7 +320,7 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
         path: path.to_path_buf(),
         msg,
     };
-    let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(format!("invalid XML: {e}")))?;
+    let (text, warnings) = drop_duplicate_origins(text).map_err(err)?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
     let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
     let children = children_of(&robot);
@@ -502,8 +502,8 @@ fn lump_fixed<'a>(
 /// Some xacro-generated URDFs carry two `<origin>` elements in one joint;
 /// ROS's parser (urdfdom) takes the first. Do the same: cut the later ones
 /// out of the text and say so.
-fn drop_duplicate_origins(text: &str) -> Result<(String, Vec<String>), roxmltree::Error> {
-    let doc = roxmltree::Document::parse(text)?;
+fn drop_duplicate_origins(text: &str) -> Result<(String, Vec<String>), String> {
+    let doc = super::xml::parse(text)?;
     let mut cuts = Vec::new();
     let mut warnings = Vec::new();
     for joint in doc.descendants().filter(|n| n.has_tag_name("joint")) {

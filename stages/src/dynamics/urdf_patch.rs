@@ -115,7 +115,7 @@ impl<'a, 'i> Tree<'a, 'i> {
 
 impl UrdfPatch {
     pub fn new(text: String, path: &Path, model: &Model) -> Result<UrdfPatch, String> {
-        let doc = roxmltree::Document::parse(&text).map_err(|e| format!("invalid XML: {e}"))?;
+        let doc = super::xml::parse(&text)?;
         let tree = Tree::of(&doc, model)?;
         // The carried links' share of each body, at their locked positions:
         // the robot file's bodies with and without their inertials.
@@ -136,7 +136,7 @@ impl UrdfPatch {
     /// what was done to each link.
     pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
         let text = self.text.as_str();
-        let doc = roxmltree::Document::parse(text).map_err(|e| format!("invalid XML: {e}"))?;
+        let doc = super::xml::parse(text)?;
         let tree = Tree::of(&doc, model)?;
         let mut edits: Vec<(Range<usize>, String)> = Vec::new();
         let mut patched = Vec::new();

@@ -603,7 +603,7 @@ pub fn urdf_with_payload(
     fit: &PayloadFit,
 ) -> std::result::Result<String, String> {
     let (body, from) = exported(fit)?;
-    let doc = roxmltree::Document::parse(urdf).map_err(|e| format!("the URDF: {e}"))?;
+    let doc = crate::dynamics::xml::parse(urdf).map_err(|e| format!("the URDF: {e}"))?;
     let has = |name: &str| {
         doc.descendants()
             .any(|n| n.has_tag_name("link") && n.attribute("name") == Some(name))

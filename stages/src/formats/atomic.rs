@@ -37,9 +37,76 @@ pub fn write_atomic(path: &Path, fill: impl FnOnce(&mut BufWriter<File>) -> Resu
     result
 }
 
+/// Refuses, before any work, to write an output that is one of the
+/// inputs: the same path after links are resolved, or the same file by
+/// another name (a hard link). `export --robot mine.urdf -o mine.urdf`
+/// would otherwise replace the user's robot file with its own patch.
+pub fn refuse_inputs<'a>(
+    outputs: impl IntoIterator<Item = &'a Path>,
+    inputs: impl IntoIterator<Item = &'a Path> + Clone,
+) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let resolved = |p: &Path| -> std::path::PathBuf {
+        if let Ok(c) = std::fs::canonicalize(p) {
+            return c;
+        }
+        // Not there yet: its folder resolved, its name kept.
+        let dir = p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        match (std::fs::canonicalize(dir), p.file_name()) {
+            (Ok(d), Some(n)) => d.join(n),
+            _ => p.to_path_buf(),
+        }
+    };
+    let identity = |p: &Path| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+    for out in outputs {
+        let (o, o_id) = (resolved(out), identity(out));
+        for input in inputs.clone() {
+            if o == resolved(input) || (o_id.is_some() && o_id == identity(input)) {
+                return Err(Error::Config {
+                    path: out.to_path_buf(),
+                    msg: format!(
+                        "is the input {}: writing it would replace what it was made from; give another output path",
+                        input.display()
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_output_that_is_an_input_is_refused_by_any_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let input = d.join("mine.urdf");
+        std::fs::write(&input, b"<robot/>").unwrap();
+        std::os::unix::fs::symlink(&input, d.join("link.urdf")).unwrap();
+        std::fs::hard_link(&input, d.join("hard.urdf")).unwrap();
+        std::fs::create_dir(d.join("sub")).unwrap();
+        let same = [
+            input.clone(),
+            d.join("link.urdf"),
+            d.join("hard.urdf"),
+            d.join("sub/../mine.urdf"),
+            d.join("./mine.urdf"),
+        ];
+        for out in &same {
+            let e = refuse_inputs([out.as_path()], [input.as_path()]).unwrap_err();
+            assert!(e.to_string().contains("is the input"), "{e}");
+        }
+        for out in [d.join("other.urdf"), d.join("sub/mine.urdf")] {
+            refuse_inputs([out.as_path()], [input.as_path()]).unwrap();
+        }
+        assert_eq!(std::fs::read(&input).unwrap(), b"<robot/>");
+    }
 
     #[test]
     fn failed_write_leaves_nothing() {

@@ -10,7 +10,7 @@ pub mod mcap;
 pub mod parquet;
 mod thrift;
 
-pub use atomic::write_atomic;
+pub use atomic::{refuse_inputs, write_atomic};
 
 use sha2::{Digest, Sha256};
 

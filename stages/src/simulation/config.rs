@@ -237,6 +237,21 @@ impl PerJoint {
 /// a 6-joint arm).
 pub const MAX_SAMPLES: f64 = 5e7;
 
+/// Why `name` cannot name files inside the output folder, if it cannot:
+/// it comes from a file the user may not have written, and a separator,
+/// `..` or an absolute path would write outside that folder.
+pub fn plain_name_problem(name: &str) -> Option<&'static str> {
+    if name.is_empty() || name == "." || name == ".." {
+        Some("must be a file name (it is empty, `.` or `..`)")
+    } else if name.contains(['/', '\\', '\0']) {
+        Some("must be a plain file name, without a path separator: the recordings go into the output folder")
+    } else if name.len() > 200 {
+        Some("is longer than 200 bytes")
+    } else {
+        None
+    }
+}
+
 impl SimConfig {
     /// Reads and checks a simulation file; the robot path is made absolute
     /// against the file's folder.
@@ -353,6 +368,9 @@ impl SimConfig {
         }
         if self.output.formats.is_empty() {
             errs.push(Problem::new("output.formats", "is empty"));
+        }
+        if let Some(why) = plain_name_problem(&self.output.name) {
+            errs.push(Problem::new("output.name", why));
         }
         errs
     }

@@ -46,6 +46,12 @@ pub fn write_simulation(
     sim: &Simulation,
     model: &Model,
 ) -> Result<WrittenFiles> {
+    if let Some(why) = super::config::plain_name_problem(name) {
+        return Err(Error::Config {
+            path: dir.join(name),
+            msg: format!("the recording name `{name}` {why}"),
+        });
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut out = WrittenFiles::default();
     for f in formats {

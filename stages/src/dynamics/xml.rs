@@ -1,0 +1,169 @@
+//! A user's URDF or MJCF read as XML with the limits a hostile file needs:
+//! nesting no deeper than a robot's (the readers walk bodies recursively,
+//! and 200 000 nested elements overflowed the stack), a bounded node count,
+//! and no number that is not finite (`pos="nan 0 0.39"` passed the
+//! kinematics check and came out as `NaN` inertials in the export).
+
+/// The deepest nesting read. A robot's MJCF nests a body per joint inside
+/// a handful of wrappers: a 50-joint chain is about 60 deep.
+pub const MAX_DEPTH: usize = 512;
+/// The most XML nodes read (a large robot's URDF or MJCF has a few
+/// thousand; meshes are separate files).
+pub const MAX_NODES: u32 = 2_000_000;
+
+/// Attributes that hold names, not numbers: a link called `inf` is
+/// allowed.
+const NAMES: [&str; 16] = [
+    "name",
+    "link",
+    "joint",
+    "class",
+    "childclass",
+    "body",
+    "site",
+    "mesh",
+    "material",
+    "texture",
+    "file",
+    "filename",
+    "type",
+    "parent",
+    "child",
+    "version",
+];
+
+/// `text` parsed, or why not: too deep (the depth and the line),
+/// malformed, too many nodes, or a non-finite number (the element, its
+/// line and the attribute).
+pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, String> {
+    depth_within(text)?;
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: false,
+        nodes_limit: MAX_NODES,
+    };
+    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| format!("invalid XML: {e}"))?;
+    for node in doc.descendants().filter(roxmltree::Node::is_element) {
+        for a in node.attributes() {
+            if NAMES.contains(&a.name()) {
+                continue;
+            }
+            let tokens: Vec<Option<f64>> = a.value().split_whitespace().map(|t| t.parse::<f64>().ok()).collect();
+            let numeric = !tokens.is_empty() && tokens.iter().all(Option::is_some);
+            if numeric && tokens.iter().flatten().any(|x| !x.is_finite()) {
+                let at = doc.text_pos_at(node.range().start);
+                let named = node
+                    .attribute("name")
+                    .map(|n| format!(" name=\"{n}\""))
+                    .unwrap_or_default();
+                return Err(format!(
+                    "<{}{named}> (line {}), attribute `{}`: `{}` holds a number that is not finite",
+                    node.tag_name().name(),
+                    at.row,
+                    a.name(),
+                    a.value()
+                ));
+            }
+        }
+    }
+    Ok(doc)
+}
+
+/// Refuses nesting deeper than [`MAX_DEPTH`] by one pass over the bytes,
+/// before any parser recurses into it.
+fn depth_within(text: &str) -> Result<(), String> {
+    let b = text.as_bytes();
+    let (mut depth, mut line, mut i) = (0usize, 1usize, 0usize);
+    let skip_to = |from: usize, end: &[u8]| -> usize {
+        b[from..]
+            .windows(end.len())
+            .position(|w| w == end)
+            .map_or(b.len(), |p| from + p + end.len())
+    };
+    while i < b.len() {
+        match b[i] {
+            b'\n' => {
+                line += 1;
+                i += 1;
+            }
+            b'<' if b[i..].starts_with(b"<!--") => i = skip_to(i, b"-->"),
+            b'<' if b[i..].starts_with(b"<![CDATA[") => i = skip_to(i, b"]]>"),
+            b'<' if b[i..].starts_with(b"<?") => i = skip_to(i, b"?>"),
+            b'<' if b[i..].starts_with(b"<!") => i = skip_to(i, b">"),
+            b'<' if b[i..].starts_with(b"</") => {
+                depth = depth.saturating_sub(1);
+                i = skip_to(i, b">");
+            }
+            b'<' => {
+                // To the tag's end, past quoted attribute values.
+                let mut j = i + 1;
+                let mut quote = None;
+                while j < b.len() {
+                    match (quote, b[j]) {
+                        (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                        (Some(q), c) if c == q => quote = None,
+                        (None, b'>') => break,
+                        (_, b'\n') => line += 1,
+                        _ => {}
+                    }
+                    j += 1;
+                }
+                if j > 0 && j < b.len() && b[j - 1] != b'/' {
+                    depth += 1;
+                    if depth > MAX_DEPTH {
+                        return Err(format!(
+                            "elements nested over {MAX_DEPTH} deep (line {line}): no robot's file is; refused before reading it"
+                        ));
+                    }
+                }
+                i = j + 1;
+            }
+            _ => i += 1,
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn depth_is_counted_as_a_parser_would() {
+        let nested = |n: usize| format!("{}{}", "<a x='>'>".repeat(n), "</a>".repeat(n));
+        assert!(parse(&nested(MAX_DEPTH)).is_ok());
+        let e = parse(&nested(MAX_DEPTH + 1)).unwrap_err();
+        assert!(e.contains("nested over 512"), "{e}");
+        let deep = format!("<robot>{}</robot>", nested(200_000));
+        assert!(parse(&deep).unwrap_err().contains("nested over"));
+        // Empty elements, comments, CDATA and declarations do not nest.
+        let flat = format!(
+            "<?xml version='1.0'?><!DOCTYPE r><r>{}<!-- <a> --><![CDATA[<a>]]></r>",
+            "<b/><c y=\"/\"/>".repeat(10_000)
+        );
+        assert!(depth_within(&flat).is_ok());
+        assert_eq!(
+            roxmltree::Document::parse(&nested(300)).unwrap().descendants().count(),
+            301
+        );
+    }
+
+    #[test]
+    fn non_finite_numbers_are_refused_naming_element_and_attribute() {
+        for (value, attr) in [
+            ("nan 0 0.39", "pos"),
+            ("0 0 inf", "pos"),
+            ("-Infinity", "mass"),
+            ("1e400", "mass"),
+            ("NaN", "mass"),
+        ] {
+            let text = format!("<mujoco>\n<worldbody>\n<body name=\"b1\" {attr}=\"{value}\"/></worldbody></mujoco>");
+            let e = parse(&text).unwrap_err();
+            assert!(
+                e.contains("<body name=\"b1\"> (line 3)") && e.contains(&format!("`{attr}`")),
+                "{e}"
+            );
+        }
+        // Names are names, whatever they spell; finite numbers pass.
+        parse("<robot name='inf'><link name='nan'/><joint name='Infinity' type='revolute'><origin xyz='0 1e300 -2'/></joint></robot>").unwrap();
+    }
+}
