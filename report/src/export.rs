@@ -679,15 +679,16 @@ struct Sidecar<'a> {
 
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
 /// symmetric friction pair goes into both (`friction`/`frictionloss`,
-/// `damping`); asymmetric coefficients only as their means; offsets,
-/// springs and the URDF's rotor inertia nowhere.
+/// `damping`); asymmetric coefficients only as their means; Stribeck's
+/// static excess, offsets, springs and the URDF's rotor inertia nowhere
+/// (the sidecar and the robotid comments carry them).
 fn representable(name: &str) -> (bool, bool) {
     use robotid_stages::dynamics::ParameterKind as K;
     match K::of(name) {
         K::Inertia | K::FirstMoment | K::Mass => (true, true),
         K::Viscous { one_sided } | K::Coulomb { one_sided } => (!one_sided, !one_sided),
         K::RotorInertia => (false, true),
-        K::JointInertia | K::Gravity | K::Offset | K::Spring | K::Unknown => (false, false),
+        K::Static { .. } | K::JointInertia | K::Gravity | K::Offset | K::Spring | K::Unknown => (false, false),
     }
 }
 
@@ -746,6 +747,12 @@ impl Sidecar<'_> {
         if f.transition > 0.0 {
             lost_both.push("the Coulomb transition tanh(q̇/v): URDF and MuJoCo switch at q̇ = 0");
         }
+        let s = &f.stribeck;
+        if s.velocity > 0.0 && (s.excess_pos != 0.0 || s.excess_neg != 0.0) {
+            lost_both.push(
+                "Stribeck's static excess fading with speed: the formats hold Coulomb's friction alone (MuJoCo's frictionloss is constant in speed)",
+            );
+        }
         if self.terms.offset {
             lost_both.push("the torque offset");
         }
@@ -758,6 +765,7 @@ impl Sidecar<'_> {
             "viscous_pos": f.viscous_pos, "viscous_neg": f.viscous_neg,
             "coulomb_pos": f.coulomb_pos, "coulomb_neg": f.coulomb_neg,
             "coulomb_transition_rad_s": f.transition, "offset": f.offset,
+            "stribeck": {"excess_pos": s.excess_pos, "excess_neg": s.excess_neg, "velocity_rad_s": s.velocity, "exponent": s.exponent},
             "reflected_rotor_inertia": ia,
             "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
             "mjcf": {"armature": ia, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},

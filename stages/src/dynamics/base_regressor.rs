@@ -5,6 +5,7 @@
 //! evaluated at any number of states (tables, predictions, ML Jacobians,
 //! excitation design).
 
+use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
@@ -14,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     base_parameters, decoupled_names, decoupled_regressor, regressor, Batched, Data, FrictionTerms, Model,
-    RegressorTerms, Spring, LANES,
+    RegressorTerms, Spring, Stribeck, LANES,
 };
 use crate::{Error, Result};
 
@@ -65,6 +66,21 @@ pub struct RegressorModel {
     /// payload changes that link's ten parameters, and records with and
     /// without it tell the change apart (`estimation::payload`).
     pub payload: bool,
+    /// With `friction = "stribeck"` or `"stribeck_asymmetric"`: each
+    /// joint's Stribeck fade, by joint name. A joint not named has no
+    /// static excess (its column is zero, and the base leaves it out).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub stribeck: BTreeMap<String, StribeckShape>,
+}
+
+/// How a joint's static friction fades with speed: exp(−(|q̇|/vs)^δ).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StribeckShape {
+    /// vs, rad/s (> 0).
+    pub velocity_rad_s: f64,
+    /// δ (> 0; 2 is Gaussian).
+    pub exponent: f64,
 }
 
 /// The chain model with symmetric friction (Swevers' and Bona's), rotor
@@ -80,6 +96,7 @@ impl Default for RegressorModel {
             coulomb_transition_rad_s: None,
             spring: None,
             payload: false,
+            stribeck: BTreeMap::new(),
         }
     }
 }
@@ -209,6 +226,36 @@ impl BaseRegressor {
             }
             model.friction.iter_mut().for_each(|f| f.transition = v);
         }
+        if !spec.stribeck.is_empty() {
+            for (name, s) in &spec.stribeck {
+                if !model.joints.iter().any(|j| j.name == *name) {
+                    return Err(Error::mismatch(
+                        "stribeck: joint",
+                        format!("one of {}", model.joint_names().join(", ")),
+                        name,
+                    ));
+                }
+                if !(s.velocity_rad_s > 0.0 && s.velocity_rad_s.is_finite() && s.exponent > 0.0 && s.exponent <= 10.0) {
+                    return Err(Error::setting(
+                        "stribeck",
+                        "velocity_rad_s > 0 and exponent in (0, 10]",
+                        format!("{name}: {} rad/s, δ {}", s.velocity_rad_s, s.exponent),
+                    ));
+                }
+            }
+            // The configuration's shapes replace the robot file's (which
+            // stand where it names none): a joint not named has none.
+            for (j, f) in model.friction.iter_mut().enumerate() {
+                f.stribeck = match spec.stribeck.get(&model.joints[j].name) {
+                    Some(s) => Stribeck {
+                        velocity: s.velocity_rad_s,
+                        exponent: s.exponent,
+                        ..f.stribeck
+                    },
+                    None => Stribeck::default(),
+                };
+            }
+        }
         let terms = spec.terms(&model)?;
         let n = model.dof();
         // Columns: (standard-column index into the full regressor, name, expression).
@@ -332,7 +379,7 @@ impl BaseRegressor {
     /// Every friction term of `joint` at joint velocity `qd`, as the
     /// regressor makes them (indexed as [`BaseRegressor::friction_term`]'s
     /// second number): one tanh for all.
-    pub fn friction_values(&self, joint: usize, qd: f64) -> [f64; 4] {
+    pub fn friction_values(&self, joint: usize, qd: f64) -> [f64; super::torque_regressor::FRICTION_COLUMNS] {
         super::torque_regressor::friction_values(self.terms.friction, &self.model.friction[joint], qd).0
     }
 

@@ -292,7 +292,7 @@ impl Batched {
                 c += 1;
             }
             if terms.friction != FrictionTerms::None {
-                let mut cols = [[0.0; LANES]; 4];
+                let mut cols = [[0.0; LANES]; super::torque_regressor::FRICTION_COLUMNS];
                 let mut width = 0;
                 for l in 0..LANES {
                     let (vals, w) = friction_values(terms.friction, &self.model.friction[j], qd[j][l]);

@@ -172,8 +172,8 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "{pad}  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {} -->",
-            f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset
+            "{pad}  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{} -->",
+            f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said()
         );
         let range = match model.limits[i].position {
             Some((lo, hi)) => format!(" range=\"{lo:?} {hi:?}\""),

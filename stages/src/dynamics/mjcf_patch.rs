@@ -177,8 +177,8 @@ impl MjcfPatch {
         edits.push((
             j.range.start..j.range.start,
             format!(
-                "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {} -->\n{indent}",
-                f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset
+                "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{} -->\n{indent}",
+                f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said()
             ),
         ));
         let over: Vec<String> = (0..3)

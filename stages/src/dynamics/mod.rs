@@ -29,7 +29,9 @@ pub mod xml;
 
 pub use agreement::{torque_agreement, Agreement};
 pub use base_parameters::{base_parameters, is_inertial, prior_scales, BaseParameters, PHYSICAL_FLOOR};
-pub use base_regressor::{BaseRegressor, ModelKind, RegressorModel, SpringConfig, Workspace, PAYLOAD_COLUMNS};
+pub use base_regressor::{
+    BaseRegressor, ModelKind, RegressorModel, SpringConfig, StribeckShape, Workspace, PAYLOAD_COLUMNS,
+};
 pub use batch::{BatchData, Batched, LANES};
 pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
@@ -37,7 +39,7 @@ pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics, try_choles
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
 pub use mjcf_patch::MjcfPatch;
-pub use model::{Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, LISTED};
+pub use model::{Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, LISTED};
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};

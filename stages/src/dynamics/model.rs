@@ -123,7 +123,9 @@ impl Inertial {
 /// zero at rest; `offset` is added always. Coulomb values are magnitudes (≥ 0).
 /// With `transition` > 0 the Coulomb term is smooth: it follows
 /// tanh(q̇ / transition) instead of sign(q̇) (simulation, prediction near
-/// zero velocity).
+/// zero velocity). With a Stribeck fade (`stribeck.velocity` > 0) the
+/// static friction exceeds Coulomb's at rest and fades with speed:
+/// Fs·exp(−(|q̇|/vs)^δ) more, in the Coulomb term's direction.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Friction {
     /// N·m·s/rad
@@ -138,6 +140,43 @@ pub struct Friction {
     pub offset: f64,
     /// Coulomb transition velocity, rad/s (0: exact sign).
     pub transition: f64,
+    /// Static friction's excess over Coulomb's and how it fades.
+    pub stribeck: Stribeck,
+}
+
+/// Stribeck's static friction: at rest the friction reaches Fc + Fs (per
+/// direction), and the excess Fs fades with speed as exp(−(|q̇|/vs)^δ)
+/// (Armstrong-Hélouvry's model; δ = 2 is Gaussian, δ = 1 exponential).
+/// `velocity` 0: no excess, the joint's friction is Coulomb's and viscous.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Stribeck {
+    /// The excess over Coulomb at rest, each direction, N·m (≥ 0).
+    pub excess_pos: f64,
+    pub excess_neg: f64,
+    /// The speed it fades over, vs, rad/s.
+    pub velocity: f64,
+    /// The fade's exponent δ.
+    pub exponent: f64,
+}
+
+impl Stribeck {
+    /// The fade's shape alone, (vs, δ), with no excess yet.
+    pub fn shape(velocity: f64, exponent: f64) -> Stribeck {
+        Stribeck {
+            velocity,
+            exponent,
+            ..Stribeck::default()
+        }
+    }
+
+    /// exp(−(|q̇|/vs)^δ): 1 at rest, → 0 with speed; 0 without a fade.
+    #[inline]
+    pub fn fade(&self, qd: f64) -> f64 {
+        match self.velocity > 0.0 {
+            true => (-(qd.abs() / self.velocity).powf(self.exponent)).exp(),
+            false => 0.0,
+        }
+    }
 }
 
 impl Friction {
@@ -149,6 +188,7 @@ impl Friction {
             coulomb_neg: coulomb,
             offset: 0.0,
             transition: 0.0,
+            stribeck: Stribeck::default(),
         }
     }
 
@@ -162,16 +202,35 @@ impl Friction {
             } else {
                 (self.viscous_neg, self.coulomb_neg)
             };
-            return self.offset + viscous * qd + coulomb * s;
+            let excess = if qd >= 0.0 {
+                self.stribeck.excess_pos
+            } else {
+                self.stribeck.excess_neg
+            };
+            return self.offset + viscous * qd + (coulomb + excess * self.stribeck.fade(qd)) * s;
         }
+        let fade = self.stribeck.fade(qd);
         self.offset
             + if qd > 0.0 {
-                self.viscous_pos * qd + self.coulomb_pos
+                self.viscous_pos * qd + self.coulomb_pos + self.stribeck.excess_pos * fade
             } else if qd < 0.0 {
-                self.viscous_neg * qd - self.coulomb_neg
+                self.viscous_neg * qd - self.coulomb_neg - self.stribeck.excess_neg * fade
             } else {
                 0.0
             }
+    }
+
+    /// Stribeck's excess as the exports' `robotid:` comments carry it (no
+    /// format has a place for it); empty without one.
+    pub fn stribeck_said(&self) -> String {
+        let s = &self.stribeck;
+        match s.velocity > 0.0 && (s.excess_pos != 0.0 || s.excess_neg != 0.0) {
+            true => format!(
+                ", stribeck_excess_pos = {}, stribeck_excess_neg = {}, stribeck_velocity = {}, stribeck_exponent = {} (static friction over Coulomb's at rest, fading as exp(-(|qd|/velocity)^exponent); the format has no place for it)",
+                s.excess_pos, s.excess_neg, s.velocity, s.exponent
+            ),
+            false => String::new(),
+        }
     }
 
     pub fn is_zero(&self) -> bool {
@@ -427,6 +486,10 @@ impl Model {
                 ("coulomb", f.coulomb_neg),
                 ("offset", f.offset),
                 ("coulomb_transition", f.transition),
+                ("stribeck_excess", f.stribeck.excess_pos),
+                ("stribeck_excess", f.stribeck.excess_neg),
+                ("stribeck_velocity", f.stribeck.velocity),
+                ("stribeck_exponent", f.stribeck.exponent),
             ] {
                 if !v.is_finite() {
                     return bad(key, format!("{ctx}: {key}"), v, "finite");
@@ -542,6 +605,13 @@ impl Model {
                 return Err(Problem::new(
                     "coulomb",
                     format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"),
+                ));
+            }
+            let s = &f.stribeck;
+            if s.velocity < 0.0 || (s.velocity > 0.0 && !(s.exponent > 0.0)) {
+                return Err(Problem::new(
+                    "stribeck",
+                    format!("{ctx}: a Stribeck fade needs a velocity ≥ 0 and, with one, an exponent > 0"),
                 ));
             }
         }

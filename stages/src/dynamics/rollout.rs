@@ -19,7 +19,9 @@ pub struct BaseDynamics<'a> {
     theta: &'a [f64],
     /// Per Coulomb parameter: its joint, its index in θ and its side
     /// (+1, −1; 0 for both).
-    coulomb: Vec<(usize, usize, i8)>,
+    /// The sign(q̇) terms a friction-loss constraint applies: (joint, base
+    /// column, side: 0 both, 1 for q̇ ≥ 0, −1 below, Stribeck's excess).
+    coulomb: Vec<(usize, usize, i8, bool)>,
     /// The time constant of the friction-loss constraint Coulomb friction
     /// is applied as (None: the estimate's own sign(q̇) or turn-over).
     settle_s: Option<f64>,
@@ -52,12 +54,19 @@ impl<'a> BaseDynamics<'a> {
             .filter(|(j, _)| regressor.model.friction[*j].transition == 0.0)
             .flat_map(|(j, joint)| {
                 let names = &names;
-                [("Fc", 0i8), ("Fc+", 1), ("Fc-", -1)]
-                    .into_iter()
-                    .filter_map(move |(p, side)| {
-                        let name = format!("{p}_{}", joint.name);
-                        names.iter().position(|n| *n == name).map(|i| (j, i, side))
-                    })
+                [
+                    ("Fc", 0i8, false),
+                    ("Fc+", 1, false),
+                    ("Fc-", -1, false),
+                    ("Fs", 0, true),
+                    ("Fs+", 1, true),
+                    ("Fs-", -1, true),
+                ]
+                .into_iter()
+                .filter_map(move |(p, side, excess)| {
+                    let name = format!("{p}_{}", joint.name);
+                    names.iter().position(|n| *n == name).map(|i| (j, i, side, excess))
+                })
             })
             .collect();
         BaseDynamics {
@@ -90,7 +99,16 @@ impl<'a> BaseDynamics<'a> {
 
     /// The Coulomb torque on joint `j` the regressor's columns give at
     /// `qd` (its sign, or its turn-over), per the parameter at `i` of `side`.
-    fn coulomb_column(&self, j: usize, side: i8, qd: f64) -> f64 {
+    fn coulomb_column(&self, j: usize, side: i8, excess: bool, qd: f64) -> f64 {
+        let fade = match excess {
+            true => self.regressor.model.friction[j].stribeck.fade(qd),
+            false => 1.0,
+        };
+        fade * self.sign_column(j, side, qd)
+    }
+
+    /// The sign part of [`BaseDynamics::coulomb_column`].
+    fn sign_column(&self, j: usize, side: i8, qd: f64) -> f64 {
         let own = self.regressor.model.friction[j].transition;
         let s = match own > 0.0 {
             true => (qd / own).tanh(),
@@ -111,22 +129,24 @@ impl<'a> BaseDynamics<'a> {
     fn constrained(&mut self, qd: &[f64], tc: f64, rhs: &mut [f64]) -> Result<(), usize> {
         let n = rhs.len();
         for k in 0..self.coulomb.len() {
-            let (j, i, side) = self.coulomb[k];
-            rhs[j] += self.theta[i] * self.coulomb_column(j, side, qd[j]);
+            let (j, i, side, excess) = self.coulomb[k];
+            rhs[j] += self.theta[i] * self.coulomb_column(j, side, excess, qd[j]);
         }
         self.free.copy_from_slice(rhs);
         self.factor.copy_from(&self.mass);
         super::forward_dynamics::try_cholesky_solve_in_place(&mut self.factor, &mut self.free)?;
         for j in 0..n {
             let needed = self.mass[(j, j)] * (self.free[j] + qd[j] / tc);
-            // The friction of the side the joint is driven to.
-            let fc = self
+            // The friction of the side the joint is driven to: Coulomb's,
+            // and Stribeck's excess faded to the joint's speed (all of it
+            // at rest).
+            let fade = self.regressor.model.friction[j].stribeck.fade(qd[j]);
+            let fc: f64 = self
                 .coulomb
                 .iter()
-                .filter(|(k, _, side)| *k == j && (*side == 0 || (*side == 1) == (needed >= 0.0)))
-                .map(|&(_, i, _)| self.theta[i].abs())
-                .next()
-                .unwrap_or(0.0);
+                .filter(|(k, _, side, _)| *k == j && (*side == 0 || (*side == 1) == (needed >= 0.0)))
+                .map(|&(_, i, _, excess)| self.theta[i].abs() * if excess { fade } else { 1.0 })
+                .sum();
             rhs[j] -= needed.clamp(-fc, fc);
         }
         Ok(())

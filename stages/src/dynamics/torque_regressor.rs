@@ -45,6 +45,12 @@ pub enum FrictionTerms {
     Symmetric,
     /// Bona eq. 2: separate coefficients for each sign of q̇.
     Asymmetric,
+    /// Symmetric, and Stribeck's static excess Fs·exp(−(|q̇|/vs)^δ)·sign(q̇)
+    /// with each joint's own fade (`Friction::stribeck`; a joint without
+    /// one has a zero column, which the base parameters leave out).
+    Stribeck,
+    /// Asymmetric, and the static excess for each sign of q̇.
+    StribeckAsymmetric,
 }
 
 impl FrictionTerms {
@@ -54,7 +60,30 @@ impl FrictionTerms {
             FrictionTerms::None => 0,
             FrictionTerms::Symmetric => 2,
             FrictionTerms::Asymmetric => 4,
+            FrictionTerms::Stribeck => 3,
+            FrictionTerms::StribeckAsymmetric => 6,
         }
+    }
+
+    /// The same model with Stribeck's excess (`true`) or without.
+    pub fn with_stribeck(self, stribeck: bool) -> FrictionTerms {
+        match (self, stribeck) {
+            (FrictionTerms::Symmetric | FrictionTerms::Stribeck, true) => FrictionTerms::Stribeck,
+            (FrictionTerms::Asymmetric | FrictionTerms::StribeckAsymmetric, true) => FrictionTerms::StribeckAsymmetric,
+            (FrictionTerms::Stribeck, false) => FrictionTerms::Symmetric,
+            (FrictionTerms::StribeckAsymmetric, false) => FrictionTerms::Asymmetric,
+            (other, _) => other,
+        }
+    }
+
+    /// Whether Stribeck's excess is among the columns.
+    pub fn has_stribeck(self) -> bool {
+        matches!(self, FrictionTerms::Stribeck | FrictionTerms::StribeckAsymmetric)
+    }
+
+    /// Whether viscous and Coulomb friction differ by direction.
+    pub fn is_asymmetric(self) -> bool {
+        matches!(self, FrictionTerms::Asymmetric | FrictionTerms::StribeckAsymmetric)
     }
 
     /// Whether column `index` of a joint's friction (as [`friction_values`]
@@ -64,13 +93,15 @@ impl FrictionTerms {
             FrictionTerms::None => false,
             FrictionTerms::Symmetric => index == 1,
             FrictionTerms::Asymmetric => index >= 2,
+            FrictionTerms::Stribeck => index >= 1,
+            FrictionTerms::StribeckAsymmetric => index >= 2,
         }
     }
 
     /// Whether column `index` is smooth in q̇: only the symmetric viscous
     /// one (linear); the others have a kink or a jump at q̇ = 0.
     pub fn is_smooth(self, index: usize) -> bool {
-        self == FrictionTerms::Symmetric && index == 0
+        matches!(self, FrictionTerms::Symmetric | FrictionTerms::Stribeck) && index == 0
     }
 }
 
@@ -143,6 +174,9 @@ pub enum ParameterKind {
     Viscous { one_sided: bool },
     /// Coulomb friction, N·m: both directions, or one (`Fc+`/`Fc-`).
     Coulomb { one_sided: bool },
+    /// Stribeck's static excess over Coulomb at rest, N·m (`Fs`, or
+    /// `Fs+`/`Fs-`), fading with speed by the joint's own shape.
+    Static { one_sided: bool },
     /// A constant torque offset, N·m.
     Offset,
     /// A spring's Fourier coefficient, N·m.
@@ -165,6 +199,8 @@ impl ParameterKind {
             "Fv+" | "Fv-" => ParameterKind::Viscous { one_sided: true },
             "Fc" => ParameterKind::Coulomb { one_sided: false },
             "Fc+" | "Fc-" => ParameterKind::Coulomb { one_sided: true },
+            "Fs" => ParameterKind::Static { one_sided: false },
+            "Fs+" | "Fs-" => ParameterKind::Static { one_sided: true },
             "Off" => ParameterKind::Offset,
             p if p.starts_with("SpA") || p.starts_with("SpB") => ParameterKind::Spring,
             _ => ParameterKind::Unknown,
@@ -181,7 +217,10 @@ impl ParameterKind {
 
     /// Friction, either kind.
     pub fn is_friction(self) -> bool {
-        matches!(self, ParameterKind::Viscous { .. } | ParameterKind::Coulomb { .. })
+        matches!(
+            self,
+            ParameterKind::Viscous { .. } | ParameterKind::Coulomb { .. } | ParameterKind::Static { .. }
+        )
     }
 
     /// A magnitude no physical drive has below zero.
@@ -192,6 +231,7 @@ impl ParameterKind {
                 | ParameterKind::JointInertia
                 | ParameterKind::Viscous { .. }
                 | ParameterKind::Coulomb { .. }
+                | ParameterKind::Static { .. }
         )
     }
 
@@ -202,6 +242,7 @@ impl ParameterKind {
             ParameterKind::Mass => "kg",
             ParameterKind::Viscous { .. } => "N*m*s/rad",
             ParameterKind::Coulomb { .. }
+            | ParameterKind::Static { .. }
             | ParameterKind::Gravity
             | ParameterKind::Offset
             | ParameterKind::Spring
@@ -245,6 +286,19 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
                 0.5 * (f.coulomb_pos + f.coulomb_neg),
             ]),
             FrictionTerms::Asymmetric => theta.extend([f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg]),
+            FrictionTerms::Stribeck => theta.extend([
+                0.5 * (f.viscous_pos + f.viscous_neg),
+                0.5 * (f.coulomb_pos + f.coulomb_neg),
+                0.5 * (f.stribeck.excess_pos + f.stribeck.excess_neg),
+            ]),
+            FrictionTerms::StribeckAsymmetric => theta.extend([
+                f.viscous_pos,
+                f.viscous_neg,
+                f.coulomb_pos,
+                f.coulomb_neg,
+                f.stribeck.excess_pos,
+                f.stribeck.excess_neg,
+            ]),
         }
         if terms.offset {
             theta.push(f.offset);
@@ -295,6 +349,18 @@ pub fn with_standard_parameters(model: &Model, terms: RegressorTerms, theta: &[f
                 (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at + 1]);
                 (f.coulomb_pos, f.coulomb_neg) = (theta[at + 2], theta[at + 3]);
                 at += 4;
+            }
+            FrictionTerms::Stribeck => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 1], theta[at + 1]);
+                (f.stribeck.excess_pos, f.stribeck.excess_neg) = (theta[at + 2], theta[at + 2]);
+                at += 3;
+            }
+            FrictionTerms::StribeckAsymmetric => {
+                (f.viscous_pos, f.viscous_neg) = (theta[at], theta[at + 1]);
+                (f.coulomb_pos, f.coulomb_neg) = (theta[at + 2], theta[at + 3]);
+                (f.stribeck.excess_pos, f.stribeck.excess_neg) = (theta[at + 4], theta[at + 5]);
+                at += 6;
             }
         }
         if terms.offset {
@@ -396,25 +462,51 @@ pub fn friction_names(friction: FrictionTerms, joint: &str) -> Vec<String> {
                 format!("Fc-_{joint}"),
             ]
         }
+        FrictionTerms::Stribeck => vec![format!("Fv_{joint}"), format!("Fc_{joint}"), format!("Fs_{joint}")],
+        FrictionTerms::StribeckAsymmetric => {
+            vec![
+                format!("Fv+_{joint}"),
+                format!("Fv-_{joint}"),
+                format!("Fc+_{joint}"),
+                format!("Fc-_{joint}"),
+                format!("Fs+_{joint}"),
+                format!("Fs-_{joint}"),
+            ]
+        }
     }
 }
 
+/// The most friction columns a joint has ([`FrictionTerms::width`]).
+pub const FRICTION_COLUMNS: usize = 6;
+
 /// One joint's friction columns for joint velocity `qd`, and how many
-/// there are; the Coulomb shape (sign or tanh) is the joint's.
-pub(crate) fn friction_values(friction: FrictionTerms, model: &super::Friction, qd: f64) -> ([f64; 4], usize) {
+/// there are; the Coulomb shape (sign or tanh) and the Stribeck fade are
+/// the joint's.
+pub(crate) fn friction_values(
+    friction: FrictionTerms,
+    model: &super::Friction,
+    qd: f64,
+) -> ([f64; FRICTION_COLUMNS], usize) {
     let sign = if model.transition > 0.0 {
         (qd / model.transition).tanh()
     } else {
         qd.signum() * (qd != 0.0) as i32 as f64
     };
+    let pos = qd >= 0.0;
+    let (up, down) = (sign.max(0.0), sign.min(0.0));
     match friction {
-        FrictionTerms::None => ([0.0; 4], 0),
-        FrictionTerms::Symmetric => ([qd, sign, 0.0, 0.0], 2),
-        FrictionTerms::Asymmetric => {
-            let pos = qd >= 0.0;
+        FrictionTerms::None => ([0.0; FRICTION_COLUMNS], 0),
+        FrictionTerms::Symmetric => ([qd, sign, 0.0, 0.0, 0.0, 0.0], 2),
+        FrictionTerms::Asymmetric => match pos {
+            true => ([qd, 0.0, up, 0.0, 0.0, 0.0], 4),
+            false => ([0.0, qd, 0.0, down, 0.0, 0.0], 4),
+        },
+        FrictionTerms::Stribeck => ([qd, sign, sign * model.stribeck.fade(qd), 0.0, 0.0, 0.0], 3),
+        FrictionTerms::StribeckAsymmetric => {
+            let fade = model.stribeck.fade(qd);
             match pos {
-                true => ([qd, 0.0, sign.max(0.0), 0.0], 4),
-                false => ([0.0, qd, 0.0, sign.min(0.0)], 4),
+                true => ([qd, 0.0, up, 0.0, up * fade, 0.0], 6),
+                false => ([0.0, qd, 0.0, down, 0.0, down * fade], 6),
             }
         }
     }

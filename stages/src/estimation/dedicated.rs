@@ -64,6 +64,15 @@ pub struct GravityFriction {
 
 /// Fits gravity and friction of `cfg.joint` from the cruise parts of `kin`.
 pub fn gravity_friction(kin: &Kinematics, cfg: &SweepConfig) -> Result<GravityFriction> {
+    if cfg.friction.has_stribeck() {
+        // Constant-speed levels above `min_speed_rad_s` do not reach the
+        // speeds a static excess fades over.
+        return Err(Error::setting(
+            "friction",
+            "\"symmetric\" or \"asymmetric\" (speed levels do not hold Stribeck's static friction)",
+            format!("{:?}", cfg.friction),
+        ));
+    }
     let j = kin
         .joints
         .iter()
@@ -259,6 +268,8 @@ fn friction_of_levels(lv: &[(f64, f64, f64)], terms: FrictionTerms) -> (Vec<f64>
             let c = (cov_plus + cov_minus) * 0.25;
             (v, c)
         }
-        FrictionTerms::None => (Vec::new(), DMatrix::zeros(0, 0)),
+        FrictionTerms::None | FrictionTerms::Stribeck | FrictionTerms::StribeckAsymmetric => {
+            (Vec::new(), DMatrix::zeros(0, 0))
+        }
     }
 }

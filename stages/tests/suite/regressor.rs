@@ -18,19 +18,38 @@ fn regressor_times_parameters_is_rnea() {
     ]
     .into_iter()
     .chain(lwr4);
-    let terms = RegressorTerms {
-        rotor: true,
-        friction: FrictionTerms::Asymmetric,
-        offset: true,
-        spring: None,
-    };
     let mut rng = ChaCha8Rng::seed_from_u64(41);
-    for path in robots {
+    let stribeck = [
+        FrictionTerms::Asymmetric,
+        FrictionTerms::StribeckAsymmetric,
+        FrictionTerms::Stribeck,
+    ];
+    for (path, friction) in robots.flat_map(|p| stribeck.map(|f| (p.clone(), f))) {
+        let terms = RegressorTerms {
+            rotor: true,
+            friction,
+            offset: true,
+            spring: None,
+        };
         for transition in [0.0, 0.02] {
             let mut model = dynamics::load_robot(&path).unwrap();
             for (i, f) in model.friction.iter_mut().enumerate() {
                 f.offset = 0.3 * i as f64 - 0.2;
                 f.transition = transition;
+                // Stribeck's excess on every other joint, each its own
+                // fade; symmetric terms need a symmetric model.
+                if friction.has_stribeck() && i % 2 == 0 {
+                    let asym = friction.is_asymmetric() as i32 as f64;
+                    f.stribeck = dynamics::Stribeck {
+                        excess_pos: 0.4 + 0.1 * i as f64,
+                        excess_neg: 0.4 + 0.1 * i as f64 - 0.15 * asym,
+                        velocity: 0.05 + 0.3 * i as f64,
+                        exponent: 0.7 + 0.4 * i as f64,
+                    };
+                }
+                if !friction.is_asymmetric() {
+                    (f.viscous_neg, f.coulomb_neg) = (f.viscous_pos, f.coulomb_pos);
+                }
             }
             let n = model.dof();
             let theta = nalgebra::DVector::from_vec(standard_parameters(&model, terms));
@@ -47,7 +66,7 @@ fn regressor_times_parameters_is_rnea() {
                 worst = worst.max(e);
             }
             println!(
-                "{}: transition {transition}: worst relative error {worst:.1e}",
+                "{}: {friction:?}, transition {transition}: worst relative error {worst:.1e}",
                 model.name
             );
             assert!(worst < 1e-10, "{}: {worst:e}", model.name);
@@ -127,6 +146,68 @@ fn base_parameters_predict_like_the_full_set() {
         exprs.contains(&"MX_a3".to_string()) && exprs.contains(&"Fc_a3".to_string()),
         "{exprs:?}"
     );
+}
+
+/// Stribeck's excess is a base parameter of each joint the configuration
+/// gives a fade, and of no other (a joint without one has a zero column,
+/// left out, not regrouped into another); the robot file's own shapes
+/// stand where the configuration names none; a bad shape is refused.
+#[test]
+fn stribeck_columns_are_base_parameters_where_a_joint_has_a_fade() {
+    use robotid_stages::dynamics::{BaseRegressor, RegressorModel, StribeckShape};
+    let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let joints = model.joint_names();
+    let shape = |v: f64, d: f64| StribeckShape {
+        velocity_rad_s: v,
+        exponent: d,
+    };
+    for friction in [FrictionTerms::Stribeck, FrictionTerms::StribeckAsymmetric] {
+        let spec = RegressorModel {
+            friction,
+            stribeck: [
+                (joints[0].clone(), shape(0.05, 2.0)),
+                (joints[3].clone(), shape(0.2, 0.8)),
+            ]
+            .into(),
+            ..RegressorModel::default()
+        };
+        let base = BaseRegressor::new(&model, &spec).unwrap();
+        let statics: Vec<String> = base.names().into_iter().filter(|n| n.starts_with("Fs")).collect();
+        let expected: Vec<String> = match friction {
+            FrictionTerms::Stribeck => vec![format!("Fs_{}", joints[0]), format!("Fs_{}", joints[3])],
+            _ => [0, 3]
+                .iter()
+                .flat_map(|&j| [format!("Fs+_{}", joints[j]), format!("Fs-_{}", joints[j])])
+                .collect(),
+        };
+        assert_eq!(statics, expected, "{friction:?}");
+        // Each stands alone: the static excess is nothing else's.
+        for e in base.expressions().iter().filter(|e| e.contains("Fs")) {
+            assert!(!e.contains(" + ") && !e.contains(" - "), "{e}");
+        }
+        assert_eq!(base.model.friction[3].stribeck.velocity, 0.2);
+        assert_eq!(base.model.friction[1].stribeck.velocity, 0.0);
+    }
+    for bad in [
+        shape(0.0, 2.0),
+        shape(0.05, 0.0),
+        shape(f64::NAN, 1.0),
+        shape(0.05, 50.0),
+    ] {
+        let spec = RegressorModel {
+            friction: FrictionTerms::Stribeck,
+            stribeck: [(joints[0].clone(), bad)].into(),
+            ..RegressorModel::default()
+        };
+        assert!(BaseRegressor::new(&model, &spec).is_err(), "{bad:?}");
+    }
+    let spec = RegressorModel {
+        friction: FrictionTerms::Stribeck,
+        stribeck: [("no_such_joint".to_string(), shape(0.05, 2.0))].into(),
+        ..RegressorModel::default()
+    };
+    let e = BaseRegressor::new(&model, &spec).unwrap_err().to_string();
+    assert!(e.contains("no_such_joint"), "{e}");
 }
 
 /// On the simulator's noise-free truth the regressor is exact: least

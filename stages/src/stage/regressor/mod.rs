@@ -12,7 +12,7 @@ use robotid_schemas::{metadata, Kinematics};
 use serde::{Deserialize, Serialize};
 
 use super::{Chain, Component, Context, LintContext, PeriodsUse, Problem, Product, Stage};
-use crate::dynamics::{BaseRegressor, FrictionTerms, Model, ModelKind, RegressorModel, SpringConfig};
+use crate::dynamics::{BaseRegressor, FrictionTerms, Model, ModelKind, RegressorModel, SpringConfig, StribeckShape};
 use crate::estimation::projection::ProjectionConfig;
 use crate::signal::Spectra;
 use crate::{Error, Result};
@@ -67,6 +67,9 @@ pub struct RegressorConfig {
     /// Records of the robot carrying a payload: ten more columns, the last
     /// moving link's standard ones (see [`RegressorModel::payload`]).
     pub payload: bool,
+    /// Each joint's Stribeck fade (see [`RegressorModel::stribeck`]).
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub stribeck: BTreeMap<String, StribeckShape>,
 }
 
 impl Default for RegressorConfig {
@@ -88,6 +91,7 @@ impl RegressorConfig {
             projection: None,
             joint_wise: false,
             payload: m.payload,
+            stribeck: m.stribeck,
         }
     }
 
@@ -101,6 +105,7 @@ impl RegressorConfig {
             coulomb_transition_rad_s: self.coulomb_transition_rad_s,
             spring: self.spring.clone(),
             payload: self.payload,
+            stribeck: self.stribeck.clone(),
         }
     }
 
