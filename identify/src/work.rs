@@ -871,6 +871,8 @@ struct Judge {
     id_rows: System,
     val_rows: Option<System>,
     periods_relative: Option<f64>,
+    /// Else a block held out in time (fewer than two steady periods).
+    split_relative: Option<f64>,
 }
 
 impl Judge {
@@ -880,7 +882,10 @@ impl Judge {
                 let stats = robotid::validation::residues(v, &(&v.a * &est.values));
                 Some((robotid::validation::relative_error(&stats), Measured::Validation))
             }
-            _ => self.periods_relative.map(|r| (r, Measured::HeldOutPeriods)),
+            _ => self
+                .periods_relative
+                .map(|r| (r, Measured::HeldOutPeriods))
+                .or(self.split_relative.map(|r| (r, Measured::HeldOutTime))),
         };
         robotid::verdict::judge(self.policy, est, &self.id_rows, held_out)
     }
@@ -907,6 +912,11 @@ fn estimate(
         periods_relative: identifying
             .iter()
             .map(|r| r.design.periodic().and_then(|p| p.held_out_relative))
+            .collect::<Option<Vec<f64>>>()
+            .map(|r| r.into_iter().fold(0.0, f64::max)),
+        split_relative: identifying
+            .iter()
+            .map(|r| r.design.periodic().and_then(|p| p.held_out_split))
             .collect::<Option<Vec<f64>>>()
             .map(|r| r.into_iter().fold(0.0, f64::max)),
     };

@@ -63,6 +63,9 @@ pub enum Measured {
     /// On held-out periods: fitted on the even periods, predicting the odd
     /// ones, and the reverse.
     HeldOutPeriods,
+    /// On a block held out in time: fitted on the first part of the
+    /// record's one period, predicting the rest.
+    HeldOutTime,
     /// On the fitted data itself: nothing was held out (fewer than two
     /// steady periods and no validation recording).
     InSample,
@@ -74,6 +77,9 @@ impl Measured {
             Measured::Validation => "on the validation recordings",
             Measured::HeldOutPeriods => {
                 "on held-out periods (fitted on the even periods, predicting the odd ones, and the reverse)"
+            }
+            Measured::HeldOutTime => {
+                "on a block held out in time (fewer than two steady periods: fitted on the first 70 % of the period, predicting the rest)"
             }
             Measured::InSample => {
                 "in sample: nothing held out (fewer than two steady periods and no validation recording)"
@@ -154,7 +160,7 @@ impl std::fmt::Display for Refusal {
             ),
             Refusal::MissingFriction(joints) => write!(
                 f,
-                "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; robotid's friction models (viscous and Coulomb, asymmetric, a smooth turn-over) do not hold it. Excite the joints above the speeds where it fades, or take the estimate as it is (accept inadequate)",
+                "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; none of robotid's friction models holds it (viscous and Coulomb, asymmetric, a smooth turn-over, and Stribeck's static friction with the fades held-out periods can choose among). Excite the joints above the speeds where it fades, or take the estimate as it is (accept inadequate)",
                 joints
                     .iter()
                     .map(|(j, share, r)| format!("{j} ({:.0} % of a residue {r:.1}× the noise floor)", 100.0 * share))
@@ -226,6 +232,32 @@ impl Verdict {
             )
         };
         let over = self.over_floor();
+        let floorless: Vec<&str> = self
+            .joints
+            .iter()
+            .filter(|j| j.ratio.is_none())
+            .map(|j| j.joint.as_str())
+            .collect();
+        if over.is_empty() && floorless.len() == self.joints.len() {
+            // Nothing to compare the residue with: only the tolerance
+            // judges, and the verdict says so rather than claim a floor.
+            let rel = format!(
+                "relative error {:.2} % {}, tolerance {:.1} %",
+                100.0 * rel,
+                measured.said(),
+                100.0 * self.policy.tolerance
+            );
+            return match rel_within(self) {
+                true => format!("within the tolerance, judged by it alone: no joint has a noise floor to judge the fit against (the record has no repeated periods) ({rel})"),
+                false => format!("over the tolerance, judged by it alone: no joint has a noise floor to judge the fit against ({rel})"),
+            };
+        }
+        if over.is_empty() && !floorless.is_empty() {
+            return format!(
+                "adequate: the residue within {REFUSE_RATIO}× the noise floor on every joint that has one; no floor on {} ({rule})",
+                floorless.join(", ")
+            );
+        }
         if over.is_empty() {
             return format!("adequate: the residue within {REFUSE_RATIO}× the noise floor on every joint ({rule})");
         }
@@ -287,11 +319,19 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
     verdict
 }
 
+/// Whether the relative error that decides is within the tolerance.
+fn rel_within(v: &Verdict) -> bool {
+    v.relative.0 <= v.policy.tolerance
+}
+
 /// Why `v` is refused under its policy, or None.
 fn refusal(v: &Verdict) -> Option<Refusal> {
     let over = v.over_floor();
     let ratio = |j: &JointFigures| j.ratio.unwrap_or(f64::NAN);
-    if v.policy.strict {
+    // Without a floor on any joint the strict rule has nothing to judge
+    // by: the tolerance does, as without it.
+    let floorless = v.joints.iter().all(|j| j.ratio.is_none());
+    if v.policy.strict && !floorless {
         let said = |js: Vec<&JointFigures>| js.iter().map(|j| (j.joint.clone(), ratio(j))).collect();
         let suspect = v.floor_suspect();
         return if !over.is_empty() {
@@ -311,7 +351,7 @@ fn refusal(v: &Verdict) -> Option<Refusal> {
         return Some(Refusal::MissingFriction(friction));
     }
     let (relative, measured) = v.relative;
-    (!(relative <= v.policy.tolerance)).then_some(Refusal::OverTolerance {
+    (!rel_within(v)).then_some(Refusal::OverTolerance {
         relative,
         measured,
         tolerance: v.policy.tolerance,
@@ -411,6 +451,55 @@ mod tests {
             relative: (relative, Measured::HeldOutPeriods),
             refused: None,
         }
+    }
+
+    /// Without a floor on any joint no verdict claims one: it says the
+    /// tolerance alone judged, and `strict` (which judges by floors)
+    /// refuses by the tolerance as the default rule does.
+    #[test]
+    fn no_verdict_claims_a_floor_it_has_not() {
+        let floorless = |policy: Policy, relative: f64| {
+            let mut v = verdict(policy, 1.0, None, relative);
+            v.joints[0].ratio = None;
+            v.joints.push(JointFigures {
+                joint: "j2".into(),
+                ..v.joints[0].clone()
+            });
+            v.refused = refusal(&v);
+            v
+        };
+        let lax = Policy::default();
+        let strict = Policy { strict: true, ..lax };
+        for policy in [lax, strict] {
+            let ok = floorless(policy, 0.02);
+            assert!(ok.refused.is_none());
+            let said = ok.said();
+            assert!(!said.contains("within 3× the noise floor"), "{said}");
+            assert!(
+                said.contains("no joint has a noise floor") && said.contains("2.00 %"),
+                "{said}"
+            );
+            let over = floorless(policy, 0.08);
+            assert!(
+                matches!(over.refused, Some(Refusal::OverTolerance { .. })),
+                "{:?}",
+                over.refused
+            );
+            assert!(
+                over.said().contains("over the tolerance, judged by it alone"),
+                "{}",
+                over.said()
+            );
+        }
+        // One joint without a floor: named, the others judged by theirs.
+        let mut some = verdict(lax, 1.0, None, 0.01);
+        some.joints.push(JointFigures {
+            joint: "j2".into(),
+            ratio: None,
+            ..some.joints[0].clone()
+        });
+        let said = some.said();
+        assert!(said.contains("on every joint that has one; no floor on j2"), "{said}");
     }
 
     /// The rules, each at its edge: the tolerance, the friction share,

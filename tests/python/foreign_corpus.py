@@ -72,6 +72,12 @@ CASES = {
     "payload_loaded": dict(
         filter=("butter", 4, 30.0, None), friction="sign", periods=3, seed_case="payload_unloaded", payload=True
     ),
+    # Stribeck's static friction fading faster and exponentially, twice
+    # Coulomb's at rest (added last: the other cases' seeds are their
+    # places in this table).
+    "stribeck_fast": dict(
+        filter=("butter", 4, 30.0, None), friction="stribeck", periods=5, stribeck=(0.02, 1.0, 1.0)
+    ),
 }
 
 # The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its
@@ -241,8 +247,10 @@ def main(urdf, out, case):
     if spec["friction"] == "sign":
         tau += fv * qd + fc * np.sign(qd)
     else:
-        # Stribeck: static friction 1.5× Coulomb, fading over 0.05 rad/s.
-        tau += fv * qd + (fc + 0.5 * fc * np.exp(-((qd / 0.05) ** 2))) * np.sign(qd)
+        # Stribeck: static friction (1 + ratio)× Coulomb, fading as
+        # exp(−(|q̇|/vs)^δ); by default 1.5× over 0.05 rad/s, Gaussian.
+        vs, delta, ratio = spec.get("stribeck", (0.05, 2.0, 0.5))
+        tau += fv * qd + (fc + ratio * fc * np.exp(-((np.abs(qd) / vs) ** delta))) * np.sign(qd)
     tau += spec.get("offset", 0.0)
     if held:
         # A stiff position loop (5000 N·m/rad) holds them: they sag by the
@@ -300,6 +308,11 @@ def main(urdf, out, case):
         moving=[names[j] for j in moving],
         anti_alias=filt,
         friction=spec["friction"],
+        **(
+            dict(zip(("stribeck_velocity_rad_s", "stribeck_exponent", "stribeck_ratio"), spec.get("stribeck", (0.05, 2.0, 0.5))))
+            if spec["friction"] == "stribeck"
+            else {}
+        ),
         friction_viscous=fv.tolist(),
         friction_coulomb=fc.tolist(),
         offset_Nm=spec.get("offset", 0.0),

@@ -125,12 +125,16 @@ fn truth(urdf: &Path, dir: &Path, names: &[String]) -> Vec<f64> {
         ..Default::default()
     };
     let base = cfg.base_regressor(&model).unwrap();
+    // Stribeck's excess aside (a base parameter of its own on each joint
+    // given a fade), the symmetric-friction base set.
+    let own: Vec<&String> = names.iter().filter(|n| !n.starts_with("Fs_")).collect();
     assert_eq!(
-        base.names(),
-        names,
+        base.names().iter().collect::<Vec<_>>(),
+        own,
         "identify's parameters are the symmetric-friction base set"
     );
     let values = base.base_values(&model).unwrap();
+    let value_of = |n: &str| base.names().iter().position(|b| b == n).map(|i| values[i]);
     let joints: Vec<String> = t["joints"]
         .as_array()
         .unwrap()
@@ -141,18 +145,21 @@ fn truth(urdf: &Path, dir: &Path, names: &[String]) -> Vec<f64> {
         let j = joints.iter().position(|x| x == joint).unwrap();
         t[key][j].as_f64().unwrap()
     };
+    // The generator's Stribeck excess: its ratio of each joint's Coulomb.
+    let ratio = t["stribeck_ratio"].as_f64().unwrap_or(0.0);
     names
         .iter()
-        .zip(values.iter())
-        .map(|(n, v)| {
+        .map(|n| {
             if let Some(j) = n.strip_prefix("Fv_") {
                 friction("friction_viscous", j)
             } else if let Some(j) = n.strip_prefix("Fc_") {
                 friction("friction_coulomb", j)
+            } else if let Some(j) = n.strip_prefix("Fs_") {
+                ratio * friction("friction_coulomb", j)
             } else if n.starts_with("Off_") {
                 t["offset_Nm"].as_f64().unwrap_or(0.0)
             } else {
-                *v
+                value_of(n).expect("a base parameter")
             }
         })
         .collect()
@@ -925,7 +932,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
     // are scored on the steady stretch's first and last whole periods: 1.6
     // periods between ramps from torque sensors at 1 kHz, and 1.5 between
     // ramps, identified.
-    let refused = ["stribeck", "transient_1p5"];
+    let refused = ["transient_1p5"];
     let cases = [
         "butter4_20",
         "bessel6_40",
@@ -944,6 +951,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
         "jointwise_premove",
         "transient_1p5",
         "sensors_1k_1p6",
+        "stribeck_fast",
     ];
     // One case: what the summary says of it, and its (within, of) when
     // identified.
@@ -958,15 +966,15 @@ fn the_foreign_corpus_is_identified_or_refused() {
         // the outcome read typed.
         let mut request = Request::new(vec![log.clone()], robot.clone());
         request.out = Some(out.clone());
-        request.policy.strict = case != "stribeck";
+        request.policy.strict = true;
         let id = robotid_identify::identify_quietly(&request).unwrap_or_else(|e| panic!("{case}: {e}"));
         let said = id.verdict.said();
-        if case == "stribeck" {
-            assert!(
-                matches!(id.verdict.refused, Some(Refusal::MissingFriction(_))),
-                "{case}: the cause is named: {:?}",
-                id.refused
-            );
+        // Stribeck's excess is chosen where the truth has it, on every
+        // joint, and nowhere else.
+        let statics = id.recordings[0].design.regressor.stribeck.len();
+        match case.starts_with("stribeck") {
+            true => assert_eq!(statics, 6, "{case}: Stribeck on every joint:\n{said}"),
+            false => assert_eq!(statics, 0, "{case}: no Stribeck where the truth has none"),
         }
         if case == "transient_1p5" {
             assert!(
@@ -1089,6 +1097,34 @@ fn the_foreign_corpus_is_identified_or_refused() {
         let within = (0..p.names.len())
             .filter(|&i| ((p.values[i] - truth[i]) / p.std[i]).abs() <= 2.0)
             .count();
+        // Stribeck's law measured: its excess, Coulomb and viscous
+        // friction near the truth on every joint. Their intervals are
+        // conditional on the fade chosen (vs found within 0.6 % of the
+        // truth's; its own uncertainty is not carried into them yet, and
+        // it trades against Coulomb's): at least 15 of the 18 within 2 std,
+        // none beyond 4.
+        if case.starts_with("stribeck") {
+            let friction: Vec<usize> = (0..p.names.len())
+                .filter(|&i| ["Fs_", "Fc_", "Fv_"].iter().any(|k| p.names[i].starts_with(k)))
+                .collect();
+            let z = |i: usize| ((p.values[i] - truth[i]) / p.std[i]).abs();
+            assert!(
+                friction.iter().all(|&i| z(i) <= 4.0),
+                "{case}: a friction value 4 std off:\n{said}"
+            );
+            let off: Vec<String> = friction
+                .iter()
+                .filter(|&&i| z(i) > 2.0)
+                .map(|&i| {
+                    format!(
+                        "{} {:.4} ± {:.4} (truth {:.4})",
+                        p.names[i], p.values[i], p.std[i], truth[i]
+                    )
+                })
+                .collect();
+            assert!(friction.len() == 18 && off.len() <= 3, "{case}: {off:?}\n{said}");
+            eprintln!("{case}: friction values over 2 std off the truth: {off:?}");
+        }
         let line = format!(
             "{case}: identified, {within}/{} within 2 std, worst {worst:.2}×, delay {:.3} samples (truth {:.3})",
             p.names.len(),

@@ -41,9 +41,10 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         )
     };
     let mut wide_band = first.map(|d| d.wide_band);
-    let (mut held_out_relative, mut friction_scores) = (None, None);
+    let mut laddered = None;
+    let (mut held_out_relative, mut friction_scores, mut held_out_split) = (None, None, None);
     if own_regressor {
-        let (wide, said, choice) = best_band(
+        let (wide, said, choice, ladder) = best_band(
             &Scoring {
                 log,
                 plan: &plan,
@@ -60,13 +61,15 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
             torques_stage.as_ref(),
         )?;
         wide_band = Some(wide);
-        (held_out_relative, friction_scores) = (choice.relative, choice.friction_scores);
+        laddered = ladder;
+        (held_out_relative, friction_scores, held_out_split) = (choice.relative, choice.friction_scores, choice.split);
         findings.push((Found::Differentiate, said));
         apply_choice(choice, fs, (&mut inverse, &mut delay), &mut regressor, &mut findings);
     }
     // Validation recordings take the identification's rule.
-    let (differentiate, said, _) = match (&torques_stage, wide_band) {
-        (Some(t), Some(true)) => t,
+    let (differentiate, said, _) = match (&laddered, &torques_stage, wide_band) {
+        (Some(l), _, _) => l,
+        (_, Some(t), Some(true)) => t,
         _ => &positions_stage,
     };
     if !own_regressor {
@@ -78,6 +81,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
             period_s: period,
             periods: p.periods,
             held_out_relative,
+            held_out_split,
             friction_scores,
             repeated: p.periods >= 2 || p.stretch.is_some(),
             harmonics: sets,

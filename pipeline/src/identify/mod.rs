@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use robotid_schemas::{metadata, RawSamples, TableKind};
 use robotid_stages::dynamics::load_robot;
-use robotid_stages::dynamics::{FrictionTerms, ModelKind};
+use robotid_stages::dynamics::{FrictionTerms, ModelKind, StribeckShape};
 use robotid_stages::estimation::spectral::{FilterChoice, Score};
 use robotid_stages::signal::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
 use robotid_stages::signal::{FilterFamily, FilterSpec};
@@ -192,6 +192,9 @@ pub struct Periodic {
     /// on the even periods, predicting the odd ones, and the reverse):
     /// None with fewer than two steady periods, and for validation records.
     pub held_out_relative: Option<f64>,
+    /// With fewer than two steady periods: the relative error of the
+    /// chosen band predicting the period's last part, fitted on the rest.
+    pub held_out_split: Option<f64>,
     /// The held-out scores the friction was chosen by (None: symmetric
     /// friction was not a choice, or nothing was held out).
     pub friction_scores: Option<FrictionScores>,

@@ -31,7 +31,11 @@ pub(super) fn apply_choice(
         regressor.coulomb_transition_rad_s = Some(v);
     }
     regressor.friction = choice.friction;
+    regressor.stribeck = choice.stribeck;
     if let Some(said) = choice.friction_said {
+        findings.push((Found::Friction, said));
+    }
+    if let Some(said) = choice.stribeck_said {
         findings.push((Found::Friction, said));
     }
     findings.push((Found::CoulombTransition, choice.transition_said));
@@ -130,11 +134,16 @@ pub(super) struct Scoring<'a> {
 /// The positions' band or the torques', each with its best filter and
 /// Coulomb model (`choose_model`), chosen by held-out periods; whether the
 /// torques' won, what says so, and the model chosen.
-pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) -> Result<(bool, String, ModelChoice)> {
+pub(super) fn best_band(
+    sc: &Scoring,
+    positions: &Band,
+    torques: Option<&Band>,
+) -> Result<(bool, String, ModelChoice, Option<Band>)> {
     // The kinematics of each band and the periods' torques as
     // measured; the band, the filter and the Coulomb model are chosen
     // on them by held-out periods.
     let mut tried = Vec::new();
+    let mut laddered = None;
     for (wide, (stage, said, band)) in [(false, positions)].into_iter().chain(torques.map(|t| (true, t))) {
         // The Fourier fit at the noise floor leaves the wider band
         // nothing to gain beyond the score's spread: not tried.
@@ -144,6 +153,18 @@ pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) 
         {
             break;
         }
+        // Nothing scored by periods: the wider band is the one of a ladder
+        // up to the torques' that predicts a block held out in time best.
+        let unscored = tried
+            .first()
+            .is_some_and(|t: &(bool, String, ModelChoice)| t.2.score.is_none());
+        let (stage, said, band) = match (wide, unscored) {
+            (true, true) => {
+                laddered = Some(band_ladder(sc, *band, positions.2)?);
+                laddered.as_ref().map(|l| (&l.0, &l.1, &l.2)).expect("made above")
+            }
+            _ => (stage, said, band),
+        };
         let chain = probe(sc.plan, (sc.stages_after)(None, None, stage), sc.log, sc.raw)?;
         if tried.is_empty() && sc.torque_check {
             if let Some(why) = torque_check(chain.kinematics()?, sc.model) {
@@ -151,7 +172,7 @@ pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) 
             }
         }
         let lowest = (4.0 * band).max(sc.fs / 50.0);
-        let choice = choose_model(
+        let mut choice = choose_model(
             sc.log,
             &chain,
             sc.model,
@@ -161,6 +182,10 @@ pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) 
             sc.fs,
             lowest,
         )?;
+        // Nothing repeats to score by: a block in time held out instead.
+        if choice.score.is_none() {
+            choice.split = time_split(chain.kinematics()?, sc.model, sc.regressor, sc.moving)?;
+        }
         tried.push((wide, said.clone(), choice));
     }
     // The Fourier fit or the positions' band unless the torques' band
@@ -168,28 +193,99 @@ pub(super) fn best_band(sc: &Scoring, positions: &Band, torques: Option<&Band>) 
     // whose scores were not taken (a steady stretch's two periods far
     // apart under it) loses to one that was; with nothing scored (one
     // period alone) the wider band keeps whatever motion the torques show.
+    let split = |i: usize| tried.get(i).and_then(|t| t.2.split);
     let pick = match (tried.first().and_then(|t| t.2.score), tried.get(1).map(|t| t.2.score)) {
         (Some(a), Some(Some(b))) => usize::from(b < a * (1.0 - tried[1].2.margin)),
         (Some(_), Some(None)) => 0,
+        // Neither scored by periods: by the block held out in time, the
+        // wider band only where it predicts it better.
+        (None, Some(None)) if split(0).is_some() && split(1).is_some() => {
+            usize::from(split(1).unwrap_or(f64::INFINITY) < split(0).unwrap_or(f64::INFINITY))
+        }
         _ => tried.len() - 1,
     };
     let scores: String = tried
         .iter()
-        .map(|t| match t.2.score {
-            Some(r) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
-            None => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
+        .map(|t| match (t.2.score, t.2.split) {
+            (Some(r), _) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
+            (None, Some(s)) => format!(
+                "{}: {:.2} % of the torque held out in time",
+                if t.0 { "torques' band" } else { "positions' band" },
+                100.0 * s
+            ),
+            (None, None) => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
         })
         .collect::<Vec<_>>()
         .join(", ");
     let (wide, said, choice) = tried.swap_remove(pick);
-    let said = if scores.contains(',') {
+    let laddered = laddered.filter(|_| wide);
+    let said = if scores.contains(',') && choice.score.is_none() && choice.split.is_some() {
+        format!("{said} (fewer than two steady periods: each band fitted on the first {:.0} % of its period and scored by the relative error predicting the rest: {scores})", 100.0 * FITTED_SHARE)
+    } else if scores.contains(',') {
         format!("{said} (held-out residue over the noise floor, each with its best filter and Coulomb model: {scores})")
     } else if torques.is_some() && choice.score.is_some() {
         format!("{said} ({scores}, at the noise floor: the torques' band, up to their lines beyond the excited ones, not tried)")
     } else {
         said
     };
-    Ok((wide, said, choice))
+    Ok((wide, said, choice, laddered))
+}
+
+/// The bands between the positions' (`from`, Hz) and the torques' (`to`),
+/// doubling, each a DFT differentiation whose fit on the first part of the
+/// period is scored predicting the rest ([`time_split`]): the one that
+/// predicts it best, and what says the ladder's scores. On one period
+/// nothing else tells a real motion's lines (tracking, vibration) from the
+/// noise the wider bands amplify (on the real Panda: 29 % held out at the
+/// torques' 175 Hz).
+fn band_ladder(sc: &Scoring, to: f64, from: f64) -> Result<Band> {
+    let mut bands = Vec::new();
+    let mut f = 2.0 * from;
+    while f < to {
+        bands.push(f);
+        f *= 2.0;
+    }
+    bands.push(to);
+    let stages: Vec<(f64, Vec<StageConfig>)> = bands
+        .iter()
+        .map(|&f| (f, (sc.stages_after)(None, None, &dft_stage(f))))
+        .collect();
+    let (plan, log, raw, model, regressor, moving) = (sc.plan, sc.log, sc.raw, sc.model, sc.regressor, sc.moving);
+    let scored: Vec<(f64, Option<f64>)> = stages
+        .into_par_iter()
+        .map(|(f, stages)| {
+            let chain = probe(plan, stages, log, raw)?;
+            Ok((f, time_split(chain.kinematics()?, model, regressor, moving)?))
+        })
+        .collect::<Result<_>>()?;
+    let (best, _) = scored
+        .iter()
+        .filter_map(|(f, s)| Some((*f, (*s)?)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((to, 0.0));
+    let table = scored
+        .iter()
+        .map(|(f, s)| match s {
+            Some(s) => format!("{f:.2} Hz {:.2} %", 100.0 * s),
+            None => format!("{f:.2} Hz not determined"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    Ok((
+        dft_stage(best),
+        format!("dft up to {best:.4} Hz: of the bands up to the torques' {to:.2} Hz, the one whose fit predicts a block held out in time best ({table})"),
+        best,
+    ))
+}
+
+/// A DFT differentiation up to `band_hz`.
+fn dft_stage(band_hz: f64) -> StageConfig {
+    StageConfig::Differentiate(DifferentiateConfig {
+        method: Differentiation::Dft,
+        harmonics: None,
+        bandwidth_hz: Some(band_hz),
+        filter: None,
+    })
 }
 
 /// Transition velocities of the Coulomb term tried, rad/s: 0 is sign(q̇).
@@ -211,6 +307,13 @@ pub(super) struct ModelChoice {
     /// Symmetric friction, or Bona's asymmetric one where held-out periods
     /// prefer it, and why (None: not tried).
     pub(super) friction: FrictionTerms,
+    /// Each joint's Stribeck fade, where held-out periods chose one.
+    pub(super) stribeck: std::collections::BTreeMap<String, StribeckShape>,
+    /// What the Stribeck search found, with its scores (None: not tried).
+    pub(super) stribeck_said: Option<String>,
+    /// Unscored by periods: the relative error predicting a block held out
+    /// in time ([`time_split`]).
+    pub(super) split: Option<f64>,
     pub(super) friction_said: Option<String>,
     pub(super) friction_scores: Option<FrictionScores>,
     /// The held-out score of the choice and its relative error (None:
@@ -237,6 +340,9 @@ impl ModelChoice {
             relative: None,
             friction,
             friction_said: None,
+            stribeck: Default::default(),
+            stribeck_said: None,
+            split: None,
             friction_scores: None,
             margin,
         }
@@ -287,7 +393,7 @@ pub(super) fn choose_model(
     let first: Lines = (sign.columns(), &sign_names);
     let late = choose_delay(&sign, declared, (lowest_hz, 0.5 * fs), fs, margin)
         .ok_or_else(|| refuse(log, "the held-out scores of the filters: the regression is singular"))?;
-    let search = late.search;
+    let search = late.search.clone();
     let scorer = Scorer {
         declared,
         search: search.as_ref(),
@@ -310,6 +416,55 @@ pub(super) fn choose_model(
     let asymmetric = asymmetric_fit(&systems, &scorer, symmetric, pick.0, first)?;
     let (friction, friction_said, friction_scores, (filter, score)) =
         friction_choice(template.friction, symmetric, asymmetric, (filter, score), margin);
+    // Stribeck's static friction, where the fit is above the floor (a
+    // model at the floor has nothing left for it to explain).
+    let stribeck = match at_floor || template.friction.has_stribeck() {
+        true => None,
+        false => stribeck_fit(&systems, &scorer, (friction, pick.0), first, &score, margin)?,
+    };
+    // The delay and the filter were searched with a friction that left
+    // the static friction in the residue (on the corpus's Stribeck arm a
+    // Chebyshev filter and 0.86 samples early, the truth a Butterworth and
+    // none): with the fades found, searched again, and the fades again
+    // under what that finds (vs 0.054 → 0.050 rad/s there, the residue
+    // from 2.6× the floor to 1.0×); kept where the score is better.
+    let (late, search, stribeck) = match stribeck {
+        None => (late, search, None),
+        Some(first_fit) => {
+            let terms = friction.with_stribeck(true);
+            let (sys, _) = systems.system_with(terms, pick.0, Some(first), &first_fit.shapes)?;
+            match sys
+                .as_ref()
+                .and_then(|sys| choose_delay(sys, declared, (lowest_hz, 0.5 * fs), fs, margin))
+            {
+                Some(again) => {
+                    let rescorer = Scorer {
+                        search: again.search.as_ref(),
+                        delay_s: again.delay_s,
+                        ..scorer
+                    };
+                    let (without_sys, _) = systems.system(friction, pick.0, Some(first))?;
+                    let without = without_sys.as_ref().and_then(|s| rescorer.score(s));
+                    let refit = match &without {
+                        Some((_, w)) => stribeck_fit(&systems, &rescorer, (friction, pick.0), first, w, margin)?,
+                        None => None,
+                    };
+                    match refit {
+                        Some(r) if r.fit.1.ratio < first_fit.fit.1.ratio => {
+                            let search = again.search.clone();
+                            (again, search, Some(r))
+                        }
+                        _ => (late, search, Some(first_fit)),
+                    }
+                }
+                None => (late, search, Some(first_fit)),
+            }
+        }
+    };
+    let (friction, stribeck, stribeck_said, (filter, score)) = match stribeck {
+        Some(s) => (friction.with_stribeck(true), s.shapes, Some(s.said), s.fit),
+        None => (friction, Default::default(), None, (filter, score)),
+    };
     let transition_said = transition_said(
         &scored,
         declared.is_some(),
@@ -332,9 +487,190 @@ pub(super) fn choose_model(
         relative: Some(score.relative),
         friction,
         friction_said,
+        stribeck,
+        stribeck_said,
+        split: None,
         friction_scores,
         margin,
     })
+}
+
+/// The share of a record a time split fits on; the rest, one contiguous
+/// block at its end, is predicted. Contiguous: samples interleaved with
+/// the fitted ones share their noise's correlation and would flatter the
+/// wider band.
+pub(super) const FITTED_SHARE: f64 = 0.7;
+
+/// The relative error of the least-squares fit of `kin`'s first
+/// [`FITTED_SHARE`] of samples predicting the rest (‖b − A·θ‖ / ‖b‖ over
+/// the held-out block, every joint or the `moving` one); None where the
+/// fitted block does not determine the parameters.
+pub(super) fn time_split(
+    kin: &robotid_schemas::Kinematics,
+    model: &robotid_stages::dynamics::Model,
+    regressor: &RegressorConfig,
+    moving: Option<usize>,
+) -> Result<Option<f64>> {
+    let Some(torque) = &kin.torque else { return Ok(None) };
+    let cfg = RegressorConfig {
+        band_limit_hz: None,
+        joint_wise: false,
+        projection: None,
+        ..regressor.clone()
+    };
+    let base = cfg.base_regressor(model)?;
+    let (n, samples, p) = (kin.joints.len(), kin.time.len(), base.parameters());
+    let cut = (FITTED_SHARE * samples as f64) as usize;
+    let joints: Vec<usize> = match moving {
+        Some(m) => vec![m],
+        None => (0..n).collect(),
+    };
+    let a = base.matrix(kin);
+    let rows = |range: std::ops::Range<usize>| -> (nalgebra::DMatrix<f64>, nalgebra::DVector<f64>) {
+        let picked: Vec<(usize, usize)> = range.flat_map(|k| joints.iter().map(move |&j| (k, j))).collect();
+        (
+            nalgebra::DMatrix::from_fn(picked.len(), p, |r, c| a[(picked[r].0 * n + picked[r].1, c)]),
+            nalgebra::DVector::from_fn(picked.len(), |r, _| torque[picked[r].1][picked[r].0]),
+        )
+    };
+    let (fit_a, fit_b) = rows(0..cut);
+    let (test_a, test_b) = rows(cut..samples);
+    if fit_a.nrows() < 2 * p || test_b.norm() == 0.0 {
+        return Ok(None);
+    }
+    // Columns scaled to unit norm, solved by SVD with a relative cut: a
+    // direction the fitted block does not determine is left at zero.
+    let scale: Vec<f64> = (0..p).map(|c| fit_a.column(c).norm().max(f64::MIN_POSITIVE)).collect();
+    let scaled = nalgebra::DMatrix::from_fn(fit_a.nrows(), p, |r, c| fit_a[(r, c)] / scale[c]);
+    let svd = scaled.svd(true, true);
+    let tol = 1e-10 * svd.singular_values.max();
+    let Ok(x) = svd.solve(&fit_b, tol) else { return Ok(None) };
+    let theta = nalgebra::DVector::from_fn(p, |c, _| x[c] / scale[c]);
+    Ok(Some((&test_b - &test_a * theta).norm() / test_b.norm()))
+}
+
+/// The Stribeck fades tried: vs, rad/s (harmonic drives' static friction
+/// fades over a few hundredths of a rad/s; gearless joints' over more),
+/// and δ (1: exponential, 2: Gaussian).
+pub(super) const STRIBECK_SPEEDS: [f64; 7] = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5];
+pub(super) const STRIBECK_EXPONENTS: [f64; 3] = [0.5, 1.0, 2.0];
+
+/// A system's held-out fit: the filter refitted, the score, friction ≥ 0.
+type Fitted = (Option<FilterSpec>, Score, bool);
+
+/// Stribeck's excess as chosen: the joints' fades, the chosen fit, and
+/// what says so.
+pub(super) struct StribeckChoice {
+    shapes: std::collections::BTreeMap<String, StribeckShape>,
+    fit: (Option<FilterSpec>, Score),
+    said: String,
+}
+
+/// Stribeck's static friction on top of `friction` (at turn-over `v`):
+/// every fade of the grid given to every joint at once, each scored on
+/// held-out periods (a joint's friction columns enter its own rows only,
+/// so each joint's held-out ratio ranks its own fades); each joint takes
+/// the fade that predicts its held-out periods best, where that beats its
+/// ratio without by the per-joint spread. The joints' fades together must
+/// then beat the model without by `margin`, with every static excess ≥ 0;
+/// else None. The grid's best is refined by a golden-section search in
+/// log vs on the joint's own ratio.
+pub(super) fn stribeck_fit(
+    systems: &LineSystems,
+    scorer: &Scorer,
+    (friction, v): (FrictionTerms, f64),
+    first: Lines,
+    without: &Score,
+    margin: f64,
+) -> Result<Option<StribeckChoice>> {
+    use std::collections::BTreeMap;
+    let joints = &systems.kin.joints;
+    let shape = |vs: f64, d: f64| StribeckShape {
+        velocity_rad_s: vs,
+        exponent: d,
+    };
+    let every =
+        |s: StribeckShape| -> BTreeMap<String, StribeckShape> { joints.iter().map(|j| (j.clone(), s)).collect() };
+    let terms = friction.with_stribeck(true);
+    let score_of = |shapes: &BTreeMap<String, StribeckShape>| -> Result<Option<Fitted>> {
+        let (sys, names) = systems.system_with(terms, v, Some(first), shapes)?;
+        Ok(sys.and_then(|sys| {
+            let fit = scorer.score(&sys)?;
+            let ok = scorer.friction_ok(&names, &fit.1);
+            Some((fit.0, fit.1, ok))
+        }))
+    };
+    let grid: Vec<(f64, f64)> = STRIBECK_SPEEDS
+        .iter()
+        .flat_map(|&vs| STRIBECK_EXPONENTS.iter().map(move |&d| (vs, d)))
+        .collect();
+    let scored: Vec<((f64, f64), Option<Fitted>)> = grid
+        .par_iter()
+        .map(|&(vs, d)| Ok(((vs, d), score_of(&every(shape(vs, d)))?)))
+        .collect::<Result<_>>()?;
+    // Per joint: its best fade on the grid and its ratio there.
+    let per_joint_margin = margin * (joints.len() as f64).sqrt();
+    let mut shapes = BTreeMap::new();
+    let mut said = Vec::new();
+    for (j, name) in joints.iter().enumerate() {
+        let before = without.per_joint.get(j).copied().unwrap_or(f64::NAN);
+        let best = scored
+            .iter()
+            .filter_map(|(s, f)| Some((*s, f.as_ref()?.1.per_joint.get(j).copied()?)))
+            .filter(|(_, r)| r.is_finite())
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let Some(((vs, d), r)) = best else { continue };
+        if !(r < before * (1.0 - per_joint_margin)) {
+            continue;
+        }
+        // Refined in log vs at the grid's δ, on this joint's own ratio
+        // (the others at the same fade: their rows do not see it).
+        let at = |x: f64| -> f64 {
+            match score_of(&every(shape(x.exp(), d))) {
+                Ok(Some((_, s, _))) => s
+                    .per_joint
+                    .get(j)
+                    .copied()
+                    .filter(|r| r.is_finite())
+                    .unwrap_or(f64::INFINITY),
+                _ => f64::INFINITY,
+            }
+        };
+        // Searched in ln vs + 10, positive for the relative tolerance
+        // (about 1 % in vs).
+        let x = robotid_stages::signal::golden(|y| at(y - 10.0), (vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
+            - 10.0;
+        let (vs, r) = match at(x) {
+            rx if rx < r => (x.exp(), rx),
+            _ => (vs, r),
+        };
+        shapes.insert(name.clone(), shape(vs, d));
+        said.push(format!(
+            "{name} vs {vs:.4} rad/s, δ {d} ({r:.2}× the noise floor held out, {before:.2}× without)"
+        ));
+    }
+    if shapes.is_empty() {
+        return Ok(None);
+    }
+    let Some((filter, fit, ok)) = score_of(&shapes)? else {
+        return Ok(None);
+    };
+    if !ok || !(fit.ratio < without.ratio * (1.0 - margin)) {
+        return Ok(None);
+    }
+    Ok(Some(StribeckChoice {
+        said: format!(
+            "Stribeck's static friction on {}: held-out residue {:.3}× the noise floor with it, {:.3}× without ({} fades tried per joint: vs {:?} rad/s × δ {:?}, the best refined)",
+            said.join(", "),
+            fit.ratio,
+            without.ratio,
+            grid.len(),
+            STRIBECK_SPEEDS,
+            STRIBECK_EXPONENTS
+        ),
+        shapes,
+        fit: (filter, fit),
+    }))
 }
 
 /// Two periods of one stretch far apart (model error dominates, as on real
@@ -642,6 +978,17 @@ impl<'a> LineSystems<'a> {
         v: f64,
         reuse: Option<Lines>,
     ) -> Result<(Option<robotid_stages::estimation::spectral::LineSystem>, Vec<String>)> {
+        self.system_with(friction, v, reuse, &self.template.stribeck)
+    }
+
+    /// [`LineSystems::system`] with these Stribeck fades.
+    fn system_with(
+        &self,
+        friction: FrictionTerms,
+        v: f64,
+        reuse: Option<Lines>,
+        stribeck: &std::collections::BTreeMap<String, StribeckShape>,
+    ) -> Result<(Option<robotid_stages::estimation::spectral::LineSystem>, Vec<String>)> {
         use robotid_stages::estimation::spectral::LineSystem;
         use robotid_stages::stage::regressor::column_spectra_of;
         let (p, lines) = (self.periods, self.lines);
@@ -650,6 +997,7 @@ impl<'a> LineSystems<'a> {
             coulomb_transition_rad_s: Some(v),
             band_limit_hz: None,
             joint_wise: false,
+            stribeck: stribeck.clone(),
             ..self.template.clone()
         };
         let base = cfg.base_regressor(self.model)?;
