@@ -59,6 +59,28 @@ fn with_cell(from: &Path, to: &Path, column: &str, row: usize, value: f64) {
     robotid_stages::formats::parquet::write_parquet(to, &batch).unwrap();
 }
 
+/// Runs each case: each must exit non-zero without a panic, say what it
+/// names, within `limit`, and leave `out` byte for byte as it was.
+fn refused_cleanly(cases: &[Case], out: &Path, limit: Duration) {
+    let before = bytes_of(out);
+    for c in cases {
+        let (ok, text, took) = run(&c.args);
+        println!(
+            "{:<40} {:>6.2} s  {}",
+            c.name,
+            took.as_secs_f64(),
+            text.lines().last().unwrap_or("")
+        );
+        assert!(!ok, "{}: exit 0\n{text}", c.name);
+        assert!(!text.contains("panicked"), "{}: panic\n{text}", c.name);
+        for needle in &c.says {
+            assert!(text.contains(needle.as_str()), "{}: no `{needle}` in\n{text}", c.name);
+        }
+        assert!(took < limit, "{}: took {took:?}", c.name);
+        assert_eq!(bytes_of(out), before, "{}: the output folder changed", c.name);
+    }
+}
+
 #[test]
 fn every_class_of_bad_input_is_refused_cleanly() {
     let ws = workspace(&["kuka_axis3"]);
@@ -459,25 +481,9 @@ fn every_class_of_bad_input_is_refused_cleanly() {
         ],
         says: vec!["nan_kinematics.parquet".into(), "q_a3".into(), "sample 17".into()],
     });
-    let before_out = bytes_of(&out);
     let inputs = [w.join("recordings"), w.join("csv"), w.join("robots"), w.join("sims")];
     let before_in: Vec<_> = inputs.iter().map(|d| bytes_of(d)).collect();
-    for c in &cases {
-        let (ok, text, took) = run(&c.args);
-        println!(
-            "{:<36} {:>6.2} s  {}",
-            c.name,
-            took.as_secs_f64(),
-            text.lines().last().unwrap_or("")
-        );
-        assert!(!ok, "{}: exit 0\n{text}", c.name);
-        assert!(!text.contains("panicked"), "{}: panic\n{text}", c.name);
-        for needle in &c.says {
-            assert!(text.contains(needle.as_str()), "{}: no `{needle}` in\n{text}", c.name);
-        }
-        assert!(took < Duration::from_secs(30), "{}: took {took:?}", c.name);
-        assert_eq!(bytes_of(&out), before_out, "{}: the output folder changed", c.name);
-    }
+    refused_cleanly(&cases, &out, Duration::from_secs(30));
     for (d, before) in inputs.iter().zip(&before_in) {
         assert_eq!(&bytes_of(d), before, "{}: an input changed", d.display());
     }
@@ -690,24 +696,8 @@ fn round_five_names_and_counts_are_refused_before_work() {
         ]),
         says: vec!["--known-payload-mass".into(), "--parameters".into()],
     });
-    let before_out = bytes_of(&out);
     let before_all = bytes_of(w);
-    for c in &cases {
-        let (ok, text, took) = run(&c.args);
-        println!(
-            "{:<40} {:>6.2} s  {}",
-            c.name,
-            took.as_secs_f64(),
-            text.lines().last().unwrap_or("")
-        );
-        assert!(!ok, "{}: exit 0\n{text}", c.name);
-        assert!(!text.contains("panicked"), "{}: panic\n{text}", c.name);
-        for needle in &c.says {
-            assert!(text.contains(needle.as_str()), "{}: no `{needle}` in\n{text}", c.name);
-        }
-        assert!(took < Duration::from_secs(10), "{}: took {took:?}", c.name);
-        assert_eq!(bytes_of(&out), before_out, "{}: the output folder changed", c.name);
-    }
+    refused_cleanly(&cases, &out, Duration::from_secs(10));
     // Nothing anywhere in the workspace changed (the refused simulations'
     // `--out` aside: made empty at most), the user's file kept.
     let mut after = bytes_of(w);
