@@ -304,8 +304,12 @@ fn impossible_bodies_are_refused_by_name() {
     let joint = urdf.find("<joint").unwrap();
     let at = joint + urdf[joint..].find("<origin xyz=\"").unwrap() + "<origin xyz=\"".len();
     let x = urdf[at..].find(' ').unwrap();
+    // Refused as it is read, naming the element, its line and attribute.
     let e = load("ur5.urdf", &format!("{}nan{}", &urdf[..at], &urdf[at + x..]));
-    assert!(e.contains("joint 1 (`shoulder_pan_joint`): origin = NaN"), "{e}");
+    assert!(
+        e.contains("<origin> (line 34), attribute `xyz`") && e.contains("not finite"),
+        "{e}"
+    );
 }
 
 /// A link's extent from its URDF shapes, in its frame: a box placed and
