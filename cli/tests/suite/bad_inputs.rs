@@ -628,6 +628,38 @@ fn round_five_names_and_counts_are_refused_before_work() {
             says: vec![format!("{n} draws"), "ceiling".into()],
         });
     }
+    // 100 seeded random counts over the whole range of u64 (the ceiling
+    // leaves almost none), each refused before the table is read.
+    let mut state: u64 = 0x9e37_79b9_7f4a_7c15;
+    for _ in 0..100 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let n = match state % 4 {
+            0 => state,
+            1 => state >> 32,
+            2 => 100_001 + (state >> 40),
+            _ => 10_001 + (state >> 44),
+        };
+        let mut a = args(&[
+            "sample",
+            &n.to_string(),
+            "--robot",
+            robot.to_str().unwrap(),
+            "-p",
+            params.to_str().unwrap(),
+            "-o",
+            w.join("samples").to_str().unwrap(),
+        ]);
+        if n <= 100_000 {
+            a.extend(args(&["--format", "urdf"]));
+        }
+        cases.push(Case {
+            name: "sample, a random count",
+            args: a,
+            says: vec![format!("{n} draws"), "ceiling".into()],
+        });
+    }
     // XML nested deeper than any robot's, and numbers that are not finite.
     let good = std::fs::read_to_string(&urdf).unwrap();
     let xml_cases = [
