@@ -78,6 +78,12 @@ CASES = {
     "stribeck_fast": dict(
         filter=("butter", 4, 30.0, None), friction="stribeck", periods=5, stribeck=(0.02, 1.0, 1.0)
     ),
+    # 1 kHz, no anti-alias filter, 2.2 periods between a move from rest and
+    # rest (the filter search's range ends at Nyquist: a pipeline declaring
+    # a filter beyond it is one its own lint refuses).
+    "unfiltered_1k_2p2": dict(
+        filter=None, friction="sign", periods=2.2, premove=3.0, ramp_in=0.5, ramp_out=0.5, rest=3.0, fs=1000.0
+    ),
 }
 
 # The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its

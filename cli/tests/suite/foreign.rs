@@ -918,7 +918,9 @@ fn a_payload_on_foreign_records_is_identified() {
 /// The corpus is simulated, its model exact: identified `--strict` (the
 /// start-up transient refused by it: its floor holds the transient); the
 /// Stribeck case under the default rule, refused as a friction the model
-/// lacks, measured.
+/// lacks, measured. 1 kHz with no filter, 2.2 periods between a move
+/// from rest and rest, is run, not pinned (its filter search once wrote a
+/// pipeline its own lint refused: exit 1).
 #[test]
 fn the_foreign_corpus_is_identified_or_refused() {
     let Some(urdf) = example_urdf("ur_description/urdf/ur5_robot.urdf") else {
@@ -933,6 +935,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
     // periods between ramps from torque sensors at 1 kHz, and 1.5 between
     // ramps, identified.
     let refused = ["transient_1p5"];
+    let unpinned = ["unfiltered_1k_2p2"];
     let cases = [
         "butter4_20",
         "bessel6_40",
@@ -952,6 +955,7 @@ fn the_foreign_corpus_is_identified_or_refused() {
         "transient_1p5",
         "sensors_1k_1p6",
         "stribeck_fast",
+        "unfiltered_1k_2p2",
     ];
     // One case: what the summary says of it, and its (within, of) when
     // identified.
@@ -969,6 +973,13 @@ fn the_foreign_corpus_is_identified_or_refused() {
         request.policy.strict = true;
         let id = robotid_identify::identify_quietly(&request).unwrap_or_else(|e| panic!("{case}: {e}"));
         let said = id.verdict.said();
+        // Not pinned, only run: identify writes no pipeline its own lint
+        // refuses (it once did: exit 1). Its parameters are not yet right
+        // (38 of 54 within 2 std, a filter found near Nyquist where there
+        // is none: the issue on honest figures).
+        if unpinned.contains(&case) {
+            return (format!("{case}: ran, not pinned: {said}"), None);
+        }
         // Stribeck's excess is chosen where the truth has it, on every
         // joint, and nowhere else.
         let statics = id.recordings[0].design.regressor.stribeck.len();

@@ -586,7 +586,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
     let best = best_cutoffs(
         sys,
         &shapes.iter().map(|&shape| spec(shape, 1.0)).collect::<Vec<_>>(),
-        lo,
+        (lo, hi),
         step,
     );
     let mut order: Vec<usize> = (0..shapes.len()).collect();
@@ -602,6 +602,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
             .take(REFINED)
             .map(|&i| (spec(shapes[i], best[i].0), best[i].1))
             .collect::<Vec<_>>(),
+        (lo, hi),
         step,
     );
     let (chosen, _) = fine[0];
@@ -618,7 +619,11 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
         .iter()
         .find(|&&i| shapes[i].0 != shapes[top].0 || shapes[i].1 != shapes[top].1)
         .map(|&i| (spec(shapes[i], best[i].0), best[i].1));
-    let keep = score.ratio < none.ratio * (1.0 - margin);
+    // A cutoff at the range's top (Nyquist, for identify) is no filter
+    // found: the search ran into its edge, and what it fits there is the
+    // band's own shape (aliasing, the sample-and-hold), not a filter's.
+    let at_edge = chosen.cutoff_hz >= 0.99 * highest_hz;
+    let keep = score.ratio < none.ratio * (1.0 - margin) && !at_edge;
     Some(FilterChoice {
         spec: keep.then_some(chosen),
         score: if keep { score } else { none.clone() },
@@ -633,7 +638,9 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
 /// Per shape of `shapes` (their cutoffs ignored): the best cutoff on the
 /// grid lo + step·i in u = ln(cutoff) + 20, refined by golden section
 /// between its neighbours, and its score.
-fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], lo: f64, step: f64) -> Vec<(f64, f64)> {
+/// The searches never leave [lo, hi]: a cutoff past the top of the range
+/// (Nyquist, for identify) is one no pipeline may declare.
+fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], (lo, hi): (f64, f64), step: f64) -> Vec<(f64, f64)> {
     // Per shape: the best grid cutoff, refined between its neighbours.
     let grid: Vec<Vec<f64>> = shapes
         .par_iter()
@@ -652,7 +659,13 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], lo: f64, step: f64) -> 
     let searches: Vec<(FilterSpec, f64, f64)> = shapes
         .iter()
         .zip(&near)
-        .map(|(&shape, &k)| (shape, lo + step * (k as f64 - 1.0), lo + step * (k as f64 + 1.0)))
+        .map(|(&shape, &k)| {
+            (
+                shape,
+                lo + step * (k as f64 - 1.0).max(0.0),
+                (lo + step * (k as f64 + 1.0)).min(hi),
+            )
+        })
         .collect();
     golden_cutoffs(sys, &searches, 1e-3)
         .iter()
@@ -669,11 +682,14 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], lo: f64, step: f64) -> 
 
 /// Each filter's cutoff refined by golden section within ±`step` (natural
 /// log) to 1e-6, kept where it scores better; sorted best first.
-fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], step: f64) -> Vec<(FilterSpec, f64)> {
+fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], (lo, hi): (f64, f64), step: f64) -> Vec<(FilterSpec, f64)> {
     // u = ln(cutoff) + 20 stays positive for the relative tolerance.
     let searches: Vec<(FilterSpec, f64, f64)> = start
         .iter()
-        .map(|(s, _)| (*s, s.cutoff_hz.ln() + 20.0 - step, s.cutoff_hz.ln() + 20.0 + step))
+        .map(|(s, _)| {
+            let u = s.cutoff_hz.ln() + 20.0;
+            (*s, (u - step).max(lo), (u + step).min(hi))
+        })
         .collect();
     let mut out: Vec<(FilterSpec, f64)> = golden_cutoffs(sys, &searches, 1e-8)
         .into_iter()
@@ -727,11 +743,16 @@ fn golden_cutoffs(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f6
 /// The best of `filters` (each cutoff refined within ±10 %) on `sys`, a
 /// system of other columns (another friction model, other kinematics) of
 /// the same recording: a search's best shapes carried over, not searched
-/// again.
+/// again, nor past the highest cutoff that search found (it stayed within
+/// its range: Nyquist, for identify).
 pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterSpec, Score)> {
     let ratios = sys.ratios(&filters.iter().map(|s| Some(*s)).collect::<Vec<_>>());
     let start: Vec<(FilterSpec, f64)> = filters.iter().copied().zip(ratios).collect();
-    let (best, _) = *refine(sys, &start, 0.1).first()?;
+    let hi = filters
+        .iter()
+        .map(|f| f.cutoff_hz.ln() + 20.0)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let (best, _) = *refine(sys, &start, (0.0, hi), 0.1).first()?;
     Some((best, sys.score(&sys.response(Some(&best))?)?))
 }
 
