@@ -546,13 +546,23 @@ fn lock(out: &Path) -> Result<(File, PathBuf)> {
         match file.try_lock() {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
-                let pid = std::fs::read_to_string(&path).unwrap_or_default();
+                // The holder writes its id just after it locks: a moment's
+                // wait for it, and no empty "(process )" if it is not there.
+                let mut pid = String::new();
+                for _ in 0..20 {
+                    pid = std::fs::read_to_string(&path).unwrap_or_default().trim().to_string();
+                    if !pid.is_empty() {
+                        break;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                let who = match pid.is_empty() {
+                    true => "another robotid run".to_string(),
+                    false => format!("another robotid run (process {pid})"),
+                };
                 return Err(output_error(
                     out,
-                    format!(
-                        "another robotid run (process {}) is writing here; wait for it or give another output folder",
-                        pid.trim()
-                    ),
+                    format!("{who} is writing here; wait for it or give another output folder"),
                 ));
             }
             Err(TryLockError::Error(e)) => return Err(Error::Io { path, source: e }),

@@ -728,6 +728,54 @@ fn round_five_names_and_counts_are_refused_before_work() {
         ]),
         says: vec!["--known-payload-mass".into(), "--parameters".into()],
     });
+    // A payload's declared values refused before any work (they were
+    // checked after the robot's identification, 6 s in).
+    let log = std::fs::read_dir(w.join("recordings/kuka_axis3"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .expect("a recording");
+    for (flag, values, says) in [
+        ("--known-payload-mass=-1", vec![], "known payload mass"),
+        ("--known-payload-mass", vec!["0"], "known payload mass"),
+        ("--known-payload-mass", vec!["NaN"], "known payload mass"),
+        ("--known-payload-mass", vec!["inf"], "known payload mass"),
+        (
+            "--payload-ellipsoid",
+            vec!["0", "0", "0", "0.1", "0.1", "inf"],
+            "semi-axes",
+        ),
+        (
+            "--payload-ellipsoid",
+            vec!["0", "0", "0", "0", "0.1", "0.1"],
+            "semi-axes",
+        ),
+        (
+            "--payload-ellipsoid",
+            vec!["NaN", "0", "0", "0.1", "0.1", "0.1"],
+            "semi-axes",
+        ),
+    ] {
+        let mut a = args(&[
+            "identify",
+            log.to_str().unwrap(),
+            "--robot",
+            robot.to_str().unwrap(),
+            "--payload-on",
+            "a3",
+            "--unloaded",
+            log.to_str().unwrap(),
+            "--out",
+            w.join("payload_out").to_str().unwrap(),
+            flag,
+        ]);
+        a.extend(values.iter().map(|v| v.to_string()));
+        cases.push(Case {
+            name: "a payload value no body has",
+            args: a,
+            says: vec![says.into()],
+        });
+    }
     let before_all = bytes_of(w);
     refused_cleanly(&cases, &out, Duration::from_secs(10));
     // Nothing anywhere in the workspace changed (the refused simulations'
