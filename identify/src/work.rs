@@ -22,7 +22,26 @@ use crate::{
 /// `observer` told of each pipeline's steps and of the physical fit. A
 /// refused fit is an [`Identification`] whose `refused` says why, its
 /// files written and marked; errors are for what could not be judged.
+/// A payload's declared values checked before any work: a positive
+/// finite mass, a finite centre and positive finite semi-axes.
+fn payload_values(p: &PayloadRequest) -> Result<()> {
+    if let Some(m) = p.known_mass.filter(|m| !(m.is_finite() && *m > 0.0)) {
+        return Err(Error::Request(format!(
+            "the known payload mass {m} kg: give a positive number of kilograms"
+        )));
+    }
+    if let Some((centre, axes)) = &p.bound {
+        if centre.iter().chain(axes).any(|v| !v.is_finite()) || axes.iter().any(|a| *a <= 0.0) {
+            return Err(Error::Request(format!(
+                "the payload's ellipsoid: centre {centre:?} m, semi-axes {axes:?} m: give a finite centre and positive, finite semi-axes"
+            )));
+        }
+    }
+    Ok(())
+}
+
 pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
+    request.payload.as_ref().map(payload_values).transpose()?;
     let paths = Paths::of(request)?;
     // The robot file as the payload's table and exports see it, its link
     // checked before anything runs.
@@ -228,6 +247,7 @@ pub fn payload_against_parameters(
     if loaded.is_empty() {
         return Err(Error::Request("--payload-on: no recording with the payload".into()));
     }
+    payload_values(request)?;
     let model = robotid_stages::dynamics::load_robot(&robot)?;
     payload_frame(&model, &request.link)?;
     let table = robotid_stages::formats::parquet::read_parquet(parameters)?;
@@ -916,7 +936,7 @@ fn estimate(
             .map(|r| r.into_iter().fold(0.0, f64::max)),
         split_relative: identifying
             .iter()
-            .map(|r| r.design.periodic().and_then(|p| p.held_out_split))
+            .map(|r| r.design.held_out_split)
             .collect::<Option<Vec<f64>>>()
             .map(|r| r.into_iter().fold(0.0, f64::max)),
     };

@@ -64,7 +64,7 @@ pub enum Measured {
     /// ones, and the reverse.
     HeldOutPeriods,
     /// On a block held out in time: fitted on the first part of the
-    /// record's one period, predicting the rest.
+    /// record's one period (or the whole record), predicting the rest.
     HeldOutTime,
     /// On the fitted data itself: nothing was held out (fewer than two
     /// steady periods and no validation recording).
@@ -79,7 +79,7 @@ impl Measured {
                 "on held-out periods (fitted on the even periods, predicting the odd ones, and the reverse)"
             }
             Measured::HeldOutTime => {
-                "on a block held out in time (fewer than two steady periods: fitted on the first 70 % of the period, predicting the rest)"
+                "on a block held out in time (fewer than two steady periods: the last 30 % of the period, or of a record that does not repeat, predicted by a fit that does not see it)"
             }
             Measured::InSample => {
                 "in sample: nothing held out (fewer than two steady periods and no validation recording)"
@@ -111,6 +111,9 @@ pub struct Verdict {
     /// The relative error that decides, pooled over the joints, and where
     /// it was measured.
     pub relative: (f64, Measured),
+    /// The fit's own relative error, ‖τ − Yθ‖ / ‖τ‖ over every joint's
+    /// identification rows (the papers' figure).
+    pub in_sample: f64,
     /// Why the fit is refused; None: identified.
     pub refused: Option<Refusal>,
 }
@@ -221,11 +224,15 @@ impl Verdict {
 
     fn judged(&self) -> String {
         let (rel, measured) = self.relative;
+        let in_sample = match measured {
+            Measured::InSample => String::new(),
+            _ => format!(", {:.2} % in sample", 100.0 * self.in_sample),
+        };
         let rule = if self.policy.strict {
             format!("strict: refused over {REFUSE_RATIO}× the noise floor on any joint, or a floor over twice the residue on every joint")
         } else {
             format!(
-                "tolerance {:.1} % of the torque; relative error {:.2} % {}",
+                "tolerance {:.1} % of the torque; relative error {:.2} % {}{in_sample}",
                 100.0 * self.policy.tolerance,
                 100.0 * rel,
                 measured.said()
@@ -242,10 +249,15 @@ impl Verdict {
             // Nothing to compare the residue with: only the tolerance
             // judges, and the verdict says so rather than claim a floor.
             let rel = format!(
-                "relative error {:.2} % {}, tolerance {:.1} %",
+                "relative error {:.2} % {}{in_sample}, tolerance {:.1} %; per joint {}",
                 100.0 * rel,
                 measured.said(),
-                100.0 * self.policy.tolerance
+                100.0 * self.policy.tolerance,
+                self.joints
+                    .iter()
+                    .map(|j| format!("{} {:.2} %", j.joint, 100.0 * j.model_error))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
             return match rel_within(self) {
                 true => format!("within the tolerance, judged by it alone: no joint has a noise floor to judge the fit against (the record has no repeated periods) ({rel})"),
@@ -308,11 +320,13 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
             }
         })
         .collect();
-    let relative = held_out.unwrap_or((validation::relative_error(&stats), Measured::InSample));
+    let in_sample = validation::relative_error(&stats);
+    let relative = held_out.unwrap_or((in_sample, Measured::InSample));
     let mut verdict = Verdict {
         policy,
         joints,
         relative,
+        in_sample,
         refused: None,
     };
     verdict.refused = refusal(&verdict);
@@ -449,6 +463,7 @@ mod tests {
                 friction_share: friction,
             }],
             relative: (relative, Measured::HeldOutPeriods),
+            in_sample: relative,
             refused: None,
         }
     }

@@ -208,6 +208,73 @@ fn held_out(params: &Path, tables: &[PathBuf]) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// The real Panda's 1.5 periods of torque-sensor data (stamps with gaps up
+/// to 8.8 ms, a ramp at either end), as the headerless matrix a lab would
+/// save (stamps, 7 angles, 7 torques), with only example-robot-data's
+/// URDF: one period leaves nothing repeating to score a band by, and the
+/// whole record filtered predicts the period's held-out last 30 % better
+/// than the period's best band (1.81 % against 3.50 %), so identify takes
+/// it whole. Its fit is within the paper's 1.41 % in sample (0.91 %; the
+/// period's DFT band gave 2.79 %), the held-out figure is what the verdict
+/// judges by, exit 0; and the intervals are the sandwich's, not the
+/// residual's 140 000 degrees of freedom.
+#[test]
+fn real_panda_one_period_identified_within_the_papers_figure() {
+    let Some(dir) = realdata("franka_panda") else { return };
+    let Some(robot) = robotid_tests::panda_urdf() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let column = |name: &str| -> Vec<String> {
+        std::fs::read_to_string(dir.join(name))
+            .unwrap()
+            .split_whitespace()
+            .map(str::to_string)
+            .collect()
+    };
+    let (t, q, tau) = (
+        column("exciting_traj_time.txt"),
+        column("exciting_traj_positions.txt"),
+        column("exciting_traj_torques.txt"),
+    );
+    assert_eq!((q.len(), tau.len()), (7 * t.len(), 7 * t.len()));
+    let text: String = (0..t.len())
+        .map(|k| {
+            format!(
+                "{} {} {}\n",
+                t[k],
+                q[7 * k..7 * k + 7].join(" "),
+                tau[7 * k..7 * k + 7].join(" ")
+            )
+        })
+        .collect();
+    let log = tmp.path().join("panda.txt");
+    std::fs::write(&log, text).unwrap();
+    let id = identified(vec![log], &robot, &tmp.path().join("id"), |_| {});
+    let said = id.verdict.said();
+    let design = &id.recordings[0].design;
+    assert!(design.taken_whole && design.periodic().is_none(), "{}", design.text);
+    assert!(id.refused.is_none() && id.verdict.refused.is_none(), "{said}");
+    assert!(
+        id.verdict.in_sample <= 0.0141,
+        "in sample {:.4} over the paper's 1.41 %: {said}",
+        id.verdict.in_sample
+    );
+    let (held_out, measured) = id.verdict.relative;
+    assert_eq!(measured, Measured::HeldOutTime, "{said}");
+    assert!((0.01..0.03).contains(&held_out), "{said}");
+    assert!(
+        said.contains("% in sample") && said.contains("on a block held out in time"),
+        "{said}"
+    );
+    assert_eq!(id.estimate.estimate.covariance_from, Covariance::Robust, "{said}");
+    assert!(
+        id.estimate.estimate.dof < 1000,
+        "{} degrees of freedom",
+        id.estimate.estimate.dof
+    );
+}
+
 /// The real KUKA LWR4+ files with nothing but the robot: 4π s found, and
 /// held-out residues on files 2 and 3 no worse than the hand-written
 /// pipelines' (fixtures/pipelines/kuka_lwr4_identify.toml, _heldout.toml)

@@ -139,9 +139,28 @@ pub struct Design {
     /// A joint-wise record: the joint that moves, and the held ones at
     /// their mean positions (rad).
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
+    /// Where nothing repeats to score by (fewer than two steady periods,
+    /// or none): the relative error of the chosen pipeline's fit on the
+    /// first [`FITTED_SHARE`] of its samples predicting the rest (None:
+    /// a validation recording, or the block does not determine the fit).
+    pub held_out_split: Option<f64>,
+    /// A periodic record taken whole as one that does not repeat (see
+    /// `whole_record`): its validation recordings are taken alike, through
+    /// the same data filter.
+    pub taken_whole: bool,
 }
 
 impl Design {
+    /// `said` found as `kind`, into the findings and the file's `[inferred]`
+    /// (replacing what was said of it).
+    fn note(&mut self, kind: Found, said: String) -> Result<()> {
+        self.findings.retain(|(k, _)| *k != kind);
+        self.findings.push((kind, said.clone()));
+        self.plan.inferred.insert(kind.key().into(), said);
+        self.text = file_text(&self.plan)?;
+        Ok(())
+    }
+
     /// The same pipeline with the effort `delay_s` late (s, at `fs` Hz),
     /// found as `said`: its inverse filter's delay set (a stage that undoes
     /// only it added where there was none), the finding and file updated.
@@ -164,11 +183,7 @@ impl Design {
             }
         }
         self.delay_s = Some(delay_s);
-        self.findings.retain(|(k, _)| *k != Found::EffortDelay);
-        self.findings.push((Found::EffortDelay, said.clone()));
-        self.plan.inferred.insert(Found::EffortDelay.key().into(), said);
-        self.text = file_text(&self.plan)?;
-        Ok(())
+        self.note(Found::EffortDelay, said)
     }
 }
 
@@ -192,9 +207,6 @@ pub struct Periodic {
     /// on the even periods, predicting the odd ones, and the reverse):
     /// None with fewer than two steady periods, and for validation records.
     pub held_out_relative: Option<f64>,
-    /// With fewer than two steady periods: the relative error of the
-    /// chosen band predicting the period's last part, fitted on the rest.
-    pub held_out_split: Option<f64>,
     /// The held-out scores the friction was chosen by (None: symmetric
     /// friction was not a choice, or nothing was held out).
     pub friction_scores: Option<FrictionScores>,
@@ -240,6 +252,8 @@ impl Design {
             delay_s: None,
             wide_band: false,
             joint_wise: None,
+            held_out_split: None,
+            taken_whole: false,
         })
     }
 }
@@ -401,14 +415,32 @@ fn design_checked(
     };
     findings.push((Found::SampleRate, fs_said));
     let period = period_of(&raw, &mut findings);
-    let (period, period_said) = match period {
-        Ok(p) => p,
-        Err(why) => {
-            findings.push((Found::Periodic, format!("no: {why}")));
-            let delay = first.and_then(|d| d.delay_s);
-            return non_periodic(plan, findings, &raw, fs, &regressor, (inverse.as_ref(), delay));
-        }
+    // The identification recording was taken whole: this one alike, through its filter.
+    let whole_cutoff = first.filter(|d| d.taken_whole).and_then(|d| data_cutoff(&d.plan));
+    let not_periodic = match (&period, whole_cutoff) {
+        (Ok(_), Some(c)) => Some(format!(
+            "taken whole as a record that does not repeat, as the identification recording was, through its {c} Hz data filter"
+        )),
+        (Ok(_), None) => None,
+        (Err(why), _) => Some(format!("no: {why}")),
     };
+    if let Some(said) = not_periodic {
+        findings.push((Found::Periodic, said));
+        let delay = first.and_then(|d| d.delay_s);
+        let mut d = non_periodic(
+            plan,
+            findings,
+            &raw,
+            (fs, whole_cutoff),
+            &regressor,
+            (inverse.as_ref(), delay),
+        )?;
+        if first.is_none() && !loaded {
+            d.held_out_split = record_split(&d, log, &raw, None)?;
+        }
+        return Ok(d);
+    }
+    let (period, period_said) = period.expect("periodic: checked above");
     findings.push((Found::Period, period_said));
     periodic(
         Draft {

@@ -535,8 +535,64 @@ pub(super) fn time_split(
     };
     let (fit_a, fit_b) = rows(0..cut);
     let (test_a, test_b) = rows(cut..samples);
+    Ok(predicted((&fit_a, &fit_b), (&test_a, &test_b)))
+}
+
+/// The same split of a regressor system's rows (a record that does not
+/// repeat, its columns and torque through its data filter): fitted on the
+/// rows of the first [`FITTED_SHARE`] of its time span, predicting the
+/// rest; None where the fitted block does not determine the parameters.
+/// `period` (start, period, s): a periodic record taken whole is scored on
+/// the block its one period's split holds out (the period's last part),
+/// fitted on every row whose phase lies outside it: a repeat of the
+/// held-out motion one period on is not held out.
+pub(super) fn system_split(sys: &robotid_stages::estimation::System, period: Option<(f64, f64)>) -> Option<f64> {
+    let (fit, test): (Vec<usize>, Vec<usize>) = match period {
+        Some((start, p)) => {
+            let held = |t: f64| (t - start).rem_euclid(p) >= FITTED_SHARE * p;
+            let (mut fit, mut test) = (Vec::new(), Vec::new());
+            for (i, &t) in sys.time.iter().enumerate() {
+                if !held(t) {
+                    fit.push(i);
+                } else if t >= start && t < start + p {
+                    test.push(i);
+                }
+            }
+            (fit, test)
+        }
+        None => {
+            let (first, last) = sys
+                .time
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &t| {
+                    (lo.min(t), hi.max(t))
+                });
+            let cut = first + FITTED_SHARE * (last - first);
+            (0..sys.rows()).partition(|&i| sys.time[i] < cut)
+        }
+    };
+    let take = |rows: &[usize]| {
+        (
+            sys.a.select_rows(rows.iter()),
+            nalgebra::DVector::from_fn(rows.len(), |r, _| sys.b[rows[r]]),
+        )
+    };
+    let (fit_a, fit_b) = take(&fit);
+    let (test_a, test_b) = take(&test);
+    predicted((&fit_a, &fit_b), (&test_a, &test_b))
+}
+
+/// The relative error ‖b − A·θ‖ / ‖b‖ of the held-out rows `test` under
+/// the least-squares θ of the `fit` rows; None where those do not
+/// determine it (fewer than twice as many rows as parameters) or nothing
+/// is held out.
+fn predicted(
+    (fit_a, fit_b): (&nalgebra::DMatrix<f64>, &nalgebra::DVector<f64>),
+    (test_a, test_b): (&nalgebra::DMatrix<f64>, &nalgebra::DVector<f64>),
+) -> Option<f64> {
+    let p = fit_a.ncols();
     if fit_a.nrows() < 2 * p || test_b.norm() == 0.0 {
-        return Ok(None);
+        return None;
     }
     // Columns scaled to unit norm, solved by SVD with a relative cut: a
     // direction the fitted block does not determine is left at zero.
@@ -544,9 +600,9 @@ pub(super) fn time_split(
     let scaled = nalgebra::DMatrix::from_fn(fit_a.nrows(), p, |r, c| fit_a[(r, c)] / scale[c]);
     let svd = scaled.svd(true, true);
     let tol = 1e-10 * svd.singular_values.max();
-    let Ok(x) = svd.solve(&fit_b, tol) else { return Ok(None) };
+    let x = svd.solve(fit_b, tol).ok()?;
     let theta = nalgebra::DVector::from_fn(p, |c, _| x[c] / scale[c]);
-    Ok(Some((&test_b - &test_a * theta).norm() / test_b.norm()))
+    Some((test_b - test_a * theta).norm() / test_b.norm())
 }
 
 /// The Stribeck fades tried: vs, rad/s (harmonic drives' static friction

@@ -656,14 +656,23 @@ impl Reducer {
         }
     }
 
-    /// `covariance = "robust"`: where model error dominates some joint, the
-    /// sandwich of the kept rows replaces auto's covariance (and its
-    /// widening), said; None where every joint is at its floor.
+    /// `covariance = "robust"`: where model error dominates some joint, or
+    /// nothing repeats to take the noise from (the residual's covariance:
+    /// a filtered record's residue is correlated over the filter's time
+    /// constant whatever it holds, and no floor tells noise from model
+    /// error), the sandwich of the kept rows replaces auto's covariance
+    /// (and its widening), said; None where every joint is at its floor
+    /// of repeated periods.
     fn robust(&self, parts: &[Part], est: &mut Estimate) -> Result<Option<String>> {
         let inadequate: Vec<String> = est.inadequate().iter().map(|a| a.joint.clone()).collect();
-        if inadequate.is_empty() {
+        let unrepeated = est.covariance_from == Covariance::Residual;
+        if inadequate.is_empty() && !unrepeated {
             return Ok(None);
         }
+        let why = match inadequate.is_empty() {
+            false => format!("model error dominates on {}", inadequate.join(", ")),
+            true => "nothing repeats to take the noise from (no periods)".to_string(),
+        };
         let systems: Vec<&System> = parts.iter().filter_map(|p| p.rows.as_ref().map(|r| &r.0)).collect();
         let sys = System::stack(&systems)?;
         let w = match self.cfg.method {
@@ -673,8 +682,7 @@ impl Reducer {
         let r = robust_covariance(&sys, &est.values, w.as_ref())?;
         let rate = sys.time.windows(2).map(|t| t[1] - t[0]).find(|d| *d > 0.0);
         let said = format!(
-            "model error dominates on {}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom), not the {} covariance, which holds model error as white noise",
-            inadequate.join(", "),
+            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom), not the {} covariance, which holds the residue as white noise",
             r.bandwidth,
             rate.map(|d| format!(", {:.0} ms", 1e3 * d * r.bandwidth as f64)).unwrap_or_default(),
             r.dof,
