@@ -139,7 +139,7 @@ fn whole_record(d: Draft, p: &robotid_stages::stage::Periods, period_split: f64)
     let Some(split) = record_split(&whole, log, &raw, Some((p.start_s, p.period_s)))? else {
         return Ok(None);
     };
-    if split >= period_split {
+    if split >= (1.0 - WHOLE_MARGIN) * period_split {
         return Ok(None);
     }
     whole.note(
@@ -158,6 +158,13 @@ fn whole_record(d: Draft, p: &robotid_stages::stage::Periods, period_split: f64)
     whole.taken_whole = true;
     Ok(Some(whole))
 }
+
+/// How much better the whole record must predict the held-out block to
+/// be taken over the period: a change of kind earns its place (the
+/// LWR4+'s file 2 predicts it 4.31 % off whole, 4.39 % by its period,
+/// and its estimate taken whole left its repeat, file 1, outside the
+/// robust intervals more often: 78 % within 2 σ against 91 %).
+const WHOLE_MARGIN: f64 = 0.1;
 
 /// The time split's score of a non-periodic design's pipeline on `raw`
 /// (see [`system_split`]): on its regressor's rows, whose columns and
