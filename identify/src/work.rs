@@ -18,10 +18,6 @@ use crate::{
     Error, Identification, PayloadRequest, PayloadValidation, Physical, Ran, Recording, Request, Result, Role,
 };
 
-/// Identifies the robot of `request` (see the crate's documentation),
-/// `observer` told of each pipeline's steps and of the physical fit. A
-/// refused fit is an [`Identification`] whose `refused` says why, its
-/// files written and marked; errors are for what could not be judged.
 /// A payload's declared values checked before any work: a positive
 /// finite mass, a finite centre and positive finite semi-axes.
 fn payload_values(p: &PayloadRequest) -> Result<()> {
@@ -40,6 +36,10 @@ fn payload_values(p: &PayloadRequest) -> Result<()> {
     Ok(())
 }
 
+/// Identifies the robot of `request` (see the crate's documentation),
+/// `observer` told of each pipeline's steps and of the physical fit. A
+/// refused fit is an [`Identification`] whose `refused` says why, its
+/// files written and marked; errors are for what could not be judged.
 pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
     request.payload.as_ref().map(payload_values).transpose()?;
     let paths = Paths::of(request)?;

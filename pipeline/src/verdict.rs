@@ -249,7 +249,7 @@ impl Verdict {
             // Nothing to compare the residue with: only the tolerance
             // judges, and the verdict says so rather than claim a floor.
             let rel = format!(
-                "relative error {:.2} % {}{in_sample}, tolerance {:.1} %; per joint {}",
+                "relative error {:.2} % {}{in_sample}, tolerance {:.1} %; in sample per joint {}",
                 100.0 * rel,
                 measured.said(),
                 100.0 * self.policy.tolerance,

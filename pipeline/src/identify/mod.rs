@@ -140,9 +140,10 @@ pub struct Design {
     /// their mean positions (rad).
     pub joint_wise: Option<(String, Vec<(String, f64)>)>,
     /// Where nothing repeats to score by (fewer than two steady periods,
-    /// or none): the relative error of the chosen pipeline's fit on the
-    /// first [`FITTED_SHARE`] of its samples predicting the rest (None:
-    /// a validation recording, or the block does not determine the fit).
+    /// or none): the relative error predicting a block held out in time,
+    /// the last part of the one period or of a record that does not
+    /// repeat, by a fit that does not see it (None: a validation
+    /// recording, or the rest does not determine the fit).
     pub held_out_split: Option<f64>,
     /// A periodic record taken whole as one that does not repeat (see
     /// `whole_record`): its validation recordings are taken alike, through
