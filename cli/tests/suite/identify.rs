@@ -646,6 +646,35 @@ fn a_declared_period_the_data_contradict_is_said() {
     );
 }
 
+/// A robot file with a link no body has (j2's principal moments break the
+/// triangle inequality, as two links of a widely copied URDF do): identify
+/// runs, says the link with both sets of moments once, and identifies the
+/// arm as with the right file (the data decide the values; the file's
+/// bodies are the prior).
+#[test]
+fn a_robot_file_with_a_link_no_body_has_is_identified_and_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("robots/arm3.toml")).unwrap();
+    let bad = text.replace(
+        "inertia = { ixx = 3.6, iyy = 3.7, izz = 0.35, ixz = 0.05 }",
+        "inertia = { ixx = 8.0, iyy = 3.7, izz = 0.35 }",
+    );
+    assert_ne!(bad, text);
+    let robot = dir.path().join("arm3.toml");
+    std::fs::write(&robot, bad).unwrap();
+    let log = robotid_tests::simulated("arm3").join("arm3.parquet");
+    let out = dir.path().join("id");
+    let run = super::robotid(&["identify", s(&log), "--robot", s(&robot), "--out", s(&out)]);
+    let said = super::text(&run);
+    assert!(run.status.success(), "{said}");
+    let warning = "the link of `j2`: principal moments 3.500000e-1, 3.700000e0, 8.000000e0 kg·m² about its centre of mass are no body's (one exceeds the sum of the other two: the triangle inequality); taken as the nearest body's, 2.325000e0, 5.675000e0, 8.000000e0 kg·m²";
+    assert_eq!(said.matches(warning).count(), 1, "{said}");
+    assert!(said.contains("verdict: adequate"), "{said}");
+    for k in ["identified.urdf", "identified.xml", "parameters_physical.parquet"] {
+        assert!(out.join(k).is_file(), "{k} missing:\n{said}");
+    }
+}
+
 /// A joint held still in the record is refused, with what to do.
 #[test]
 fn a_joint_that_does_not_move_is_refused() {

@@ -537,6 +537,53 @@ impl Model {
 
     /// Checks the physical sanity of the description: positive masses
     /// (zero allowed), symmetric positive semidefinite inertias satisfying
+    /// Links whose inertia about the centre of mass no body has (a
+    /// negative principal moment, or moments that break the triangle
+    /// inequality: a typo in a widely copied URDF) taken as the nearest
+    /// body's, each said in `warnings` with both sets of moments. The
+    /// nearest in the mass's second moments Σ = ½tr(I)·1 − I, which a body
+    /// has positive semidefinite: Σ's negative eigenvalues set to 0, the
+    /// principal axes kept (I = tr(Σ)·1 − Σ). The link then serves as the
+    /// physical fit's prior and the simulator's body; the data decide its
+    /// identified values.
+    pub fn make_bodies_physical(&mut self) {
+        for (link, joint) in self.links.iter_mut().zip(&self.joints) {
+            let ic = link.inertia_com;
+            let scale = ic.abs().max();
+            if !scale.is_finite() || (ic - ic.transpose()).abs().max() > 1e-12 * (1.0 + scale) {
+                continue; // not symmetric or not finite: validate() refuses it
+            }
+            let eig = ic.symmetric_eigen();
+            let tol = 1e-12 * (1.0 + scale);
+            let p = eig.eigenvalues;
+            let trace = p.sum();
+            let second = p.map(|a| 0.5 * trace - a);
+            if second.iter().all(|s| *s >= -tol) {
+                continue;
+            }
+            let kept = second.map(|s| s.max(0.0));
+            let moments = kept.map(|s| kept.sum() - s);
+            let axes = eig.eigenvectors;
+            link.inertia_com = axes * Matrix3::from_diagonal(&moments) * axes.transpose();
+            let list = |v: &Vector3<f64>| {
+                let mut v: Vec<f64> = v.iter().copied().collect();
+                v.sort_by(f64::total_cmp);
+                v.iter().map(|x| format!("{x:.6e}")).collect::<Vec<_>>().join(", ")
+            };
+            self.warnings.push(format!(
+                "the link of `{}`: principal moments {} kg·m² about its centre of mass are no body's ({}); taken as the nearest body's, {} kg·m², for the physical fit's prior and simulation (the data decide the identified values)",
+                joint.name,
+                list(&p),
+                if p.iter().any(|a| *a < -tol) {
+                    "a negative moment"
+                } else {
+                    "one exceeds the sum of the other two: the triangle inequality"
+                },
+                list(&moments)
+            ));
+        }
+    }
+
     /// the triangle inequalities, positive drive constants.
     pub fn validate(&self) -> Result<(), Problem> {
         let n = self.dof();

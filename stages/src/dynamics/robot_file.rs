@@ -136,12 +136,13 @@ pub fn load_robot(path: &Path) -> Result<Model> {
 /// Loads a robot with some joints of its URDF locked (see [`Locks`]).
 pub fn load_robot_with(path: &Path, locks: &Locks) -> Result<Model> {
     let is_urdf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
-    let model = if is_urdf {
+    let mut model = if is_urdf {
         super::urdf::load_urdf_with(path, locks)?
     } else {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         parse_robot_file_with(&text, path, locks)?
     };
+    model.make_bodies_physical();
     model.validate().map_err(|p| Error::Robot {
         path: path.to_path_buf(),
         msg: p.to_string(),

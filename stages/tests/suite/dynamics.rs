@@ -122,6 +122,39 @@ fn three_dof_arm_matches_lagrangian() {
     check_against_lagrangian(&model, 4);
 }
 
+/// A robot file whose link inertia no body has (a typo: j2's moments
+/// 8.0, 3.7, 0.35 kg·m² break the triangle inequality, 8.0 > 4.05) loads
+/// with a warning that names the link and both sets of moments, its body
+/// the nearest physical one: in the principal axes the mass's second
+/// moments (½tr − I) = (−1.975, 2.325, 5.675) with the negative one set to
+/// 0, so the moments become (8.0, 5.675, 2.325): the triangle met with
+/// equality, the other links untouched.
+#[test]
+fn a_link_no_body_has_is_loaded_as_the_nearest_body_and_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(fixture("robots/arm3.toml")).unwrap();
+    let bad = text.replace(
+        "inertia = { ixx = 3.6, iyy = 3.7, izz = 0.35, ixz = 0.05 }",
+        "inertia = { ixx = 8.0, iyy = 3.7, izz = 0.35 }",
+    );
+    assert_ne!(bad, text);
+    let file = dir.path().join("arm3.toml");
+    std::fs::write(&file, bad).unwrap();
+    let model = dynamics::load_robot(&file).unwrap();
+    let good = dynamics::load_robot(&fixture("robots/arm3.toml")).unwrap();
+    assert_eq!(model.warnings.len(), 1, "{:?}", model.warnings);
+    let w = &model.warnings[0];
+    assert!(w.contains("`j2`") && w.contains("triangle inequality"), "{w}");
+    assert!(w.contains("3.500000e-1, 3.700000e0, 8.000000e0"), "{w}");
+    assert!(w.contains("2.325000e0, 5.675000e0, 8.000000e0"), "{w}");
+    let i = model.links[1].inertia_com;
+    let expected = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(8.0, 5.675, 2.325));
+    assert!((i - expected).abs().max() < 1e-12, "{i}");
+    assert_eq!(model.links[0], good.links[0]);
+    assert_eq!(model.links[2], good.links[2]);
+    assert!(good.warnings.is_empty());
+}
+
 #[test]
 fn real_kuka_lwr4_urdf_loads_and_matches_lagrangian() {
     let Some(dir) = robotid_tests::realdata("kuka_lwr4") else {
