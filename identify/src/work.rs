@@ -8,7 +8,9 @@ use robotid::verdict::{Measured, Verdict};
 use robotid::{Observer, RunOptions};
 use robotid_report::export::{Export, Format};
 use robotid_schemas::TableKind;
-use robotid_stages::estimation::payload::{identify_payload, PayloadFit, PayloadOptions, Robot as PayloadRobot};
+use robotid_stages::estimation::payload::{
+    identify_payload, NominalGains, PayloadFit, PayloadOptions, Robot as PayloadRobot,
+};
 use robotid_stages::estimation::{Covariance, Ellipsoid, Estimate, Estimator, System};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
 use robotid_stages::stage::read::mcap_has_reference;
@@ -303,9 +305,13 @@ pub fn payload_against_parameters(
         identify_payload(
             &system,
             PayloadRobot::Known(&known),
+            // The table's parameters came through the same gains: a
+            // common error scales both, and the first-order share below
+            // is for records with and without the payload.
             &PayloadOptions {
                 known_mass: None,
                 bound,
+                gains: None,
             },
         )
     })?;
@@ -424,6 +430,7 @@ pub fn payload_from_tables(
     let model = robotid_stages::dynamics::load_robot(robot)?;
     let unloaded = robotid::tables::load_system(within, unloaded)?;
     let loaded = robotid::tables::load_system(within, loaded)?;
+    let gains = nominal_gains(&model, &loaded);
     bounded_payload(request, &model, |bound| {
         identify_payload(
             &loaded,
@@ -431,8 +438,59 @@ pub fn payload_from_tables(
             &PayloadOptions {
                 known_mass: request.known_mass,
                 bound,
+                gains: gains.as_ref(),
             },
         )
+    })
+}
+
+/// Where the records' torques are currents through the robot file's (or
+/// the `[read]` table's) gains: each joint's gain's relative standard
+/// deviation, the robot file's `torque_constant_rel_std` or the default,
+/// and which.
+fn nominal_gains(
+    model: &robotid_stages::dynamics::Model,
+    sys: &robotid_stages::estimation::System,
+) -> Option<NominalGains> {
+    let through = sys.metadata.get(robotid_schemas::metadata::EFFORT_GAINS)?;
+    let names = model.joint_names();
+    let declared: Vec<Option<f64>> = sys
+        .joints
+        .iter()
+        .map(|j| {
+            names
+                .iter()
+                .position(|n| n == j)
+                .and_then(|i| model.drives[i].gain_rel_std)
+        })
+        .collect();
+    let default = robotid_stages::dynamics::DEFAULT_GAIN_REL_STD;
+    let rel_std: Vec<f64> = declared.iter().map(|d| d.unwrap_or(default)).collect();
+    let whose = if declared.iter().all(Option::is_some) {
+        "as the robot file declares (torque_constant_rel_std)".to_string()
+    } else {
+        format!(
+            "{}the default {:.0} % where the robot file declares no `torque_constant_rel_std`",
+            if declared.iter().any(Option::is_some) {
+                "as the robot file declares, and "
+            } else {
+                ""
+            },
+            100.0 * default
+        )
+    };
+    let each: Vec<String> = sys
+        .joints
+        .iter()
+        .zip(&rel_std)
+        .map(|(j, s)| format!("{j} {:.1} %", 100.0 * s))
+        .collect();
+    Some(NominalGains {
+        said: format!(
+            "the torques are {through}, each gain uncertain by {} ({whose})",
+            each.join(", ")
+        ),
+        rel_std,
     })
 }
 

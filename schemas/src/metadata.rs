@@ -50,6 +50,9 @@ pub const PHASE_REGISTERED: &str = "robotid.phase_registered";
 pub const TIME_ORIGIN_S: &str = "robotid.time_origin_s";
 /// What reading a log noticed and did (e.g. a truncated last line dropped).
 pub const READ_NOTES: &str = "robotid.read.notes";
+/// Where the effort is a motor current: the gain it was turned into joint
+/// torque by (absent where the effort was read as a torque).
+pub const EFFORT_GAINS: &str = "robotid.effort_gains";
 /// The unit a log declared for its effort channel.
 pub const READ_EFFORT_UNIT: &str = "robotid.read.effort_unit";
 /// Band of the inverse-filtered torque, Hz: lines above it were zeroed.

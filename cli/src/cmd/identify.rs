@@ -368,6 +368,9 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
     if let Some(said) = &fit.bound_said {
         println!("  bound: {said}");
     }
+    if let Some(g) = &fit.gains_share {
+        println!("  gains: {}", g.said());
+    }
     if !fit.undetermined.is_empty() {
         println!(
             "  undetermined at the payload's size (the records do not tell them from any body of that mass and size; move the wrist more, or longer): {}",

@@ -125,7 +125,7 @@ fn identified(
 #[test]
 fn a_payload_is_identified_with_the_robot() {
     let dir = tempfile::tempdir().unwrap();
-    let robot = fixture("robots/ur5.toml");
+    let robot = exact_gains(dir.path());
     let model = load_robot(&robot).unwrap();
     let truth = payload();
     let unloaded = record(dir.path(), &model, 1, "unloaded", true);
@@ -255,15 +255,13 @@ fn a_payload_is_identified_with_the_robot() {
     );
 }
 
-/// Drives whose torque constants the robot file has wrong by −15 to
-/// +20 %: with the payload's mass known, each joint's scale within 1 %
-/// of the truth's (file's constant × scale = the simulator's), and as
-/// close, positive, given the payload bounded to its declared size.
-#[test]
-fn drive_gains_come_from_a_known_payload_mass() {
-    let dir = tempfile::tempdir().unwrap();
-    let model = load_robot(&fixture("robots/ur5.toml")).unwrap();
-    let off = [1.1, 0.9, 1.05, 0.95, 1.2, 0.85];
+/// Each drive's simulated torque constant over the robot file's.
+const GAINS_OFF: [f64; 6] = [1.1, 0.9, 1.05, 0.95, 1.2, 0.85];
+
+/// The UR5's robot file with each torque constant times `off` (the
+/// simulator keeps the fixture's), and each gain's relative standard
+/// deviation declared where `declared` gives one.
+fn ur5_gains(dir: &Path, off: &[f64; 6], declared: Option<f64>) -> PathBuf {
     let text = std::fs::read_to_string(fixture("robots/ur5.toml")).unwrap();
     let mut k = 0;
     let wrong: String = text
@@ -272,7 +270,10 @@ fn drive_gains_come_from_a_known_payload_mass() {
             Some(v) => {
                 let v: f64 = v.parse().unwrap();
                 k += 1;
-                format!("torque_constant = {}\n", v * off[k - 1])
+                let std = declared
+                    .map(|d| format!("torque_constant_rel_std = {d}\n"))
+                    .unwrap_or_default();
+                format!("torque_constant = {}\n{std}", v * off[k - 1])
             }
             None if l.starts_with("urdf = ") => {
                 format!(
@@ -284,8 +285,65 @@ fn drive_gains_come_from_a_known_payload_mass() {
         })
         .collect();
     assert_eq!(k, 6);
-    let robot = dir.path().join("ur5_wrong_gains.toml");
+    let robot = dir.join("ur5_gains.toml");
     std::fs::write(&robot, wrong).unwrap();
+    robot
+}
+
+/// The simulator's own robot file, its gains declared exact: a payload's
+/// mass carries no gains' uncertainty.
+fn exact_gains(dir: &Path) -> PathBuf {
+    ur5_gains(dir, &[1.0; 6], Some(0.0))
+}
+
+/// The same wrong gains (−15 to +20 %) with the payload's mass unknown:
+/// the mass is only as good as the gains. Its interval carries them (the
+/// robot file declares no uncertainty: 10 % each, said) and holds the
+/// true 3 kg, which the noise's interval alone excludes; the output names
+/// the gains and what would separate them.
+#[test]
+fn a_payload_through_nominal_gains_carries_their_uncertainty() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let robot = ur5_gains(dir.path(), &GAINS_OFF, None);
+    let truth = payload();
+    let unloaded = record(dir.path(), &model, 3, "unloaded", true);
+    let loaded = record(dir.path(), &carrying(&model, &truth), 4, "loaded", true);
+    let id = identified(dir.path(), &robot, (unloaded, loaded), |_| {}).unwrap();
+    let fit = id.payload.as_ref().unwrap();
+    let share = fit.gains_share.as_ref().expect("currents through nominal gains");
+    let said = share.said();
+    assert!(
+        said.contains("the default 10 % where the robot file declares no `torque_constant_rel_std`")
+            && said.contains("--known-payload-mass"),
+        "{said}"
+    );
+    let mass = fit.body.unwrap().mass;
+    let t = robotid_stages::estimation::student_t_quantile(0.975, fit.estimate.dof);
+    let (half, noise) = (t * fit.body_std[0], t * share.mass_std_noise);
+    eprintln!(
+        "mass {mass:.4} ± {half:.4} kg (95 %; the noise's alone ± {noise:.4}, the gains' std {:.4}), truth {}",
+        share.mass_std, truth.mass
+    );
+    assert!((mass - truth.mass).abs() <= half, "{said}");
+    assert!(
+        (mass - truth.mass).abs() > noise,
+        "the noise's interval already held it: {said}"
+    );
+    let table = read_parquet(&dir.path().join("out/payload.parquet")).unwrap();
+    assert_eq!(table.schema().metadata()["robotid.payload.gains"], said);
+}
+
+/// Drives whose torque constants the robot file has wrong by −15 to
+/// +20 %: with the payload's mass known, each joint's scale within 1 %
+/// of the truth's (file's constant × scale = the simulator's), and as
+/// close, positive, given the payload bounded to its declared size.
+#[test]
+fn drive_gains_come_from_a_known_payload_mass() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = load_robot(&fixture("robots/ur5.toml")).unwrap();
+    let off = GAINS_OFF;
+    let robot = ur5_gains(dir.path(), &off, None);
     let truth = payload();
     let unloaded = record(dir.path(), &model, 3, "unloaded", true);
     let loaded = record(dir.path(), &carrying(&model, &truth), 4, "loaded", true);
@@ -336,7 +394,7 @@ fn drive_gains_come_from_a_known_payload_mass() {
 #[test]
 fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
     let dir = tempfile::tempdir().unwrap();
-    let robot = fixture("robots/ur5.toml");
+    let robot = exact_gains(dir.path());
     let model = load_robot(&robot).unwrap();
     let truth = payload();
     let unloaded = record(dir.path(), &model, 5, "unloaded", true);
@@ -411,7 +469,7 @@ fn a_still_wrist_leaves_the_payloads_inertia_undetermined() {
 #[test]
 fn the_payloads_intervals_cover_the_truth() {
     let dir = tempfile::tempdir().unwrap();
-    let robot = fixture("robots/ur5.toml");
+    let robot = exact_gains(dir.path());
     let model = load_robot(&robot).unwrap();
     let truth = payload();
     let (r, p) = ee(&model);

@@ -39,7 +39,9 @@ pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics, try_choles
 pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
 pub use mjcf_patch::MjcfPatch;
-pub use model::{Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, LISTED};
+pub use model::{
+    Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, DEFAULT_GAIN_REL_STD, LISTED,
+};
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};

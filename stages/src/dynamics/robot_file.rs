@@ -47,6 +47,7 @@ struct JointEntry {
     inertia: Option<InertiaEntry>,
     gear_ratio: Option<f64>,
     torque_constant: Option<f64>,
+    torque_constant_rel_std: Option<f64>,
     encoder_counts_per_rev: Option<f64>,
     rotor_inertia: Option<f64>,
     viscous: Option<f64>,
@@ -307,6 +308,9 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     }
     if let Some(v) = e.torque_constant {
         d.torque_constant = v;
+    }
+    if let Some(v) = e.torque_constant_rel_std {
+        d.gain_rel_std = Some(v);
     }
     if let Some(v) = e.encoder_counts_per_rev {
         d.encoder_counts_per_rev = v;

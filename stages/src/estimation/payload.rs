@@ -78,6 +78,9 @@ pub struct PayloadFit {
     /// Where the bound came from (declared, or the robot file's shapes of
     /// the payload's link), or why the shapes were not taken.
     pub bound_said: Option<String>,
+    /// With the mass estimated from currents through nominal gains: the
+    /// gains' share of its uncertainty (in `covariance` already).
+    pub gains_share: Option<GainsShare>,
 }
 
 /// The payload fitted inside its bounding ellipsoid.
@@ -91,13 +94,49 @@ pub struct Bounded {
 
 /// What to fit besides the payload.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct PayloadOptions {
+pub struct PayloadOptions<'a> {
     /// The payload's mass, kg, when known: the drives' gains are estimated
     /// (needs [`Robot::Unloaded`]).
     pub known_mass: Option<f64>,
     /// Where the payload's mass is, in the last link's frame: the bounded
     /// estimate keeps inside it.
     pub bound: Option<Ellipsoid>,
+    /// Where the torques are currents through nominal gains: each joint's
+    /// gain's relative standard deviation (in the records' joint order),
+    /// carried into the payload's covariance when its mass is estimated.
+    pub gains: Option<&'a NominalGains>,
+}
+
+/// The drives' nominal gains the torques were read through, and how
+/// uncertain each is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NominalGains {
+    /// Per joint of the records: its relative standard deviation.
+    pub rel_std: Vec<f64>,
+    /// Where the figures come from (declared in the robot file, or the
+    /// default), said with the payload.
+    pub said: String,
+}
+
+/// What the nominal gains' uncertainty does to an estimated payload.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GainsShare {
+    pub gains: NominalGains,
+    /// The mass's standard deviation from the gains alone, kg, and from
+    /// the noise alone.
+    pub mass_std: f64,
+    pub mass_std_noise: f64,
+}
+
+impl GainsShare {
+    /// One sentence: the gains, their share of the mass's uncertainty,
+    /// and what would separate them.
+    pub fn said(&self) -> String {
+        format!(
+            "{}: the mass's standard deviation is {:.4} kg from the gains and {:.4} kg from the noise (both in its interval); with records with and without the payload a common error of the gains cannot be told from the mass: declare the load's mass (--known-payload-mass) to fit the gains instead",
+            self.gains.said, self.mass_std, self.mass_std_noise
+        )
+    }
 }
 
 fn payload_index(names: &[String]) -> Result<Vec<usize>> {
@@ -116,7 +155,7 @@ fn payload_index(names: &[String]) -> Result<Vec<usize>> {
 
 /// Identifies the payload in `loaded` (a system with the payload's
 /// columns) against `robot`.
-pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions) -> Result<PayloadFit> {
+pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<'_>) -> Result<PayloadFit> {
     payload_index(&loaded.names)?;
     let sys = match robot {
         Robot::Known(known) => {
@@ -195,6 +234,19 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
             }
         }
     }
+    let gains_share = match (options.gains, options.known_mass, &robot) {
+        (Some(g), None, Robot::Unloaded(_)) => {
+            let from_gains = gains_covariance(&sys, &at, &g.rel_std)?;
+            let noise = covariance[(9, 9)].max(0.0).sqrt();
+            covariance += &from_gains;
+            Some(GainsShare {
+                gains: g.clone(),
+                mass_std: from_gains[(9, 9)].max(0.0).sqrt(),
+                mass_std_noise: noise,
+            })
+        }
+        _ => None,
+    };
     let body = Inertial::of_standard(&standard);
     let body_std = listed_std(&standard, &covariance);
     let bounded = match (options.bound, body) {
@@ -242,7 +294,42 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions)
         undetermined,
         bound_size_m,
         bound_said: None,
+        gains_share,
     })
+}
+
+/// The payload's ten parameters' covariance from the drives' gains (`at`:
+/// their columns in `sys`; `rel_std` per joint). The estimate is linear
+/// in the torques, so a gain off by ε_j moves it by ε_j·φ̂⁽ʲ⁾, φ̂⁽ʲ⁾ the
+/// estimate from joint j's torques alone (the others zero); with the
+/// gains independent, Σ_g = Σ_j σ_j²·φ̂⁽ʲ⁾φ̂⁽ʲ⁾ᵀ. A common error of every
+/// gain would scale the whole estimate, the mass with it: the records
+/// with and without the payload cannot tell either from a heavier load.
+fn gains_covariance(sys: &System, at: &[usize], rel_std: &[f64]) -> Result<DMatrix<f64>> {
+    if rel_std.len() != sys.joints.len() {
+        return Err(Error::mismatch(
+            "the drives' gains' uncertainty",
+            format!("one per joint of the records ({})", sys.joints.len()),
+            rel_std.len(),
+        ));
+    }
+    let mut cov = DMatrix::zeros(10, 10);
+    for (j, sigma) in rel_std.iter().enumerate() {
+        if *sigma == 0.0 {
+            continue;
+        }
+        let mut one = sys.clone();
+        for i in 0..one.rows() {
+            if one.joint[i] != j {
+                one.b[i] = 0.0;
+            }
+        }
+        one.periods.iter_mut().for_each(|p| *p = None);
+        let e = super::solve_least_squares(&one, None, Covariance::Residual)?;
+        let phi = DVector::from_fn(10, |k, _| if at[k] == usize::MAX { 0.0 } else { e.values[at[k]] });
+        cov += &phi * phi.transpose() * (sigma * sigma);
+    }
+    Ok(cov)
 }
 
 /// An estimate (`values`, `cov`) given the payload held at `held` (`at`:
@@ -535,6 +622,7 @@ impl PayloadFit {
             gains: self.gains.clone(),
             bound_size_m: self.bound_size_m,
             bound_said: self.bound_said.clone(),
+            gains_share: self.gains_share.clone(),
         }
     }
 }
@@ -707,6 +795,9 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
     }
     if let Some(said) = &fit.bound_said {
         md.insert("robotid.payload.bound".to_string(), said.clone());
+    }
+    if let Some(g) = &fit.gains_share {
+        md.insert("robotid.payload.gains".to_string(), g.said());
     }
     if !fit.undetermined.is_empty() {
         md.insert(

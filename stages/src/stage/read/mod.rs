@@ -577,6 +577,16 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
     units.convert("effort", &effort_unit, &mut effort)?;
+    // A torque from a current is only as good as its gain: said, so that
+    // what depends on the torque's absolute scale (a payload's mass) can
+    // carry the gain's uncertainty.
+    if let Ok(Scale::Current(_)) = unit_scale("effort", &effort_unit) {
+        let from = match cfg.torque_per_amp {
+            Some(_) => "the [read] table's torque_per_amp",
+            None => "the robot file's torque constant × gear ratio",
+        };
+        md.insert(metadata::EFFORT_GAINS.into(), format!("{effort_unit} × {from}"));
+    }
     if let Some(r) = &mut reference {
         units.convert("reference", &unit(&cfg.reference, "rad"), r)?;
     }
