@@ -125,7 +125,7 @@ fn pyarrow_page_checksums_are_checked() {
     if !o.status.success() {
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!err.contains("Error") || err.contains("No module named"), "{err}");
-        println!("skipped: no pyarrow in {python} (bash scripts/test.sh installs it)");
+        robotid_tests::absent(&format!("no pyarrow in {python} (bash scripts/test.sh installs it)"));
         return;
     }
     assert_eq!(read_parquet(&path).unwrap().num_rows(), 50_000);
