@@ -301,17 +301,15 @@ pub fn payload_against_parameters(
         values: given.values.clone(),
         covariance: given.covariance.clone(),
     };
+    let gains = nominal_gains(&model, &system);
     let fit = bounded_payload(request, &model, |bound| {
         identify_payload(
             &system,
             PayloadRobot::Known(&known),
-            // The table's parameters came through the same gains: a
-            // common error scales both, and the first-order share below
-            // is for records with and without the payload.
             &PayloadOptions {
                 known_mass: None,
                 bound,
-                gains: None,
+                gains: gains.as_ref(),
             },
         )
     })?;

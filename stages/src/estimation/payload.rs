@@ -132,9 +132,14 @@ impl GainsShare {
     /// One sentence: the gains, their share of the mass's uncertainty,
     /// and what would separate them.
     pub fn said(&self) -> String {
+        let r = &self.gains.rel_std;
+        let sigma = r.iter().sum::<f64>() / r.len().max(1) as f64;
         format!(
-            "{}: the mass's standard deviation is {:.4} kg from the gains and {:.4} kg from the noise (both in its interval); with records with and without the payload a common error of the gains cannot be told from the mass: declare the load's mass (--known-payload-mass) to fit the gains instead",
-            self.gains.said, self.mass_std, self.mass_std_noise
+            "{}: a common error of the gains (their mean, {:.1} %) scales the payload with it, so the mass's standard deviation is {:.4} kg from the gains and {:.4} kg from the noise (both in its interval; the centre of mass does not move); records cannot tell that error from a heavier load: declare the load's mass (--known-payload-mass, with records without the payload) to fit the gains instead",
+            self.gains.said,
+            100.0 * sigma,
+            self.mass_std,
+            self.mass_std_noise
         )
     }
 }
@@ -234,9 +239,11 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
             }
         }
     }
-    let gains_share = match (options.gains, options.known_mass, &robot) {
-        (Some(g), None, Robot::Unloaded(_)) => {
-            let from_gains = gains_covariance(&sys, &at, &g.rel_std)?;
+    // With the robot's parameters known (identified through the same
+    // gains), a common error scales them and the payload alike.
+    let gains_share = match (options.gains, options.known_mass) {
+        (Some(g), None) => {
+            let from_gains = gains_covariance(&standard, &g.rel_std);
             let noise = covariance[(9, 9)].max(0.0).sqrt();
             covariance += &from_gains;
             Some(GainsShare {
@@ -298,38 +305,18 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
     })
 }
 
-/// The payload's ten parameters' covariance from the drives' gains (`at`:
-/// their columns in `sys`; `rel_std` per joint). The estimate is linear
-/// in the torques, so a gain off by ε_j moves it by ε_j·φ̂⁽ʲ⁾, φ̂⁽ʲ⁾ the
-/// estimate from joint j's torques alone (the others zero); with the
-/// gains independent, Σ_g = Σ_j σ_j²·φ̂⁽ʲ⁾φ̂⁽ʲ⁾ᵀ. A common error of every
-/// gain would scale the whole estimate, the mass with it: the records
-/// with and without the payload cannot tell either from a heavier load.
-fn gains_covariance(sys: &System, at: &[usize], rel_std: &[f64]) -> Result<DMatrix<f64>> {
-    if rel_std.len() != sys.joints.len() {
-        return Err(Error::mismatch(
-            "the drives' gains' uncertainty",
-            format!("one per joint of the records ({})", sys.joints.len()),
-            rel_std.len(),
-        ));
-    }
-    let mut cov = DMatrix::zeros(10, 10);
-    for (j, sigma) in rel_std.iter().enumerate() {
-        if *sigma == 0.0 {
-            continue;
-        }
-        let mut one = sys.clone();
-        for i in 0..one.rows() {
-            if one.joint[i] != j {
-                one.b[i] = 0.0;
-            }
-        }
-        one.periods.iter_mut().for_each(|p| *p = None);
-        let e = super::solve_least_squares(&one, None, Covariance::Residual)?;
-        let phi = DVector::from_fn(10, |k, _| if at[k] == usize::MAX { 0.0 } else { e.values[at[k]] });
-        cov += &phi * phi.transpose() * (sigma * sigma);
-    }
-    Ok(cov)
+/// The payload's ten parameters' covariance from the drives' gains: a
+/// common relative error g of every gain scales every torque, and the
+/// estimate, linear in them, with it (φ̂ → (1 + g)·φ̂: the mass and its
+/// inertia by g, the centre of mass not at all): Σ_g = σ²·φ̂φ̂ᵀ, σ the
+/// gains' mean relative standard deviation. Records with and without the
+/// payload cannot tell that error from a heavier load; errors that differ
+/// from joint to joint break the rigid body's consistency across joints,
+/// which the residue shows.
+fn gains_covariance(standard: &[f64; 10], rel_std: &[f64]) -> DMatrix<f64> {
+    let sigma = rel_std.iter().sum::<f64>() / rel_std.len().max(1) as f64;
+    let phi = DVector::from_column_slice(standard);
+    &phi * phi.transpose() * (sigma * sigma)
 }
 
 /// An estimate (`values`, `cov`) given the payload held at `held` (`at`:
