@@ -71,7 +71,7 @@ def identify(
     robot: Union[str, PathLike],
     validate: Sequence[Union[str, PathLike]] = (),
     out: Optional[Union[str, PathLike]] = None,
-    tolerance: float = 0.05,
+    tolerance: float = 5.0,
     strict: bool = False,
     accept_inadequate: bool = False,
     torque_per_amp: Sequence[float] = (),
@@ -84,9 +84,13 @@ def identify(
     validate_loaded: Sequence[Union[str, PathLike]] = (),
     controller: Optional[Union[str, PathLike]] = None,
     mujoco: bool = False,
+    read: Optional[Union[str, PathLike]] = None,
 ) -> Identification:
     """From recordings and a robot file to a validated model, as `robotid
-    identify`: the same files in `out`, byte for byte. A refused fit is a
+    identify`: the same files in `out`, byte for byte. `tolerance` is a
+    percent of the measured torque, as `--tolerance`; `read`, a TOML file
+    whose `[read]` table says where the channels are, as `--read`. A
+    refused fit is a
     result (`identified` False, `refused` the cause), not an error. With
     `mjcf` (the user's own MJCF of the robot), `identified.xml` is it with
     the identified dynamics written in. With `payload_on` (a link), the

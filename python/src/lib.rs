@@ -362,7 +362,7 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
-#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new(), controller=None, mujoco=false))]
+#[pyo3(signature = (recordings, robot, validate=Vec::new(), out=None, tolerance=100.0 * robotid::verdict::DEFAULT_TOLERANCE, strict=false, accept_inadequate=false, torque_per_amp=Vec::new(), threads=None, mjcf=None, payload_on=None, unloaded=Vec::new(), known_payload_mass=None, payload_ellipsoid=None, validate_loaded=Vec::new(), controller=None, mujoco=false, read=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -383,6 +383,7 @@ fn identify(
     validate_loaded: Vec<PathBuf>,
     controller: Option<PathBuf>,
     mujoco: bool,
+    read: Option<PathBuf>,
 ) -> PyResult<Identification> {
     use robotid_identify::{PayloadRequest, Physical, Request};
     // As the command line: with a payload, `recordings` carry it and the
@@ -409,12 +410,21 @@ fn identify(
         validate,
         out,
         torque_per_amp,
-        policy: robotid::verdict::Policy { tolerance, strict },
+        // A percent, as the command line's `--tolerance`.
+        policy: robotid::verdict::Policy {
+            tolerance: tolerance / 100.0,
+            strict,
+        },
         accept_inadequate,
         threads,
         mjcf,
         payload,
         controller,
+        read: read
+            .as_deref()
+            .map(robotid_stages::stage::read::ReadConfig::from_file)
+            .transpose()
+            .map_err(|e| py_error(robotid::Error::Stage(e)))?,
         // MuJoCo run by this interpreter, which has it when the caller does.
         mujoco: match mujoco {
             true => Some(py.import("sys")?.getattr("executable")?.extract::<PathBuf>()?),

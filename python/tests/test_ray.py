@@ -65,7 +65,7 @@ def test_identify_robots_runs_identify_per_robot_as_the_command_line(examples, l
         "robot": examples / "robots" / "kuka_axis3.toml",
         "validate": [rec / "kuka_axis3_validation" / "kuka_axis3_validation.mcap"],
     }
-    strict = dict(axis3, tolerance=1e-6)
+    strict = dict(axis3, tolerance=1e-4)
     out = tmp_path / "fleet"
     expected = {}
     for name, extra in [("axis3", []), ("axis3_strict", ["--tolerance", "0.0001"])]:

@@ -1,6 +1,5 @@
 use std::path::PathBuf;
 
-use anyhow::Context as _;
 use robotid::identify::Found;
 use robotid_identify::{Identification, PayloadRequest, Physical, Request};
 
@@ -160,7 +159,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let request = Request {
         out: args.out,
-        read: args.read.as_deref().map(read_table).transpose()?,
+        read: args
+            .read
+            .as_deref()
+            .map(robotid_stages::stage::read::ReadConfig::from_file)
+            .transpose()?,
         torque_per_amp: args.torque_per_amp,
         policy: robotid::verdict::Policy {
             tolerance: args.tolerance / 100.0,
@@ -247,17 +250,6 @@ fn payload_only(
         true => Ok(()),
         false => payload_determined(&fit, &out.join("payload.parquet")),
     }
-}
-
-/// The `[read]` table of a `--read` file.
-fn read_table(f: &std::path::Path) -> anyhow::Result<robotid_stages::stage::read::ReadConfig> {
-    let text = std::fs::read_to_string(f).with_context(|| f.display().to_string())?;
-    let mut t: toml::Table = text.parse().with_context(|| f.display().to_string())?;
-    let r = t
-        .remove("read")
-        .ok_or_else(|| anyhow::anyhow!("{}: no `[read]` table", f.display()))?;
-    r.try_into()
-        .with_context(|| format!("{}: its `[read]` table", f.display()))
 }
 
 /// What identify found in each recording, the pipelines run, and what the

@@ -677,6 +677,76 @@ fn a_robot_file_with_a_link_no_body_has_is_identified_and_said() {
     }
 }
 
+/// A log whose columns identify cannot place by name (`stamp`,
+/// `angle1`…, `amps1`…) with a `--read` file saying where they are:
+/// identified as the same log with robotid's names, the same parameters;
+/// a file without a `[read]` table is refused before any work, naming it.
+#[test]
+fn a_read_file_places_the_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = std::fs::read_to_string(robotid_tests::simulated("arm3").join("arm3.csv")).unwrap();
+    let (header, body) = csv.split_once('\n').unwrap();
+    let renamed: Vec<String> = header
+        .split(',')
+        .map(|c| match c {
+            "time" => "stamp".to_string(),
+            _ => c
+                .replacen("q_j", "angle", 1)
+                .replacen("current_j", "amps", 1)
+                .replacen("ref_j", "goal", 1)
+                .replacen("counts_j", "ticks", 1),
+        })
+        .collect();
+    let log = dir.path().join("arm3.csv");
+    std::fs::write(&log, format!("{}\n{body}", renamed.join(","))).unwrap();
+    let read = dir.path().join("read.toml");
+    std::fs::write(
+        &read,
+        "[read]\ntime = { column = \"stamp\", unit = \"s\" }\nposition = { column = \"angle{index}\", unit = \"rad\" }\neffort = { column = \"amps{index}\", unit = \"A\" }\n",
+    )
+    .unwrap();
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let out = dir.path().join("id");
+    ok(&[
+        "identify",
+        s(&log),
+        "--robot",
+        s(&robot),
+        "--read",
+        s(&read),
+        "--out",
+        s(&out),
+    ]);
+    let named = dir.path().join("named");
+    let original = robotid_tests::simulated("arm3").join("arm3.csv");
+    ok(&["identify", s(&original), "--robot", s(&robot), "--out", s(&named)]);
+    let (n1, v1, _) = parameters(&out.join("parameters.parquet"));
+    let (n2, v2, _) = parameters(&named.join("parameters.parquet"));
+    assert_eq!(n1, n2);
+    for ((n, a), b) in n1.iter().zip(&v1).zip(&v2) {
+        assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()), "{n}: {a} against {b}");
+    }
+    let bare = dir.path().join("bare.toml");
+    std::fs::write(&bare, "[pipeline]\n").unwrap();
+    let o = super::robotid(&[
+        "identify",
+        s(&log),
+        "--robot",
+        s(&robot),
+        "--read",
+        s(&bare),
+        "--out",
+        s(&dir.path().join("x")),
+    ]);
+    let said = super::text(&o);
+    assert!(!o.status.success(), "{said}");
+    assert!(
+        said.contains(&format!("{}: no `[read]` table", bare.display())),
+        "{said}"
+    );
+    assert!(!dir.path().join("x").exists());
+}
+
 /// A joint held still in the record is refused, with what to do.
 #[test]
 fn a_joint_that_does_not_move_is_refused() {

@@ -220,6 +220,22 @@ pub fn unit_scale(kind: &str, unit: &str) -> Result<Scale> {
 }
 
 impl ReadConfig {
+    /// The `[read]` table of a TOML file (as in a pipeline file): where
+    /// the channels are for every recording of an identify.
+    pub fn from_file(path: &std::path::Path) -> Result<ReadConfig> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let config = |msg: String| Error::Config {
+            path: path.to_path_buf(),
+            msg,
+        };
+        let mut t: toml::Table = text
+            .parse()
+            .map_err(|e| config(crate::error::toml_message(&text, &e)))?;
+        let r = t.remove("read").ok_or_else(|| config("no `[read]` table".into()))?;
+        r.try_into()
+            .map_err(|e: toml::de::Error| config(format!("its `[read]` table: {}", e.message())))
+    }
+
     /// Each channel kind with what is said of it, in the file's order.
     pub fn channels(&self) -> [(&'static str, &Option<Channel>); 4] {
         [
