@@ -15,6 +15,21 @@ pub fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures").join(rel)
 }
 
+/// The arm3 example's robot file written into `dir` with a link no body
+/// has: j2's principal moments 8.0, 3.7, 0.35 kg·m² break the triangle
+/// inequality (8.0 > 4.05), its axes the frame's.
+pub fn arm3_with_a_link_no_body_has(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(fixture("robots/arm3.toml")).unwrap();
+    let bad = text.replace(
+        "inertia = { ixx = 3.6, iyy = 3.7, izz = 0.35, ixz = 0.05 }",
+        "inertia = { ixx = 8.0, iyy = 3.7, izz = 0.35 }",
+    );
+    assert_ne!(bad, text, "the fixture's j2 inertia changed");
+    let file = dir.join("arm3.toml");
+    std::fs::write(&file, bad).unwrap();
+    file
+}
+
 /// The real recordings beside the repository (`../shared/realdata/NAME`),
 /// or None with a message saying the test is skipped; under CI their
 /// absence fails instead.

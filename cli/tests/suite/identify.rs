@@ -656,14 +656,7 @@ fn a_declared_period_the_data_contradict_is_said() {
 #[test]
 fn a_robot_file_with_a_link_no_body_has_is_identified_and_said() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(fixture("robots/arm3.toml")).unwrap();
-    let bad = text.replace(
-        "inertia = { ixx = 3.6, iyy = 3.7, izz = 0.35, ixz = 0.05 }",
-        "inertia = { ixx = 8.0, iyy = 3.7, izz = 0.35 }",
-    );
-    assert_ne!(bad, text);
-    let robot = dir.path().join("arm3.toml");
-    std::fs::write(&robot, bad).unwrap();
+    let robot = robotid_tests::arm3_with_a_link_no_body_has(dir.path());
     let log = robotid_tests::simulated("arm3").join("arm3.parquet");
     let out = dir.path().join("id");
     let run = super::robotid(&["identify", s(&log), "--robot", s(&robot), "--out", s(&out)]);
