@@ -546,8 +546,6 @@ impl Model {
         self.joints.iter().map(|j| j.name.clone()).collect()
     }
 
-    /// Checks the physical sanity of the description: positive masses
-    /// (zero allowed), symmetric positive semidefinite inertias satisfying
     /// Links whose inertia about the centre of mass no body has (a
     /// negative principal moment, or moments that break the triangle
     /// inequality: a typo in a widely copied URDF) taken as the nearest
@@ -595,6 +593,8 @@ impl Model {
         }
     }
 
+    /// Checks the physical sanity of the description: positive masses
+    /// (zero allowed), symmetric positive semidefinite inertias satisfying
     /// the triangle inequalities, positive drive constants.
     pub fn validate(&self) -> Result<(), Problem> {
         let n = self.dof();

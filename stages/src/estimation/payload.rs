@@ -118,6 +118,13 @@ pub struct NominalGains {
     pub said: String,
 }
 
+impl NominalGains {
+    /// The common error's relative standard deviation: the joints' mean.
+    pub fn common(&self) -> f64 {
+        self.rel_std.iter().sum::<f64>() / self.rel_std.len().max(1) as f64
+    }
+}
+
 /// What the nominal gains' uncertainty does to an estimated payload.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GainsShare {
@@ -132,12 +139,10 @@ impl GainsShare {
     /// One sentence: the gains, their share of the mass's uncertainty,
     /// and what would separate them.
     pub fn said(&self) -> String {
-        let r = &self.gains.rel_std;
-        let sigma = r.iter().sum::<f64>() / r.len().max(1) as f64;
         format!(
             "{}: a common error of the gains (their mean, {:.1} %) scales the payload with it, so the mass's standard deviation is {:.4} kg from the gains and {:.4} kg from the noise (both in its interval; the centre of mass does not move); records cannot tell that error from a heavier load: declare the load's mass (--known-payload-mass, with records without the payload) to fit the gains instead",
             self.gains.said,
-            100.0 * sigma,
+            100.0 * self.gains.common(),
             self.mass_std,
             self.mass_std_noise
         )
@@ -243,7 +248,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
     // gains), a common error scales them and the payload alike.
     let gains_share = match (options.gains, options.known_mass) {
         (Some(g), None) => {
-            let from_gains = gains_covariance(&standard, &g.rel_std);
+            let from_gains = gains_covariance(&standard, g);
             let noise = covariance[(9, 9)].max(0.0).sqrt();
             covariance += &from_gains;
             Some(GainsShare {
@@ -308,13 +313,13 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
 /// The payload's ten parameters' covariance from the drives' gains: a
 /// common relative error g of every gain scales every torque, and the
 /// estimate, linear in them, with it (φ̂ → (1 + g)·φ̂: the mass and its
-/// inertia by g, the centre of mass not at all): Σ_g = σ²·φ̂φ̂ᵀ, σ the
-/// gains' mean relative standard deviation. Records with and without the
+/// inertia by g, the centre of mass not at all): Σ_g = σ²·φ̂φ̂ᵀ, σ
+/// [`NominalGains::common`]. Records with and without the
 /// payload cannot tell that error from a heavier load; errors that differ
 /// from joint to joint break the rigid body's consistency across joints,
 /// which the residue shows.
-fn gains_covariance(standard: &[f64; 10], rel_std: &[f64]) -> DMatrix<f64> {
-    let sigma = rel_std.iter().sum::<f64>() / rel_std.len().max(1) as f64;
+fn gains_covariance(standard: &[f64; 10], gains: &NominalGains) -> DMatrix<f64> {
+    let sigma = gains.common();
     let phi = DVector::from_column_slice(standard);
     &phi * phi.transpose() * (sigma * sigma)
 }

@@ -598,7 +598,7 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     // carry the gain's uncertainty.
     if let Ok(Scale::Current(_)) = unit_scale("effort", &effort_unit) {
         let from = match cfg.torque_per_amp {
-            Some(_) => "the [read] table's torque_per_amp",
+            Some(_) => "the torque_per_amp given",
             None => "the robot file's torque constant × gear ratio",
         };
         md.insert(metadata::EFFORT_GAINS.into(), format!("{effort_unit} × {from}"));
