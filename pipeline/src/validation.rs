@@ -616,17 +616,36 @@ pub fn read_controller(path: &Path, joints: usize) -> Result<robotid_stages::dyn
         .get("controller")
         .and_then(|c| c.as_table())
         .ok_or_else(|| bad("no [controller] table (kp, kd, ki per joint)".into()))?;
+    // A simulation file's controller is a design (a bandwidth the
+    // simulator turns into gains from the true mass matrix), not the gains
+    // the loop ran with: gains made here from the robot file would differ.
+    if let Some(kind) = c.get("kind") {
+        let kind = kind.as_str().map_or_else(|| kind.to_string(), |k| format!("\"{k}\""));
+        return Err(bad(format!(
+            "[controller] kind = {kind} is a simulation file's controller design, not the gains the loop ran with; give the truth file `robotid simulate` wrote beside the recording (<name>.truth.toml), or a [controller] table of kp, kd and ki, {joints} each"
+        )));
+    }
     let gains = |k: &str| -> Result<Vec<f64>> {
-        let v: Option<Vec<f64>> = c.get(k).and_then(|v| v.as_array()).map(|a| {
-            a.iter()
-                .filter_map(|x| x.as_float().or(x.as_integer().map(|i| i as f64)))
-                .collect()
-        });
-        match v {
-            Some(v) if v.len() == joints && v.iter().all(|g| g.is_finite() && *g >= 0.0) => Ok(v),
-            _ => Err(bad(format!(
-                "[controller] {k}: {joints} gains ≥ 0 expected, one per joint"
-            ))),
+        let expected = format!("[controller] {k}: {joints} gains ≥ 0 expected, one per joint in the robot's order");
+        let list = match c.get(k) {
+            None => return Err(bad(format!("{expected}; none given"))),
+            Some(v) => v
+                .as_array()
+                .ok_or_else(|| bad(format!("{expected}; {v} given, not a list")))?,
+        };
+        let v: Vec<f64> = list
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                x.as_float()
+                    .or(x.as_integer().map(|i| i as f64))
+                    .filter(|g| g.is_finite() && *g >= 0.0)
+                    .ok_or_else(|| bad(format!("{expected}; its gain {} is {x}", i + 1)))
+            })
+            .collect::<Result<_>>()?;
+        match v.len() == joints {
+            true => Ok(v),
+            false => Err(bad(format!("{expected}; {} given", v.len()))),
         }
     };
     Ok(robotid_stages::dynamics::Pid {

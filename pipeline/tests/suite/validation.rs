@@ -37,3 +37,57 @@ fn the_time_shift_of_a_leading_torque_is_found() {
     sys.var[10] = f64::NAN;
     assert!(time_shift(&sys, &predicted).is_none());
 }
+
+/// A `--controller` file is read as the gains the loop ran with, and a
+/// file that is not that says what it is and what to give instead: a
+/// simulation file's controller design (its gains come from the true mass
+/// matrix, which robotid does not have), a list one gain short, a gain
+/// that is negative or not a number.
+#[test]
+fn a_controller_file_is_read_or_said_wrong() {
+    use robotid::validation::read_controller;
+    let dir = tempfile::tempdir().unwrap();
+    let read = |text: &str| {
+        let path = dir.path().join("controller.toml");
+        std::fs::write(&path, text).unwrap();
+        read_controller(&path, 2).map_err(|e| e.to_string())
+    };
+    let pid = read("[controller]\nkp = [100, 50.5]\nkd = [10.0, 5.0]\nki = [0, 1]\n").unwrap();
+    assert_eq!(
+        (pid.kp, pid.kd, pid.ki),
+        (vec![100.0, 50.5], vec![10.0, 5.0], vec![0.0, 1.0])
+    );
+    let refusals = [
+        (
+            "[controller]\nkind = \"pid\"\nbandwidth_hz = 4.0\n",
+            "kind = \"pid\" is a simulation file's controller design",
+        ),
+        ("[controller]\nkind = \"off\"\n", "<name>.truth.toml"),
+        (
+            "[controller]\nkp = [1.0]\nkd = [1, 1]\nki = [1, 1]\n",
+            "kp: 2 gains ≥ 0 expected, one per joint in the robot's order; 1 given",
+        ),
+        (
+            "[controller]\nkp = [1, -1]\nkd = [1, 1]\nki = [1, 1]\n",
+            "its gain 2 is -1",
+        ),
+        (
+            "[controller]\nkp = [1, 1]\nkd = [1, \"x\"]\nki = [1, 1]\n",
+            "kd: 2 gains",
+        ),
+        (
+            "[controller]\nkp = [1, 1]\nkd = [1, 1]\nki = 3\n",
+            "ki: 2 gains ≥ 0 expected, one per joint in the robot's order; 3 given, not a list",
+        ),
+        (
+            "[controller]\nkp = [1, 1]\nkd = [1, 1]\n",
+            "ki: 2 gains ≥ 0 expected, one per joint in the robot's order; none given",
+        ),
+        ("kp = [1, 1]\n", "no [controller] table"),
+    ];
+    for (text, said) in refusals {
+        let e = read(text).expect_err(text);
+        assert!(e.contains(said), "{text}: {e}");
+        assert!(e.contains("controller.toml"), "the file is named: {e}");
+    }
+}
