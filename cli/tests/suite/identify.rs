@@ -982,22 +982,40 @@ fn identify_writes_the_same_bytes_at_any_blas_thread_count() {
 /// identify's own verdict (`parameters.parquet`'s
 /// `robotid.identify.verdict`, the report's paragraph saying it), whose
 /// tables and pages are otherwise equal. On the simulated KUKA axis with
-/// a validation record and its declared controller.
+/// a validation record and its declared controller, every file named as
+/// a hostile user would (issue 60 item 1): the script runs nothing its
+/// names hold.
 #[test]
 fn identify_sh_replays_what_identify_wrote() {
     let ws = robotid_tests::workspace(&["kuka_axis3", "kuka_axis3_validation"]);
     let w = ws.path();
+    let hostile = w.join("k $(touch PWNED) `touch PWNED`;touch PWNED;'\"");
+    std::fs::create_dir(&hostile).unwrap();
+    let recording = hostile.join("k $(touch PWNED);x.mcap");
+    let validation = hostile.join("v;touch PWNED;.mcap");
+    let (robot, controller) = (
+        hostile.join("robot $(touch PWNED).toml"),
+        hostile.join("c'$(touch PWNED)'.toml"),
+    );
     let val = w.join("recordings/kuka_axis3_validation");
-    let out = w.join("id");
+    for (from, to) in [
+        (w.join("recordings/kuka_axis3/kuka_axis3.mcap"), &recording),
+        (val.join("kuka_axis3_validation.mcap"), &validation),
+        (w.join("robots/kuka_axis3.toml"), &robot),
+        (val.join("kuka_axis3_validation.truth.toml"), &controller),
+    ] {
+        std::fs::copy(from, to).unwrap();
+    }
+    let out = w.join("id $(touch PWNED)");
     ok(&[
         "identify",
-        s(&w.join("recordings/kuka_axis3/kuka_axis3.mcap")),
+        s(&recording),
         "--robot",
-        s(&w.join("robots/kuka_axis3.toml")),
+        s(&robot),
         "--validate",
-        s(&val.join("kuka_axis3_validation.mcap")),
+        s(&validation),
         "--controller",
-        s(&val.join("kuka_axis3_validation.truth.toml")),
+        s(&controller),
         "--out",
         s(&out),
     ]);
@@ -1023,6 +1041,19 @@ fn identify_sh_replays_what_identify_wrote() {
         .unwrap();
     assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stderr));
     let script = std::fs::read_to_string(out.join("identify.sh")).unwrap();
+    let mut stack = vec![w.to_path_buf(), std::env::current_dir().unwrap()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            assert!(
+                e.file_name() != "PWNED",
+                "a name ran as a command: {:?}\n{script}",
+                e.path()
+            );
+            if e.path().is_dir() && d.starts_with(w) {
+                stack.push(e.path());
+            }
+        }
+    }
     assert!(
         script.contains("--rollout") && script.contains("--closed-loop"),
         "{script}"
