@@ -321,6 +321,10 @@ fn stopped_said(joints: &[String], stopped: &robotid_stages::dynamics::Stopped) 
             "not simulated: the mass matrix is not positive definite at sample {sample} (pivot of {})",
             joints[*joint]
         ),
+        robotid_stages::dynamics::Stopped::Diverged { sample, joint } => format!(
+            "not simulated: the state diverged by sample {sample} (on {})",
+            joints[*joint]
+        ),
     }
 }
 

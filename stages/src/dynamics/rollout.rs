@@ -22,6 +22,10 @@ pub struct BaseDynamics<'a> {
     /// The sign(q̇) terms a friction-loss constraint applies: (joint, base
     /// column, side: 0 both, 1 for q̇ ≥ 0, −1 below, Stribeck's excess).
     coulomb: Vec<(usize, usize, i8, bool)>,
+    /// Per joint, the damping its friction gives about rest, ∂τ/∂q̇
+    /// (N·m·s/rad): viscous (the larger side's), and a smooth Coulomb
+    /// turn-over's Fc/v. What makes a light wrist stiff to integrate.
+    damping: Vec<f64>,
     /// The time constant of the friction-loss constraint Coulomb friction
     /// is applied as (None: the estimate's own sign(q̇) or turn-over).
     settle_s: Option<f64>,
@@ -32,6 +36,8 @@ pub struct BaseDynamics<'a> {
     ws: Workspace,
     rows: Vec<f64>,
     mass: DMatrix<f64>,
+    /// M(q) held over a sample step's RK4 steps ([`BaseDynamics::hold_mass`]).
+    held: Option<DMatrix<f64>>,
     zero: Vec<f64>,
     unit: Vec<f64>,
     torque: Vec<f64>,
@@ -69,16 +75,37 @@ impl<'a> BaseDynamics<'a> {
                 })
             })
             .collect();
+        let damping = regressor
+            .model
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(j, joint)| {
+                let value = |p: &str| {
+                    let name = format!("{p}_{}", joint.name);
+                    names.iter().position(|n| *n == name).map_or(0.0, |i| theta[i].abs())
+                };
+                let viscous = value("Fv").max(value("Fv+")).max(value("Fv-"));
+                let v = regressor.model.friction[j].transition;
+                let turn_over = match v > 0.0 {
+                    true => (value("Fc") + value("Fc+").max(value("Fc-"))) / v,
+                    false => 0.0,
+                };
+                viscous + turn_over
+            })
+            .collect();
         BaseDynamics {
             regressor,
             theta,
             coulomb,
+            damping,
             settle_s: None,
             factor: DMatrix::zeros(n, n),
             free: vec![0.0; n],
             ws: regressor.workspace(),
             rows: vec![0.0; n * regressor.parameters()],
             mass: DMatrix::zeros(n, n),
+            held: None,
             zero: vec![0.0; n],
             unit: vec![0.0; n],
             torque: vec![0.0; n],
@@ -152,6 +179,82 @@ impl<'a> BaseDynamics<'a> {
         Ok(())
     }
 
+    /// M taken at `q` and held for every call until `None`: a stiff
+    /// joint's many RK4 steps within one sample step (where q moves by a
+    /// sample's motion) share one mass matrix, which costs n + 1 torque
+    /// evaluations against the one the rest of each step costs.
+    pub fn hold_mass(&mut self, q: Option<&[f64]>) {
+        match q {
+            Some(q) => {
+                self.held = None;
+                self.mass_at(q);
+                match &mut self.held {
+                    Some(m) => m.copy_from(&self.mass),
+                    None => self.held = Some(self.mass.clone()),
+                }
+            }
+            None => self.held = None,
+        }
+    }
+
+    /// M(q) into `self.mass`, symmetrised (the regressor's columns are
+    /// exact to round-off).
+    fn mass_at(&mut self, q: &[f64]) {
+        let n = q.len();
+        let zero = std::mem::take(&mut self.zero);
+        let mut unit = std::mem::take(&mut self.unit);
+        self.predict(q, &zero, &zero);
+        self.bias.copy_from_slice(&self.torque);
+        for i in 0..n {
+            unit[i] = 1.0;
+            self.predict(q, &zero, &unit);
+            unit[i] = 0.0;
+            for j in 0..n {
+                self.mass[(j, i)] = self.torque[j] - self.bias[j];
+            }
+        }
+        self.zero = zero;
+        self.unit = unit;
+        for i in 0..n {
+            for j in 0..i {
+                let m = 0.5 * (self.mass[(i, j)] + self.mass[(j, i)]);
+                self.mass[(i, j)] = m;
+                self.mass[(j, i)] = m;
+            }
+        }
+    }
+
+    /// The fastest decay rate (1/s) of the damping about rest at `q`: the
+    /// largest eigenvalue of M(q)⁻¹·D, D the friction's [`damping`] plus
+    /// `extra` per joint (a controller's kd). An explicit step h is stable
+    /// while h times it stays under RK4's 2.78; a light wrist with a real
+    /// joint's viscous friction reaches 10⁴/s (the Kinova Jaco 2: 17 000,
+    /// 34 per 2 ms sample). Err(the joint whose pivot is not positive)
+    /// where M(q) is not positive definite.
+    ///
+    /// [`damping`]: BaseDynamics::damping
+    pub fn damping_rate(&mut self, q: &[f64], extra: &[f64]) -> Result<f64, usize> {
+        let n = q.len();
+        self.mass_at(q);
+        self.factor.copy_from(&self.mass);
+        // The Cholesky factor L (M = L·Lᵀ), then L⁻¹·D·L⁻ᵀ: symmetric,
+        // with M⁻¹·D's eigenvalues.
+        self.free.iter_mut().for_each(|f| *f = 0.0);
+        super::forward_dynamics::try_cholesky_solve_in_place(&mut self.factor, &mut self.free)?;
+        let l = DMatrix::from_fn(n, n, |i, j| if j <= i { self.factor[(i, j)] } else { 0.0 });
+        let root = DMatrix::from_fn(n, n, |i, j| {
+            if i == j {
+                (self.damping[i] + extra.get(i).copied().unwrap_or(0.0)).max(0.0).sqrt()
+            } else {
+                0.0
+            }
+        });
+        // L⁻¹·√D: its Gram matrix is L⁻¹·D·L⁻ᵀ.
+        let b = l.solve_lower_triangular(&root).ok_or(0usize)?;
+        let rate = (&b * b.transpose()).symmetric_eigenvalues().max();
+        Ok(if rate.is_finite() { rate.max(0.0) } else { 0.0 })
+    }
+
     /// The torque the model needs for (q, q̇, q̈): Y(q, q̇, q̈)·θ.
     pub fn torque(&mut self, q: &[f64], qd: &[f64], qdd: &[f64]) -> &[f64] {
         self.predict(q, qd, qdd);
@@ -176,31 +279,15 @@ impl<'a> BaseDynamics<'a> {
     /// estimate can have such a mass matrix: it is said, not simulated).
     pub fn accelerations(&mut self, q: &[f64], qd: &[f64], tau: &[f64], qdd: &mut [f64]) -> Result<(), usize> {
         let n = q.len();
-        let zero = std::mem::take(&mut self.zero);
-        let mut unit = std::mem::take(&mut self.unit);
-        self.predict(q, &zero, &zero);
-        self.bias.copy_from_slice(&self.torque);
-        for i in 0..n {
-            unit[i] = 1.0;
-            self.predict(q, &zero, &unit);
-            unit[i] = 0.0;
-            for j in 0..n {
-                self.mass[(j, i)] = self.torque[j] - self.bias[j];
-            }
+        match &self.held {
+            Some(m) => self.mass.copy_from(m),
+            None => self.mass_at(q),
         }
+        let zero = std::mem::take(&mut self.zero);
         self.predict(q, qd, &zero);
         self.zero = zero;
-        self.unit = unit;
         for j in 0..n {
             qdd[j] = tau[j] - self.torque[j];
-        }
-        // Symmetrised: the regressor's columns are exact to round-off.
-        for i in 0..n {
-            for j in 0..i {
-                let m = 0.5 * (self.mass[(i, j)] + self.mass[(j, i)]);
-                self.mass[(i, j)] = m;
-                self.mass[(j, i)] = m;
-            }
         }
         if let Some(tc) = self.settle_s.filter(|_| !self.coulomb.is_empty()) {
             self.constrained(qd, tc, qdd)?;
@@ -240,6 +327,25 @@ pub enum Stopped {
     /// The mass matrix is not positive definite at this sample's state
     /// (its pivot on this joint).
     NotPositiveDefinite { sample: usize, joint: usize },
+    /// The state left the finite numbers by this sample, on this joint
+    /// (a model no step the rollout takes keeps stable).
+    Diverged { sample: usize, joint: usize },
+}
+
+/// RK4 steps per sample step of `step` s for a decay `rate` (1/s): h·rate
+/// ≤ 2, inside RK4's real-axis bound 2.78 (at most 1000).
+fn damping_substeps(rate: f64, step: f64) -> usize {
+    ((rate * step / 2.0).ceil() as usize).clamp(1, 1000)
+}
+
+/// The first joint whose state is not finite.
+fn not_finite(x: &[f64], v: &[f64]) -> Option<usize> {
+    x.iter().zip(v).position(|(a, b)| !(a.is_finite() && b.is_finite()))
+}
+
+/// The first joint whose state is not finite or moves over 10⁴ rad/s.
+fn runaway(x: &[f64], v: &[f64]) -> Option<usize> {
+    not_finite(x, v).or_else(|| v.iter().position(|v| v.abs() > 1e4))
 }
 
 /// RK4's four stages on (q, q̇), buffers kept between steps.
@@ -297,8 +403,10 @@ impl Rk4 {
 /// `q`, `qd`, `tau` as `[joint][sample]`): from the measured state at
 /// every `window`-th sample, RK4 over each sample step with the torque
 /// linear between samples; a Coulomb friction of sign(q̇) applied as a
-/// friction-loss constraint over half a sample step
-/// ([`BaseDynamics::settle`]).
+/// friction-loss constraint over half an RK4 step
+/// ([`BaseDynamics::settle`]). Each window takes as many RK4 steps per
+/// sample step as the damping at its start needs to stay stable
+/// ([`BaseDynamics::damping_rate`]).
 pub fn rollout(
     dynamics: &mut BaseDynamics,
     time: &[f64],
@@ -308,55 +416,57 @@ pub fn rollout(
     window: usize,
 ) -> Result<Rollout, Stopped> {
     let (n, samples, window) = (q.len(), time.len(), window.max(2));
-    // Rest as a simulator's friction-loss constraint holds it, not a
-    // dithering sign(q̇): over half a sample step, as hard as RK4 keeps
-    // stable (its damping −q̇/tc is stable up to h/tc = 2.78).
     let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
-    dynamics.settle(0.5 * step);
     let mut sim = vec![vec![0.0; samples]; n];
+    let mut simd = vec![vec![0.0; samples]; n];
     let (mut sq, mut sqd) = (vec![0.0; n], vec![0.0; n]);
     let mut count = 0usize;
     let mut windows: Vec<Window> = Vec::new();
-    // State, stage buffers and torques: allocated once.
-    let (mut x, mut v) = (vec![0.0; n], vec![0.0; n]);
     let mut rk4 = Rk4::new(n);
     let mut t = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-    for s in 0..samples {
-        if s % window == 0 {
-            windows.push(Window {
-                start: s,
-                q_rms: vec![0.0; n],
-                qd_rms: vec![0.0; n],
-            });
-            for j in 0..n {
-                x[j] = q[j][s];
-                v[j] = qd[j][s];
+    for start in (0..samples).step_by(window) {
+        let end = (start + window).min(samples);
+        let x: Vec<f64> = (0..n).map(|j| q[j][start]).collect();
+        let rate = dynamics
+            .damping_rate(&x, &[])
+            .map_err(|joint| Stopped::NotPositiveDefinite { sample: start, joint })?;
+        // The damping's rate sets the steps; where the window still runs
+        // away (the velocity's own terms, the constraint on a coupled
+        // wrist), four times as many, up to 1000 per sample step: what
+        // then runs away is the model's, not the integrator's.
+        let mut substeps = damping_substeps(rate, step);
+        loop {
+            let ran = integrate_window(
+                dynamics,
+                (&mut rk4, &mut t),
+                (time, (q, qd, tau)),
+                (start..end, step, substeps),
+                (&mut sim, &mut simd),
+            );
+            match ran {
+                Ok(()) => break,
+                Err(stopped) if substeps >= 1000 => return Err(stopped),
+                Err(Stopped::NotPositiveDefinite { .. } | Stopped::Diverged { .. }) => {
+                    substeps = (4 * substeps).min(1000);
+                }
             }
-        } else {
-            let h = time[s] - time[s - 1];
+        }
+        let mut w = Window {
+            start,
+            q_rms: vec![0.0; n],
+            qd_rms: vec![0.0; n],
+        };
+        for s in start + 1..end {
             for j in 0..n {
-                t[0][j] = tau[j][s - 1];
-                t[2][j] = tau[j][s];
-                t[1][j] = 0.5 * (t[0][j] + t[2][j]);
-            }
-            rk4.stages(dynamics, &x, &v, &t, h)
-                .map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
-            let k = &rk4.k;
-            for j in 0..n {
-                x[j] += h / 6.0 * (k[0][0][j] + 2.0 * k[1][0][j] + 2.0 * k[2][0][j] + k[3][0][j]);
-                v[j] += h / 6.0 * (k[0][1][j] + 2.0 * k[1][1][j] + 2.0 * k[2][1][j] + k[3][1][j]);
-                let (eq, ev) = ((x[j] - q[j][s]).powi(2), (v[j] - qd[j][s]).powi(2));
+                let (eq, ev) = ((sim[j][s] - q[j][s]).powi(2), (simd[j][s] - qd[j][s]).powi(2));
                 sq[j] += eq;
                 sqd[j] += ev;
-                let w = windows.last_mut().expect("a window from sample 0");
                 w.q_rms[j] += eq;
                 w.qd_rms[j] += ev;
             }
             count += 1;
         }
-        for j in 0..n {
-            sim[j][s] = x[j];
-        }
+        windows.push(w);
     }
     let rms = |e: Vec<f64>| e.into_iter().map(|e| (e / count.max(1) as f64).sqrt()).collect();
     for w in &mut windows {
@@ -372,6 +482,69 @@ pub fn rollout(
         qd_rms: rms(sqd),
         q: sim,
     })
+}
+
+/// Samples `range` of a record (`time`, and per joint `q`, `qd`, `tau`;
+/// its mean sample step `step`) integrated from the measured state at its
+/// first, `substeps` RK4 steps per sample step, into `sim` (positions) and `simd` (velocities); Err
+/// where M(q) is not positive definite on the way or the state runs away
+/// (not finite, or a velocity over 10⁴ rad/s: no arm's).
+fn integrate_window(
+    dynamics: &mut BaseDynamics,
+    (rk4, t): (&mut Rk4, &mut [Vec<f64>; 3]),
+    (time, (q, qd, tau)): (&[f64], Channels),
+    (range, step, substeps): (std::ops::Range<usize>, f64, usize),
+    (sim, simd): (&mut [Vec<f64>], &mut [Vec<f64>]),
+) -> Result<(), Stopped> {
+    let n = q.len();
+    // Rest as a simulator's friction-loss constraint holds it, not a
+    // dithering sign(q̇): over half an RK4 step, as hard as RK4 keeps
+    // stable (its damping −q̇/tc is stable up to h/tc = 2.78).
+    dynamics.settle(0.5 * step / substeps as f64);
+    for j in 0..n {
+        sim[j][range.start] = q[j][range.start];
+        simd[j][range.start] = qd[j][range.start];
+    }
+    let mut x: Vec<f64> = (0..n).map(|j| q[j][range.start]).collect();
+    let mut v: Vec<f64> = (0..n).map(|j| qd[j][range.start]).collect();
+    for s in range.start + 1..range.end {
+        let h = (time[s] - time[s - 1]) / substeps as f64;
+        // One step per sample as ever; a stiff joint's steps share M.
+        if substeps > 1 {
+            dynamics.hold_mass(Some(&x));
+        }
+        for sub in 0..substeps {
+            // The torque linear over the sample step, at this RK4 step's
+            // start, middle and end.
+            let at = |f: f64, j: usize| tau[j][s - 1] + f * (tau[j][s] - tau[j][s - 1]);
+            let f0 = sub as f64 / substeps as f64;
+            for j in 0..n {
+                t[0][j] = at(f0, j);
+                t[1][j] = at(f0 + 0.5 / substeps as f64, j);
+                t[2][j] = at(f0 + 1.0 / substeps as f64, j);
+            }
+            let staged = rk4.stages(dynamics, &x, &v, t, h);
+            if staged.is_err() {
+                dynamics.hold_mass(None);
+            }
+            staged.map_err(|joint| Stopped::NotPositiveDefinite { sample: s, joint })?;
+            let k = &rk4.k;
+            for j in 0..n {
+                x[j] += h / 6.0 * (k[0][0][j] + 2.0 * k[1][0][j] + 2.0 * k[2][0][j] + k[3][0][j]);
+                v[j] += h / 6.0 * (k[0][1][j] + 2.0 * k[1][1][j] + 2.0 * k[2][1][j] + k[3][1][j]);
+            }
+            if let Some(joint) = runaway(&x, &v) {
+                dynamics.hold_mass(None);
+                return Err(Stopped::Diverged { sample: s, joint });
+            }
+        }
+        dynamics.hold_mass(None);
+        for j in 0..n {
+            sim[j][s] = x[j];
+            simd[j][s] = v[j];
+        }
+    }
+    Ok(())
 }
 
 /// The standard deviation of a sampled signal's white noise: its second
@@ -516,7 +689,8 @@ fn velocity(time: &[f64], x: &[Vec<f64>]) -> Vec<Vec<f64>> {
 
 /// RK4 steps per sample step of length `step` for `pid` on the model at
 /// `q`: its fastest mode ω = max(kd/M, √(kp/M), ∛(ki/M)) per joint,
-/// ω·h ≤ 0.5 (at most 1000).
+/// ω·h ≤ 0.5, and the damping's rate with kd in it within RK4's bound
+/// ([`damping_substeps`]; at most 1000).
 fn loop_substeps(dynamics: &mut BaseDynamics, pid: &Pid, q: &[f64], step: f64) -> Result<usize, Stopped> {
     let n = q.len();
     let mut scratch = vec![0.0; n];
@@ -529,7 +703,14 @@ fn loop_substeps(dynamics: &mut BaseDynamics, pid: &Pid, q: &[f64], step: f64) -
             (pid.kd[j] / m).max((pid.kp[j] / m).sqrt()).max((pid.ki[j] / m).cbrt())
         })
         .fold(0.0, f64::max);
-    Ok(((fastest * step / 0.5).ceil() as usize).clamp(1, 1000))
+    // The friction's damping and kd together, through the whole mass
+    // matrix (a light wrist's coupling makes M⁻¹ larger than 1/M_jj).
+    let damped = dynamics
+        .damping_rate(q, &pid.kd)
+        .map_err(|joint| Stopped::NotPositiveDefinite { sample: 0, joint })?;
+    Ok(((fastest * step / 0.5).ceil() as usize)
+        .max(damping_substeps(damped, step))
+        .clamp(1, 1000))
 }
 
 /// A PID position controller per joint, as robotid's simulator runs it:
@@ -624,6 +805,9 @@ pub fn closed_loop(
                 }
                 for m in 0..3 * n {
                     x[m] += h / 6.0 * (k[0][m] + 2.0 * k[1][m] + 2.0 * k[2][m] + k[3][m]);
+                }
+                if let Some(joint) = not_finite(&x[..n], &x[n..2 * n]) {
+                    return Err(Stopped::Diverged { sample: s, joint });
                 }
             }
         }
