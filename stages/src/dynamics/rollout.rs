@@ -36,8 +36,10 @@ pub struct BaseDynamics<'a> {
     ws: Workspace,
     rows: Vec<f64>,
     mass: DMatrix<f64>,
-    /// M(q) held over a sample step's RK4 steps ([`BaseDynamics::hold_mass`]).
-    held: Option<DMatrix<f64>>,
+    /// M(q) held over a sample step's RK4 steps, while `holding`
+    /// ([`BaseDynamics::hold_mass`]).
+    held: DMatrix<f64>,
+    holding: bool,
     zero: Vec<f64>,
     unit: Vec<f64>,
     torque: Vec<f64>,
@@ -105,7 +107,8 @@ impl<'a> BaseDynamics<'a> {
             ws: regressor.workspace(),
             rows: vec![0.0; n * regressor.parameters()],
             mass: DMatrix::zeros(n, n),
-            held: None,
+            held: DMatrix::zeros(n, n),
+            holding: false,
             zero: vec![0.0; n],
             unit: vec![0.0; n],
             torque: vec![0.0; n],
@@ -184,16 +187,10 @@ impl<'a> BaseDynamics<'a> {
     /// sample's motion) share one mass matrix, which costs n + 1 torque
     /// evaluations against the one the rest of each step costs.
     pub fn hold_mass(&mut self, q: Option<&[f64]>) {
-        match q {
-            Some(q) => {
-                self.held = None;
-                self.mass_at(q);
-                match &mut self.held {
-                    Some(m) => m.copy_from(&self.mass),
-                    None => self.held = Some(self.mass.clone()),
-                }
-            }
-            None => self.held = None,
+        self.holding = q.is_some();
+        if let Some(q) = q {
+            self.mass_at(q);
+            self.held.copy_from(&self.mass);
         }
     }
 
@@ -279,9 +276,9 @@ impl<'a> BaseDynamics<'a> {
     /// estimate can have such a mass matrix: it is said, not simulated).
     pub fn accelerations(&mut self, q: &[f64], qd: &[f64], tau: &[f64], qdd: &mut [f64]) -> Result<(), usize> {
         let n = q.len();
-        match &self.held {
-            Some(m) => self.mass.copy_from(m),
-            None => self.mass_at(q),
+        match self.holding {
+            true => self.mass.copy_from(&self.held),
+            false => self.mass_at(q),
         }
         let zero = std::mem::take(&mut self.zero);
         self.predict(q, qd, &zero);
