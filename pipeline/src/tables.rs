@@ -61,8 +61,20 @@ pub type Marks<'a> = &'a dyn Fn(&Outcome) -> Vec<(String, String)>;
 /// The parts merged and solved; the table written to `out` with `marks`
 /// added to its metadata.
 pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks>) -> Result<Outcome> {
-    let outcome = reducer.reduce(parts, &Default::default())?;
-    let table = match marks.map(|m| m(&outcome)).filter(|m| !m.is_empty()) {
+    let outcome = solve(reducer, parts)?;
+    write_marked(&outcome, out, marks)?;
+    Ok(outcome)
+}
+
+/// The parts merged and solved.
+pub fn solve(reducer: &Reducer, parts: &[Part]) -> Result<Outcome> {
+    Ok(reducer.reduce(parts, &Default::default())?)
+}
+
+/// `outcome`'s table written to `out` with `marks` added to its metadata
+/// (again, where a table's verdict changed).
+pub fn write_marked(outcome: &Outcome, out: &Path, marks: Option<Marks>) -> Result<()> {
+    let table = match marks.map(|m| m(outcome)).filter(|m| !m.is_empty()) {
         None => outcome.table.clone(),
         Some(m) => {
             let mut md = outcome.table.schema().metadata().clone();
@@ -77,7 +89,7 @@ pub fn reduce(reducer: &Reducer, parts: &[Part], out: &Path, marks: Option<Marks
         }
     };
     write_parquet(out, &table)?;
-    Ok(outcome)
+    Ok(())
 }
 
 /// Regressor tables stacked into one system, read `within` a folder and

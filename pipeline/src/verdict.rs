@@ -60,6 +60,9 @@ impl Default for Policy {
 pub enum Measured {
     /// On the `--validate` recordings.
     Validation,
+    /// On the `--validate` recordings, by the physically consistent
+    /// estimate: the one exported, judged where it is validated.
+    ValidationPhysical,
     /// On held-out periods: fitted on the even periods, predicting the odd
     /// ones, and the reverse.
     HeldOutPeriods,
@@ -75,6 +78,9 @@ impl Measured {
     pub fn said(self) -> &'static str {
         match self {
             Measured::Validation => "on the validation recordings",
+            Measured::ValidationPhysical => {
+                "on the validation recordings by the physically consistent estimate (the one exported)"
+            }
             Measured::HeldOutPeriods => {
                 "on held-out periods (fitted on the even periods, predicting the odd ones, and the reverse)"
             }
@@ -114,6 +120,8 @@ pub struct Verdict {
     /// The fit's own relative error, ‖τ − Yθ‖ / ‖τ‖ over every joint's
     /// identification rows (the papers' figure).
     pub in_sample: f64,
+    /// The effort channels' gains against each other (None: not told).
+    pub channels: Option<ChannelGains>,
     /// Why the fit is refused; None: identified.
     pub refused: Option<Refusal>,
 }
@@ -128,6 +136,10 @@ pub enum Refusal {
     /// residue (joint, ratio): the floors the strict rule judges by hold
     /// more than noise, and none can vouch for the fit.
     FloorSuspect(Vec<(String, f64)>),
+    /// Effort channels that read the model's torque with a gain of their
+    /// own (joint, gain against the others'), and the share of the residue
+    /// the gains explain: a lab mistake.
+    ScaledChannel(Vec<ChannelGain>, Measured),
     /// A friction the model lacks: functions of each joint's own velocity
     /// explain most of its residue (joint, share, ratio).
     MissingFriction(Vec<(String, f64, f64)>),
@@ -161,6 +173,21 @@ impl std::fmt::Display for Refusal {
                 "the noise floor is over twice the fit's residue on every joint, {} (the fit's residue over it): it holds more than noise (a transient or a ramp in the stretch it came from), and the strict policy has no floor to judge the fit by; record steady periods, or judge by the held-out tolerance (without --strict)",
                 ratios_said(joints, 2)
             ),
+            Refusal::ScaledChannel(channels, on) => write!(
+                f,
+                "an effort channel reads the torque with a gain of its own: {} against the others' (a gain per channel fitted with the parameters {}; a real drive's calibration is within a few per cent, and the parameters take up a scaled channel only where the robot's structure lets them). Check that channel's torque constant, gear ratio or current scale: each effort column must be in N·m at its joint",
+                channels
+                    .iter()
+                    .map(|c| format!(
+                        "{} {:.3}× (explaining {:.0} % of its residue)",
+                        c.joint,
+                        c.gain.unwrap_or(f64::NAN),
+                        100.0 * c.share
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                on.said()
+            ),
             Refusal::MissingFriction(joints) => write!(
                 f,
                 "a friction the model lacks is measured: functions of each joint's own velocity alone (a static friction fading with speed, as Stribeck's) explain most of the residue on {}; none of robotid's friction models holds it (viscous and Coulomb, asymmetric, a smooth turn-over, and Stribeck's static friction with the fades held-out periods can choose among). Excite the joints above the speeds where it fades, or take the estimate as it is (accept inadequate)",
@@ -186,6 +213,19 @@ impl std::fmt::Display for Refusal {
 }
 
 impl Verdict {
+    /// The channels' gains measured on the validation recordings' rows
+    /// `val` instead, where they tell them: a record that does not repeat
+    /// is compared sample by sample, where the identification's rows may
+    /// be its excited lines alone (as many equations as a few parameters
+    /// more than the model's, which a scale is lost in).
+    pub fn with_validation_channels(mut self, val: &System) -> Verdict {
+        if let Some(c) = channel_gains(val, Measured::Validation) {
+            self.channels = Some(c);
+            self.refused = refusal(&self);
+        }
+        self
+    }
+
     /// The joints over [`REFUSE_RATIO`]× the noise floor.
     pub fn over_floor(&self) -> Vec<&JointFigures> {
         self.joints
@@ -327,8 +367,10 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
         joints,
         relative,
         in_sample,
+        channels: channel_gains(sys, Measured::InSample),
         refused: None,
     };
+
     verdict.refused = refusal(&verdict);
     verdict
 }
@@ -354,6 +396,12 @@ fn refusal(v: &Verdict) -> Option<Refusal> {
             (!suspect.is_empty() && suspect.len() == v.joints.len()).then(|| Refusal::FloorSuspect(said(suspect)))
         };
     }
+    if let Some(c) = &v.channels {
+        let scaled: Vec<ChannelGain> = c.channels.iter().filter(|c| c.scaled()).cloned().collect();
+        if !scaled.is_empty() {
+            return Some(Refusal::ScaledChannel(scaled, c.on));
+        }
+    }
     let friction: Vec<(String, f64, f64)> = over
         .iter()
         .filter_map(|j| {
@@ -370,6 +418,231 @@ fn refusal(v: &Verdict) -> Option<Refusal> {
         measured,
         tolerance: v.policy.tolerance,
     })
+}
+
+/// A gain of one channel against the others', at or beyond this factor
+/// either way, is a lab mistake when it explains [`SCALED_SHARE`] of its
+/// joint's residue (a drive's torque constant or gear ratio wrong, a current
+/// scaled): a real drive's calibration is within a few per cent.
+pub const SCALED_GAIN: f64 = 1.2;
+
+/// The share of its joint's residue a channel's gain must explain to be
+/// said as a scaled channel.
+pub const SCALED_SHARE: f64 = 0.5;
+
+/// Rows gathered at a time into each joint's Gram matrix.
+const GRAM_BLOCK: usize = 4096;
+
+/// One effort channel's gain against the others'.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelGain {
+    pub joint: String,
+    /// The gain the channel reads the model's torque with, the told
+    /// gains' median 1 (None: the rows cannot tell it apart from the
+    /// joint's own parameters).
+    pub gain: Option<f64>,
+    /// The share of the joint's least-squares residue the gains explain.
+    pub share: f64,
+}
+
+impl ChannelGain {
+    /// A lab mistake: a told gain at or beyond [`SCALED_GAIN`] either way
+    /// that explains [`SCALED_SHARE`] of its joint's residue or more.
+    pub fn scaled(&self) -> bool {
+        self.gain
+            .is_some_and(|g| !(1.0 / SCALED_GAIN..SCALED_GAIN).contains(&g))
+            && self.share >= SCALED_SHARE
+    }
+}
+
+/// The channels' gains against each other, fitted with the parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelGains {
+    /// Per joint of the rows.
+    pub channels: Vec<ChannelGain>,
+    /// The rows they were fitted on: the identification's (in sample) or
+    /// the validation recordings'.
+    pub on: Measured,
+}
+
+/// Each effort channel's gain against the others', b_j ≈ g_j·(A_j·θ),
+/// fitted with θ by Gauss–Newton from least squares (one gain held: the
+/// scale of the whole is the parameters'), every joint's rows weighed by
+/// its least-squares residual variance. A scaled channel leaves a residue
+/// the coupled rows cannot take up (a link's parameters move every joint
+/// inboard of it); the gains take it. None where the rows do not couple
+/// the joints (joint-wise records), or hold fewer than three joints (no
+/// majority to be the reference), or are projected or hold known columns.
+pub fn channel_gains(sys: &System, on: Measured) -> Option<ChannelGains> {
+    let (n, p) = (sys.joints.len(), sys.parameters());
+    if n < 3 || sys.known.is_some() || sys.equations.is_some() || sys.rows() <= p + n {
+        return None;
+    }
+    // Each joint's Gram matrix, A_jᵀA_j, A_jᵀb_j and b_jᵀb_j, summed over
+    // blocks of rows (no copy of the whole A: a validation record's may be
+    // hundreds of MB).
+    let mut gram: Vec<(DMatrix<f64>, DVector<f64>, f64, usize)> =
+        vec![(DMatrix::zeros(p, p), DVector::zeros(p), 0.0, 0); n];
+    for start in (0..sys.rows()).step_by(GRAM_BLOCK) {
+        let end = (start + GRAM_BLOCK).min(sys.rows());
+        for (j, (g, c, s, count)) in gram.iter_mut().enumerate() {
+            let rows: Vec<usize> = (start..end).filter(|&i| sys.joint[i] == j).collect();
+            if rows.is_empty() {
+                continue;
+            }
+            let (a, b) = (sys.a.select_rows(&rows), sys.b.select_rows(&rows));
+            *g += a.tr_mul(&a);
+            *c += a.tr_mul(&b);
+            *s += b.norm_squared();
+            *count += rows.len();
+        }
+    }
+    if gram.iter().any(|(.., count)| *count <= 1) {
+        return None;
+    }
+    // From the Gram matrices: exact up to rounding where the residue is
+    // over 1e-9 of the torque's energy (below, nothing is left to explain).
+    let rss = |theta: &DVector<f64>, g: &[f64]| -> Vec<f64> {
+        gram.iter()
+            .zip(g)
+            .map(|((gj, cj, s, _), g)| s - 2.0 * g * theta.dot(cj) + g * g * theta.dot(&(gj * theta)))
+            .collect()
+    };
+    let total = gram.iter().fold(DMatrix::zeros(p, p), |s, (g, ..)| s + g);
+    let rhs = gram.iter().fold(DVector::zeros(p), |s, (_, c, ..)| s + c);
+    let mut theta = total.cholesky()?.solve(&rhs);
+    let mut g = vec![1.0; n];
+    let first = rss(&theta, &g);
+    if first.iter().zip(&gram).any(|(r, (_, _, s, _))| !(*r > 1e-9 * s)) {
+        return None;
+    }
+    let weights = |r: &[f64]| -> Vec<f64> { r.iter().zip(&gram).map(|(r, (.., count))| *count as f64 / r).collect() };
+    // The normal equations of the weighed residue in θ and the gains of
+    // `free` (joint, its column), at (θ, g), and its gradient.
+    let normal_at = |theta: &DVector<f64>, g: &[f64], w: &[f64], free: &[(usize, usize)]| {
+        let k = p + free.len();
+        let mut normal = DMatrix::zeros(k, k);
+        let mut grad = DVector::zeros(k);
+        for (j, (gj, cj, ..)) in gram.iter().enumerate() {
+            let gt = gj * theta;
+            let mut block = normal.view_mut((0, 0), (p, p));
+            block += gj * (w[j] * g[j] * g[j]);
+            grad.rows_mut(0, p).axpy(w[j] * g[j], &(cj - &gt * g[j]), 1.0);
+            if let Some(&(_, c)) = free.iter().find(|(f, _)| *f == j) {
+                for r in 0..p {
+                    normal[(r, c)] = w[j] * g[j] * gt[r];
+                    normal[(c, r)] = normal[(r, c)];
+                }
+                normal[(c, c)] = w[j] * theta.dot(&gt);
+                grad[c] = w[j] * (theta.dot(cj) - g[j] * theta.dot(&gt));
+            }
+        }
+        (normal, grad)
+    };
+    // Each gain's standard deviation, where the rows tell it (the normal
+    // matrix ridged by 1e-12 of its scale: a gain they leave free has
+    // none), the weighed residue's σ² 1 per row.
+    let deviations = |normal: DMatrix<f64>, free: &[(usize, usize)]| -> Option<Vec<Option<f64>>> {
+        let k = normal.nrows();
+        let ridge = 1e-12 * normal.diagonal().max();
+        let inverse = (normal + DMatrix::identity(k, k) * ridge).cholesky()?.inverse();
+        let dof = sys.rows().saturating_sub(k).max(1) as f64 / sys.rows() as f64;
+        Some(
+            (0..n)
+                .map(|j| {
+                    free.iter()
+                        .find(|(f, _)| *f == j)
+                        .map(|&(_, c)| (inverse[(c, c)] / dof).sqrt())
+                })
+                .collect(),
+        )
+    };
+    let w = weights(&first);
+    let weighed = |r: &[f64]| r.iter().zip(&w).map(|(r, w)| r * w).sum::<f64>();
+    let start = weighed(&first);
+    // Free only the gains the rows tell at the start (within 5 %): one
+    // they barely tell would go to zero, freeing θ from its joint's rows.
+    // The gain held is the best told against joint 0's (the base's own
+    // parameters take up much of its scale: a poor reference).
+    let others = |held: usize| -> Vec<(usize, usize)> {
+        (0..n)
+            .filter(|&j| j != held)
+            .enumerate()
+            .map(|(c, j)| (j, p + c))
+            .collect()
+    };
+    let sd_of = |held: usize| -> Option<Vec<Option<f64>>> {
+        let all = others(held);
+        deviations(normal_at(&theta, &g, &w, &all).0, &all)
+    };
+    let held = sd_of(0)?
+        .iter()
+        .enumerate()
+        .filter_map(|(j, sd)| sd.map(|sd| (j, sd)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(j, _)| j);
+    let at_start = sd_of(held)?;
+    let free: Vec<(usize, usize)> = (0..n)
+        .filter(|&j| at_start[j].is_some_and(|sd| sd < 0.05))
+        .enumerate()
+        .map(|(c, j)| (j, p + c))
+        .collect();
+    let mut now = start;
+    let mut mu = 1e-9;
+    for _ in 0..50 {
+        let (normal, grad) = normal_at(&theta, &g, &w, &free);
+        // Levenberg–Marquardt: the diagonal raised until the residue falls.
+        let accepted = loop {
+            let mut damped = normal.clone();
+            for d in 0..damped.nrows() {
+                damped[(d, d)] *= 1.0 + mu;
+            }
+            if let Some(step) = damped.cholesky().map(|c| c.solve(&grad)) {
+                let t = &theta + step.rows(0, p);
+                let mut h = g.clone();
+                for &(j, c) in &free {
+                    h[j] += step[c];
+                }
+                let r = weighed(&rss(&t, &h));
+                if r <= now {
+                    mu = (mu / 10.0).max(1e-12);
+                    break Some((t, h, r));
+                }
+            }
+            mu *= 10.0;
+            if mu > 1e8 {
+                break None;
+            }
+        };
+        let Some((t, h, r)) = accepted else { break };
+        let done = now - r <= 1e-10 * now;
+        (theta, g, now) = (t, h, r);
+        if done {
+            break;
+        }
+    }
+    // Told: a gain within 2 %, each joint's rows weighed by its own
+    // residual variance at the fit.
+    let last = weights(&rss(&theta, &g));
+    let sd = deviations(normal_at(&theta, &g, &last, &free).0, &free)?;
+    let told: Vec<bool> = (0..n)
+        .map(|j| j == held || sd[j].is_some_and(|sd| g[j] > 0.0 && sd < 0.02 * g[j]))
+        .collect();
+    let mut sorted: Vec<f64> = (0..n).filter(|&j| told[j]).map(|j| g[j]).collect();
+    if sorted.len() < 3 {
+        return None;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let at_fit = rss(&theta, &g);
+    let channels = (0..n)
+        .map(|j| ChannelGain {
+            joint: sys.joints[j].clone(),
+            gain: told[j].then_some(g[j] / median),
+            share: 1.0 - at_fit[j] / first[j],
+        })
+        .collect();
+    Some(ChannelGains { channels, on })
 }
 
 /// The velocity of `joint` on its `rows`: its viscous column (or the sum
@@ -464,6 +737,7 @@ mod tests {
             }],
             relative: (relative, Measured::HeldOutPeriods),
             in_sample: relative,
+            channels: None,
             refused: None,
         }
     }
@@ -562,5 +836,84 @@ mod tests {
             said.starts_with("adequate") && said.contains("twice the fit's residue on j1 (0.30×)"),
             "{said}"
         );
+    }
+
+    /// A serial chain's rows (each link's parameters move its joint and
+    /// every joint inboard of it), `scale` on joint 1's channel: its gain
+    /// found to 1 % with the residue explained; unscaled, none said; a
+    /// joint-wise system (no coupling), not told.
+    #[test]
+    fn a_scaled_channel_is_found_by_its_gain_against_the_others() {
+        let (n, per, rows) = (4usize, 3usize, 2000usize);
+        let p = n * per;
+        let mut s = 7u64;
+        let mut rand = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let theta = DVector::from_fn(p, |k, _| 1.0 + k as f64 * 0.3);
+        let system = |scale: f64, coupled: bool, rand: &mut dyn FnMut() -> f64| {
+            let mut a = DMatrix::zeros(n * rows, p);
+            let mut joint = Vec::new();
+            for j in 0..n {
+                for r in 0..rows {
+                    for link in 0..n {
+                        if link == j || (coupled && link > j) {
+                            for k in 0..per {
+                                a[(j * rows + r, link * per + k)] = rand();
+                            }
+                        }
+                    }
+                    joint.push(j);
+                }
+            }
+            let mut b = &a * &theta;
+            for (i, b) in b.iter_mut().enumerate() {
+                *b = *b * if joint[i] == 1 { scale } else { 1.0 } + 1e-3 * rand();
+            }
+            let m = b.len();
+            System {
+                names: (0..p).map(|k| format!("p{k}")).collect(),
+                units: vec![String::new(); p],
+                expressions: vec![String::new(); p],
+                a,
+                b,
+                var: DVector::from_element(m, f64::NAN),
+                recording: vec![0; m],
+                sample: (0..m as i64).collect(),
+                joint,
+                time: (0..m).map(|i| i as f64).collect(),
+                recordings: vec!["r".into()],
+                joints: (0..n).map(|j| format!("j{j}")).collect(),
+                offsets: vec![0],
+                periods: vec![None],
+                known: None,
+                equations: None,
+                metadata: Default::default(),
+            }
+        };
+        let scaled = channel_gains_in(&system(1.5, true, &mut rand)).unwrap();
+        let g: Vec<f64> = scaled.channels.iter().map(|c| c.gain.unwrap()).collect();
+        assert!((g[1] - 1.5).abs() < 0.015, "{scaled:?}");
+        assert!(
+            g.iter().enumerate().all(|(j, g)| j == 1 || (g - 1.0).abs() < 0.01),
+            "{scaled:?}"
+        );
+        assert!(
+            scaled.channels[1].share > 0.99 && scaled.channels[1].scaled(),
+            "{scaled:?}"
+        );
+        let clean = channel_gains_in(&system(1.0, true, &mut rand)).unwrap();
+        assert!(
+            clean
+                .channels
+                .iter()
+                .all(|c| (c.gain.unwrap() - 1.0).abs() < 0.01 && c.share < 0.01),
+            "{clean:?}"
+        );
+        assert_eq!(channel_gains_in(&system(1.5, false, &mut rand)), None);
+        fn channel_gains_in(sys: &System) -> Option<ChannelGains> {
+            channel_gains(sys, Measured::InSample)
+        }
     }
 }

@@ -290,27 +290,14 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     // The library's identify, read typed (the command line prints it).
     let id = identified(vec![f(1)], &robot, &out, |r| {
         r.validate = vec![f(2), f(3)];
-        r.accept_inadequate = true;
     });
     let text = id.verdict.said();
     // The wrist's residue is far over the floor that 1.94 periods give
     // (1.2e-4 (N·m)² on lwr_6_joint, from the repeated 0.94 period): said.
     let wrist = id.estimate.estimate.adequacy_of("lwr_6_joint").unwrap();
     assert_eq!(wrist.verdict(), AdequacyVerdict::ModelErrorDominates, "{text}");
-    // What decides is the relative error on the validation files, over
-    // the default 5 % tolerance: refused (exit 3 without the flag) with
-    // the figure, written here as the lab asked.
-    match &id.verdict.refused {
-        Some(Refusal::OverTolerance {
-            relative,
-            measured: Measured::Validation,
-            tolerance,
-        }) => assert!((0.05..0.10).contains(relative) && *tolerance == 0.05, "{text}"),
-        other => panic!("refused over the tolerance on the validation files: {other:?}\n{text}"),
-    }
-    assert!(!id.is_refused(), "written anyway");
     // Each held-out file's relative error, least squares then the physical
-    // fit: file 3 at 9.40 % and 5.66 % (5.92 % before its links were
+    // fit: file 3 at 9.37 % and 5.72 % (5.92 % before its links were
     // bounded).
     let file_3 = |v: &robotid::validation::Validated| {
         let r = v.per_recording();
@@ -319,15 +306,35 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
             .unwrap()
             .relative_error()
     };
-    let ols = file_3(id.validation.as_deref().unwrap());
+    let ols = id.validation.as_deref().unwrap();
     let Physical::Fitted {
         validation: Some(v), ..
     } = &id.physical
     else {
         panic!("no physical fit validated:\n{text}")
     };
-    let physical = file_3(v);
-    assert!(ols < 0.095 && physical < 0.060, "{ols} {physical}\n{text}");
+    assert!(
+        file_3(ols) < 0.095 && file_3(v) < 0.060,
+        "{} {}\n{text}",
+        file_3(ols),
+        file_3(v)
+    );
+    // What decides is the relative error on the validation files of the
+    // estimate exported, the physically consistent one: 3.72 % pooled,
+    // within the default 5 % tolerance (identified, exit 0), where least
+    // squares' 5.08 % is over it.
+    let pooled = |v: &robotid::validation::Validated| robotid::validation::relative_error(&v.stats);
+    assert!(pooled(ols) > 0.05, "{}\n{text}", pooled(ols));
+    assert_eq!(id.verdict.relative.1, Measured::ValidationPhysical, "{text}");
+    assert!(
+        (id.verdict.relative.0 - pooled(v)).abs() < 1e-12 && (0.03..0.045).contains(&id.verdict.relative.0),
+        "{:?}\n{text}",
+        id.verdict.relative
+    );
+    assert!(
+        id.verdict.refused.is_none() && id.refused.is_none() && !id.is_refused(),
+        "{text}"
+    );
     let d = design(&f(1), &robot, None).unwrap();
     let p = d.periodic().unwrap().period_s;
     assert!((p - 4.0 * std::f64::consts::PI).abs() < 2e-3, "{p}\n{text}");
@@ -738,6 +745,64 @@ fn a_read_file_places_the_channels() {
         "{said}"
     );
     assert!(!dir.path().join("x").exists());
+}
+
+/// A channel scaled against the others (issue 60, item 8): the arm3
+/// example's second current ×1.5 in both its records, as a wrong torque
+/// constant scales every record a lab makes. The identification's rows,
+/// its excited lines, leave the scale to the parameters (it was adequate,
+/// exit 0); the validation record, compared sample by sample, tells it:
+/// refused, j2's gain named (1.42: the truth 1.5, less the pull of the
+/// current's noise), measured there. The same records unscaled are not.
+#[test]
+fn a_scaled_channel_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let scaled = |sim: &str, factor: f64| -> PathBuf {
+        let csv = std::fs::read_to_string(robotid_tests::simulated(sim).join(format!("{sim}.csv"))).unwrap();
+        let mut lines = csv.lines();
+        let header = lines.next().unwrap();
+        let at = header.split(',').position(|c| c == "current_j2").unwrap();
+        let mut text = format!("{header}\n");
+        for l in lines {
+            let mut v: Vec<String> = l.split(',').map(str::to_string).collect();
+            v[at] = (v[at].parse::<f64>().unwrap() * factor).to_string();
+            text.push_str(&v.join(","));
+            text.push('\n');
+        }
+        let path = dir.path().join(format!("{sim}_{factor}.csv"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    for factor in [1.0, 1.5] {
+        let id = identified(
+            vec![scaled("arm3", factor)],
+            &robot,
+            &dir.path().join(format!("id_{factor}")),
+            |r| r.validate = vec![scaled("arm3_validation", factor)],
+        );
+        let said = id.verdict.said();
+        let channels = id.verdict.channels.as_ref().expect("gains told");
+        assert_eq!(channels.on, Measured::Validation, "{channels:?}");
+        if factor == 1.0 {
+            assert!(id.verdict.refused.is_none() && !id.is_refused(), "{said}: {channels:?}");
+            assert!(channels.channels.iter().all(|c| !c.scaled()), "{channels:?}");
+            continue;
+        }
+        match &id.verdict.refused {
+            Some(Refusal::ScaledChannel(found, Measured::Validation)) => {
+                assert_eq!(found.len(), 1, "{found:?}");
+                let g = found[0].gain.unwrap();
+                assert!(found[0].joint == "j2" && (1.35..1.55).contains(&g), "{found:?}");
+            }
+            other => panic!("refused as a scaled channel: {other:?}\n{said}"),
+        }
+        let why = id.refused.as_deref().unwrap();
+        assert!(
+            id.is_refused() && why.contains("j2 1.4") && why.contains("torque constant"),
+            "{why}"
+        );
+    }
 }
 
 /// A joint held still in the record is refused, with what to do.

@@ -7,3 +7,4 @@ mod lint;
 mod manifest;
 mod summaries;
 mod validation;
+mod verdict;
