@@ -91,7 +91,9 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
     assert result.physical is not None
     assert sorted(p.suffix for p in map(pathlib.Path, result.exports)) == [".json", ".parquet", ".urdf", ".xml"]
     assert 0 < result.relative_error < 0.05, result.relative_error
-    assert result.measured == "on the validation recordings"
+    # The verdict judges what is exported: the physically consistent
+    # estimate, validated.
+    assert result.measured == "on the validation recordings by the physically consistent estimate (the one exported)"
     # Rolled out from Python on the validation record: a row per model,
     # window and joint, in units; the identified model as close to the
     # measured angle as the robot file (the simulation's truth; 1.109×
