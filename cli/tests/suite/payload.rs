@@ -384,6 +384,46 @@ fn drive_gains_come_from_a_known_payload_mass() {
             1.0 / f
         );
     }
+    assert_eq!(
+        robotid_identify::payload_refused(fit, Path::new("payload.parquet")),
+        None
+    );
+    // A known mass that contradicts the robot file (issue 60, item 7): the
+    // gains it implies scale with it, and past 0.67–1.5× the file's are
+    // refused, each joint named. The issue's own case (30 kg for this
+    // 3 kg payload, every gain ≈ 10×) and four more, on the same tables.
+    let table = |n: &str| vec![PathBuf::from(format!("{n}/{n}/regressor.parquet"))];
+    for factor in [10.0, 0.1, 2.0, 0.5, 1.7] {
+        let request = PayloadRequest {
+            loaded: Vec::new(),
+            link: "ee_link".into(),
+            known_mass: Some(factor * truth.mass),
+            bound: None,
+            validate: Vec::new(),
+        };
+        let fit = robotid_identify::payload_from_tables(
+            &request,
+            &robot,
+            &dir.path().join("out"),
+            &table("unloaded"),
+            &table("loaded"),
+        )
+        .unwrap();
+        let why = robotid_identify::payload_refused(&fit, Path::new("payload.parquet")).expect("refused");
+        assert!(
+            why.contains("contradict the robot file") && why.contains("shoulder_pan_joint"),
+            "×{factor}: {why}"
+        );
+        // Each gain the known mass's share of the truth's.
+        for (g, f) in fit.gains.iter().zip(off) {
+            assert!(
+                (g.scale * f / factor - 1.0).abs() < 0.02,
+                "×{factor}: {} {}",
+                g.joint,
+                g.scale
+            );
+        }
+    }
 }
 
 /// A wrist that does not move: with the robot's parameters from records
