@@ -466,13 +466,16 @@ pub struct ChannelGains {
 }
 
 /// Each effort channel's gain against the others', b_j ≈ g_j·(A_j·θ),
-/// fitted with θ by Gauss–Newton from least squares (one gain held: the
-/// scale of the whole is the parameters'), every joint's rows weighed by
-/// its least-squares residual variance. A scaled channel leaves a residue
-/// the coupled rows cannot take up (a link's parameters move every joint
-/// inboard of it); the gains take it. None where the rows do not couple
-/// the joints (joint-wise records), or hold fewer than three joints (no
-/// majority to be the reference), or are projected or hold known columns.
+/// fitted with θ by Levenberg–Marquardt from least squares (the best told
+/// gain held: the scale of the whole is the parameters'; only the gains
+/// the rows tell freed), every joint's rows weighed by its least-squares
+/// residual variance, and said against the told gains' median. A scaled
+/// channel leaves a residue the coupled rows cannot take up (a link's
+/// parameters move every joint inboard of it); the gains take it. None
+/// where the rows do not couple the joints (joint-wise records), tell
+/// fewer than three gains (no majority to be the reference), fit exactly
+/// (a periodic record's excited lines), or are projected or hold known
+/// columns.
 pub fn channel_gains(sys: &System, on: Measured) -> Option<ChannelGains> {
     let (n, p) = (sys.joints.len(), sys.parameters());
     if n < 3 || sys.known.is_some() || sys.equations.is_some() || sys.rows() <= p + n {
