@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use robotid::identify::{absolute, design_with, Design, Found};
 use robotid::validation::Validated;
-use robotid::verdict::{Measured, Refusal, Verdict};
+use robotid::verdict::{channel_gains, Measured, Refusal, Verdict};
 use robotid::{Observer, RunOptions};
 use robotid_report::export::{Export, Format};
 use robotid_schemas::TableKind;
@@ -1019,6 +1019,12 @@ struct Judge {
     /// Every identification record has steady periods that repeat: its
     /// noise floor comes from their spread.
     repeated: bool,
+    /// The effort channels' gains, fitted once: on the validation rows
+    /// where they tell them (a record compared sample by sample; the
+    /// identification's may be its excited lines alone, as many equations
+    /// as a few parameters more than the model's, which a scale is lost
+    /// in), else on the identification's.
+    channels: Option<robotid::verdict::ChannelGains>,
 }
 
 impl Judge {
@@ -1036,14 +1042,9 @@ impl Judge {
         self.judged(est, held_out)
     }
 
-    /// The verdict on `est` with the relative error `held_out`, the
-    /// channels' gains taken from the validation rows where they tell.
+    /// The verdict on `est` with the relative error `held_out`.
     fn judged(&self, est: &Estimate, held_out: Option<(f64, Measured)>) -> Verdict {
-        let verdict = robotid::verdict::judge(self.policy, est, &self.id_rows, held_out);
-        match &self.val_rows {
-            Some(v) => verdict.with_validation_channels(v),
-            None => verdict,
-        }
+        robotid::verdict::judge(self.policy, est, &self.id_rows, held_out, self.channels.clone())
     }
 
     /// Why `verdict` refuses, with what identify found on the way.
@@ -1094,12 +1095,19 @@ fn estimate(
     val_tables: &[PathBuf],
 ) -> Result<Judged> {
     let identifying = &recordings[..paths.identifying];
+    let id_rows = robotid::tables::load_system(staged, id_tables)?;
+    let val_rows = (!val_tables.is_empty())
+        .then(|| robotid::tables::load_system(staged, val_tables))
+        .transpose()?;
+    let channels = val_rows
+        .as_ref()
+        .and_then(|v| channel_gains(v, Measured::Validation))
+        .or_else(|| channel_gains(&id_rows, Measured::InSample));
     let judge = Judge {
         policy: request.policy,
-        id_rows: robotid::tables::load_system(staged, id_tables)?,
-        val_rows: (!val_tables.is_empty())
-            .then(|| robotid::tables::load_system(staged, val_tables))
-            .transpose()?,
+        id_rows,
+        val_rows,
+        channels,
         // Held-out periods of every identification recording, pooled by
         // their worst; none where one has fewer than two steady periods.
         periods_relative: identifying

@@ -213,19 +213,6 @@ impl std::fmt::Display for Refusal {
 }
 
 impl Verdict {
-    /// The channels' gains measured on the validation recordings' rows
-    /// `val` instead, where they tell them: a record that does not repeat
-    /// is compared sample by sample, where the identification's rows may
-    /// be its excited lines alone (as many equations as a few parameters
-    /// more than the model's, which a scale is lost in).
-    pub fn with_validation_channels(mut self, val: &System) -> Verdict {
-        if let Some(c) = channel_gains(val, Measured::Validation) {
-            self.channels = Some(c);
-            self.refused = refusal(&self);
-        }
-        self
-    }
-
     /// The joints over [`REFUSE_RATIO`]× the noise floor.
     pub fn over_floor(&self) -> Vec<&JointFigures> {
         self.joints
@@ -331,7 +318,15 @@ impl Verdict {
 /// The verdict on the estimate `est` of the identification rows `sys`,
 /// with the relative error measured on held-out data where there is some
 /// (`held_out`: pooled, and where); else in sample.
-pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64, Measured)>) -> Verdict {
+/// `channels`: the effort channels' gains ([`channel_gains`], fitted
+/// once by the caller on the rows that tell them best).
+pub fn judge(
+    policy: Policy,
+    est: &Estimate,
+    sys: &System,
+    held_out: Option<(f64, Measured)>,
+    channels: Option<ChannelGains>,
+) -> Verdict {
     let predicted = &sys.a * &est.values;
     let stats = validation::residues(sys, &predicted);
     let residue = &sys.b - &predicted;
@@ -367,7 +362,7 @@ pub fn judge(policy: Policy, est: &Estimate, sys: &System, held_out: Option<(f64
         joints,
         relative,
         in_sample,
-        channels: channel_gains(sys, Measured::InSample),
+        channels,
         refused: None,
     };
 
