@@ -84,6 +84,18 @@ CASES = {
     "unfiltered_1k_2p2": dict(
         filter=None, friction="sign", periods=2.2, premove=3.0, ramp_in=0.5, ramp_out=0.5, rest=3.0, fs=1000.0
     ),
+    # No period at all: the five lines at incommensurate frequencies (the
+    # fundamental times 1, √2, √5, √10, √17), 30 s between ramps; and 5 s
+    # of it, from rest to rest, whose regressor is ill-conditioned (the
+    # slow lines barely turn).
+    "nonperiodic_30s": dict(
+        filter=("butter", 4, 30.0, None), friction="sign", periods=3.0, ramp_in=1.0, ramp_out=1.0, nonperiodic=True
+    ),
+    "nonperiodic_5s": dict(
+        filter=("butter", 4, 30.0, None), friction="sign", periods=0.5, ramp_in=0.5, ramp_out=0.5, nonperiodic=True
+    ),
+    # Exactly one period between ramps.
+    "one_period": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=1.0, ramp_in=1.0, ramp_out=1.0),
 }
 
 # The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its
@@ -165,7 +177,8 @@ def main(urdf, out, case):
     # Seeded by the case's place: new cases go last, so the others keep theirs.
     rng = np.random.default_rng(list(CASES).index(spec.get("seed_case", case)) + 1)
     f0, harmonics = 0.1, 5
-    w = 2 * np.pi * f0 * np.arange(1, harmonics + 1)
+    lines = np.sqrt([1.0, 2.0, 5.0, 10.0, 17.0]) if spec.get("nonperiodic") else np.arange(1, harmonics + 1)
+    w = 2 * np.pi * f0 * lines
     a = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
     b = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
 
@@ -305,6 +318,7 @@ def main(urdf, out, case):
         fs_hz=fs,
         f0_hz=f0,
         harmonics=harmonics,
+        nonperiodic=bool(spec.get("nonperiodic")),
         periods=spec["periods"],
         ramp_in_s=ramp_in,
         premove_s=premove,

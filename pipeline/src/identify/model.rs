@@ -582,6 +582,12 @@ pub(super) fn system_split(sys: &robotid_stages::estimation::System, period: Opt
     predicted((&fit_a, &fit_b), (&test_a, &test_b))
 }
 
+/// The relative error of a system's least-squares fit on all its rows
+/// (in sample), and of [`system_split`]'s held-out block.
+pub(super) fn system_scores(sys: &robotid_stages::estimation::System) -> Option<(f64, f64)> {
+    Some((predicted((&sys.a, &sys.b), (&sys.a, &sys.b))?, system_split(sys, None)?))
+}
+
 /// The relative error ‖b − A·θ‖ / ‖b‖ of the held-out rows `test` under
 /// the least-squares θ of the `fit` rows; None where those do not
 /// determine it (fewer than twice as many rows as parameters) or nothing
