@@ -438,9 +438,15 @@ fn design_checked(
             )
         };
         // An identification record's own delay, scored on a block held
-        // out in time; a validation record takes the identification's.
-        if first.is_none() && !loaded {
-            return split_delay(make, log, &raw, fs);
+        // out in time (a loaded record's too: the unloaded one's estimate
+        // has its delay undone); a validation record takes the
+        // identification's.
+        if first.is_none() {
+            let mut d = split_delay(make, log, &raw, fs)?;
+            if loaded {
+                d.held_out_split = None;
+            }
+            return Ok(d);
         }
         return make(first.and_then(|d| d.delay_s));
     }
