@@ -320,7 +320,7 @@ pub(super) fn non_periodic(
 
 /// Effort delays tried on a record that does not repeat, in samples:
 /// finer near none, to the group delay of a low anti-alias filter (a
-/// 4th-order Butterworth at fs/25 holds the effort 16 samples late).
+/// 4th-order Butterworth at fs/40 holds the effort 17 samples late).
 const SPLIT_DELAYS: [f64; 9] = [-2.0, -1.0, 0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0];
 
 /// How much better than none the delay must predict the held-out block
