@@ -86,8 +86,8 @@ CASES = {
     ),
     # No period at all: the five lines at incommensurate frequencies (the
     # fundamental times 1, √2, √5, √10, √17), 30 s between ramps; and 5 s
-    # of it, from rest to rest, whose regressor is ill-conditioned (the
-    # slow lines barely turn).
+    # of it, from rest to rest, whose slow lines barely turn (its
+    # column-normalised condition 509, the 30 s record's 25).
     "nonperiodic_30s": dict(
         filter=("butter", 4, 30.0, None), friction="sign", periods=3.0, ramp_in=1.0, ramp_out=1.0, nonperiodic=True
     ),

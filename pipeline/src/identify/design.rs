@@ -176,12 +176,17 @@ pub(super) fn record_split(
     raw: &RawSamples,
     period: Option<(f64, f64)>,
 ) -> Result<Option<f64>> {
+    Ok(design_system(d, log, raw)?.and_then(|sys| system_split(&sys, period)))
+}
+
+/// The regressor system of a design's pipeline on `raw`, run in memory.
+fn design_system(d: &Design, log: &Path, raw: &RawSamples) -> Result<Option<robotid_stages::estimation::System>> {
     let plan = Plan {
         tables: Vec::new(),
         ..d.plan.clone()
     };
     let chain = probe(&plan, d.plan.stages.clone(), log, raw)?;
-    Ok(chain.regressor.as_ref().and_then(|r| system_split(&r.system, period)))
+    Ok(chain.regressor.map(|r| r.system))
 }
 
 /// The tables a periodic record's pipeline writes.
@@ -351,12 +356,7 @@ pub(super) fn split_delay(
     // (in sample, held out) of the design `k` samples late.
     let score = |k: f64| -> Result<Option<(f64, f64)>> {
         let d = make((k != 0.0).then_some(k / fs))?;
-        let plan = Plan {
-            tables: Vec::new(),
-            ..d.plan.clone()
-        };
-        let chain = probe(&plan, d.plan.stages.clone(), log, raw)?;
-        Ok(chain.regressor.as_ref().and_then(|r| system_scores(&r.system)))
+        Ok(design_system(&d, log, raw)?.and_then(|sys| system_scores(&sys)))
     };
     let grid: Vec<Option<(f64, f64)>> = SPLIT_DELAYS.par_iter().map(|&k| score(k)).collect::<Result<_>>()?;
     let zero = SPLIT_DELAYS.iter().position(|&k| k == 0.0).expect("0 on the grid");
