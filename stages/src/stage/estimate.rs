@@ -578,7 +578,9 @@ impl Reducer {
             Covariance::Robust => self.robust(parts, &mut est)?,
             _ => None,
         };
-        let essential = matches!(self.cfg.method, Estimator::Ols | Estimator::Wls)
+        // The essential set is least squares' (a physical fit keeps every
+        // parameter, pulled to the robot file).
+        let essential = (matches!(self.cfg.method, Estimator::Ols | Estimator::Wls) && !self.cfg.physical)
             .then(|| essential_parameters(&summary, ESSENTIAL_MAX_RELATIVE_STD));
         // The base regressor of the recordings' configuration, built once
         // for the identifiability flags and the physical fit.
@@ -586,6 +588,16 @@ impl Reducer {
             (Some(model), Some(rc)) => Some(rc.base_regressor(model)?),
             _ => None,
         };
+        let mut md = summary.metadata.clone();
+        let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
+        let physical = match self.cfg.physical {
+            true => Some(self.physical(base.as_deref(), &summary, &mut est, &metric, &mut md)?),
+            false => None,
+        };
+        // Judged on the values this table holds: the physical fit's where
+        // it replaced least squares' (whose flags are in least squares'
+        // own table; on the LWR4+ they named ZZ_lwr_0_joint = −0.76 kg·m²
+        // beside the physical table's 0.018).
         let unidentified = match base.as_ref().map(|b| (b, b.kind, b.map())) {
             Some((base, ModelKind::Chain, Some(map))) if base.names() == est.names => {
                 let names = parameter_names(&base.model, base.terms);
@@ -594,17 +606,11 @@ impl Reducer {
             }
             _ => Vec::new(),
         };
-        let mut md = summary.metadata.clone();
         md.extend(identifiability_notes(
             &unidentified,
             essential.as_ref(),
             summary.names.len(),
         ));
-        let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
-        let physical = match self.cfg.physical {
-            true => Some(self.physical(base.as_deref(), &summary, &mut est, &metric, &mut md)?),
-            false => None,
-        };
         for k in [metadata::SOURCE_FILE, metadata::SOURCE_SHA256] {
             md.remove(k);
         }
