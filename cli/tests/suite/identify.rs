@@ -351,7 +351,11 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
         let (name, rest) = flag.split_once(" = ").unwrap();
         let value: f64 = rest.split(' ').next().unwrap().parse().unwrap();
         let i = names.iter().position(|n| n == name).unwrap();
-        assert!((value - values[i]).abs() <= 1e-4 * values[i].abs() + 1e-12, "{flag}: {}", values[i]);
+        assert!(
+            (value - values[i]).abs() <= 1e-4 * values[i].abs() + 1e-12,
+            "{flag}: {}",
+            values[i]
+        );
     }
     let d = design(&f(1), &robot, None).unwrap();
     let p = d.periodic().unwrap().period_s;

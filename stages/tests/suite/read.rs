@@ -1170,3 +1170,100 @@ fn a_changed_value_in_a_written_recording_is_refused() {
     rewrite(&foreign, 1e-9, false);
     assert!(read(&foreign, &cfg, Some(&model)).is_ok());
 }
+
+/// A log stamped by its rate: without a time column, row k at k / rate;
+/// with a column of sample numbers, those over the rate (a gap in them a
+/// gap in time). Said beside stamps, out of range, or on MCAP: refused.
+#[test]
+fn logs_stamped_by_their_rate() {
+    let dir = tempfile::tempdir().unwrap();
+    let (model, s) = recording(dir.path());
+    let text = std::fs::read_to_string(dir.path().join("rec.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    let time = rows[0].iter().position(|c| *c == "time").unwrap();
+    let rate = 1.0 / (s.raw.time[1] - s.raw.time[0]);
+    // The time column dropped; then replaced by sample numbers from 7 with
+    // row 3 missing.
+    let dropped: String = rows
+        .iter()
+        .map(|r| {
+            let mut r = r.clone();
+            r.remove(time);
+            r.join(",") + "\n"
+        })
+        .collect();
+    let numbered: String = rows
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != 4)
+        .map(|(i, r)| {
+            let mut r: Vec<String> = r.iter().map(|c| c.to_string()).collect();
+            r[time] = if i == 0 { "n".into() } else { (i + 6).to_string() };
+            r.join(",") + "\n"
+        })
+        .collect();
+    let (a, b) = (dir.path().join("dropped.csv"), dir.path().join("numbered.csv"));
+    std::fs::write(&a, dropped).unwrap();
+    std::fs::write(&b, numbered).unwrap();
+    let by_rate = ReadConfig {
+        sample_rate_hz: Some(rate),
+        ..Default::default()
+    };
+    let r = read(&a, &by_rate, Some(&model)).unwrap();
+    assert_eq!(r.q, s.raw.q);
+    assert_eq!(r.time.len(), s.raw.time.len());
+    for (k, t) in r.time.iter().enumerate() {
+        assert!((t - k as f64 / rate).abs() < 1e-12, "{k}: {t}");
+    }
+    assert!(
+        r.metadata["robotid.read.notes"].contains("no time column"),
+        "{:?}",
+        r.metadata
+    );
+    let numbers = ReadConfig {
+        time: Some(Channel {
+            column: Some("n".into()),
+            topic: None,
+            field: None,
+            unit: Some("sample".into()),
+        }),
+        ..by_rate.clone()
+    };
+    let r = read(&b, &numbers, Some(&model)).unwrap();
+    let step = |k: usize| (r.time[k + 1] - r.time[k]) * rate;
+    assert!(
+        (step(1) - 1.0).abs() < 1e-9 && (step(2) - 2.0).abs() < 1e-9,
+        "the missing row is a gap in time"
+    );
+    assert_eq!(r.metadata["robotid.time_origin_s"], (7.0 / rate).to_string());
+    // Refused: no rate for the sample numbers; a rate beside stamps; out of
+    // range; on MCAP; no time column and no rate (the error says the way).
+    let no_rate = ReadConfig {
+        sample_rate_hz: None,
+        ..numbers.clone()
+    };
+    assert!(err_of(read(&b, &no_rate, Some(&model))).contains("sample_rate_hz"));
+    let beside = ReadConfig {
+        time: Some(Channel {
+            column: Some("time".into()),
+            topic: None,
+            field: None,
+            unit: Some("s".into()),
+        }),
+        ..by_rate.clone()
+    };
+    let e = err_of(read(&dir.path().join("rec.csv"), &beside, Some(&model)));
+    assert!(e.contains("the stamps or the rate"), "{e}");
+    for bad in [0.0, -5.0, f64::NAN, 1e7] {
+        let cfg = ReadConfig {
+            sample_rate_hz: Some(bad),
+            ..Default::default()
+        };
+        assert!(!cfg.problems().is_empty(), "{bad}");
+        assert!(err_of(read(&a, &cfg, Some(&model))).contains("sample_rate_hz"), "{bad}");
+    }
+    let e = err_of(read(&dir.path().join("rec.mcap"), &by_rate, Some(&model)));
+    assert!(e.contains("MCAP"), "{e}");
+    let e = err_of(read(&a, &ReadConfig::default(), Some(&model)));
+    assert!(e.contains("sample_rate_hz"), "{e}");
+}

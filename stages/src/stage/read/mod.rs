@@ -129,7 +129,15 @@ pub struct ReadConfig {
     /// refused at their sample (default 3; a current read in the wrong
     /// unit, a corrupt value).
     pub max_torque_factor: Option<f64>,
+    /// Text and Parquet logs stamped by their rate, Hz: without a `time`
+    /// channel, row k is at k / rate s; with `time = { column = …, unit =
+    /// "sample" }`, the column's sample numbers at that rate (a gap in
+    /// them is a gap in time).
+    pub sample_rate_hz: Option<f64>,
 }
+
+/// The highest `sample_rate_hz` read (1 MHz: over any joint controller's).
+pub const MAX_SAMPLE_RATE_HZ: f64 = 1e6;
 
 /// What the read stage does with an isolated spike.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -187,6 +195,8 @@ pub enum Scale {
     Counts,
     /// Motor current: per joint torque per ampere, times the factor (mA → 1e-3).
     Current(f64),
+    /// Sample numbers: over `sample_rate_hz`.
+    Sample,
 }
 
 /// What a unit string means for a channel kind.
@@ -197,6 +207,7 @@ pub fn unit_scale(kind: &str, unit: &str) -> Result<Scale> {
         ("time", "ms") => Scale::Factor(1e-3),
         ("time", "us") => Scale::Factor(1e-6),
         ("time", "ns") => Scale::Factor(1e-9),
+        ("time", "sample" | "samples") => Scale::Sample,
         ("position" | "reference", "rad") => Scale::Factor(1.0),
         ("position" | "reference", "deg") => Scale::Factor(std::f64::consts::PI / 180.0),
         ("position" | "reference", "count" | "counts") => Scale::Counts,
@@ -205,7 +216,7 @@ pub fn unit_scale(kind: &str, unit: &str) -> Result<Scale> {
         ("effort", "mA") => Scale::Current(1e-3),
         _ => {
             let known = match kind {
-                "time" => "s, ms, us, ns",
+                "time" => "s, ms, us, ns, sample (with `sample_rate_hz`)",
                 "effort" => "A, mA, N*m",
                 _ => "rad, deg, count",
             };
@@ -267,11 +278,43 @@ impl ReadConfig {
         if self.joints.as_ref().is_some_and(|j| j.is_empty()) {
             out.push(Problem::new("joints", "is empty: name the recorded joints"));
         }
+        out.extend(self.rate_problems());
         if let Some(f) = self.max_torque_factor.filter(|f| !(*f >= 1.0 && f.is_finite())) {
             out.push(Problem::new(
                 "max_torque_factor",
                 format!("must be a finite multiple ≥ 1 of the torque limits, not {f}"),
             ));
+        }
+        out
+    }
+
+    /// A declared rate out of range, or said beside stamps it would
+    /// contradict; sample numbers without a rate.
+    fn rate_problems(&self) -> Vec<Problem> {
+        let sample_numbers = self
+            .time
+            .as_ref()
+            .and_then(|c| c.unit.as_deref())
+            .is_some_and(|u| matches!(unit_scale("time", u), Ok(Scale::Sample)));
+        let stamped = self
+            .time
+            .as_ref()
+            .is_some_and(|c| c.column.is_some() || c.topic.is_some());
+        let mut out = Vec::new();
+        match self.sample_rate_hz {
+            Some(r) if !(r > 0.0 && r <= MAX_SAMPLE_RATE_HZ) => out.push(Problem::new(
+                "sample_rate_hz",
+                format!("must be over 0 and at most {MAX_SAMPLE_RATE_HZ:e} Hz, not {r}"),
+            )),
+            Some(_) if stamped && !sample_numbers => out.push(Problem::new(
+                "sample_rate_hz",
+                "is said beside a `time` channel of stamps: give the stamps or the rate (or the time column's unit as `sample`, its sample numbers at that rate)",
+            )),
+            None if sample_numbers => out.push(Problem::new(
+                "time.unit",
+                "`sample` needs the rate: give `sample_rate_hz`",
+            )),
+            _ => {}
         }
         out
     }
@@ -564,6 +607,18 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             msg: "no joint names: give `joints` in the source or a robot file".into(),
         })?;
     let ext = log.format();
+    if let Some(p) = cfg.rate_problems().first() {
+        return Err(Error::Config {
+            path: path.to_path_buf(),
+            msg: format!("`{}` {}", p.key, p.message),
+        });
+    }
+    if ext == "mcap" && cfg.sample_rate_hz.is_some() {
+        return Err(Error::Config {
+            path: path.to_path_buf(),
+            msg: "`sample_rate_hz` on an MCAP log, whose messages carry their log times".into(),
+        });
+    }
     let (cols, bytes_hash) = columns_of(log, &ext, cfg, &joints)?;
     if let Log::File(p) = log {
         verify_checksum(p, &bytes_hash)?;
@@ -589,7 +644,15 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             .unwrap_or_else(|| default.to_string())
     };
     let time_unit = unit(&cfg.time, if ext == "mcap" { "ns" } else { "s" });
-    units.convert("time", &time_unit, std::slice::from_mut(&mut time))?;
+    match (cfg.sample_rate_hz, cfg.time.as_ref().and_then(|c| c.column.as_ref())) {
+        // No time column: the rows' numbers at the rate.
+        (Some(rate), None) => {
+            let rows = position.first().map_or(0, Vec::len);
+            time = (0..rows).map(|k| k as f64 / rate).collect();
+            add_note(&mut md, format!("read: no time column, row k at k / {rate} Hz"));
+        }
+        _ => units.convert("time", &time_unit, std::slice::from_mut(&mut time))?,
+    }
     units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
     units.convert("effort", &effort_unit, &mut effort)?;
@@ -744,6 +807,13 @@ impl Units<'_> {
                 ),
                 f,
             ),
+            Scale::Sample => {
+                let rate = self.cfg.sample_rate_hz.ok_or_else(|| {
+                    self.data_err(kind, None, "sample numbers need the rate: give `sample_rate_hz`".into())
+                })?;
+                values.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v /= rate));
+                return Ok(());
+            }
         };
         let k = k.map_err(|e| self.data_err(kind, None, e))?;
         for (c, kj) in values.iter_mut().zip(k) {

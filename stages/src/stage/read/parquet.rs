@@ -53,7 +53,9 @@ fn read_log(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     let schema = builder.schema().clone();
     let header: Vec<String> = schema.fields().iter().map(|f| f.name().clone()).collect();
     let mapping = resolve(&header, cfg, joints, &source)?;
-    let mut wanted: Vec<String> = std::iter::once(&mapping.time)
+    let mut wanted: Vec<String> = mapping
+        .time
+        .iter()
         .chain(&mapping.position)
         .chain(&mapping.effort)
         .chain(mapping.reference.iter().flatten())
@@ -114,7 +116,9 @@ fn into_columns_moved(
     md: BTreeMap<String, String>,
 ) -> Columns {
     let mut uses: BTreeMap<String, usize> = BTreeMap::new();
-    for n in std::iter::once(&mapping.time)
+    for n in mapping
+        .time
+        .iter()
         .chain(&mapping.position)
         .chain(&mapping.effort)
         .chain(mapping.reference.iter().flatten())

@@ -11,7 +11,8 @@ use crate::{Error, Result};
 
 /// Column names the mapping asks for, resolved against a header.
 pub(crate) struct Mapping {
-    pub time: String,
+    /// None: stamped by `sample_rate_hz`.
+    pub time: Option<String>,
     pub position: Vec<String>,
     pub effort: Vec<String>,
     pub reference: Option<Vec<String>>,
@@ -134,13 +135,18 @@ impl Header<'_> {
 pub(crate) fn resolve(header: &[String], cfg: &ReadConfig, joints: &[String], source: &str) -> Result<Mapping> {
     let h = Header { header, joints, source };
     let time = match cfg.time.as_ref().and_then(|c| c.column.as_ref()) {
-        Some(Column::Index(i)) => h.by_index("time", *i)?,
-        Some(Column::Name(n)) => n.clone(),
+        Some(Column::Index(i)) => Some(h.by_index("time", *i)?),
+        Some(Column::Name(n)) => Some(n.clone()),
         Some(Column::Each(_)) => return Err(h.err("time", "is one column, not a list".into())),
-        None => "time".into(),
+        None if cfg.sample_rate_hz.is_some() => None,
+        None => Some("time".into()),
     };
-    if !h.has(&time) {
-        return Err(h.missing(&time));
+    if let Some(time) = time.as_ref().filter(|t| !h.has(t)) {
+        let mut e = h.missing(time);
+        if let Error::Data { msg, .. } = &mut e {
+            msg.push_str("; a log without one is stamped by its rate: `sample_rate_hz` in `[read]`");
+        }
+        return Err(e);
     }
     let position = h.require(
         h.per_joint(&cfg.position, "position")?
@@ -184,7 +190,7 @@ pub(crate) fn into_columns(
         metadata.insert(metadata::READ_EFFORT_UNIT.into(), u.into());
     }
     Columns {
-        time: get(&m.time),
+        time: m.time.as_deref().map(&mut get).unwrap_or_default(),
         position: m.position.iter().map(|c| get(c)).collect(),
         effort: m.effort.iter().map(|c| get(c)).collect(),
         reference: m.reference.as_ref().map(|r| r.iter().map(|c| get(c)).collect()),
@@ -371,7 +377,10 @@ pub(crate) fn read_text(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result
     }
     let layout = Layout::of(&lines, cfg)?;
     let mapping = resolve(&layout.header, cfg, joints, &source)?;
-    let wanted: Vec<String> = std::iter::once(mapping.time.clone())
+    let wanted: Vec<String> = mapping
+        .time
+        .iter()
+        .cloned()
         .chain(mapping.position.iter().cloned())
         .chain(mapping.effort.iter().cloned())
         .chain(mapping.reference.iter().flatten().cloned())
