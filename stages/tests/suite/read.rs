@@ -1220,13 +1220,14 @@ fn logs_stamped_by_their_rate() {
         "{:?}",
         r.metadata
     );
+    let time_column = |column: &str, unit: &str| Channel {
+        column: Some(column.into()),
+        topic: None,
+        field: None,
+        unit: Some(unit.into()),
+    };
     let numbers = ReadConfig {
-        time: Some(Channel {
-            column: Some("n".into()),
-            topic: None,
-            field: None,
-            unit: Some("sample".into()),
-        }),
+        time: Some(time_column("n", "sample")),
         ..by_rate.clone()
     };
     let r = read(&b, &numbers, Some(&model)).unwrap();
@@ -1244,12 +1245,7 @@ fn logs_stamped_by_their_rate() {
     };
     assert!(err_of(read(&b, &no_rate, Some(&model))).contains("sample_rate_hz"));
     let beside = ReadConfig {
-        time: Some(Channel {
-            column: Some("time".into()),
-            topic: None,
-            field: None,
-            unit: Some("s".into()),
-        }),
+        time: Some(time_column("time", "s")),
         ..by_rate.clone()
     };
     let e = err_of(read(&dir.path().join("rec.csv"), &beside, Some(&model)));
