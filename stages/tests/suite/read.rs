@@ -1237,6 +1237,7 @@ fn logs_stamped_by_their_rate() {
         "the missing row is a gap in time"
     );
     assert_eq!(r.metadata["robotid.time_origin_s"], (7.0 / rate).to_string());
+    assert_eq!(r.metadata["robotid.sample_rate_hz"], rate.to_string());
     // Refused: no rate for the sample numbers; a rate beside stamps; out of
     // range; on MCAP; no time column and no rate (the error says the way).
     let no_rate = ReadConfig {

@@ -653,6 +653,10 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
         }
         _ => units.convert("time", &time_unit, std::slice::from_mut(&mut time))?,
     }
+    // A declared rate is the recording's, as a robotid log's provenance.
+    if let Some(rate) = cfg.sample_rate_hz {
+        md.insert(metadata::SAMPLE_RATE_HZ.into(), rate.to_string());
+    }
     units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
     units.convert("effort", &effort_unit, &mut effort)?;
