@@ -17,6 +17,7 @@ use super::{
     base_parameters, decoupled_names, decoupled_regressor, regressor, Batched, Data, FrictionTerms, Model,
     RegressorTerms, Spring, Stribeck, LANES,
 };
+use super::{rnea::rigid_torque, torque_regressor::joint_columns};
 use crate::{Error, Result};
 
 /// Which dynamic model the regressor describes.
@@ -174,6 +175,7 @@ pub const PAYLOAD_COLUMNS: [&str; 10] = [
 ];
 
 /// Preallocated buffers for [`BaseRegressor::rows`].
+#[derive(Clone)]
 pub struct Workspace {
     data: Data,
     phi: DMatrix<f64>,
@@ -414,6 +416,43 @@ impl BaseRegressor {
         }
     }
 
+    /// θ over the full regressor's columns with the base θ's torques
+    /// (Φ·θ_full = Y·θ): a base column is a column of Φ, and the payload's
+    /// add to the last link's. None for the decoupled model.
+    pub fn full_values(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        (self.kind == ModelKind::Chain).then(|| {
+            let mut full = vec![0.0; self.full_count];
+            for ((c, _, _), v) in self.columns.iter().zip(theta) {
+                full[*c] += v;
+            }
+            full
+        })
+    }
+
+    /// Φ(q, q̇, q̈)·θ_full into `out` (n torques) for a chain and
+    /// [`BaseRegressor::full_values`]: the links by Newton–Euler, O(n)
+    /// against [`BaseRegressor::rows`]' O(n²), and each joint's own columns
+    /// as the regressor makes them. Equal to Y·θ to round-off. No
+    /// allocation.
+    pub fn torque(&self, ws: &mut Workspace, (q, qd, qdd): (&[f64], &[f64], &[f64]), full: &[f64], out: &mut [f64]) {
+        let n = self.model.dof();
+        assert_eq!(self.kind, ModelKind::Chain, "torque: a chain's full parameters");
+        rigid_torque(&self.model, &mut ws.data, (q, qd, qdd), &full[..10 * n], out);
+        // Each joint's columns are its own row's, the spring's its joint's.
+        joint_columns(&self.model, (q, qd, qdd), self.terms, &mut ws.phi);
+        let per = self.terms.per_joint();
+        for (j, t) in out.iter_mut().enumerate() {
+            for c in 10 * n + per * j..10 * n + per * (j + 1) {
+                *t += ws.phi[(j, c)] * full[c];
+            }
+        }
+        if let Some(sp) = self.terms.spring {
+            for c in n * (10 + per)..self.full_count {
+                out[sp.joint] += ws.phi[(sp.joint, c)] * full[c];
+            }
+        }
+    }
+
     /// The stacked rows of a whole kinematics table (samples × n rows,
     /// sample-major), samples in parallel chunks with their own workspace:
     /// no allocation per sample, and the result does not depend on the
@@ -637,4 +676,79 @@ mod tests {
             }
         }
     }
+
+    /// Newton–Euler on the full parameters gives the base rows' torques,
+    /// for values no body has (θ drawn at random, the payload's added to
+    /// the last link's) and every kind of joint column.
+    #[test]
+    fn torque_of_the_full_values_is_the_rows_times_theta() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+        let model = crate::dynamics::load_robot(&path).unwrap();
+        let n = model.dof();
+        let spring = SpringConfig {
+            joint: model.joints[1].name.clone(),
+            harmonics: 2,
+        };
+        let stribeck = model
+            .joints
+            .iter()
+            .map(|j| {
+                let shape = StribeckShape {
+                    velocity_rad_s: 0.1,
+                    exponent: 1.5,
+                };
+                (j.name.clone(), shape)
+            })
+            .collect();
+        let specs = [
+            RegressorModel::default(),
+            RegressorModel {
+                friction: FrictionTerms::StribeckAsymmetric,
+                rotor: Some(true),
+                offset: true,
+                coulomb_transition_rad_s: Some(0.02),
+                spring: Some(spring),
+                payload: true,
+                stribeck,
+                ..Default::default()
+            },
+        ];
+        let mut seed = 7u64;
+        let mut draw = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for spec in specs {
+            let base = BaseRegressor::new(&model, &spec).unwrap();
+            let nb = base.parameters();
+            let theta: Vec<f64> = (0..nb).map(|_| draw()).collect();
+            let full = base.full_values(&theta).unwrap();
+            let mut ws = base.workspace();
+            let (mut rows, mut got) = (vec![0.0; n * nb], vec![0.0; n]);
+            for _ in 0..50 {
+                let state: Vec<Vec<f64>> = (0..3).map(|d| (0..n).map(|_| (1 + d) as f64 * draw()).collect()).collect();
+                let (q, qd, qdd) = (&state[0][..], &state[1][..], &state[2][..]);
+                base.rows(&mut ws, q, qd, qdd, &mut rows);
+                base.torque(&mut ws, (q, qd, qdd), &full, &mut got);
+                for j in 0..n {
+                    let want: f64 = rows[j * nb..(j + 1) * nb].iter().zip(&theta).map(|(y, v)| y * v).sum();
+                    let scale: f64 = rows[j * nb..(j + 1) * nb].iter().zip(&theta).map(|(y, v)| (y * v).abs()).sum();
+                    assert!(
+                        (got[j] - want).abs() <= 1e-12 * scale.max(1.0),
+                        "payload {} joint {j}: {} vs {want}",
+                        spec.payload,
+                        got[j]
+                    );
+                }
+            }
+        }
+        let decoupled = RegressorModel {
+            model: ModelKind::Decoupled,
+            rotor: Some(false),
+            ..Default::default()
+        };
+        let base = BaseRegressor::new(&model, &decoupled).unwrap();
+        assert!(base.full_values(&vec![0.0; base.parameters()]).is_none());
+    }
+
 }

@@ -45,7 +45,14 @@ pub fn cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) {
 /// positive) where M is not positive definite: a pivot under 1e-12 of M's
 /// largest diagonal entry counts as zero (round-off of a singular M).
 pub fn try_cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) -> Result<(), usize> {
-    let n = b.len();
+    try_cholesky_in_place(m, b.len())?;
+    cholesky_solve_factored(m, b);
+    Ok(())
+}
+
+/// The Cholesky factor L (M = L·Lᵀ) of the leading n × n of `m`, in its
+/// lower triangle; Err as [`try_cholesky_solve_in_place`].
+pub fn try_cholesky_in_place(m: &mut DMatrix<f64>, n: usize) -> Result<(), usize> {
     let scale = (0..n).map(|j| m[(j, j)]).fold(0.0, f64::max);
     for j in 0..n {
         let mut d = m[(j, j)];
@@ -65,19 +72,24 @@ pub fn try_cholesky_solve_in_place(m: &mut DMatrix<f64>, b: &mut [f64]) -> Resul
             m[(i, j)] = s / d;
         }
     }
+    Ok(())
+}
+
+/// b ← M⁻¹·b, M's Cholesky factor L in the lower triangle of `l`.
+pub fn cholesky_solve_factored(l: &DMatrix<f64>, b: &mut [f64]) {
+    let n = b.len();
     for i in 0..n {
         let mut s = b[i];
         for k in 0..i {
-            s -= m[(i, k)] * b[k];
+            s -= l[(i, k)] * b[k];
         }
-        b[i] = s / m[(i, i)];
+        b[i] = s / l[(i, i)];
     }
     for i in (0..n).rev() {
         let mut s = b[i];
         for k in i + 1..n {
-            s -= m[(k, i)] * b[k];
+            s -= l[(k, i)] * b[k];
         }
-        b[i] = s / m[(i, i)];
+        b[i] = s / l[(i, i)];
     }
-    Ok(())
 }

@@ -3,7 +3,7 @@
 //! in the standard inertial parameters: the same recursion later gives the
 //! regressor.
 
-use nalgebra::{DVector, Vector3};
+use nalgebra::{DVector, Matrix3, Vector3};
 
 use super::{Data, Model};
 
@@ -69,7 +69,49 @@ pub fn rnea_terms<'a>(
 
 /// Forward pass: link velocities and accelerations from the base outwards,
 /// then each link's own inertial wrench (stored in `force`/`moment`).
-pub(crate) fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
+fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
+    kinematics(model, data, q, qd, qdd, gravity);
+    for i in 0..model.dof() {
+        let link = &model.links[i];
+        let h = link.first_moment();
+        let io = link.inertia_origin();
+        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
+        data.force[i] = a * link.mass + dw.cross(&h) + w.cross(&w.cross(&h));
+        data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
+    }
+}
+
+/// Joint torques of rigid bodies with the standard parameters `params`
+/// (ten per link in the regressor's order: XX, XY, XZ, YY, YZ, ZZ about
+/// the link frame's origin, MX, MY, MZ, M), gravity included, into `out`:
+/// the regressor's first 10·n columns times `params`, by Newton–Euler in
+/// O(n) where the regressor is O(n²). Any values, physical or not (a base
+/// parameter set's particular solution).
+pub(crate) fn rigid_torque(
+    model: &Model,
+    data: &mut Data,
+    (q, qd, qdd): (&[f64], &[f64], &[f64]),
+    params: &[f64],
+    out: &mut [f64],
+) {
+    let n = model.dof();
+    kinematics(model, data, q, qd, qdd, true);
+    for (i, p) in params.chunks_exact(10).take(n).enumerate() {
+        let io = Matrix3::new(p[0], p[1], p[2], p[1], p[3], p[4], p[2], p[4], p[5]);
+        let h = Vector3::new(p[6], p[7], p[8]);
+        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
+        data.force[i] = a * p[9] + dw.cross(&h) + w.cross(&w.cross(&h));
+        data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
+    }
+    backward_pass(model, data);
+    for (i, t) in out.iter_mut().enumerate().take(n) {
+        *t = model.joints[i].axis.dot(&data.moment[i]);
+    }
+}
+
+/// Link velocities and accelerations (gravity as an upward base
+/// acceleration when `gravity`) and orientations, from the base outwards.
+pub(crate) fn kinematics(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
     let mut w_p = Vector3::zeros();
     let mut dw_p = Vector3::zeros();
     let mut a_p = if gravity { -model.gravity } else { Vector3::zeros() };
@@ -83,11 +125,6 @@ pub(crate) fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64]
         let w = w_in + z * qd[i];
         let dw = rt * dw_p + z * qdd[i] + w_in.cross(&(z * qd[i]));
         let a = rt * (a_p + dw_p.cross(&p) + w_p.cross(&w_p.cross(&p)));
-        let link = &model.links[i];
-        let h = link.first_moment();
-        let io = link.inertia_origin();
-        data.force[i] = a * link.mass + dw.cross(&h) + w.cross(&w.cross(&h));
-        data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
         data.rot[i] = r;
         data.omega[i] = w;
         data.domega[i] = dw;

@@ -3,8 +3,12 @@
 //! windows that restart from the measured state (multiple shooting), and
 //! the simulated joint angles and velocities compared with the measured.
 
-use nalgebra::DMatrix;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+use super::forward_dynamics::{cholesky_solve_factored, try_cholesky_in_place};
 use super::{BaseRegressor, Workspace};
 
 /// Forward dynamics of base parameters θ (any estimate: least squares,
@@ -14,9 +18,13 @@ use super::{BaseRegressor, Workspace};
 /// Y(q, 0, 0)·θ. The friction, offsets and Coulomb turn-over are the
 /// estimate's own, but for [`BaseDynamics::settle`]. Allocates nothing per
 /// call.
+#[derive(Clone)]
 pub struct BaseDynamics<'a> {
     regressor: &'a BaseRegressor,
     theta: &'a [f64],
+    /// θ over the full regressor's columns (a chain's): its torques by
+    /// Newton–Euler, an order cheaper than the regressor's rows.
+    full: Option<Vec<f64>>,
     /// Per Coulomb parameter: its joint, its index in θ and its side
     /// (+1, −1; 0 for both).
     /// The sign(q̇) terms a friction-loss constraint applies: (joint, base
@@ -36,9 +44,10 @@ pub struct BaseDynamics<'a> {
     ws: Workspace,
     rows: Vec<f64>,
     mass: DMatrix<f64>,
-    /// M(q) held over a sample step's RK4 steps, while `holding`
-    /// ([`BaseDynamics::hold_mass`]).
-    held: DMatrix<f64>,
+    /// Whether `factor` is M's (Err: the joint whose pivot is not
+    /// positive); M and its factor are held over a sample step's RK4
+    /// steps while `holding` ([`BaseDynamics::hold_mass`]).
+    factored: Result<(), usize>,
     holding: bool,
     zero: Vec<f64>,
     unit: Vec<f64>,
@@ -99,6 +108,7 @@ impl<'a> BaseDynamics<'a> {
         BaseDynamics {
             regressor,
             theta,
+            full: regressor.full_values(theta),
             coulomb,
             damping,
             settle_s: None,
@@ -107,7 +117,7 @@ impl<'a> BaseDynamics<'a> {
             ws: regressor.workspace(),
             rows: vec![0.0; n * regressor.parameters()],
             mass: DMatrix::zeros(n, n),
-            held: DMatrix::zeros(n, n),
+            factored: Ok(()),
             holding: false,
             zero: vec![0.0; n],
             unit: vec![0.0; n],
@@ -155,16 +165,15 @@ impl<'a> BaseDynamics<'a> {
 
     /// Right-hand side `rhs` = τ − h(q, q̇) with the Coulomb terms taken
     /// out and the friction-loss constraint's force put in (see
-    /// [`BaseDynamics::settle`]); `self.mass` the mass matrix, kept.
-    fn constrained(&mut self, qd: &[f64], tc: f64, rhs: &mut [f64]) -> Result<(), usize> {
+    /// [`BaseDynamics::settle`]); `mass` and `factor` M's, kept.
+    fn constrained(&mut self, qd: &[f64], tc: f64, rhs: &mut [f64]) {
         let n = rhs.len();
         for k in 0..self.coulomb.len() {
             let (j, i, side, excess) = self.coulomb[k];
             rhs[j] += self.theta[i] * self.coulomb_column(j, side, excess, qd[j]);
         }
         self.free.copy_from_slice(rhs);
-        self.factor.copy_from(&self.mass);
-        super::forward_dynamics::try_cholesky_solve_in_place(&mut self.factor, &mut self.free)?;
+        cholesky_solve_factored(&self.factor, &mut self.free);
         for j in 0..n {
             let needed = self.mass[(j, j)] * (self.free[j] + qd[j] / tc);
             // The friction of the side the joint is driven to: Coulomb's,
@@ -179,18 +188,18 @@ impl<'a> BaseDynamics<'a> {
                 .sum();
             rhs[j] -= needed.clamp(-fc, fc);
         }
-        Ok(())
     }
 
     /// M taken at `q` and held for every call until `None`: a stiff
     /// joint's many RK4 steps within one sample step (where q moves by a
-    /// sample's motion) share one mass matrix, which costs n + 1 torque
-    /// evaluations against the one the rest of each step costs.
+    /// sample's motion) share one mass matrix and its factor, which cost
+    /// n + 1 torque evaluations against the one the rest of each step
+    /// costs.
     pub fn hold_mass(&mut self, q: Option<&[f64]>) {
         self.holding = q.is_some();
         if let Some(q) = q {
             self.mass_at(q);
-            self.held.copy_from(&self.mass);
+            self.factor_mass();
         }
     }
 
@@ -260,6 +269,10 @@ impl<'a> BaseDynamics<'a> {
 
     /// Y(q, q̇, q̈)·θ into `self.torque`.
     fn predict(&mut self, q: &[f64], qd: &[f64], qdd: &[f64]) {
+        if let Some(full) = &self.full {
+            self.regressor.torque(&mut self.ws, (q, qd, qdd), full, &mut self.torque);
+            return;
+        }
         self.regressor.rows(&mut self.ws, q, qd, qdd, &mut self.rows);
         let p = self.theta.len();
         for (j, t) in self.torque.iter_mut().enumerate() {
@@ -276,10 +289,11 @@ impl<'a> BaseDynamics<'a> {
     /// estimate can have such a mass matrix: it is said, not simulated).
     pub fn accelerations(&mut self, q: &[f64], qd: &[f64], tau: &[f64], qdd: &mut [f64]) -> Result<(), usize> {
         let n = q.len();
-        match self.holding {
-            true => self.mass.copy_from(&self.held),
-            false => self.mass_at(q),
+        if !self.holding {
+            self.mass_at(q);
+            self.factor_mass();
         }
+        self.factored?;
         let zero = std::mem::take(&mut self.zero);
         self.predict(q, qd, &zero);
         self.zero = zero;
@@ -287,9 +301,16 @@ impl<'a> BaseDynamics<'a> {
             qdd[j] = tau[j] - self.torque[j];
         }
         if let Some(tc) = self.settle_s.filter(|_| !self.coulomb.is_empty()) {
-            self.constrained(qd, tc, qdd)?;
+            self.constrained(qd, tc, qdd);
         }
-        super::forward_dynamics::try_cholesky_solve_in_place(&mut self.mass, qdd)
+        cholesky_solve_factored(&self.factor, qdd);
+        Ok(())
+    }
+
+    /// `factor` and `factored` from `mass`.
+    fn factor_mass(&mut self) {
+        self.factor.copy_from(&self.mass);
+        self.factored = try_cholesky_in_place(&mut self.factor, self.mass.nrows());
     }
 }
 
@@ -405,7 +426,7 @@ impl Rk4 {
 /// sample step as the damping at its start needs to stay stable
 /// ([`BaseDynamics::damping_rate`]).
 pub fn rollout(
-    dynamics: &mut BaseDynamics,
+    dynamics: &BaseDynamics,
     time: &[f64],
     q: &[Vec<f64>],
     qd: &[Vec<f64>],
@@ -414,54 +435,52 @@ pub fn rollout(
 ) -> Result<Rollout, Stopped> {
     let (n, samples, window) = (q.len(), time.len(), window.max(2));
     let step = (time[samples - 1] - time[0]) / (samples.max(2) - 1) as f64;
+    // Windows start from the measured state: each is integrated alone, in
+    // parallel, and the figures summed in window order, so the result is
+    // the same at any thread count. A window after one that failed is
+    // not started (the first failure is the answer).
+    let starts: Vec<usize> = (0..samples).step_by(window).collect();
+    let failed = AtomicUsize::new(usize::MAX);
+    let runs: Vec<Result<Option<Simulated>, Stopped>> = starts
+        .par_iter()
+        .enumerate()
+        .map_init(
+            || (dynamics.clone(), Rk4::new(n), [vec![0.0; n], vec![0.0; n], vec![0.0; n]]),
+            |(dynamics, rk4, t), (w, &start)| {
+                if failed.load(Ordering::Relaxed) < w {
+                    return Ok(None);
+                }
+                let ran = simulate_window(dynamics, (rk4, t), (time, (q, qd, tau)), (start, window, step));
+                if ran.is_err() {
+                    failed.fetch_min(w, Ordering::Relaxed);
+                }
+                ran.map(Some)
+            },
+        )
+        .collect();
     let mut sim = vec![vec![0.0; samples]; n];
-    let mut simd = vec![vec![0.0; samples]; n];
     let (mut sq, mut sqd) = (vec![0.0; n], vec![0.0; n]);
     let mut count = 0usize;
-    let mut windows: Vec<Window> = Vec::new();
-    let mut rk4 = Rk4::new(n);
-    let mut t = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-    for start in (0..samples).step_by(window) {
-        let end = (start + window).min(samples);
-        let x: Vec<f64> = (0..n).map(|j| q[j][start]).collect();
-        let rate = dynamics
-            .damping_rate(&x, &[])
-            .map_err(|joint| Stopped::NotPositiveDefinite { sample: start, joint })?;
-        // The damping's rate sets the steps; where the window still runs
-        // away (the velocity's own terms, the constraint on a coupled
-        // wrist), four times as many, up to 1000 per sample step: what
-        // then runs away is the model's, not the integrator's.
-        let mut substeps = damping_substeps(rate, step);
-        loop {
-            let ran = integrate_window(
-                dynamics,
-                (&mut rk4, &mut t),
-                (time, (q, qd, tau)),
-                (start..end, step, substeps),
-                (&mut sim, &mut simd),
-            );
-            match ran {
-                Ok(()) => break,
-                Err(stopped) if substeps >= 1000 => return Err(stopped),
-                Err(Stopped::NotPositiveDefinite { .. } | Stopped::Diverged { .. }) => {
-                    substeps = (4 * substeps).min(1000);
-                }
-            }
-        }
+    let mut windows: Vec<Window> = Vec::with_capacity(starts.len());
+    for (run, &start) in runs.into_iter().zip(&starts) {
+        let (x, v) = run?.expect("a window is skipped only after one that failed");
         let mut w = Window {
             start,
             q_rms: vec![0.0; n],
             qd_rms: vec![0.0; n],
         };
-        for s in start + 1..end {
+        for k in 1..x[0].len() {
             for j in 0..n {
-                let (eq, ev) = ((sim[j][s] - q[j][s]).powi(2), (simd[j][s] - qd[j][s]).powi(2));
+                let (eq, ev) = ((x[j][k] - q[j][start + k]).powi(2), (v[j][k] - qd[j][start + k]).powi(2));
                 sq[j] += eq;
                 sqd[j] += ev;
                 w.q_rms[j] += eq;
                 w.qd_rms[j] += ev;
             }
             count += 1;
+        }
+        for j in 0..n {
+            sim[j][start..start + x[j].len()].copy_from_slice(&x[j]);
         }
         windows.push(w);
     }
@@ -481,9 +500,51 @@ pub fn rollout(
     })
 }
 
+/// One window's simulated positions and velocities, `[joint][sample in
+/// the window]`.
+type Simulated = (Vec<Vec<f64>>, Vec<Vec<f64>>);
+
+/// The window of `window` samples from `start`, integrated from the
+/// measured state with the RK4 steps per sample step its damping needs;
+/// where it still runs away (the velocity's own terms, the constraint on
+/// a coupled wrist), four times as many, up to 1000 per sample step: what
+/// then runs away is the model's, not the integrator's.
+fn simulate_window(
+    dynamics: &mut BaseDynamics,
+    (rk4, t): (&mut Rk4, &mut [Vec<f64>; 3]),
+    (time, channels): (&[f64], Channels),
+    (start, window, step): (usize, usize, f64),
+) -> Result<Simulated, Stopped> {
+    let (q, n) = (channels.0, channels.0.len());
+    let end = (start + window).min(time.len());
+    let x: Vec<f64> = (0..n).map(|j| q[j][start]).collect();
+    let rate = dynamics
+        .damping_rate(&x, &[])
+        .map_err(|joint| Stopped::NotPositiveDefinite { sample: start, joint })?;
+    let mut substeps = damping_substeps(rate, step);
+    let mut sim = (vec![vec![0.0; end - start]; n], vec![vec![0.0; end - start]; n]);
+    loop {
+        let ran = integrate_window(
+            dynamics,
+            (rk4, t),
+            (time, channels),
+            (start..end, step, substeps),
+            (&mut sim.0, &mut sim.1),
+        );
+        match ran {
+            Ok(()) => return Ok(sim),
+            Err(stopped) if substeps >= 1000 => return Err(stopped),
+            Err(Stopped::NotPositiveDefinite { .. } | Stopped::Diverged { .. }) => {
+                substeps = (4 * substeps).min(1000);
+            }
+        }
+    }
+}
+
 /// Samples `range` of a record (`time`, and per joint `q`, `qd`, `tau`;
 /// its mean sample step `step`) integrated from the measured state at its
-/// first, `substeps` RK4 steps per sample step, into `sim` (positions) and `simd` (velocities); Err
+/// first, `substeps` RK4 steps per sample step, into `sim` (positions) and
+/// `simd` (velocities), indexed from the range's start; Err
 /// where M(q) is not positive definite on the way or the state runs away
 /// (not finite, or a velocity over 10⁴ rad/s: no arm's).
 fn integrate_window(
@@ -499,8 +560,8 @@ fn integrate_window(
     // stable (its damping −q̇/tc is stable up to h/tc = 2.78).
     dynamics.settle(0.5 * step / substeps as f64);
     for j in 0..n {
-        sim[j][range.start] = q[j][range.start];
-        simd[j][range.start] = qd[j][range.start];
+        sim[j][0] = q[j][range.start];
+        simd[j][0] = qd[j][range.start];
     }
     let mut x: Vec<f64> = (0..n).map(|j| q[j][range.start]).collect();
     let mut v: Vec<f64> = (0..n).map(|j| qd[j][range.start]).collect();
@@ -537,8 +598,8 @@ fn integrate_window(
         }
         dynamics.hold_mass(None);
         for j in 0..n {
-            sim[j][s] = x[j];
-            simd[j][s] = v[j];
+            sim[j][s - range.start] = x[j];
+            simd[j][s - range.start] = v[j];
         }
     }
     Ok(())

@@ -15,7 +15,7 @@
 
 use nalgebra::{DMatrix, Matrix3, SMatrix, Vector3};
 
-use super::rnea::forward_pass;
+use super::rnea::kinematics;
 use super::{Data, Model};
 
 /// Which joint terms the regressor carries besides the link inertials.
@@ -399,7 +399,7 @@ pub fn regressor(
         (n, terms.count(n)),
         "regressor: output matrix has the wrong shape"
     );
-    forward_pass(model, data, q, qd, qdd, true);
+    kinematics(model, data, q, qd, qdd, true);
     out.fill(0.0);
     for i in 0..n {
         let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
@@ -427,6 +427,18 @@ pub fn regressor(
             }
         }
     }
+    joint_columns(model, (q, qd, qdd), terms, out);
+}
+
+/// The columns of Φ(q, q̇, q̈) past the links' 10·n that each joint holds
+/// alone (rotor, friction, offset, spring), into `out`; the rest untouched.
+pub(crate) fn joint_columns(
+    model: &Model,
+    (q, qd, qdd): (&[f64], &[f64], &[f64]),
+    terms: RegressorTerms,
+    out: &mut DMatrix<f64>,
+) {
+    let n = model.dof();
     let per = terms.per_joint();
     for j in 0..n {
         let mut c = 10 * n + per * j;
