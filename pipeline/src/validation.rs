@@ -532,8 +532,8 @@ pub fn rolled_alike(
         .iter()
         .map(|r| {
             let (kin, tau) = kinematics_of(&within.join(&r.table), &model)?;
-            let mut dynamics = BaseDynamics::new(&base, &theta);
-            Ok(rollout(&mut dynamics, &kin.time, &kin.q, &kin.qd, &tau, r.window))
+            let dynamics = BaseDynamics::new(&base, &theta);
+            Ok(rollout(&dynamics, &kin.time, &kin.q, &kin.qd, &tau, r.window))
         })
         .collect()
 }
@@ -579,7 +579,7 @@ pub fn rollouts(
         });
         let run = |theta: &[f64]| {
             rollout(
-                &mut BaseDynamics::new(&base, theta),
+                &BaseDynamics::new(&base, theta),
                 &kin.time,
                 &kin.q,
                 &kin.qd,

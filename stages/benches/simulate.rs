@@ -87,7 +87,7 @@ fn bench_rollout(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(samples as u64));
     g.bench_function(BenchmarkId::new("ur5_130s_200Hz", samples), |b| {
-        b.iter(|| rollout(&mut BaseDynamics::new(&regressor, &theta), &time, &q, &qd, &tau, 100).unwrap())
+        b.iter(|| rollout(&BaseDynamics::new(&regressor, &theta), &time, &q, &qd, &tau, 100).unwrap())
     });
     g.finish();
 }

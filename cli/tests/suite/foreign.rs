@@ -381,7 +381,7 @@ fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>
     )
     .unwrap();
     let exact = rollout(
-        &mut BaseDynamics::new(&base, truth),
+        &BaseDynamics::new(&base, truth),
         &kin.time,
         &kin.q,
         &kin.qd,

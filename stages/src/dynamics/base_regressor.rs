@@ -726,13 +726,19 @@ mod tests {
             let mut ws = base.workspace();
             let (mut rows, mut got) = (vec![0.0; n * nb], vec![0.0; n]);
             for _ in 0..50 {
-                let state: Vec<Vec<f64>> = (0..3).map(|d| (0..n).map(|_| (1 + d) as f64 * draw()).collect()).collect();
+                let state: Vec<Vec<f64>> = (0..3)
+                    .map(|d| (0..n).map(|_| (1 + d) as f64 * draw()).collect())
+                    .collect();
                 let (q, qd, qdd) = (&state[0][..], &state[1][..], &state[2][..]);
                 base.rows(&mut ws, q, qd, qdd, &mut rows);
                 base.torque(&mut ws, (q, qd, qdd), &full, &mut got);
                 for j in 0..n {
                     let want: f64 = rows[j * nb..(j + 1) * nb].iter().zip(&theta).map(|(y, v)| y * v).sum();
-                    let scale: f64 = rows[j * nb..(j + 1) * nb].iter().zip(&theta).map(|(y, v)| (y * v).abs()).sum();
+                    let scale: f64 = rows[j * nb..(j + 1) * nb]
+                        .iter()
+                        .zip(&theta)
+                        .map(|(y, v)| (y * v).abs())
+                        .sum();
                     assert!(
                         (got[j] - want).abs() <= 1e-12 * scale.max(1.0),
                         "payload {} joint {j}: {} vs {want}",
@@ -750,5 +756,4 @@ mod tests {
         let base = BaseRegressor::new(&model, &decoupled).unwrap();
         assert!(base.full_values(&vec![0.0; base.parameters()]).is_none());
     }
-
 }

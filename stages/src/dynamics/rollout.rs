@@ -270,7 +270,8 @@ impl<'a> BaseDynamics<'a> {
     /// Y(q, q̇, q̈)·θ into `self.torque`.
     fn predict(&mut self, q: &[f64], qd: &[f64], qdd: &[f64]) {
         if let Some(full) = &self.full {
-            self.regressor.torque(&mut self.ws, (q, qd, qdd), full, &mut self.torque);
+            self.regressor
+                .torque(&mut self.ws, (q, qd, qdd), full, &mut self.torque);
             return;
         }
         self.regressor.rows(&mut self.ws, q, qd, qdd, &mut self.rows);
@@ -445,7 +446,13 @@ pub fn rollout(
         .par_iter()
         .enumerate()
         .map_init(
-            || (dynamics.clone(), Rk4::new(n), [vec![0.0; n], vec![0.0; n], vec![0.0; n]]),
+            || {
+                (
+                    dynamics.clone(),
+                    Rk4::new(n),
+                    [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+                )
+            },
             |(dynamics, rk4, t), (w, &start)| {
                 if failed.load(Ordering::Relaxed) < w {
                     return Ok(None);
@@ -471,7 +478,10 @@ pub fn rollout(
         };
         for k in 1..x[0].len() {
             for j in 0..n {
-                let (eq, ev) = ((x[j][k] - q[j][start + k]).powi(2), (v[j][k] - qd[j][start + k]).powi(2));
+                let (eq, ev) = (
+                    (x[j][k] - q[j][start + k]).powi(2),
+                    (v[j][k] - qd[j][start + k]).powi(2),
+                );
                 sq[j] += eq;
                 sqd[j] += ev;
                 w.q_rms[j] += eq;

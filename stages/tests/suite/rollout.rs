@@ -122,7 +122,7 @@ fn the_true_model_rolls_out_on_the_record_and_wrong_ones_do_not() {
     let (time, [q, qd, tau]) = record(&model, 4.0);
     let truth: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
     let window = 250; // 0.5 s
-    let run = |theta: &[f64]| rollout(&mut BaseDynamics::new(&regressor, theta), &time, &q, &qd, &tau, window);
+    let run = |theta: &[f64]| rollout(&BaseDynamics::new(&regressor, theta), &time, &q, &qd, &tau, window);
     let exact = run(&truth).unwrap();
     let worst = exact.q_rms.iter().fold(0.0f64, |m, e| m.max(*e));
     // The record's torque is continuous; the rollout takes it linear
@@ -209,7 +209,7 @@ fn the_noise_growth_is_an_exact_models_rollout_error() {
     let (q, qd, tau) = (noisy(&q, 2e-5), noisy(&qd, 2e-3), noisy(&tau, 0.5));
     let truth: Vec<f64> = regressor.base_values(&model).unwrap().iter().copied().collect();
     let window = 250;
-    let exact = rollout(&mut BaseDynamics::new(&regressor, &truth), &time, &q, &qd, &tau, window).unwrap();
+    let exact = rollout(&BaseDynamics::new(&regressor, &truth), &time, &q, &qd, &tau, window).unwrap();
     let growth = dynamics::noise_growth(
         &mut BaseDynamics::new(&regressor, &truth),
         &time,
@@ -277,7 +277,7 @@ fn a_stiff_light_wrist_rolls_out() {
         "{rate} against {power} by power iteration"
     );
     assert!(rate * 0.002 > 2.78, "stiff enough to need steps: {rate}/s");
-    let exact = rollout(&mut BaseDynamics::new(&regressor, &truth), &time, &q, &qd, &tau, 250).unwrap();
+    let exact = rollout(&BaseDynamics::new(&regressor, &truth), &time, &q, &qd, &tau, 250).unwrap();
     let worst = exact.q_rms.iter().fold(0.0f64, |m, e| m.max(*e));
     eprintln!("damping rate {rate:.0}/s; true model's rollout {:?} rad", exact.q_rms);
     assert!(worst < 1e-3, "{:?} rad", exact.q_rms);
