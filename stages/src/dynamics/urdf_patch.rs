@@ -85,7 +85,11 @@ impl<'a, 'i> Tree<'a, 'i> {
         // Each link's joints to its children that do not move (and whether
         // the joint is locked rather than fixed): what is lumped.
         let mut rigid: BTreeMap<&str, Vec<(&str, bool)>> = BTreeMap::new();
-        for (name, j) in &joints {
+        // In the file's order, not the map's: what is said and written
+        // names the lumped links alike on every run.
+        let mut in_order: Vec<(&&str, &roxmltree::Node)> = joints.iter().collect();
+        in_order.sort_by_key(|(_, j)| j.range().start);
+        for (name, j) in in_order {
             if let (false, Some(p), Some(c)) = (moving.contains(name), end(*j, "parent"), end(*j, "child")) {
                 rigid
                     .entry(p)
@@ -505,6 +509,30 @@ mod tests {
         assert!(said[1].carried.is_empty() && said[1].said.as_deref().unwrap().contains("is no body"));
         let back = parse_urdf_with(&patched, path, &locks).unwrap();
         assert!((back.links[1].mass - model.links[1].mass).abs() < 1e-12);
+    }
+
+    /// Two tools fixed side by side on the flange: they are named in the
+    /// file's order on every run (a map's order differed between runs of
+    /// the real Panda's identify, fingers swapped in the URDF comment).
+    #[test]
+    fn lumped_links_are_named_in_the_files_order() {
+        let tools = r#"  <joint name="zeta_mount" type="fixed">
+    <parent link="flange"/>
+    <child link="zeta"/>
+  </joint>
+  <link name="zeta"/>
+  <joint name="alpha_mount" type="fixed">
+    <parent link="flange"/>
+    <child link="alpha"/>
+  </joint>
+  <link name="alpha"/>
+"#;
+        let text = URDF.replace("  <transmission", &format!("{tools}  <transmission"));
+        let model = parse_urdf(&text, Path::new("arm.urdf")).unwrap();
+        for _ in 0..16 {
+            let (_, said) = patch_urdf(&text, Path::new("arm.urdf"), &model, "").unwrap();
+            assert_eq!(said[1].lumped, ["flange", "zeta", "alpha"]);
+        }
     }
 
     #[test]
