@@ -122,7 +122,7 @@ impl Meshes {
                     let _ = writeln!(
                         s,
                         "{pad}<!-- robotid: mesh {} not drawn (not found as an STL file, which MuJoCo reads) -->",
-                        name.replace("--", "- -")
+                        super::xml::comment(name)
                     );
                     continue;
                 }
@@ -141,7 +141,7 @@ fn xml_attr(text: &str) -> String {
 /// The MJCF text of `model`; `note` goes into a comment at the top.
 pub fn to_mjcf(model: &Model, note: &str) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "<!-- {} -->", note.replace("--", "- -"));
+    let _ = writeln!(s, "<!-- {} -->", super::xml::comment(note));
     let _ = writeln!(s, "<mujoco model=\"{}\">", model.name);
     let _ = writeln!(s, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
     let _ = writeln!(s, "  <option gravity=\"{}\"/>", v3(&model.gravity));

@@ -126,7 +126,7 @@ impl MjcfPatch {
             }
             let element = format!(
                 "<!-- robotid: {} -->\n{}{}",
-                xml_comment(&comment),
+                super::xml::comment(&comment),
                 body.indent,
                 inertial(&written)
             );
@@ -135,7 +135,7 @@ impl MjcfPatch {
                 let welded = &self.mjcf.bodies[l];
                 let element = format!(
                     "<!-- robotid: this body's mass is in the identified body of `{}` -->\n{}<inertial pos=\"0 0 0\" mass=\"0\" diaginertia=\"0 0 0\"/>",
-                    xml_comment(&body.name),
+                    super::xml::comment(&body.name),
                     welded.indent
                 );
                 edits.push(place_inertial(welded, element));
@@ -210,7 +210,7 @@ impl MjcfPatch {
         let pad = &parent.indent;
         let element = format!(
             "\n{pad}<!-- robotid: {} -->\n{pad}<body name=\"{name}\">\n{pad}  {}\n{pad}</body>",
-            xml_comment(note),
+            super::xml::comment(note),
             inertial(&p.link_in_body.inertial(carried))
         );
         Ok(super::urdf_patch::apply(
@@ -461,10 +461,6 @@ fn line_indent(text: &str, at: usize) -> String {
         true => lead.to_string(),
         false => String::new(),
     }
-}
-
-fn xml_comment(text: &str) -> String {
-    text.replace("--", "- -")
 }
 
 #[cfg(test)]

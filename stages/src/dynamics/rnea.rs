@@ -71,14 +71,18 @@ pub fn rnea_terms<'a>(
 /// then each link's own inertial wrench (stored in `force`/`moment`).
 fn forward_pass(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64], gravity: bool) {
     kinematics(model, data, q, qd, qdd, gravity);
-    for i in 0..model.dof() {
-        let link = &model.links[i];
-        let h = link.first_moment();
-        let io = link.inertia_origin();
-        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
-        data.force[i] = a * link.mass + dw.cross(&h) + w.cross(&w.cross(&h));
-        data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
+    for (i, link) in model.links.iter().enumerate().take(model.dof()) {
+        wrench(data, i, (link.mass, link.first_moment(), link.inertia_origin()));
     }
+}
+
+/// Link `i`'s own inertial wrench about its frame origin, of mass m,
+/// first moment h = m·c and inertia I_o, at its velocities and
+/// accelerations in `data`, into `force`/`moment`.
+fn wrench(data: &mut Data, i: usize, (m, h, io): (f64, Vector3<f64>, Matrix3<f64>)) {
+    let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
+    data.force[i] = a * m + dw.cross(&h) + w.cross(&w.cross(&h));
+    data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
 }
 
 /// Joint torques of rigid bodies with the standard parameters `params`
@@ -98,10 +102,7 @@ pub(crate) fn rigid_torque(
     kinematics(model, data, q, qd, qdd, true);
     for (i, p) in params.chunks_exact(10).take(n).enumerate() {
         let io = Matrix3::new(p[0], p[1], p[2], p[1], p[3], p[4], p[2], p[4], p[5]);
-        let h = Vector3::new(p[6], p[7], p[8]);
-        let (w, dw, a) = (data.omega[i], data.domega[i], data.acc[i]);
-        data.force[i] = a * p[9] + dw.cross(&h) + w.cross(&w.cross(&h));
-        data.moment[i] = io * dw + w.cross(&(io * w)) + h.cross(&a);
+        wrench(data, i, (p[9], Vector3::new(p[6], p[7], p[8]), io));
     }
     backward_pass(model, data);
     for (i, t) in out.iter_mut().enumerate().take(n) {

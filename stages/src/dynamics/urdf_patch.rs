@@ -217,7 +217,10 @@ fn body_edits(
     ));
     for l in &lumped {
         if let Some(own) = tree.inertial_of(l) {
-            let why = format!("<!-- robotid: this link's inertial is in the identified body of {link_name} -->");
+            let why = format!(
+                "<!-- robotid: this link's inertial is in the identified body of {} -->",
+                super::xml::comment(link_name)
+            );
             edits.push((own.range(), why));
         }
     }
