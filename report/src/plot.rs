@@ -33,6 +33,15 @@ pub struct Inputs<'a> {
 
 pub(crate) type Series<'a> = (Vec<(f64, f64)>, RGBColor, &'a str);
 
+/// Points drawn as dots of one colour, with their legend's label.
+#[derive(Clone, Copy)]
+pub(crate) struct Dots<'a> {
+    pub pts: &'a [(f64, f64)],
+    pub color: RGBColor,
+    pub size: u32,
+    pub label: &'a str,
+}
+
 pub(crate) const GREY: RGBColor = RGBColor(170, 170, 170);
 pub(crate) const BLUE_: RGBColor = RGBColor(31, 119, 180);
 pub(crate) const ORANGE: RGBColor = RGBColor(255, 127, 14);
@@ -105,11 +114,12 @@ pub(crate) fn chart(
     x_desc: &str,
     y_desc: &str,
     series: &[Series],
-    markers: &[(f64, f64)],
+    dots: Option<Dots>,
 ) -> Result<()> {
-    let (x0, x1, y0, y1) = range(series);
+    let dotted = dots.map(|d| (d.pts.to_vec(), d.color, d.label));
+    let (x0, x1, y0, y1) = range(&[series, dotted.as_slice()].concat());
     let e = |e: &dyn std::fmt::Display| picture(e);
-    let labelled = !markers.is_empty() || series.iter().any(|s| !s.2.is_empty());
+    let labelled = dots.is_some() || series.iter().any(|s| !s.2.is_empty());
     let mut c = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 16))
         .margin(8)
@@ -127,13 +137,18 @@ pub(crate) fn chart(
         .y_label_formatter(&fy)
         .draw()
         .map_err(|x| e(&x))?;
+    // Dots under the lines: a line drawn through a cloud is the model of it.
+    if let Some(d) = dots {
+        c.draw_series(
+            d.pts
+                .iter()
+                .map(|&(x, y)| Circle::new((x, y), d.size, d.color.filled())),
+        )
+        .map_err(|x| e(&x))?;
+    }
     for (pts, color, _) in series {
         let width = if *color == GREY { 3 } else { 1 };
         c.draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(width)))
-            .map_err(|x| e(&x))?;
-    }
-    if !markers.is_empty() {
-        c.draw_series(markers.iter().map(|&(x, y)| Circle::new((x, y), 3, RED.filled())))
             .map_err(|x| e(&x))?;
     }
     // The legend in the right margin, drawn on the whole area (plotters
@@ -150,10 +165,10 @@ pub(crate) fn chart(
                 .map_err(|x| e(&x))?;
             y += 18;
         }
-        if !markers.is_empty() {
-            area.draw(&Circle::new((x + 9, y), 3, RED.filled()))
+        if let Some(d) = dots {
+            area.draw(&Circle::new((x + 9, y), 3, d.color.filled()))
                 .map_err(|x| e(&x))?;
-            area.draw(&Text::new("excited harmonics", (x + 24, y - 6), ("sans-serif", 12)))
+            area.draw(&Text::new(d.label, (x + 24, y - 6), ("sans-serif", 12)))
                 .map_err(|x| e(&x))?;
         }
     }
@@ -217,7 +232,7 @@ fn noise_figure(path: &Path, noise: &NoiseTable, m: &PeriodMean) -> Result<()> {
                     "time in period [s]",
                     unit,
                     &[(pts, ORANGE, "")],
-                    &[],
+                    None,
                 )?;
             }
         }
@@ -259,7 +274,7 @@ fn signals_figure(path: &Path, p: &Periods, m: &PeriodMean) -> Result<()> {
                     "time in period [s]",
                     unit,
                     &series,
-                    &[],
+                    None,
                 )?;
             }
         }
@@ -307,7 +322,12 @@ pub fn plot_recording(dir: &Path, inp: &Inputs) -> Result<Vec<PathBuf>> {
                         "frequency [Hz]",
                         "log10 amplitude",
                         &[(pts, BLUE_, "")],
-                        &marks,
+                        Some(Dots {
+                            pts: &marks,
+                            color: RED,
+                            size: 3,
+                            label: "excited harmonics",
+                        }),
                     )?;
                 }
             }
@@ -353,7 +373,7 @@ fn kinematics_figure(path: &Path, kin: &Kinematics, positions: bool) -> Result<(
                     "time [s]",
                     unit,
                     &[(pts, BLUE_, "")],
-                    &[],
+                    None,
                 )?;
             }
         }
@@ -451,7 +471,7 @@ pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebr
                 "time, s",
                 "N·m",
                 &[(measured, GREY, "measured"), (pred, BLUE_, "predicted")],
-                &[],
+                None,
             )?;
             chart(
                 &areas[2 * j + 1],
@@ -459,11 +479,132 @@ pub fn torques_svg(sys: &robotid_stages::estimation::System, predicted: &nalgebr
                 "time, s",
                 "N·m",
                 &[(residue, ORANGE, "residue")],
-                &[],
+                None,
             )?;
         }
         Ok(())
     })
+}
+
+/// One joint's friction as the data show it and as the model has it.
+pub(crate) struct FrictionSeen {
+    pub joint: usize,
+    /// (q̇, the friction seen): at most 600 samples, evenly by velocity.
+    pub samples: Vec<(f64, f64)>,
+    /// Per sign of q̇: bins of equal count, each (mean q̇, the model's
+    /// mean friction, the mean friction seen).
+    pub sides: Vec<Vec<(f64, f64, f64)>>,
+}
+
+/// The friction the data show, per joint that has friction columns: the
+/// measured torque less every other column's share (the residue plus the
+/// model's friction) against the joint's velocity, with its means and
+/// the model's friction's over the same velocity bins (each sign on its
+/// own, so a Coulomb step is not smeared across zero). Means, not the law
+/// drawn: the columns may be filtered as the torque is, so the model's
+/// friction is not a function of the velocity sample by sample. A joint
+/// without a viscous column to read its velocity from (`Fv` holds q̇,
+/// `Fv±` its two signs) is left out, and every joint where the rows are
+/// projected equations rather than samples.
+pub(crate) fn friction_seen(
+    sys: &robotid_stages::estimation::System,
+    theta: &nalgebra::DVector<f64>,
+) -> Vec<FrictionSeen> {
+    if sys.equations.is_some() {
+        return Vec::new();
+    }
+    let columns = |joint: &str, kinds: &[&str]| -> Vec<usize> {
+        kinds
+            .iter()
+            .filter_map(|k| sys.names.iter().position(|n| *n == format!("{k}_{joint}")))
+            .collect()
+    };
+    let predicted = &sys.a * theta;
+    let mut out = Vec::new();
+    for (j, joint) in sys.joints.iter().enumerate() {
+        let velocity = columns(joint, &["Fv", "Fv+", "Fv-"]);
+        if velocity.is_empty() {
+            continue;
+        }
+        let friction = columns(joint, &["Fv", "Fv+", "Fv-", "Fc", "Fc+", "Fc-", "Fs", "Fs+", "Fs-"]);
+        // (q̇, the model's friction, the friction seen), by velocity.
+        let mut rows: Vec<(f64, f64, f64)> = (0..sys.rows())
+            .filter(|&i| sys.joint[i] == j)
+            .map(|i| {
+                let qd: f64 = velocity.iter().map(|&c| sys.a[(i, c)]).sum();
+                let model: f64 = friction.iter().map(|&c| sys.a[(i, c)] * theta[c]).sum();
+                (qd, model, sys.b[i] - predicted[i] + model)
+            })
+            .filter(|r| r.0.is_finite() && r.2.is_finite())
+            .collect();
+        rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let every = rows.len().div_ceil(600).max(1);
+        let samples = rows.iter().step_by(every).map(|r| (r.0, r.2)).collect();
+        let zero = rows.partition_point(|r| r.0 < 0.0);
+        let sides = [&rows[..zero], &rows[zero..]]
+            .into_iter()
+            .filter(|side| !side.is_empty())
+            .map(|side| {
+                // 25 bins a side, as many samples in each.
+                let bin = side.len().div_ceil(25).max(5);
+                side.chunks(bin)
+                    .filter(|c| c.len() >= 5)
+                    .map(|c| {
+                        let n = c.len() as f64;
+                        let sum = c.iter().fold((0.0, 0.0, 0.0), |s, r| (s.0 + r.0, s.1 + r.1, s.2 + r.2));
+                        (sum.0 / n, sum.1 / n, sum.2 / n)
+                    })
+                    .collect()
+            })
+            .collect();
+        out.push(FrictionSeen {
+            joint: j,
+            samples,
+            sides,
+        });
+    }
+    out
+}
+
+/// [`friction_seen`] drawn, one chart per joint; None where no joint has
+/// it.
+pub fn friction_svg(
+    sys: &robotid_stages::estimation::System,
+    theta: &nalgebra::DVector<f64>,
+) -> Result<Option<String>> {
+    let seen = friction_seen(sys, theta);
+    if seen.is_empty() {
+        return Ok(None);
+    }
+    let svg = figure_svg(seen.len(), 1, |areas| {
+        for (area, f) in areas.iter().zip(&seen) {
+            let mut series: Vec<Series> = Vec::new();
+            for (k, side) in f.sides.iter().enumerate() {
+                let (seen, model) = if k == 0 {
+                    ("seen, bin means", "the model's, bin means")
+                } else {
+                    ("", "")
+                };
+                series.push((side.iter().map(|m| (m.0, m.2)).collect(), ORANGE, seen));
+                series.push((side.iter().map(|m| (m.0, m.1)).collect(), BLUE_, model));
+            }
+            chart(
+                area,
+                &format!("{}: friction, measured − the rest of the model", sys.joints[f.joint]),
+                "joint velocity [rad/s]",
+                "N·m",
+                &series,
+                Some(Dots {
+                    pts: &f.samples,
+                    color: GREY,
+                    size: 1,
+                    label: "seen, samples",
+                }),
+            )?;
+        }
+        Ok(())
+    })?;
+    Ok(Some(svg))
 }
 
 /// Density of `values` per joint (a 40-bin histogram over ±4 std) against
@@ -507,7 +648,7 @@ pub fn density_svg(joints: &[String], values: &[Vec<f64>], what: &str) -> Result
                 &format!("{what} [N·m]"),
                 "1/(N·m)",
                 &[(hist, BLUE_, what), (gauss, ORANGE, "Gaussian, same mean and std")],
-                &[],
+                None,
             )?;
         }
         Ok(())
@@ -618,7 +759,7 @@ pub fn closed_loop_svg(r: &robotid::validation::ClosedLoopRun) -> Result<String>
                 "time, s",
                 "mrad",
                 &lines,
-                &[],
+                None,
             )?;
         }
         Ok(())
@@ -659,7 +800,7 @@ fn angles_svg(
                 "time, s",
                 "rad",
                 &lines,
-                &[],
+                None,
             )?;
         }
         Ok(())
@@ -682,7 +823,7 @@ pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64
             "x [m]",
             "y [m]",
             &[(top, BLUE_, "")],
-            &[],
+            None,
         )?;
         chart(
             &areas[1],
@@ -690,7 +831,7 @@ pub fn plot_excitation(dir: &Path, kin: &Kinematics, ee: &[nalgebra::Vector3<f64
             "r [m]",
             "z [m]",
             &[(side, ORANGE, "")],
-            &[],
+            None,
         )?;
         Ok(())
     })?;
@@ -702,5 +843,97 @@ fn picture(e: &dyn std::fmt::Display) -> Error {
     Error::Output {
         what: "picture".into(),
         msg: e.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+    use robotid_stages::estimation::System;
+
+    /// One joint at q̈ = −q̇·ω (a sine's velocity and acceleration), its
+    /// torque 0.5·q̈ + 0.1·q̇ + 0.3·sign(q̇) plus `excess`·sign(q̇)·
+    /// exp(−(q̇/0.05)²), a Stribeck excess; columns ZZ, Fv, Fc only.
+    fn one_joint(excess: f64) -> System {
+        let n = 5000;
+        let (mut a, mut b) = (DMatrix::zeros(n, 3), DVector::zeros(n));
+        for i in 0..n {
+            // Half a step off: no sample at rest.
+            let phase = std::f64::consts::TAU * (i as f64 + 0.5) / n as f64;
+            let (qd, qdd) = (0.5 * phase.sin(), -0.5 * phase.cos());
+            let sign = qd.signum() * (qd != 0.0) as u8 as f64;
+            a.row_mut(i).copy_from_slice(&[qdd, qd, sign]);
+            b[i] = 0.5 * qdd + 0.1 * qd + 0.3 * sign + excess * sign * (-(qd / 0.05).powi(2)).exp();
+        }
+        System {
+            names: ["ZZ_j", "Fv_j", "Fc_j"].map(String::from).to_vec(),
+            units: ["kg*m^2", "N*m*s/rad", "N*m"].map(String::from).to_vec(),
+            expressions: ["ZZ_j", "Fv_j", "Fc_j"].map(String::from).to_vec(),
+            a,
+            b,
+            var: DVector::from_element(n, f64::NAN),
+            recording: vec![0; n],
+            sample: (0..n as i64).collect(),
+            joint: vec![0; n],
+            time: (0..n).map(|i| i as f64 * 1e-3).collect(),
+            recordings: vec!["r".into()],
+            joints: vec!["j".into()],
+            offsets: vec![0],
+            periods: vec![None],
+            known: None,
+            equations: None,
+            metadata: Default::default(),
+        }
+    }
+
+    #[test]
+    fn friction_seen_is_the_models_where_the_model_holds() {
+        let theta = DVector::from_vec(vec![0.5, 0.1, 0.3]);
+        let seen = friction_seen(&one_joint(0.0), &theta);
+        assert_eq!(seen.len(), 1);
+        let f = &seen[0];
+        assert_eq!(f.sides.len(), 2);
+        assert!(f.samples.len() <= 600 && f.samples.len() >= 500, "{}", f.samples.len());
+        for side in &f.sides {
+            assert!(side.len() >= 20, "{}", side.len());
+            for &(qd, model, seen) in side {
+                // Exact: the model is the data's law.
+                assert!((seen - model).abs() < 1e-12, "{qd}: {seen} {model}");
+                // The Coulomb step is not smeared: each bin on one side.
+                assert!((model - (0.1 * qd + 0.3 * qd.signum())).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn friction_seen_shows_a_stribeck_excess_the_model_lacks() {
+        // Fitted without the excess: the slowest bins part from the model's
+        // by the excess there (0.2·exp(−(q̇/0.05)²) ≥ 0.135 below
+        // |q̇| = 0.031 rad/s, where the slowest bin of a 0.5 rad/s sine's
+        // 2500 samples a side ends), the fast ones not at all.
+        let theta = DVector::from_vec(vec![0.5, 0.1, 0.3]);
+        let f = &friction_seen(&one_joint(0.2), &theta)[0];
+        let (neg, pos) = (&f.sides[0], &f.sides[1]);
+        let slow = [neg.last().unwrap(), pos.first().unwrap()];
+        for &&(qd, model, seen) in &slow {
+            assert!(qd.abs() < 0.031, "{qd}");
+            let gap = (seen - model) * qd.signum();
+            assert!(gap > 0.135 && gap < 0.2, "{qd}: {gap}");
+        }
+        for &(qd, model, seen) in neg.iter().chain(pos).filter(|b| b.0.abs() > 0.3) {
+            assert!((seen - model).abs() < 1e-12, "{qd}: {seen} {model}");
+        }
+        // Without a velocity column, or on projected equations: nothing.
+        let mut no_velocity = one_joint(0.2);
+        no_velocity.names[1] = "Fq_j".into();
+        assert!(friction_seen(&no_velocity, &theta).is_empty());
+        let mut projected = one_joint(0.2);
+        projected.equations = Some(100);
+        assert!(friction_seen(&projected, &theta).is_empty());
+        assert!(friction_svg(&one_joint(0.2), &theta)
+            .unwrap()
+            .unwrap()
+            .contains("friction, measured"));
     }
 }

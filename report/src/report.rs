@@ -9,7 +9,7 @@ use robotid::{Error, Result};
 use robotid_schemas::metadata;
 use robotid_stages::estimation::{Parameters, System};
 
-use crate::plot::{density_svg, residues_by_joint, torques_svg};
+use crate::plot::{density_svg, friction_svg, residues_by_joint, torques_svg};
 use crate::validation::{per_recording, table};
 use robotid::validation::{borrow_floor, residues, JointResidue};
 
@@ -448,6 +448,10 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
             &residues_by_joint(sys, predicted),
             "residue",
         )?);
+        if let Some(svg) = friction_svg(sys, &params.values)? {
+            h.push_str("\n<h3>Friction against velocity</h3>\n<p class=\"note\">The torque the rest of the model leaves (measured − predicted + the model's friction) against the joint's velocity: its samples, and its means and the model's friction's over the same bins of velocity (equal counts on each side of zero). Where the two means part, the data hold friction the model lacks (a static friction fading with speed bends the seen means toward zero velocity).</p>\n");
+            h.push_str(&svg);
+        }
         if let Some(noise) = noise_by_joint(sys) {
             h.push_str("\n<h3>Measurement noise density (periods minus their mean)</h3>\n");
             h.push_str(&density_svg(&sys.joints, &noise, "noise")?);

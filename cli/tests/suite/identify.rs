@@ -373,6 +373,9 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
         "{text}"
     );
     assert!(html.contains("The estimate: not simulated: the mass matrix is not positive definite"));
+    // Friction against velocity on every data set shown.
+    let sets = html.matches("<h3>Measured and predicted torque</h3>").count();
+    assert!(sets >= 2 && html.matches("<h3>Friction against velocity</h3>").count() == sets);
     let physical = id.physical_rollouts.as_ref().expect("rolled out");
     assert_eq!(physical.len(), 2);
     for p in physical {
