@@ -96,6 +96,20 @@ CASES = {
     ),
     # Exactly one period between ramps.
     "one_period": dict(filter=("butter", 4, 30.0, None), friction="sign", periods=1.0, ramp_in=1.0, ramp_out=1.0),
+    # The 5 s record's motion at a fiftieth of its size: the joints turn
+    # by a few hundredths of a radian, so few poses are seen and the
+    # regressor's columns nearly repeat one another (its column-normalised
+    # condition over 1e5, Kinova Gen3's real 5 s record's 1.3e6); the
+    # Coulomb steps come at speeds the encoder barely resolves.
+    "illcond_5s": dict(
+        filter=("butter", 4, 30.0, None),
+        friction="sign",
+        periods=0.5,
+        ramp_in=0.5,
+        ramp_out=0.5,
+        nonperiodic=True,
+        scale=0.02,
+    ),
 }
 
 # The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its
@@ -176,11 +190,12 @@ def main(urdf, out, case):
     names = [model.names[i] for i in range(1, model.njoints)]
     # Seeded by the case's place: new cases go last, so the others keep theirs.
     rng = np.random.default_rng(list(CASES).index(spec.get("seed_case", case)) + 1)
-    f0, harmonics = 0.1, 5
+    f0, harmonics = spec.get("f0", 0.1), 5
     lines = np.sqrt([1.0, 2.0, 5.0, 10.0, 17.0]) if spec.get("nonperiodic") else np.arange(1, harmonics + 1)
     w = 2 * np.pi * f0 * lines
     a = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
     b = rng.uniform(-0.5, 0.5, (nq, harmonics)) / np.arange(1, harmonics + 1)
+    a, b = a * spec.get("scale", 1.0), b * spec.get("scale", 1.0)
 
     def excitation(t):
         s, c = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))
