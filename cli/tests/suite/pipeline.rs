@@ -64,7 +64,7 @@ fn rendered_in_a_browser(html: &Path) {
     // floor, not left "noise floor unknown".
     assert!(!dom.contains("noise floor unknown"), "a verdict missing");
     assert!(dom.contains("Bodies for simulators"), "the bodies not rendered");
-    assert_eq!(dom.matches("<svg").count(), 5, "figures in the rendered page");
+    assert_eq!(dom.matches("<svg").count(), 7, "figures in the rendered page");
     browser(&[&format!("--screenshot={}", png.display())]);
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
@@ -643,8 +643,9 @@ fn kuka_axis3_estimate_matches_the_truth_and_validates_at_the_noise_floor() {
     for name in &params.names {
         assert!(page.contains(name.as_str()), "{name} missing from the report");
     }
-    // Excitation: torques, residues, noise; validation: torques, residues.
-    assert_eq!(page.matches("<svg").count(), 5);
+    // Excitation: torques, residues, friction, noise; validation: torques,
+    // residues, friction.
+    assert_eq!(page.matches("<svg").count(), 7);
     assert!(page.contains("95.0 % interval") && page.contains("ZZ_a3 + Ia_a3"));
     // The verdicts lead, and no raw JSON is shown.
     assert!(page.find("Verdicts").unwrap() < page.find("Parameters").unwrap());
