@@ -125,7 +125,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         .filter(|r| r.role == Role::Validation)
         .map(|r| recording_table(r, TableKind::RawSamples))
         .collect();
-    let simulated = robotid_report::report::write(&robotid_report::report::Page {
+    let page = robotid_report::report::Page {
         parameters: "parameters.parquet".into(),
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
@@ -141,7 +141,11 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
             .map(|python| ("identified.xml".into(), python)),
         out: "report.html".into(),
         within: staged.to_path_buf(),
-    })?;
+    };
+    // Every simulation is run here, held on the identification; the page
+    // only draws them.
+    let simulated = robotid_report::report::simulate(&page);
+    robotid_report::report::render(&page, &simulated)?;
     // Each run named where its table will be, not where it was read.
     let closed_loop = simulated.closed_loop.map(|runs| {
         runs.map(|mut runs| {

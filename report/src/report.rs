@@ -795,8 +795,81 @@ pub struct Simulated {
 /// rolled out; Err: why not).
 pub type PhysicalRolled = Option<Vec<std::result::Result<Rollout, String>>>;
 
-/// The report of `page`, written to `page.out`; what it simulated returned.
+/// The report of `page`, written to `page.out`; what it simulated
+/// returned: [`simulate`], then [`render`] (`robotid report`).
 pub fn write(page: &Page) -> Result<Simulated> {
+    let simulated = simulate(page);
+    render(page, &simulated)?;
+    Ok(simulated)
+}
+
+/// What `page` asks to be simulated, computed and drawn nowhere: the
+/// estimate's and the robot file's rollouts, the physically consistent
+/// estimate's in the same windows, the export's in MuJoCo and the closed
+/// loop. What cannot be simulated is said in its place (an Err the page
+/// shows), not fatal to the rest.
+pub fn simulate(page: &Page) -> Simulated {
+    let within = |p: &std::path::Path| page.within.join(p);
+    let rolled = match (&page.robot, page.rollout) {
+        (Some(robot), true) => {
+            let tables = if page.validation.is_empty() {
+                &page.excitation
+            } else {
+                &page.validation
+            };
+            Some(
+                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, None)
+                    .map_err(|e| e.to_string()),
+            )
+        }
+        _ => None,
+    };
+    let mujoco: InMujoco = match (&rolled, &page.mujoco) {
+        (Some(Ok(rolled)), Some((mjcf, python))) => Some(
+            rolled
+                .iter()
+                .map(|r| crate::mujoco::rollout(python, &within(mjcf), &within(&r.table), r.window_s))
+                .collect(),
+        ),
+        _ => None,
+    };
+    // The physical estimate rolled out in the estimate's windows.
+    let physical: PhysicalRolled = match (&rolled, &page.physical, &page.robot) {
+        (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
+            match robotid::validation::rolled_alike(&page.within, physical, robot, rolled) {
+                Ok(runs) => runs.into_iter().map(Ok).collect(),
+                Err(e) => vec![Err(e.to_string()); rolled.len()],
+            },
+        ),
+        _ => None,
+    };
+    let closed_loop = match (&page.robot, &page.closed_loop) {
+        (Some(robot), Some((controller, tables))) => {
+            let tables: Vec<std::path::PathBuf> = tables.iter().map(|t| within(t)).collect();
+            Some(
+                robotid::validation::closed_loop_rollouts(
+                    &within(&page.parameters),
+                    robot,
+                    &tables,
+                    &within(controller),
+                )
+                .map_err(|e| e.to_string()),
+            )
+        }
+        _ => None,
+    };
+    Simulated {
+        rolled,
+        closed_loop,
+        mujoco,
+        physical,
+    }
+}
+
+/// The page of `page`, written to `page.out`: its tables drawn, and what
+/// `simulated` holds ([`simulate`]'s for the same page) shown; nothing
+/// simulated here.
+pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
     let within = |p: &std::path::Path| page.within.join(p);
     let params = robotid::tables::read_parameters(&within(&page.parameters))?;
     let load = |tables: &[std::path::PathBuf]| {
@@ -833,21 +906,6 @@ pub fn write(page: &Page) -> Result<Simulated> {
         }),
         _ => None,
     };
-    let rolled = match (&page.robot, page.rollout) {
-        (Some(robot), true) => {
-            let tables = if page.validation.is_empty() {
-                &page.excitation
-            } else {
-                &page.validation
-            };
-            // What cannot be rolled out is said on the page, not fatal to it.
-            Some(
-                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, None)
-                    .map_err(|e| e.to_string()),
-            )
-        }
-        _ => None,
-    };
     let mut text = html(
         &params,
         &page.parameters.display().to_string(),
@@ -861,73 +919,35 @@ pub fn write(page: &Page) -> Result<Simulated> {
             p,
         )?);
     }
-    let mujoco: InMujoco = match (&rolled, &page.mujoco) {
-        (Some(Ok(rolled)), Some((mjcf, python))) => Some(
-            rolled
-                .iter()
-                .map(|r| crate::mujoco::rollout(python, &within(mjcf), &within(&r.table), r.window_s))
-                .collect(),
-        ),
-        _ => None,
-    };
-    // The physical estimate rolled out in the estimate's windows.
-    let physical_rolled: PhysicalRolled = match (&rolled, &page.physical, &page.robot) {
-        (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
-            match robotid::validation::rolled_alike(&page.within, physical, robot, rolled) {
-                Ok(runs) => runs.into_iter().map(Ok).collect(),
-                Err(e) => vec![Err(e.to_string()); rolled.len()],
-            },
-        ),
-        _ => None,
-    };
-    if let Some(rolled) = &rolled {
+    if let Some(rolled) = &simulated.rolled {
         let beside = Beside {
-            physical: physical_rolled.as_deref(),
+            physical: simulated.physical.as_deref(),
             mujoco: page
                 .mujoco
                 .as_ref()
                 .map(|(mjcf, _)| mjcf.as_path())
-                .zip(mujoco.as_deref()),
+                .zip(simulated.mujoco.as_deref()),
         };
-        let section = match rolled {
+        sections.push_str(&match rolled {
             Ok(rolled) => rollouts_html(rolled, beside)?,
             Err(e) => format!(
                 "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
                 esc(e)
             ),
-        };
-        sections.push_str(&section);
+        });
     }
-    let closed_loop = match (&page.robot, &page.closed_loop) {
-        (Some(robot), Some((controller, tables))) => {
-            let tables: Vec<std::path::PathBuf> = tables.iter().map(|t| within(t)).collect();
-            let runs = robotid::validation::closed_loop_rollouts(
-                &within(&page.parameters),
-                robot,
-                &tables,
-                &within(controller),
-            )
-            .map_err(|e| e.to_string());
-            sections.push_str(&match &runs {
-                Ok(runs) => closed_loop_html(runs, page)?,
-                Err(e) => format!(
-                    "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"warn\">Not run: {}</p>\n",
-                    esc(e)
-                ),
-            });
-            Some(runs)
-        }
-        _ => None,
-    };
+    if let Some(runs) = &simulated.closed_loop {
+        sections.push_str(&match runs {
+            Ok(runs) => closed_loop_html(runs, page)?,
+            Err(e) => format!(
+                "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"warn\">Not run: {}</p>\n",
+                esc(e)
+            ),
+        });
+    }
     let end = text.rfind("<p class=\"note\">MSR:").unwrap_or(text.len());
     text.insert_str(end, &sections);
-    crate::plot::write_text(&within(&page.out), &text)?;
-    Ok(Simulated {
-        rolled,
-        closed_loop,
-        mujoco,
-        physical: physical_rolled,
-    })
+    crate::plot::write_text(&within(&page.out), &text)
 }
 
 /// The closed-loop section: per recording, a table per joint (the

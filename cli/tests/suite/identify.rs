@@ -1219,3 +1219,53 @@ fn identify_sh_replays_what_identify_wrote() {
         }
     }
 }
+
+/// identify runs every simulation itself and the page only draws them
+/// (issue 62): its report has the rollouts identify holds; the same page
+/// rendered from the same tables with nothing simulated is the same page
+/// up to where the rollouts begin, and has none.
+#[test]
+fn the_report_draws_what_identify_simulated() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = simulate_arm3(dir.path(), 9, 10.0, &[vec![1, 2, 3], vec![1, 2, 4], vec![2, 3, 5]]);
+    let robot = fixture("robots/arm3.toml").canonicalize().unwrap();
+    let out = dir.path().join("out");
+    let id = identified(vec![csv], &robot, &out, |_| {});
+    let rolled = match &id.rollouts {
+        Some(Ok(r)) => r,
+        other => panic!("not rolled out: {:?}", other.as_ref().map(|r| r.as_ref().err())),
+    };
+    assert!(!rolled.is_empty());
+    // Each record's regressor table, beside the kinematics it rolled out on.
+    let tables: Vec<PathBuf> = rolled
+        .iter()
+        .map(|r| r.table.with_file_name("regressor.parquet"))
+        .collect();
+    let page = robotid_report::report::Page {
+        parameters: "parameters.parquet".into(),
+        excitation: tables,
+        validation: Vec::new(),
+        physical: None,
+        robot: Some(robot.clone()),
+        rollout: true,
+        closed_loop: None,
+        payload: None,
+        mujoco: None,
+        out: "drawn.html".into(),
+        within: out.clone(),
+    };
+    let nothing = robotid_report::report::Simulated {
+        rolled: None,
+        closed_loop: None,
+        mujoco: None,
+        physical: None,
+    };
+    robotid_report::report::render(&page, &nothing).unwrap();
+    let ours = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let drawn = std::fs::read_to_string(out.join("drawn.html")).unwrap();
+    let at = ours
+        .find("<h2 id=\"rollouts\">")
+        .expect("identify's page shows its rollouts");
+    assert!(!drawn.contains("id=\"rollouts\""), "the page simulated");
+    assert!(drawn.len() > at / 2 && ours[..at].contains(&drawn[..drawn.find("<h2").unwrap()]));
+}
