@@ -10,6 +10,7 @@ use serde::Deserialize;
 
 use crate::error::{io, Error, Result};
 use crate::runs::parquet_files;
+use robotid_schemas::metadata;
 
 /// Tolerances: defaults, then the first matching per-column rule, and which
 /// columns to compare.
@@ -258,7 +259,7 @@ fn read(path: &Path) -> Result<(DataFrame, Option<String>)> {
         })?
         .key_value_metadata()
         .as_ref()
-        .and_then(|kv| kv.iter().find(|k| k.key == "robotid.table"))
+        .and_then(|kv| kv.iter().find(|k| k.key == metadata::TABLE))
         .and_then(|k| k.value.clone());
     let df = reader.finish().map_err(|source| Error::Read {
         path: path.to_path_buf(),

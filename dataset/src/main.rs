@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use robotid_dataset::{compare, summary, Tolerances};
+use robotid_schemas::metadata;
 
 #[derive(Parser)]
 #[command(
@@ -114,10 +115,10 @@ fn main() -> ExitCode {
 fn provenance(kind: &str, roots: &[PathBuf]) -> BTreeMap<String, String> {
     let roots: Vec<String> = roots.iter().map(|r| r.display().to_string()).collect();
     BTreeMap::from([
-        ("robotid.table".to_string(), kind.to_string()),
-        ("robotid.version".to_string(), "1".to_string()),
-        ("robotid.generator".to_string(), robotid_schemas::metadata::generator()),
-        ("robotid.dataset.roots".to_string(), roots.join(",")),
+        (metadata::TABLE.to_string(), kind.to_string()),
+        (metadata::VERSION.to_string(), "1".to_string()),
+        (metadata::GENERATOR.to_string(), metadata::generator()),
+        (metadata::DATASET_ROOTS.to_string(), roots.join(",")),
     ])
 }
 

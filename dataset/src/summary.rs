@@ -14,6 +14,7 @@ use polars::prelude::*;
 use serde::Deserialize;
 
 use crate::runs::{RecordingEntry, Run};
+use robotid_schemas::metadata;
 
 /// The two tables of a summary.
 pub struct Summary {
@@ -216,10 +217,10 @@ fn adequacy_of(run: &Run) -> Result<Vec<Adequacy>> {
         Some(p) => file_keys(&run.dir.join(p))?,
         None => BTreeMap::new(),
     };
-    Ok(match param_keys.get("robotid.estimate.adequacy") {
+    Ok(match param_keys.get(metadata::ADEQUACY) {
         Some(text) => serde_json::from_str(text).map_err(|source| Error::Json {
             path: run.dir.clone(),
-            what: "robotid.estimate.adequacy",
+            what: metadata::ADEQUACY,
             source,
         })?,
         None => Vec::new(),
@@ -239,10 +240,10 @@ struct Recorded<'a> {
 /// adequacy and the joint's parameters (their units into `units`).
 fn recording_rows(rows: &mut Columns, units: &mut BTreeMap<String, String>, at: &Recorded, hive_keys: &[String]) {
     let number = |k: &str| at.keys.get(k).and_then(|v| v.parse::<f64>().ok());
-    let time = number("robotid.time_origin_s");
+    let time = number(metadata::TIME_ORIGIN_S);
     let mut joints: Vec<String> = at
         .keys
-        .get("robotid.joints")
+        .get(metadata::JOINTS)
         .map(|j| j.split(',').map(str::to_string).collect())
         .unwrap_or_default();
     if joints.is_empty() {
@@ -261,11 +262,14 @@ fn recording_rows(rows: &mut Columns, units: &mut BTreeMap<String, String>, at: 
         rows.text("source_sha256", Some(at.rec.source_sha256.clone()));
         rows.float("time_origin_s", time);
         rows.int("samples", Some(at.rec.samples as i64));
-        rows.int("periods", number("robotid.periods").map(|p| p as i64));
-        rows.float("noise_var_q", number(&format!("robotid.noise.{joint}.q.var_time")));
+        rows.int("periods", number(metadata::PERIODS).map(|p| p as i64));
+        rows.float(
+            "noise_var_q",
+            number(&format!("{}.{joint}.q.var_time", metadata::NOISE_PREFIX)),
+        );
         rows.float(
             "noise_var_torque",
-            number(&format!("robotid.noise.{joint}.torque.var_time")),
+            number(&format!("{}.{joint}.torque.var_time", metadata::NOISE_PREFIX)),
         );
         let a = at.adequacy.iter().find(|a| &a.joint == joint);
         rows.float("residual_variance", a.map(|a| a.msr));
@@ -332,7 +336,7 @@ pub fn summarize(runs: &[Run]) -> Result<Summary> {
                 keys.extend(file_keys(&run.dir.join(path))?);
             }
             let number = |k: &str| keys.get(k).and_then(|v| v.parse::<f64>().ok());
-            let time = number("robotid.time_origin_s");
+            let time = number(metadata::TIME_ORIGIN_S);
             run_time = match (run_time, time) {
                 (Some(a), Some(b)) => Some(a.min(b)),
                 (a, b) => a.or(b),

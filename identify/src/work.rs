@@ -218,7 +218,7 @@ fn write_payload(
     if let Some(v) = validation {
         let mut md = table.schema().metadata().clone();
         md.insert(
-            "robotid.payload.validation".to_string(),
+            robotid_schemas::metadata::PAYLOAD_VALIDATION.to_string(),
             format!("on the held-out loaded records: {}", v.said()),
         );
         let schema = std::sync::Arc::new(table.schema().as_ref().clone().with_metadata(md));

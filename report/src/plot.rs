@@ -866,25 +866,9 @@ mod tests {
             a.row_mut(i).copy_from_slice(&[qdd, qd, sign]);
             b[i] = 0.5 * qdd + 0.1 * qd + 0.3 * sign + excess * sign * (-(qd / 0.05).powi(2)).exp();
         }
-        System {
-            names: ["ZZ_j", "Fv_j", "Fc_j"].map(String::from).to_vec(),
-            units: ["kg*m^2", "N*m*s/rad", "N*m"].map(String::from).to_vec(),
-            expressions: ["ZZ_j", "Fv_j", "Fc_j"].map(String::from).to_vec(),
-            a,
-            b,
-            var: DVector::from_element(n, f64::NAN),
-            recording: vec![0; n],
-            sample: (0..n as i64).collect(),
-            joint: vec![0; n],
-            time: (0..n).map(|i| i as f64 * 1e-3).collect(),
-            recordings: vec!["r".into()],
-            joints: vec!["j".into()],
-            offsets: vec![0],
-            periods: vec![None],
-            known: None,
-            equations: None,
-            metadata: Default::default(),
-        }
+        let mut sys = System::one_joint(["ZZ_j", "Fv_j", "Fc_j"].map(String::from).to_vec(), a, b, 1e-3);
+        sys.units = ["kg*m^2", "N*m*s/rad", "N*m"].map(String::from).to_vec();
+        sys
     }
 
     #[test]

@@ -611,23 +611,23 @@ fn payload_html(table: &arrow::array::RecordBatch, path: &std::path::Path) -> Re
     let mut h = format!(
         "<h2 id=\"payload\">Payload</h2>\n<p class=\"note\">{} (covariance: {}): identified on <code>{}</code>; {}. {} % Student-t intervals, {} degrees of freedom.{}</p>\n",
         esc(&path.display().to_string()),
-        esc(get("robotid.estimate.covariance")),
-        esc(get("robotid.payload.link")),
-        esc(get("robotid.payload.frame")),
-        get("robotid.estimate.confidence").parse::<f64>().map_or("-".into(), |c| format!("{}", c * 100.0)),
-        esc(get("robotid.estimate.dof")),
+        esc(get(metadata::ESTIMATE_COVARIANCE)),
+        esc(get(metadata::PAYLOAD_LINK)),
+        esc(get(metadata::PAYLOAD_FRAME)),
+        get(metadata::ESTIMATE_CONFIDENCE).parse::<f64>().map_or("-".into(), |c| format!("{}", c * 100.0)),
+        esc(get(metadata::ESTIMATE_DOF)),
         match bounded {
             Some(_) => " The bounded estimate (inside the declared ellipsoid) is what the exports carry.",
             None => "",
         }
     );
-    if let Some(v) = md.get("robotid.payload.validation") {
+    if let Some(v) = md.get(metadata::PAYLOAD_VALIDATION) {
         h.push_str(&format!("<p>The robot and payload identified, {}.</p>\n", esc(v)));
     }
-    if let Some(b) = md.get("robotid.payload.bound") {
+    if let Some(b) = md.get(metadata::PAYLOAD_BOUND) {
         h.push_str(&format!("<p class=\"note\">The bound: {}.</p>\n", esc(b)));
     }
-    if let Some(u) = md.get("robotid.payload.undetermined") {
+    if let Some(u) = md.get(metadata::PAYLOAD_UNDETERMINED) {
         h.push_str(&format!("<p class=\"warn\"><b>Undetermined:</b> {}</p>\n", esc(u)));
     }
     h.push_str("<table>\n<tr><th>value</th><th>unit</th><th>estimate</th><th>std</th><th>interval</th>");

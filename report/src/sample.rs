@@ -410,9 +410,9 @@ fn provenance(args: &Sample, failed: usize) -> Result<Vec<(&'static str, String)
     Ok(vec![
         (metadata::SOURCE_FILE, args.parameters.display().to_string()),
         (metadata::SOURCE_SHA256, sha256_hex(&bytes)),
-        ("robotid.sample.seed", args.seed.to_string()),
-        ("robotid.sample.draws", args.draws.to_string()),
-        ("robotid.sample.failed", failed.to_string()),
+        (metadata::SAMPLE_SEED, args.seed.to_string()),
+        (metadata::SAMPLE_DRAWS, args.draws.to_string()),
+        (metadata::SAMPLE_FAILED, failed.to_string()),
     ])
 }
 

@@ -195,3 +195,21 @@ pub const FORMULA: &str = "robotid.formula";
 pub const EXPRESSION: &str = "expression";
 /// Field key: the period a per-period column belongs to.
 pub const PERIOD: &str = "period";
+
+/// A payload table's link, the frame its body is given in, its bounded
+/// estimate (said), the drive gains' share of its uncertainty, the values
+/// the records leave undetermined and its validation on held-out loaded
+/// records.
+pub const PAYLOAD_LINK: &str = "robotid.payload.link";
+pub const PAYLOAD_FRAME: &str = "robotid.payload.frame";
+pub const PAYLOAD_BOUND: &str = "robotid.payload.bound";
+pub const PAYLOAD_GAINS: &str = "robotid.payload.gains";
+pub const PAYLOAD_UNDETERMINED: &str = "robotid.payload.undetermined";
+pub const PAYLOAD_VALIDATION: &str = "robotid.payload.validation";
+/// A `sample` table's seed, draws asked for and draws the bounded fit
+/// could not make a body of.
+pub const SAMPLE_SEED: &str = "robotid.sample.seed";
+pub const SAMPLE_DRAWS: &str = "robotid.sample.draws";
+pub const SAMPLE_FAILED: &str = "robotid.sample.failed";
+/// A dataset table's root folders.
+pub const DATASET_ROOTS: &str = "robotid.dataset.roots";

@@ -27,6 +27,7 @@ use robotid_schemas::TableKind;
 use super::{physically_consistent, pseudo_inertia, Covariance, Ellipsoid, Estimate, Known, LinkBound, System};
 use crate::dynamics::{inertial_parameters, Inertial, LISTED, PAYLOAD_COLUMNS};
 use crate::{Error, Result};
+use robotid_schemas::metadata;
 
 /// Where the robot's own parameters come from.
 pub enum Robot<'a> {
@@ -771,29 +772,29 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
         }
     }
     let mut md = BTreeMap::new();
-    md.insert("robotid.payload.link".to_string(), link.to_string());
+    md.insert(metadata::PAYLOAD_LINK.to_string(), link.to_string());
     md.insert(
-        "robotid.payload.frame".to_string(),
+        metadata::PAYLOAD_FRAME.to_string(),
         format!("centre of mass and inertia in the frame of `{link}`; inertia about the centre of mass"),
     );
-    md.insert("robotid.estimate.confidence".to_string(), LEVEL.to_string());
-    md.insert("robotid.estimate.dof".to_string(), fit.estimate.dof.to_string());
+    md.insert(metadata::ESTIMATE_CONFIDENCE.to_string(), LEVEL.to_string());
+    md.insert(metadata::ESTIMATE_DOF.to_string(), fit.estimate.dof.to_string());
     md.insert(
-        "robotid.estimate.covariance".to_string(),
+        metadata::ESTIMATE_COVARIANCE.to_string(),
         fit.estimate.covariance_from.name().to_string(),
     );
     if let Some(b) = &fit.bounded {
         md.insert("robotid.payload.bounded_chi2".to_string(), b.chi2.to_string());
     }
     if let Some(said) = &fit.bound_said {
-        md.insert("robotid.payload.bound".to_string(), said.clone());
+        md.insert(metadata::PAYLOAD_BOUND.to_string(), said.clone());
     }
     if let Some(g) = &fit.gains_share {
-        md.insert("robotid.payload.gains".to_string(), g.said());
+        md.insert(metadata::PAYLOAD_GAINS.to_string(), g.said());
     }
     if !fit.undetermined.is_empty() {
         md.insert(
-            "robotid.payload.undetermined".to_string(),
+            metadata::PAYLOAD_UNDETERMINED.to_string(),
             said_undetermined(&fit.undetermined),
         );
     }

@@ -200,25 +200,7 @@ mod tests {
     }
 
     fn one_joint(a: DMatrix<f64>, b: DVector<f64>) -> System {
-        let n = b.len();
-        System {
-            names: (0..a.ncols()).map(|j| format!("p{j}")).collect(),
-            units: vec![String::new(); a.ncols()],
-            expressions: vec![String::new(); a.ncols()],
-            a,
-            b,
-            var: DVector::from_element(n, f64::NAN),
-            recording: vec![0; n],
-            sample: (0..n as i64).collect(),
-            joint: vec![0; n],
-            time: (0..n).map(|i| i as f64).collect(),
-            recordings: vec!["r".into()],
-            joints: vec!["j".into()],
-            offsets: vec![0],
-            periods: vec![None],
-            known: None,
-            equations: None,
-            metadata: Default::default(),
-        }
+        let names = (0..a.ncols()).map(|j| format!("p{j}")).collect();
+        System::one_joint(names, a, b, 1.0)
     }
 }

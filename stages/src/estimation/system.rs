@@ -417,6 +417,33 @@ impl System {
         Ok(fixed)
     }
 
+    /// One joint `j` of one recording `r`, its rows the samples of `a` and
+    /// `b` taken every `dt` s, its columns `names` (no units, no
+    /// expressions, no noise): a system made by hand, as tests and
+    /// callers outside the pipeline make one.
+    pub fn one_joint(names: Vec<String>, a: DMatrix<f64>, b: DVector<f64>, dt: f64) -> System {
+        let (n, p) = (b.len(), a.ncols());
+        System {
+            names,
+            units: vec![String::new(); p],
+            expressions: vec![String::new(); p],
+            a,
+            b,
+            var: DVector::from_element(n, f64::NAN),
+            recording: vec![0; n],
+            sample: (0..n as i64).collect(),
+            joint: vec![0; n],
+            time: (0..n).map(|i| i as f64 * dt).collect(),
+            recordings: vec!["r".into()],
+            joints: vec!["j".into()],
+            offsets: vec![0],
+            periods: vec![None],
+            known: None,
+            equations: None,
+            metadata: Default::default(),
+        }
+    }
+
     /// Independent equations: the rows, or fewer for projected tables.
     pub fn equations(&self) -> usize {
         self.equations.unwrap_or(self.rows())
