@@ -670,40 +670,71 @@ pub(super) fn stribeck_fit(
         .par_iter()
         .map(|&(vs, d)| Ok(((vs, d), score_of(&every(shape(vs, d)))?)))
         .collect::<Result<_>>()?;
-    // Per joint: its best fade on the grid and its ratio there.
+    // Per joint: its best fade on the grid and its ratio there, where that
+    // beats its ratio without by the per-joint spread.
     let per_joint_margin = margin * (joints.len() as f64).sqrt();
+    let taken: Vec<(usize, (f64, f64), f64, f64)> = joints
+        .iter()
+        .enumerate()
+        .filter_map(|(j, _)| {
+            let before = without.per_joint.get(j).copied().unwrap_or(f64::NAN);
+            let (fade, r) = scored
+                .iter()
+                .filter_map(|(s, f)| Some((*s, f.as_ref()?.1.per_joint.get(j).copied()?)))
+                .filter(|(_, r)| r.is_finite())
+                .min_by(|a, b| a.1.total_cmp(&b.1))?;
+            (r < before * (1.0 - per_joint_margin)).then_some((j, fade, r, before))
+        })
+        .collect();
+    if taken.is_empty() {
+        return Ok(None);
+    }
+    // Each taken joint's vs refined in log at its grid δ, on its own ratio,
+    // by golden sections in lockstep: a joint's Stribeck column enters its
+    // own rows only, so one system with every taken joint at its own point
+    // scores them all (in ln vs + 10, positive for the relative tolerance:
+    // about 1 % in vs).
+    let at = |xs: &[f64]| -> Result<Option<Score>> {
+        let shapes = taken
+            .iter()
+            .zip(xs)
+            .map(|(&(j, (_, d), _, _), &x)| (joints[j].clone(), shape((x - 10.0).exp(), d)))
+            .collect();
+        Ok(score_of(&shapes)?.map(|(_, s, _)| s))
+    };
+    let ratio_of = |s: &Option<Score>, j: usize| -> f64 {
+        s.as_ref()
+            .and_then(|s| s.per_joint.get(j).copied())
+            .filter(|r| r.is_finite())
+            .unwrap_or(f64::INFINITY)
+    };
+    let mut searches: Vec<robotid_stages::signal::Golden> = taken
+        .iter()
+        .map(|&(_, (vs, _), _, _)| {
+            robotid_stages::signal::Golden::new((vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
+        })
+        .collect();
+    loop {
+        // A search that is done stays at its best.
+        let xs: Vec<f64> = searches.iter().map(|g| g.next().unwrap_or_else(|| g.best())).collect();
+        if searches.iter().all(|g| g.next().is_none()) {
+            break;
+        }
+        let scored = at(&xs)?;
+        for (g, &(j, ..)) in searches.iter_mut().zip(&taken) {
+            if g.next().is_some() {
+                g.tell(ratio_of(&scored, j));
+            }
+        }
+    }
+    let best: Vec<f64> = searches.iter().map(|g| g.best()).collect();
+    let refined = at(&best)?;
     let mut shapes = BTreeMap::new();
     let mut said = Vec::new();
-    for (j, name) in joints.iter().enumerate() {
-        let before = without.per_joint.get(j).copied().unwrap_or(f64::NAN);
-        let best = scored
-            .iter()
-            .filter_map(|(s, f)| Some((*s, f.as_ref()?.1.per_joint.get(j).copied()?)))
-            .filter(|(_, r)| r.is_finite())
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        let Some(((vs, d), r)) = best else { continue };
-        if !(r < before * (1.0 - per_joint_margin)) {
-            continue;
-        }
-        // Refined in log vs at the grid's δ, on this joint's own ratio
-        // (the others at the same fade: their rows do not see it).
-        let at = |x: f64| -> f64 {
-            match score_of(&every(shape(x.exp(), d))) {
-                Ok(Some((_, s, _))) => s
-                    .per_joint
-                    .get(j)
-                    .copied()
-                    .filter(|r| r.is_finite())
-                    .unwrap_or(f64::INFINITY),
-                _ => f64::INFINITY,
-            }
-        };
-        // Searched in ln vs + 10, positive for the relative tolerance
-        // (about 1 % in vs).
-        let x = robotid_stages::signal::golden(|y| at(y - 10.0), (vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
-            - 10.0;
-        let (vs, r) = match at(x) {
-            rx if rx < r => (x.exp(), rx),
+    for (&(j, (vs, d), r, before), &x) in taken.iter().zip(&best) {
+        let name = &joints[j];
+        let (vs, r) = match ratio_of(&refined, j) {
+            rx if rx < r => ((x - 10.0).exp(), rx),
             _ => (vs, r),
         };
         shapes.insert(name.clone(), shape(vs, d));
