@@ -46,11 +46,11 @@ pub(crate) const GREY: RGBColor = RGBColor(170, 170, 170);
 pub(crate) const BLUE_: RGBColor = RGBColor(31, 119, 180);
 pub(crate) const ORANGE: RGBColor = RGBColor(255, 127, 14);
 
-/// The axes' ranges over the series' finite points, padded; unit ones
+/// The axes' ranges over the finite points, padded; unit ones
 /// where there are none (an axis over ±f64::MAX spun the tick search).
-fn range(series: &[Series]) -> (f64, f64, f64, f64) {
+fn range<'p>(points: impl Iterator<Item = &'p [(f64, f64)]>) -> (f64, f64, f64, f64) {
     let mut r = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for (pts, _, _) in series {
+    for pts in points {
         for &(x, y) in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
             r = (r.0.min(x), r.1.max(x), r.2.min(y), r.3.max(y));
         }
@@ -116,8 +116,7 @@ pub(crate) fn chart(
     series: &[Series],
     dots: Option<Dots>,
 ) -> Result<()> {
-    let dotted = dots.map(|d| (d.pts.to_vec(), d.color, d.label));
-    let (x0, x1, y0, y1) = range(&[series, dotted.as_slice()].concat());
+    let (x0, x1, y0, y1) = range(series.iter().map(|s| s.0.as_slice()).chain(dots.map(|d| d.pts)));
     let e = |e: &dyn std::fmt::Display| picture(e);
     let labelled = dots.is_some() || series.iter().any(|s| !s.2.is_empty());
     let mut c = ChartBuilder::on(area)
@@ -509,6 +508,7 @@ pub(crate) struct FrictionSeen {
 pub(crate) fn friction_seen(
     sys: &robotid_stages::estimation::System,
     theta: &nalgebra::DVector<f64>,
+    predicted: &nalgebra::DVector<f64>,
 ) -> Vec<FrictionSeen> {
     if sys.equations.is_some() {
         return Vec::new();
@@ -519,7 +519,6 @@ pub(crate) fn friction_seen(
             .filter_map(|k| sys.names.iter().position(|n| *n == format!("{k}_{joint}")))
             .collect()
     };
-    let predicted = &sys.a * theta;
     let mut out = Vec::new();
     for (j, joint) in sys.joints.iter().enumerate() {
         let velocity = columns(joint, &["Fv", "Fv+", "Fv-"]);
@@ -566,13 +565,14 @@ pub(crate) fn friction_seen(
     out
 }
 
-/// [`friction_seen`] drawn, one chart per joint; None where no joint has
-/// it.
+/// [`friction_seen`] drawn, one chart per joint (`predicted`: A·θ); None
+/// where no joint has it.
 pub fn friction_svg(
     sys: &robotid_stages::estimation::System,
     theta: &nalgebra::DVector<f64>,
+    predicted: &nalgebra::DVector<f64>,
 ) -> Result<Option<String>> {
-    let seen = friction_seen(sys, theta);
+    let seen = friction_seen(sys, theta, predicted);
     if seen.is_empty() {
         return Ok(None);
     }
@@ -874,7 +874,8 @@ mod tests {
     #[test]
     fn friction_seen_is_the_models_where_the_model_holds() {
         let theta = DVector::from_vec(vec![0.5, 0.1, 0.3]);
-        let seen = friction_seen(&one_joint(0.0), &theta);
+        let sys = one_joint(0.0);
+        let seen = friction_seen(&sys, &theta, &(&sys.a * &theta));
         assert_eq!(seen.len(), 1);
         let f = &seen[0];
         assert_eq!(f.sides.len(), 2);
@@ -897,7 +898,9 @@ mod tests {
         // |q̇| = 0.031 rad/s, where the slowest bin of a 0.5 rad/s sine's
         // 2500 samples a side ends), the fast ones not at all.
         let theta = DVector::from_vec(vec![0.5, 0.1, 0.3]);
-        let f = &friction_seen(&one_joint(0.2), &theta)[0];
+        let sys = one_joint(0.2);
+        let predicted = &sys.a * &theta;
+        let f = &friction_seen(&sys, &theta, &predicted)[0];
         let (neg, pos) = (&f.sides[0], &f.sides[1]);
         let slow = [neg.last().unwrap(), pos.first().unwrap()];
         for &&(qd, model, seen) in &slow {
@@ -909,13 +912,13 @@ mod tests {
             assert!((seen - model).abs() < 1e-12, "{qd}: {seen} {model}");
         }
         // Without a velocity column, or on projected equations: nothing.
-        let mut no_velocity = one_joint(0.2);
+        let mut no_velocity = sys.clone();
         no_velocity.names[1] = "Fq_j".into();
-        assert!(friction_seen(&no_velocity, &theta).is_empty());
-        let mut projected = one_joint(0.2);
+        assert!(friction_seen(&no_velocity, &theta, &predicted).is_empty());
+        let mut projected = sys.clone();
         projected.equations = Some(100);
-        assert!(friction_seen(&projected, &theta).is_empty());
-        assert!(friction_svg(&one_joint(0.2), &theta)
+        assert!(friction_seen(&projected, &theta, &predicted).is_empty());
+        assert!(friction_svg(&sys, &theta, &predicted)
             .unwrap()
             .unwrap()
             .contains("friction, measured"));

@@ -448,7 +448,7 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
             &residues_by_joint(sys, predicted),
             "residue",
         )?);
-        if let Some(svg) = friction_svg(sys, &params.values)? {
+        if let Some(svg) = friction_svg(sys, &params.values, predicted)? {
             h.push_str("\n<h3>Friction against velocity</h3>\n<p class=\"note\">The torque the rest of the model leaves (measured − predicted + the model's friction) against the joint's velocity: its samples, and its means and the model's friction's over the same bins of velocity (equal counts on each side of zero). Where the two means part, the data hold friction the model lacks (a static friction fading with speed bends the seen means toward zero velocity).</p>\n");
             h.push_str(&svg);
         }

@@ -32,9 +32,6 @@ const NAMES: [&str; 16] = [
     "version",
 ];
 
-/// `text` parsed, or why not: too deep (the depth and the line),
-/// malformed, too many nodes, or a non-finite number (the element, its
-/// line and the attribute).
 /// `text` safe inside `<!-- … -->`: a comment may hold no "--" (names
 /// come from the user's files: "--->" must not close it), nor end in "-".
 pub fn comment(text: &str) -> String {
@@ -48,6 +45,9 @@ pub fn comment(text: &str) -> String {
     s
 }
 
+/// `text` parsed, or why not: too deep (the depth and the line),
+/// malformed, too many nodes, or a non-finite number (the element, its
+/// line and the attribute).
 pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, String> {
     depth_within(text)?;
     let options = roxmltree::ParsingOptions {
