@@ -635,7 +635,7 @@ pub(super) struct StribeckChoice {
 /// the fade that predicts its held-out periods best, where that beats its
 /// ratio without by the per-joint spread. The joints' fades together must
 /// then beat the model without by `margin`, with every static excess ≥ 0;
-/// else None. The grid's best is refined by a golden-section search in
+/// else None. The grid's best is refined by a Brent search in
 /// log vs on the joint's own ratio.
 pub(super) fn stribeck_fit(
     systems: &LineSystems,
@@ -690,7 +690,7 @@ pub(super) fn stribeck_fit(
         return Ok(None);
     }
     // Each taken joint's vs refined in log at its grid δ, on its own ratio,
-    // by golden sections in lockstep: a joint's Stribeck column enters its
+    // by Brent searches in lockstep: a joint's Stribeck column enters its
     // own rows only, so one system with every taken joint at its own point
     // scores them all (in ln vs + 10, positive for the relative tolerance:
     // about 1 % in vs).
@@ -708,15 +708,18 @@ pub(super) fn stribeck_fit(
             .filter(|r| r.is_finite())
             .unwrap_or(f64::INFINITY)
     };
-    let mut searches: Vec<robotid_stages::signal::Golden> = taken
+    let mut searches: Vec<robotid_stages::signal::Brent> = taken
         .iter()
         .map(|&(_, (vs, _), _, _)| {
-            robotid_stages::signal::Golden::new((vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
+            robotid_stages::signal::Brent::new((vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
         })
         .collect();
     loop {
         // A search that is done stays at its best.
-        let xs: Vec<f64> = searches.iter().map(|g| g.next().unwrap_or_else(|| g.best())).collect();
+        let xs: Vec<f64> = searches
+            .iter()
+            .map(|g| g.next().unwrap_or_else(|| g.best().0))
+            .collect();
         if searches.iter().all(|g| g.next().is_none()) {
             break;
         }
@@ -727,7 +730,7 @@ pub(super) fn stribeck_fit(
             }
         }
     }
-    let best: Vec<f64> = searches.iter().map(|g| g.best()).collect();
+    let best: Vec<f64> = searches.iter().map(|g| g.best().0).collect();
     let refined = at(&best)?;
     let mut shapes = BTreeMap::new();
     let mut said = Vec::new();

@@ -567,7 +567,7 @@ fn shapes() -> Vec<(FilterFamily, usize, Option<f64>)> {
 }
 
 /// Scores no filter and every candidate shape with cutoffs from `lowest_hz`
-/// to `highest_hz` (a coarse log grid, then a golden-section refinement of
+/// to `highest_hz` (a coarse log grid, then a Brent refinement of
 /// the best shapes), and keeps a filter only when its held-out score beats
 /// no filter's by more than the score's sampling spread.
 pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Option<FilterChoice> {
@@ -579,8 +579,8 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
         cutoff_hz,
         ripple_db,
     };
-    // Searched in u = ln(cutoff) + 20, which stays positive for the golden
-    // section's relative tolerance.
+    // Searched in u = ln(cutoff) + 20, which stays positive for the
+    // searches' relative tolerance.
     let (lo, hi) = (lowest_hz.ln() + 20.0, highest_hz.max(lowest_hz * 1.01).ln() + 20.0);
     let step = (hi - lo) / (GRID - 1) as f64;
     let best = best_cutoffs(
@@ -636,7 +636,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
 }
 
 /// Per shape of `shapes` (their cutoffs ignored): the best cutoff on the
-/// grid lo + step·i in u = ln(cutoff) + 20, refined by golden section
+/// grid lo + step·i in u = ln(cutoff) + 20, refined by Brent's method
 /// between its neighbours, and its score.
 /// The searches never leave [lo, hi]: a cutoff past the top of the range
 /// (Nyquist, for identify) is one no pipeline may declare.
@@ -667,7 +667,7 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], (lo, hi): (f64, f64), s
             )
         })
         .collect();
-    golden_cutoffs(sys, &searches, 1e-3)
+    cutoff_searches(sys, &searches, 1e-3)
         .iter()
         .zip(near.iter().zip(&grid))
         .map(|(&(x, refined), (&k, grid))| {
@@ -680,7 +680,7 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], (lo, hi): (f64, f64), s
         .collect()
 }
 
-/// Each filter's cutoff refined by golden section within ±`step` (natural
+/// Each filter's cutoff refined by Brent's method within ±`step` (natural
 /// log) to 1e-6, kept where it scores better; sorted best first.
 fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], (lo, hi): (f64, f64), step: f64) -> Vec<(FilterSpec, f64)> {
     // u = ln(cutoff) + 20 stays positive for the relative tolerance.
@@ -691,7 +691,7 @@ fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], (lo, hi): (f64, f64), s
             (*s, (u - step).max(lo), (u + step).min(hi))
         })
         .collect();
-    let mut out: Vec<(FilterSpec, f64)> = golden_cutoffs(sys, &searches, 1e-8)
+    let mut out: Vec<(FilterSpec, f64)> = cutoff_searches(sys, &searches, 1e-8)
         .into_iter()
         .zip(start)
         .map(|((x, refined), (s, r))| if refined <= *r { (at(*s, x), refined) } else { (*s, *r) })
@@ -708,18 +708,18 @@ fn at(shape: FilterSpec, u: f64) -> FilterSpec {
     }
 }
 
-/// Golden-section searches of the cutoff of each `(shape, a, b)` in u =
-/// ln(cutoff) + 20 to `rel`, in lockstep so that each step's points are
-/// scored together ([`LineSystem::ratios`]), [`BATCH`] searches per
-/// thread; each search's minimum and its score.
-fn golden_cutoffs(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f64) -> Vec<(f64, f64)> {
-    use crate::signal::Golden;
+/// Brent searches ([`crate::signal::Brent`]) of the cutoff of each
+/// `(shape, a, b)` in u = ln(cutoff) + 20 to `rel`, in lockstep so that
+/// each step's points are scored together ([`LineSystem::ratios`]),
+/// [`BATCH`] searches per thread; each search's minimum and its score.
+fn cutoff_searches(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f64) -> Vec<(f64, f64)> {
+    use crate::signal::Brent;
     searches
         .par_chunks(BATCH)
         .flat_map_iter(|chunk| {
-            let mut golden: Vec<Golden> = chunk.iter().map(|&(_, a, b)| Golden::new(a, b, rel)).collect();
+            let mut brent: Vec<Brent> = chunk.iter().map(|&(_, a, b)| Brent::new(a, b, rel)).collect();
             loop {
-                let asked: Vec<(usize, f64)> = golden
+                let asked: Vec<(usize, f64)> = brent
                     .iter()
                     .enumerate()
                     .filter_map(|(i, g)| Some((i, g.next()?)))
@@ -729,13 +729,10 @@ fn golden_cutoffs(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f6
                 }
                 let specs: Vec<Option<FilterSpec>> = asked.iter().map(|&(i, x)| Some(at(chunk[i].0, x))).collect();
                 for ((i, _), f) in asked.into_iter().zip(sys.ratios(&specs)) {
-                    golden[i].tell(f);
+                    brent[i].tell(f);
                 }
             }
-            let specs: Vec<Option<FilterSpec>> =
-                golden.iter().zip(chunk).map(|(g, s)| Some(at(s.0, g.best()))).collect();
-            let scores = sys.ratios(&specs);
-            golden.iter().map(|g| g.best()).zip(scores).collect::<Vec<_>>()
+            brent.into_iter().map(|g| g.best()).collect::<Vec<_>>()
         })
         .collect()
 }

@@ -165,6 +165,143 @@ impl Golden {
     }
 }
 
+/// Brent's minimisation (golden section with parabolic steps; Brent 1973,
+/// ch. 5), driven from outside as [`Golden`] is. On a smooth minimum (a
+/// held-out score against a filter's cutoff) its parabolic steps reach
+/// 1e-8 in about a third of golden section's points; where a parabola is
+/// not trusted (outside the bracket, or not shrinking) it takes golden
+/// steps. Stops when the bracket is within `rel` of the best point.
+#[derive(Debug, Clone)]
+pub struct Brent {
+    a: f64,
+    b: f64,
+    /// The best point so far, the second best, and the one before.
+    x: f64,
+    w: f64,
+    v: f64,
+    fx: f64,
+    fw: f64,
+    fv: f64,
+    /// The last step, and the one before it.
+    d: f64,
+    e: f64,
+    rel: f64,
+    /// The point asked for, or none when done.
+    asked: Option<f64>,
+}
+
+/// 1 − 1/φ: golden section's step as a share of the bracket.
+const GOLDEN_STEP: f64 = 0.381_966_011_250_105_1;
+
+impl Brent {
+    pub fn new(a: f64, b: f64, rel: f64) -> Brent {
+        let x = a + GOLDEN_STEP * (b - a);
+        Brent {
+            a,
+            b,
+            x,
+            w: x,
+            v: x,
+            fx: f64::NAN,
+            fw: f64::NAN,
+            fv: f64::NAN,
+            d: 0.0,
+            e: 0.0,
+            rel,
+            asked: Some(x),
+        }
+    }
+
+    /// The point to score next, or None when the search is done.
+    pub fn next(&self) -> Option<f64> {
+        self.asked
+    }
+
+    /// The score of the point [`next`](Self::next) gave.
+    pub fn tell(&mut self, fu: f64) {
+        let Some(u) = self.asked else { return };
+        if self.fx.is_nan() && u == self.x {
+            (self.fx, self.fw, self.fv) = (fu, fu, fu);
+        } else if fu <= self.fx {
+            if u >= self.x {
+                self.a = self.x;
+            } else {
+                self.b = self.x;
+            }
+            (self.v, self.fv, self.w, self.fw, self.x, self.fx) = (self.w, self.fw, self.x, self.fx, u, fu);
+        } else {
+            if u < self.x {
+                self.a = u;
+            } else {
+                self.b = u;
+            }
+            if fu <= self.fw || self.w == self.x {
+                (self.v, self.fv, self.w, self.fw) = (self.w, self.fw, u, fu);
+            } else if fu <= self.fv || self.v == self.x || self.v == self.w {
+                (self.v, self.fv) = (u, fu);
+            }
+        }
+        self.asked = self.step();
+    }
+
+    fn step(&mut self) -> Option<f64> {
+        let mid = 0.5 * (self.a + self.b);
+        // The bracket ends within 2·tol2 = rel·|x|.
+        let tol1 = 0.25 * self.rel * self.x.abs() + f64::MIN_POSITIVE;
+        let tol2 = 2.0 * tol1;
+        if (self.x - mid).abs() <= tol2 - 0.5 * (self.b - self.a) {
+            return None;
+        }
+        let mut parabolic = false;
+        if self.e.abs() > tol1 {
+            // The parabola through x, w, v: its vertex at x + p/q.
+            let r = (self.x - self.w) * (self.fx - self.fv);
+            let q = (self.x - self.v) * (self.fx - self.fw);
+            let mut p = (self.x - self.v) * q - (self.x - self.w) * r;
+            let q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            let q = q.abs();
+            let before = self.e;
+            self.e = self.d;
+            // Taken when it falls inside the bracket and moves less than
+            // half the step before last (so the steps shrink).
+            if p.is_finite()
+                && q.is_finite()
+                && p.abs() < (0.5 * q * before).abs()
+                && p > q * (self.a - self.x)
+                && p < q * (self.b - self.x)
+            {
+                self.d = p / q;
+                let u = self.x + self.d;
+                if u - self.a < tol2 || self.b - u < tol2 {
+                    self.d = tol1.copysign(mid - self.x);
+                }
+                parabolic = true;
+            }
+        }
+        if !parabolic {
+            self.e = if self.x >= mid {
+                self.a - self.x
+            } else {
+                self.b - self.x
+            };
+            self.d = GOLDEN_STEP * self.e;
+        }
+        Some(if self.d.abs() >= tol1 {
+            self.x + self.d
+        } else {
+            self.x + tol1.copysign(self.d)
+        })
+    }
+
+    /// The best point scored, and its score.
+    pub fn best(&self) -> (f64, f64) {
+        (self.x, self.fx)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,5 +337,49 @@ mod tests {
         }
         assert_eq!(asked, alone);
         assert!((two[1].best() - 0.7).abs() < 1e-6, "{}", two[1].best());
+    }
+
+    /// Brent's method finds a smooth minimum to its tolerance in far fewer
+    /// points than golden section; a kink (|x − v|, no parabola fits) and
+    /// an infinite region (a singular fit's score) it still brackets.
+    #[test]
+    fn brent_reaches_the_tolerance_in_fewer_points() {
+        let run = |f: &dyn Fn(f64) -> f64, a: f64, b: f64, rel: f64| {
+            let mut s = Brent::new(a, b, rel);
+            let mut n = 0;
+            while let Some(x) = s.next() {
+                s.tell(f(x));
+                n += 1;
+            }
+            (s.best(), n)
+        };
+        // A filter's held-out score near its cutoff, in u = ln(cutoff) + 20.
+        let smooth = |x: f64| 1.0 + (x - 21.37).powi(2) + 0.3 * (x - 21.37).powi(3);
+        let ((x, fx), n) = run(&smooth, 21.2, 21.6, 1e-8);
+        assert!((x - 21.37).abs() < 21.37 * 1e-8, "{x}");
+        assert_eq!(fx, smooth(x));
+        let mut golden_points = 0;
+        golden(
+            |x| {
+                golden_points += 1;
+                smooth(x)
+            },
+            21.2,
+            21.6,
+            1e-8,
+        );
+        assert!(
+            3 * n <= golden_points + 6,
+            "{n} points against golden section's {golden_points}"
+        );
+        let ((x, _), n) = run(&|x: f64| (x - 0.3).abs(), -1.0, 2.0, 1e-9);
+        assert!((x - 0.3).abs() < 1e-9 && n < 100, "{x} after {n}");
+        let ((x, _), _) = run(
+            &|x: f64| if x < 4.0 { f64::INFINITY } else { (x - 4.5).powi(2) },
+            1.0,
+            9.0,
+            1e-9,
+        );
+        assert!((x - 4.5).abs() < 1e-8, "{x}");
     }
 }
