@@ -62,7 +62,7 @@ pub struct Request {
     pub controller: Option<PathBuf>,
     /// A Python with the `mujoco` package: the exported MJCF rolled out
     /// by MuJoCo itself beside robotid's rollouts, in the report
-    /// ([`robotid_report::mujoco`]).
+    /// ([`robotid::mujoco`]).
     pub mujoco: Option<PathBuf>,
 }
 
@@ -221,17 +221,17 @@ pub struct Identification {
     /// `ROLLOUT_WINDOW_S`): on each validation record (else each
     /// identification one), the estimate's and the robot file's position
     /// and velocity errors; Err: why there are none, as the report says.
-    pub rollouts: robotid_report::report::Rolled,
+    pub rollouts: robotid::simulation::Rolled,
     /// The closed-loop runs on the validation records under the declared
     /// controller, when one is; Err: why there are none, as the report
     /// says.
-    pub closed_loop: robotid_report::report::ClosedLooped,
+    pub closed_loop: robotid::simulation::ClosedLooped,
     /// The physically consistent estimate rolled out on each record of
     /// `rollouts`, in its windows.
-    pub physical_rollouts: robotid_report::report::PhysicalRolled,
+    pub physical_rollouts: robotid::simulation::PhysicalRolled,
     /// The exported MJCF rolled out by MuJoCo on each record of
     /// `rollouts`, with `Request::mujoco`.
-    pub mujoco: robotid_report::report::InMujoco,
+    pub mujoco: robotid::simulation::InMujoco,
     /// The payload identified (`payload.parquet`), when asked for.
     pub payload: Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
     /// The payload's model on its held-out records.

@@ -144,7 +144,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     };
     // Every simulation is run here, held on the identification; the page
     // only draws them.
-    let simulated = robotid_report::report::simulate(&page);
+    let simulated = robotid::simulation::simulate(&page.asked());
     robotid_report::report::render(&page, &simulated)?;
     // Each run named where its table will be, not where it was read.
     let closed_loop = simulated.closed_loop.map(|runs| {

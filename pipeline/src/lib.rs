@@ -2,8 +2,9 @@
 //! pipeline files (`plan`), the entry point (`pipeline`: [`Pipeline`] →
 //! [`Built`] → [`RunReport`]), the execution over many recordings (`run`,
 //! told to an [`Observer`]), the one commit of a run's outputs (`output`),
-//! `identify`'s design of pipelines from recordings, merged summaries and
-//! validation statistics. Pictures, reports and exports are the
+//! `identify`'s design of pipelines from recordings, merged summaries,
+//! validation statistics and every simulation a page shows (`simulation`:
+//! rollouts, the closed loop, MuJoCo). Pictures, reports and exports are the
 //! `robotid-report` crate's, the command line `robotid-cli`'s, runs read as
 //! a dataset `robotid-dataset`'s.
 
@@ -13,10 +14,12 @@ pub mod error;
 #[doc(hidden)]
 pub mod fuzz;
 pub mod identify;
+pub mod mujoco;
 pub mod output;
 pub mod pipeline;
 pub mod plan;
 pub mod run;
+pub mod simulation;
 pub mod summaries;
 pub mod tables;
 pub mod validation;

@@ -11,6 +11,7 @@ use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, friction_svg, residues_by_joint, torques_svg};
 use crate::validation::{per_recording, table};
+use robotid::simulation::{Asked, MujocoRuns, Rollout, Simulated};
 use robotid::validation::{borrow_floor, residues, JointResidue};
 
 /// Escapes text for HTML.
@@ -685,7 +686,7 @@ pub struct Page {
     pub payload: Option<std::path::PathBuf>,
     /// The exported MJCF (under `within`) and the Python that runs MuJoCo:
     /// the export rolled out by MuJoCo itself on each record `rollout`
-    /// rolls out on, in the same windows ([`crate::mujoco`]).
+    /// rolls out on, in the same windows ([`robotid::mujoco`]).
     pub mujoco: Option<(std::path::PathBuf, std::path::PathBuf)>,
     /// The HTML page written (self-contained: pictures inline).
     pub out: std::path::PathBuf,
@@ -693,18 +694,6 @@ pub struct Page {
     /// page as given (`""`: the working folder).
     pub within: std::path::PathBuf,
 }
-
-/// What a page rolled out: per record, the estimate's and the robot file's
-/// rollouts (None: not asked for, or no robot file; Err: why not, as the
-/// page says).
-pub type Rolled = Option<std::result::Result<Vec<robotid::validation::RolledOut>, String>>;
-
-/// What a page ran in closed loop, as [`Rolled`].
-pub type ClosedLooped = Option<std::result::Result<Vec<robotid::validation::ClosedLoopRun>, String>>;
-
-/// What a page rolled out in MuJoCo, per record of [`Rolled`] (None: not
-/// asked for, or nothing rolled out; Err: why not, as the page says).
-pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
 
 /// A page's rollouts as one table: per record (its kinematics table),
 /// model (`estimate`, `physical`, `robot_file`, `mujoco`: each where it
@@ -774,101 +763,30 @@ pub fn rollout_summary(
     )
 }
 
-/// A rollout, or where it stopped.
-pub type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>;
-
-/// Per record, MuJoCo's rollout or why there is none.
-pub type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
-
-/// What a page simulated.
-pub struct Simulated {
-    pub rolled: Rolled,
-    pub closed_loop: ClosedLooped,
-    pub mujoco: InMujoco,
-    /// The physically consistent estimate rolled out as `rolled`'s
-    /// records were.
-    pub physical: PhysicalRolled,
-}
-
-/// The physically consistent estimate rolled out on each record of
-/// [`Rolled`] in its windows (None: no physical estimate, or nothing
-/// rolled out; Err: why not).
-pub type PhysicalRolled = Option<Vec<std::result::Result<Rollout, String>>>;
-
-/// The report of `page`, written to `page.out`; what it simulated
-/// returned: [`simulate`], then [`render`] (`robotid report`).
-pub fn write(page: &Page) -> Result<Simulated> {
-    let simulated = simulate(page);
-    render(page, &simulated)?;
-    Ok(simulated)
-}
-
-/// What `page` asks to be simulated, computed and drawn nowhere: the
-/// estimate's and the robot file's rollouts, the physically consistent
-/// estimate's in the same windows, the export's in MuJoCo and the closed
-/// loop. What cannot be simulated is said in its place (an Err the page
-/// shows), not fatal to the rest.
-pub fn simulate(page: &Page) -> Simulated {
-    let within = |p: &std::path::Path| page.within.join(p);
-    let rolled = match (&page.robot, page.rollout) {
-        (Some(robot), true) => {
-            let tables = if page.validation.is_empty() {
-                &page.excitation
-            } else {
-                &page.validation
-            };
-            Some(
-                robotid::validation::rollouts(&page.within, &page.parameters, robot, tables, None)
-                    .map_err(|e| e.to_string()),
-            )
+impl Page {
+    /// What the page shows simulated, for [`robotid::simulation::simulate`]:
+    /// rollouts on the validation records, else the excitation's.
+    pub fn asked(&self) -> Asked<'_> {
+        let tables = if self.validation.is_empty() {
+            &self.excitation
+        } else {
+            &self.validation
+        };
+        Asked {
+            within: &self.within,
+            parameters: &self.parameters,
+            physical: self.physical.as_deref(),
+            robot: self.robot.as_deref(),
+            rollout_on: self.rollout.then_some(tables.as_slice()),
+            mujoco: self.mujoco.as_ref().map(|(m, p)| (m.as_path(), p.as_path())),
+            closed_loop: self.closed_loop.as_ref().map(|(c, t)| (c.as_path(), t.as_slice())),
         }
-        _ => None,
-    };
-    let mujoco: InMujoco = match (&rolled, &page.mujoco) {
-        (Some(Ok(rolled)), Some((mjcf, python))) => Some(
-            rolled
-                .iter()
-                .map(|r| crate::mujoco::rollout(python, &within(mjcf), &within(&r.table), r.window_s))
-                .collect(),
-        ),
-        _ => None,
-    };
-    // The physical estimate rolled out in the estimate's windows.
-    let physical: PhysicalRolled = match (&rolled, &page.physical, &page.robot) {
-        (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
-            match robotid::validation::rolled_alike(&page.within, physical, robot, rolled) {
-                Ok(runs) => runs.into_iter().map(Ok).collect(),
-                Err(e) => vec![Err(e.to_string()); rolled.len()],
-            },
-        ),
-        _ => None,
-    };
-    let closed_loop = match (&page.robot, &page.closed_loop) {
-        (Some(robot), Some((controller, tables))) => {
-            let tables: Vec<std::path::PathBuf> = tables.iter().map(|t| within(t)).collect();
-            Some(
-                robotid::validation::closed_loop_rollouts(
-                    &within(&page.parameters),
-                    robot,
-                    &tables,
-                    &within(controller),
-                )
-                .map_err(|e| e.to_string()),
-            )
-        }
-        _ => None,
-    };
-    Simulated {
-        rolled,
-        closed_loop,
-        mujoco,
-        physical,
     }
 }
 
 /// The page of `page`, written to `page.out`: its tables drawn, and what
-/// `simulated` holds ([`simulate`]'s for the same page) shown; nothing
-/// simulated here.
+/// `simulated` holds ([`robotid::simulation::simulate`] of
+/// [`Page::asked`]) shown; nothing simulated here.
 pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
     let within = |p: &std::path::Path| page.within.join(p);
     let params = robotid::tables::read_parameters(&within(&page.parameters))?;

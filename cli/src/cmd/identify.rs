@@ -173,7 +173,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         validate: args.validate,
         mjcf: args.mjcf,
         controller: args.controller,
-        mujoco: args.mujoco.then(robotid_report::mujoco::default_python),
+        mujoco: args.mujoco.then(robotid::mujoco::default_python),
         payload,
         ..Request::new(recordings, args.robot)
     };
@@ -386,7 +386,7 @@ fn print_rollouts(id: &Identification) {
         return;
     };
     for (k, r) in rolled.iter().enumerate() {
-        let stopped = |x: &robotid_report::report::Rollout| x.as_ref().ok().map(|x| x.q_rms.clone());
+        let stopped = |x: &robotid::simulation::Rollout| x.as_ref().ok().map(|x| x.q_rms.clone());
         let mut columns: Vec<(&str, Option<Vec<f64>>)> = vec![
             ("estimate", stopped(&r.estimate)),
             (

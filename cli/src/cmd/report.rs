@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use robotid_report::report::{write, Page};
+use robotid_report::report::{render, Page};
 #[derive(clap::Args)]
 pub struct Args {
     /// Identified parameters (`parameters.parquet`).
@@ -65,7 +65,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(PathBuf::as_path)
         .collect();
     robotid_stages::formats::refuse_inputs([args.out.as_path()], inputs)?;
-    write(&Page {
+    let page = Page {
         parameters: args.parameters,
         excitation: args.excitation,
         validation: args.validation,
@@ -74,10 +74,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rollout: args.rollout,
         payload: args.payload,
         closed_loop: args.controller.map(|c| (c, args.closed_loop)),
-        mujoco: args.mujoco.map(|m| (m, robotid_report::mujoco::default_python())),
+        mujoco: args.mujoco.map(|m| (m, robotid::mujoco::default_python())),
         out: args.out.clone(),
         within: PathBuf::new(),
-    })?;
+    };
+    render(&page, &robotid::simulation::simulate(&page.asked()))?;
     println!("report in {}", args.out.display());
     Ok(())
 }

@@ -1254,13 +1254,7 @@ fn the_report_draws_what_identify_simulated() {
         out: "drawn.html".into(),
         within: out.clone(),
     };
-    let nothing = robotid_report::report::Simulated {
-        rolled: None,
-        closed_loop: None,
-        mujoco: None,
-        physical: None,
-    };
-    robotid_report::report::render(&page, &nothing).unwrap();
+    robotid_report::report::render(&page, &robotid::simulation::Simulated::nothing()).unwrap();
     let ours = std::fs::read_to_string(out.join("report.html")).unwrap();
     let drawn = std::fs::read_to_string(out.join("drawn.html")).unwrap();
     let at = ours
