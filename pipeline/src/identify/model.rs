@@ -654,10 +654,12 @@ pub(super) fn stribeck_fit(
     let every =
         |s: StribeckShape| -> BTreeMap<String, StribeckShape> { joints.iter().map(|j| (j.clone(), s)).collect() };
     let terms = friction.with_stribeck(true);
-    let score_of = |shapes: &BTreeMap<String, StribeckShape>| -> Result<Option<Fitted>> {
+    // The grid and the refinement rank fades; the fades taken are scored
+    // as a choice.
+    let score_of = |shapes: &BTreeMap<String, StribeckShape>, chosen: bool| -> Result<Option<Fitted>> {
         let (sys, names) = systems.system_with(terms, v, Some(first), shapes)?;
         Ok(sys.and_then(|sys| {
-            let fit = scorer.score(&sys)?;
+            let fit = if chosen { scorer.score(&sys) } else { scorer.rank(&sys) }?;
             let ok = scorer.friction_ok(&names, &fit.1);
             Some((fit.0, fit.1, ok))
         }))
@@ -668,7 +670,7 @@ pub(super) fn stribeck_fit(
         .collect();
     let scored: Vec<((f64, f64), Option<Fitted>)> = grid
         .par_iter()
-        .map(|&(vs, d)| Ok(((vs, d), score_of(&every(shape(vs, d)))?)))
+        .map(|&(vs, d)| Ok(((vs, d), score_of(&every(shape(vs, d)), false)?)))
         .collect::<Result<_>>()?;
     // Per joint: its best fade on the grid and its ratio there, where that
     // beats its ratio without by the per-joint spread.
@@ -700,7 +702,7 @@ pub(super) fn stribeck_fit(
             .zip(xs)
             .map(|(&(j, (_, d), _, _), &x)| (joints[j].clone(), shape((x - 10.0).exp(), d)))
             .collect();
-        Ok(score_of(&shapes)?.map(|(_, s, _)| s))
+        Ok(score_of(&shapes, false)?.map(|(_, s, _)| s))
     };
     let ratio_of = |s: &Option<Score>, j: usize| -> f64 {
         s.as_ref()
@@ -748,7 +750,7 @@ pub(super) fn stribeck_fit(
     if shapes.is_empty() {
         return Ok(None);
     }
-    let Some((filter, fit, ok)) = score_of(&shapes)? else {
+    let Some((filter, fit, ok)) = score_of(&shapes, true)? else {
         return Ok(None);
     };
     if !ok || !(fit.ratio < without.ratio * (1.0 - margin)) {
@@ -904,7 +906,9 @@ fn refine_delay(
             Some(f) => sys.ratio(Some(&f)),
             None if top.is_empty() => sys.ratio(None),
             None => {
-                robotid_stages::estimation::spectral::refit_filter(&sys, top).map_or(f64::INFINITY, |(_, s)| s.ratio)
+                use robotid_stages::estimation::spectral::{refit_filter, RANKING_REL};
+                // Ranks delays: the delay taken gets its own filter search.
+                refit_filter(&sys, top, RANKING_REL).map_or(f64::INFINITY, |(_, s)| s.ratio)
             }
         }
     };
@@ -930,7 +934,23 @@ pub(super) struct Scorer<'a> {
 }
 
 impl Scorer<'_> {
+    /// The score of `sys`, its filter refitted as a chosen one is.
     fn score(&self, sys: &robotid_stages::estimation::spectral::LineSystem) -> Option<(Option<FilterSpec>, Score)> {
+        self.score_to(sys, robotid_stages::estimation::spectral::CHOSEN_REL)
+    }
+
+    /// A score that only ranks candidates (a grid of fades, a refinement's
+    /// steps): the filter's cutoff refitted to
+    /// [`RANKING_REL`](robotid_stages::estimation::spectral::RANKING_REL).
+    fn rank(&self, sys: &robotid_stages::estimation::spectral::LineSystem) -> Option<(Option<FilterSpec>, Score)> {
+        self.score_to(sys, robotid_stages::estimation::spectral::RANKING_REL)
+    }
+
+    fn score_to(
+        &self,
+        sys: &robotid_stages::estimation::spectral::LineSystem,
+        rel: f64,
+    ) -> Option<(Option<FilterSpec>, Score)> {
         use robotid_stages::estimation::spectral::refit_filter;
         let delayed;
         let sys = match self.delay_s {
@@ -944,7 +964,7 @@ impl Scorer<'_> {
             (Some(f), _) => Some((None, sys.score(&sys.response(Some(&f))?)?)),
             (None, Some(c)) => {
                 let none = sys.score(&sys.response(None)?)?;
-                match refit_filter(sys, &c.top) {
+                match refit_filter(sys, &c.top, rel) {
                     Some((f, s)) if s.ratio < none.ratio * (1.0 - c.margin) => Some((Some(f), s)),
                     _ => Some((None, none)),
                 }

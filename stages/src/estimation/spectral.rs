@@ -604,6 +604,7 @@ pub fn choose_filter(sys: &LineSystem, lowest_hz: f64, highest_hz: f64) -> Optio
             .collect::<Vec<_>>(),
         (lo, hi),
         step,
+        CHOSEN_REL,
     );
     let (chosen, _) = fine[0];
     let top = shapes
@@ -681,8 +682,15 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], (lo, hi): (f64, f64), s
 }
 
 /// Each filter's cutoff refined by Brent's method within ±`step` (natural
-/// log) to 1e-6, kept where it scores better; sorted best first.
-fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], (lo, hi): (f64, f64), step: f64) -> Vec<(FilterSpec, f64)> {
+/// log) to `rel` of u = ln(cutoff) + 20, kept where it scores better;
+/// sorted best first.
+fn refine(
+    sys: &LineSystem,
+    start: &[(FilterSpec, f64)],
+    (lo, hi): (f64, f64),
+    step: f64,
+    rel: f64,
+) -> Vec<(FilterSpec, f64)> {
     // u = ln(cutoff) + 20 stays positive for the relative tolerance.
     let searches: Vec<(FilterSpec, f64, f64)> = start
         .iter()
@@ -691,7 +699,7 @@ fn refine(sys: &LineSystem, start: &[(FilterSpec, f64)], (lo, hi): (f64, f64), s
             (*s, (u - step).max(lo), (u + step).min(hi))
         })
         .collect();
-    let mut out: Vec<(FilterSpec, f64)> = cutoff_searches(sys, &searches, 1e-8)
+    let mut out: Vec<(FilterSpec, f64)> = cutoff_searches(sys, &searches, rel)
         .into_iter()
         .zip(start)
         .map(|((x, refined), (s, r))| if refined <= *r { (at(*s, x), refined) } else { (*s, *r) })
@@ -737,19 +745,31 @@ fn cutoff_searches(sys: &LineSystem, searches: &[(FilterSpec, f64, f64)], rel: f
         .collect()
 }
 
+/// How close a filter's cutoff is refined where it may be chosen: 1e-8 of
+/// u = ln(cutoff) + 20, ~2e-7 of the cutoff (see [`choose_filter`]).
+pub const CHOSEN_REL: f64 = 1e-8;
+
+/// How close a cutoff is refined where a score only ranks candidates (one
+/// friction model against another): a cutoff 2e-4 off in its log moves a
+/// held-out score near its minimum by its curvature times 4e-8, far under
+/// any margin a choice is made by; the candidate chosen is scored again
+/// at [`CHOSEN_REL`].
+pub const RANKING_REL: f64 = 1e-5;
+
 /// The best of `filters` (each cutoff refined within ±10 %) on `sys`, a
 /// system of other columns (another friction model, other kinematics) of
 /// the same recording: a search's best shapes carried over, not searched
 /// again, nor past the highest cutoff that search found (it stayed within
-/// its range: Nyquist, for identify).
-pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec]) -> Option<(FilterSpec, Score)> {
+/// its range: Nyquist, for identify), to `rel` ([`CHOSEN_REL`] or
+/// [`RANKING_REL`]).
+pub fn refit_filter(sys: &LineSystem, filters: &[FilterSpec], rel: f64) -> Option<(FilterSpec, Score)> {
     let ratios = sys.ratios(&filters.iter().map(|s| Some(*s)).collect::<Vec<_>>());
     let start: Vec<(FilterSpec, f64)> = filters.iter().copied().zip(ratios).collect();
     let hi = filters
         .iter()
         .map(|f| f.cutoff_hz.ln() + 20.0)
         .fold(f64::NEG_INFINITY, f64::max);
-    let (best, _) = *refine(sys, &start, (0.0, hi), 0.1).first()?;
+    let (best, _) = *refine(sys, &start, (0.0, hi), 0.1, rel).first()?;
     Some((best, sys.score(&sys.response(Some(&best))?)?))
 }
 
