@@ -95,9 +95,15 @@ pub enum ExportError {
         files_cost: String,
     },
     #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
-    Patch { robot: PathBuf, problem: String },
+    Patch {
+        robot: PathBuf,
+        problem: Box<robotid_stages::dynamics::PatchError>,
+    },
     #[error("--mjcf {}: the identified dynamics cannot be written into it: {problem}", mjcf.display())]
-    MjcfPatch { mjcf: PathBuf, problem: String },
+    MjcfPatch {
+        mjcf: PathBuf,
+        problem: Box<robotid_stages::dynamics::PatchError>,
+    },
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -360,10 +366,10 @@ pub(crate) fn user_mjcf(mjcf: Option<&Path>, model: &Model) -> Result<Option<Mjc
     Ok(Some(MjcfPatch::new(text, model).map_err(|p| mjcf_error(path, p))?))
 }
 
-pub(crate) fn mjcf_error(mjcf: &Path, problem: String) -> ExportError {
+pub(crate) fn mjcf_error(mjcf: &Path, problem: robotid_stages::dynamics::PatchError) -> ExportError {
     ExportError::MjcfPatch {
         mjcf: mjcf.to_path_buf(),
-        problem,
+        problem: Box::new(problem),
     }
 }
 
@@ -417,10 +423,10 @@ pub(crate) fn user_urdf(robot: &Path, model: &Model) -> Result<Option<UrdfPatch>
     ))
 }
 
-pub(crate) fn patch_error(robot: &Path, problem: String) -> ExportError {
+pub(crate) fn patch_error(robot: &Path, problem: robotid_stages::dynamics::PatchError) -> ExportError {
     ExportError::Patch {
         robot: robot.to_path_buf(),
-        problem,
+        problem: Box::new(problem),
     }
 }
 

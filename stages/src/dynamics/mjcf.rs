@@ -13,6 +13,7 @@ use std::ops::Range;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::model::{axis_rotation, Inertial};
+use super::xml::XmlError;
 
 /// A rigid transform: rotate by `r`, then move by `p`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -167,32 +168,37 @@ impl<'a> Defaults<'a> {
     }
 }
 
-fn numbers(text: &str, what: &str) -> Result<Vec<f64>, String> {
+/// `text`, attribute `attribute` of `element`, as numbers.
+/// Why a file that includes others is not read.
+const ONE_FILE: &str = "robotid reads one MJCF file as written; give it the file MuJoCo saves (mj_saveLastXML)";
+
+fn numbers(text: &str, element: &str, attribute: &str) -> Result<Vec<f64>, XmlError> {
     text.split_whitespace()
         .map(|t| {
             t.parse::<f64>()
-                .map_err(|_| format!("{what}: `{text}` is not a list of numbers"))
+                .map_err(|_| XmlError::value(element, attribute, text, "is not a list of numbers"))
         })
         .collect()
 }
 
-fn vector(text: &str, what: &str) -> Result<Vector3<f64>, String> {
-    match numbers(text, what)?[..] {
+fn vector(text: &str, element: &str, attribute: &str) -> Result<Vector3<f64>, XmlError> {
+    match numbers(text, element, attribute)?[..] {
         [x, y, z] => Ok(Vector3::new(x, y, z)),
-        _ => Err(format!("{what}: `{text}` is not 3 numbers")),
+        _ => Err(XmlError::value(element, attribute, text, "is not 3 numbers")),
     }
 }
 
-fn unit(v: Vector3<f64>, what: &str) -> Result<Vector3<f64>, String> {
+/// `v` (read from `text`) made unit length, or refused where it is zero.
+fn unit(v: Vector3<f64>, (text, element, attribute): (&str, &str, &str)) -> Result<Vector3<f64>, XmlError> {
     let n = v.norm();
     match n > 1e-12 && n.is_finite() {
         true => Ok(v / n),
-        false => Err(format!("{what}: a zero vector")),
+        false => Err(XmlError::value(element, attribute, text, "is a zero vector")),
     }
 }
 
 impl Compiler {
-    fn of(root: roxmltree::Node) -> Result<Compiler, String> {
+    fn of(root: roxmltree::Node) -> Result<Compiler, XmlError> {
         let mut c = Compiler {
             degrees: true,
             eulerseq: b"xyz".to_vec(),
@@ -203,12 +209,20 @@ impl Compiler {
             }
             if let Some(s) = n.attribute("eulerseq") {
                 if s.len() != 3 || !s.bytes().all(|b| b"xyzXYZ".contains(&b)) {
-                    return Err(format!("<compiler eulerseq=\"{s}\">: not a sequence of 3 axes"));
+                    return Err(XmlError::value(
+                        "<compiler>",
+                        "eulerseq",
+                        s,
+                        "is not a sequence of 3 axes",
+                    ));
                 }
                 c.eulerseq = s.as_bytes().to_vec();
             }
             if n.attribute("inertiafromgeom") == Some("true") {
-                return Err("<compiler inertiafromgeom=\"true\">: MuJoCo takes every body's inertia from its geoms and ignores <inertial>, so identified bodies cannot be written into it".into());
+                return Err(XmlError::element(
+                    "<compiler inertiafromgeom=\"true\">",
+                    "MuJoCo takes every body's inertia from its geoms and ignores <inertial>, so identified bodies cannot be written into it",
+                ));
             }
         }
         Ok(c)
@@ -223,7 +237,7 @@ impl Compiler {
 
     /// The rotation an element's orientation attributes give (identity
     /// without one), as MuJoCo's compiler makes it.
-    fn orientation(&self, n: roxmltree::Node, what: &str) -> Result<Matrix3<f64>, String> {
+    fn orientation(&self, n: roxmltree::Node, what: &str) -> Result<Matrix3<f64>, XmlError> {
         let given: Vec<&str> = ["quat", "axisangle", "euler", "xyaxes", "zaxis"]
             .into_iter()
             .filter(|k| n.attribute(*k).is_some())
@@ -231,26 +245,31 @@ impl Compiler {
         let (key, text) = match given[..] {
             [] => return Ok(Matrix3::identity()),
             [k] => (k, n.attribute(k).unwrap_or_default()),
-            _ => return Err(format!("{what}: more than one orientation ({})", given.join(", "))),
+            _ => {
+                return Err(XmlError::element(
+                    what,
+                    format!("more than one orientation ({})", given.join(", ")),
+                ))
+            }
         };
-        let what = format!("{what} {key}");
-        let v = numbers(text, &what)?;
+        let v = numbers(text, what, key)?;
         let count = |k: usize| match v.len() == k {
             true => Ok(()),
-            false => Err(format!("{what}: `{text}` is not {k} numbers")),
+            false => Err(XmlError::value(what, key, text, format!("is not {k} numbers"))),
         };
+        let given = (text, what, key);
         Ok(match key {
             "quat" => {
                 count(4)?;
                 let q = nalgebra::Quaternion::new(v[0], v[1], v[2], v[3]);
                 if !(q.norm() > 1e-12) {
-                    return Err(format!("{what}: a zero quaternion"));
+                    return Err(XmlError::value(what, key, text, "is a zero quaternion"));
                 }
                 UnitQuaternion::from_quaternion(q).to_rotation_matrix().into_inner()
             }
             "axisangle" => {
                 count(4)?;
-                let axis = nalgebra::Unit::new_unchecked(unit(Vector3::new(v[0], v[1], v[2]), &what)?);
+                let axis = nalgebra::Unit::new_unchecked(unit(Vector3::new(v[0], v[1], v[2]), given)?);
                 axis_rotation(&axis, self.angle(v[3]))
             }
             "euler" => {
@@ -274,14 +293,14 @@ impl Compiler {
             }
             "xyaxes" => {
                 count(6)?;
-                let x = unit(Vector3::new(v[0], v[1], v[2]), &what)?;
+                let x = unit(Vector3::new(v[0], v[1], v[2]), given)?;
                 let y = Vector3::new(v[3], v[4], v[5]);
-                let y = unit(y - x * x.dot(&y), &what)?;
+                let y = unit(y - x * x.dot(&y), given)?;
                 Matrix3::from_columns(&[x, y, x.cross(&y)])
             }
             _ => {
                 count(3)?;
-                let z = unit(Vector3::new(v[0], v[1], v[2]), &what)?;
+                let z = unit(Vector3::new(v[0], v[1], v[2]), given)?;
                 UnitQuaternion::rotation_between(&Vector3::z(), &z)
                     .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI))
                     .to_rotation_matrix()
@@ -291,9 +310,9 @@ impl Compiler {
     }
 
     /// An element's `pos` and orientation.
-    fn pose(&self, n: roxmltree::Node, what: &str) -> Result<Pose, String> {
+    fn pose(&self, n: roxmltree::Node, what: &str) -> Result<Pose, XmlError> {
         let p = match n.attribute("pos") {
-            Some(t) => vector(t, &format!("{what} pos"))?,
+            Some(t) => vector(t, what, "pos")?,
             None => Vector3::zeros(),
         };
         Ok(Pose {
@@ -341,7 +360,7 @@ impl<'a> Reader<'a> {
         owner: Option<usize>,
         at: Pose,
         class: &'a str,
-    ) -> Result<(), String> {
+    ) -> Result<(), XmlError> {
         for c in n.children().filter(|c| c.is_element()) {
             match c.tag_name().name() {
                 "frame" => {
@@ -351,7 +370,10 @@ impl<'a> Reader<'a> {
                 "body" => self.body(c, owner, at, class)?,
                 "joint" | "freejoint" => {
                     let Some(b) = owner else {
-                        return Err("a <joint> in <worldbody> itself".into());
+                        return Err(XmlError::element(
+                            "<worldbody>",
+                            "holds a <joint> itself: a joint moves a <body>",
+                        ));
                     };
                     let j = self.joint(c, at, class)?;
                     self.bodies[b].joints.push(j);
@@ -363,10 +385,9 @@ impl<'a> Reader<'a> {
                     }
                 }
                 "include" | "attach" | "replicate" => {
-                    return Err(format!(
-                        "<{}> at byte {}: robotid reads one MJCF file as written; give it the file MuJoCo saves (mj_saveLastXML)",
-                        c.tag_name().name(),
-                        c.range().start
+                    return Err(XmlError::element(
+                        format!("<{}> at byte {}", c.tag_name().name(), c.range().start),
+                        ONE_FILE,
                     ))
                 }
                 _ => {}
@@ -381,7 +402,7 @@ impl<'a> Reader<'a> {
         parent: Option<usize>,
         at: Pose,
         class: &'a str,
-    ) -> Result<(), String> {
+    ) -> Result<(), XmlError> {
         let name = c.attribute("name").unwrap_or("").to_string();
         let local = at.then(&self.compiler.pose(c, &format!("<body name=\"{name}\">"))?);
         let world = parent.map_or(Pose::identity(), |p| self.bodies[p].world).then(&local);
@@ -405,7 +426,7 @@ impl<'a> Reader<'a> {
         )
     }
 
-    fn joint(&self, c: roxmltree::Node<'a, '_>, at: Pose, class: &'a str) -> Result<MjJoint, String> {
+    fn joint(&self, c: roxmltree::Node<'a, '_>, at: Pose, class: &'a str) -> Result<MjJoint, XmlError> {
         let name = c.attribute("name").unwrap_or("").to_string();
         let what = format!("<joint name=\"{name}\">");
         let class = c.attribute("class").unwrap_or(class);
@@ -417,13 +438,13 @@ impl<'a> Reader<'a> {
             "freejoint" => "free".to_string(),
             _ => get("type").unwrap_or("hinge").to_string(),
         };
-        let pos = at.point(&get("pos").map_or(Ok(Vector3::zeros()), |t| vector(t, &format!("{what} pos")))?);
-        let axis = get("axis").map_or(Ok(Vector3::z()), |t| vector(t, &format!("{what} axis")))?;
-        let axis = at.r * unit(axis, &format!("{what} axis"))?;
+        let pos = at.point(&get("pos").map_or(Ok(Vector3::zeros()), |t| vector(t, &what, "pos"))?);
+        let axis_text = get("axis").unwrap_or("0 0 1");
+        let axis = at.r * unit(vector(axis_text, &what, "axis")?, (axis_text, &what, "axis"))?;
         let reference = get("ref").map_or(Ok(0.0), |t| {
             t.trim()
                 .parse::<f64>()
-                .map_err(|_| format!("{what} ref: `{t}` is not a number"))
+                .map_err(|_| XmlError::value(&what, "ref", t, "is not a number"))
         })?;
         let reference = match kind.as_str() {
             "hinge" => self.compiler.angle(reference),
@@ -449,20 +470,23 @@ impl<'a> Reader<'a> {
     }
 
     /// An `<inertial>`'s body in the frame of the body that holds it.
-    fn inertial(&self, c: roxmltree::Node, at: &Pose, body: &str) -> Result<Inertial, String> {
+    fn inertial(&self, c: roxmltree::Node, at: &Pose, body: &str) -> Result<Inertial, XmlError> {
         let what = format!("the <inertial> of body `{body}`");
         let pose = at.then(&self.compiler.pose(c, &what)?);
-        let mass = c
-            .attribute("mass")
-            .and_then(|m| m.trim().parse::<f64>().ok())
-            .ok_or_else(|| format!("{what}: no mass"))?;
+        let mass = match c.attribute("mass") {
+            Some(m) => m
+                .trim()
+                .parse::<f64>()
+                .map_err(|_| XmlError::value(&what, "mass", m, "is not a number"))?,
+            None => return Err(XmlError::element(what, "no mass")),
+        };
         let inertia = match (c.attribute("diaginertia"), c.attribute("fullinertia")) {
-            (Some(d), None) => Matrix3::from_diagonal(&vector(d, &what)?),
-            (None, Some(f)) => match numbers(f, &what)?[..] {
+            (Some(d), None) => Matrix3::from_diagonal(&vector(d, &what, "diaginertia")?),
+            (None, Some(f)) => match numbers(f, &what, "fullinertia")?[..] {
                 [xx, yy, zz, xy, xz, yz] => Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz),
-                _ => return Err(format!("{what}: fullinertia `{f}` is not 6 numbers")),
+                _ => return Err(XmlError::value(&what, "fullinertia", f, "is not 6 numbers")),
             },
-            _ => return Err(format!("{what}: give diaginertia or fullinertia")),
+            _ => return Err(XmlError::element(what, "give diaginertia or fullinertia")),
         };
         Ok(pose.inertial(&Inertial {
             mass,
@@ -474,11 +498,14 @@ impl<'a> Reader<'a> {
 
 impl Mjcf {
     /// The MJCF `text` read.
-    pub fn read(text: &str) -> Result<Mjcf, String> {
+    pub fn read(text: &str) -> Result<Mjcf, XmlError> {
         let doc = super::xml::parse(text)?;
         let root = doc.root_element();
         if !root.has_tag_name("mujoco") {
-            return Err(format!("not an MJCF: its root element is <{}>", root.tag_name().name()));
+            return Err(XmlError::Root {
+                format: "MJCF",
+                found: root.tag_name().name().to_string(),
+            });
         }
         let mut reader = Reader {
             text,
@@ -490,9 +517,9 @@ impl Mjcf {
             reader.contents(w, None, Pose::identity(), "main")?;
         }
         if let Some(i) = root.descendants().find(|n| n.has_tag_name("include")) {
-            return Err(format!(
-                "<include> at byte {}: robotid reads one MJCF file as written; give it the file MuJoCo saves (mj_saveLastXML)",
-                i.range().start
+            return Err(XmlError::element(
+                format!("<include> at byte {}", i.range().start),
+                ONE_FILE,
             ));
         }
         Ok(Mjcf { bodies: reader.bodies })
@@ -588,7 +615,7 @@ mod tests {
             ),
             (r#"<robot name="x"/>"#, "not an MJCF"),
         ] {
-            let e = Mjcf::read(xml).err().unwrap();
+            let e = Mjcf::read(xml).err().unwrap().to_string();
             assert!(e.contains(says), "{e}");
         }
     }

@@ -25,6 +25,7 @@ use nalgebra::Vector3;
 
 use super::mjcf::{joint_motion, Mjcf, Pose, DYNAMICS};
 use super::model::{axis_rotation, Inertial, Joint, Model};
+use super::patch_error::PatchError;
 use super::urdf_patch::Patched;
 
 /// Kinematics farther than this from the robot file's (rad or m) are
@@ -68,7 +69,7 @@ pub struct MjcfPatch {
 
 impl MjcfPatch {
     /// `text` (an MJCF) read for patching with models like `model`.
-    pub fn new(text: String, model: &Model) -> Result<MjcfPatch, String> {
+    pub fn new(text: String, model: &Model) -> Result<MjcfPatch, PatchError> {
         let mjcf = Mjcf::read(&text)?;
         let at = model_joints(&mjcf, model)?;
         let (overlay, said) = best_overlay(&mjcf, model, &at)?;
@@ -97,7 +98,7 @@ impl MjcfPatch {
 
     /// The MJCF with `model`'s bodies and friction written into it, and
     /// what was done to each body; `note` goes into a comment beside each.
-    pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
+    pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), PatchError> {
         let text = self.text.as_str();
         let mut edits: Vec<(Range<usize>, String)> = Vec::new();
         let mut patched = Vec::new();
@@ -106,12 +107,9 @@ impl MjcfPatch {
             let identified = p.link_in_body.inertial(&model.links[i]);
             let written = match &p.share {
                 None => identified,
-                Some(s) => identified.without(s).ok_or_else(|| {
-                    format!(
-                        "the identified body of `{}` less the bodies it carries on locked joints ({}) is no body: give them lighter <inertial>s, or lock them in the robot file too",
-                        body.name,
-                        self.names(&p.carried)
-                    )
+                Some(s) => identified.without(s).ok_or_else(|| PatchError::NothingLeft {
+                    body: body.name.clone(),
+                    carried: self.names(&p.carried),
                 })?,
             };
             let mut comment = note.to_string();
@@ -201,11 +199,11 @@ impl MjcfPatch {
     /// frame) as a body of its own, `name`, welded to the last moving
     /// joint's body (a body without a joint moves with its parent); every
     /// other byte kept. `note` goes into a comment beside it.
-    pub fn with_body(&self, name: &str, carried: &Inertial, note: &str) -> Result<String, String> {
+    pub fn with_body(&self, name: &str, carried: &Inertial, note: &str) -> Result<String, PatchError> {
         if self.mjcf.bodies.iter().any(|b| b.name == name) {
-            return Err(format!("it has a body `{name}` already"));
+            return Err(PatchError::BodyExists(name.to_string()));
         }
-        let p = self.placed.last().ok_or("it moves no joint")?;
+        let p = self.placed.last().ok_or(PatchError::NoJoint)?;
         let parent = &self.mjcf.bodies[p.body];
         let pad = &parent.indent;
         let element = format!(
@@ -264,36 +262,32 @@ impl MjcfPatch {
 
 /// Each of the model's joints in the MJCF: its body and its index there;
 /// refused where one is missing, not a hinge, or shares its body.
-fn model_joints(mjcf: &Mjcf, model: &Model) -> Result<Vec<(usize, usize)>, String> {
+fn model_joints(mjcf: &Mjcf, model: &Model) -> Result<Vec<(usize, usize)>, PatchError> {
     let mut at = Vec::new();
     for j in &model.joints {
-        let (b, k) = mjcf.joint(&j.name).ok_or_else(|| {
-            let names: Vec<&str> = mjcf
+        let (b, k) = mjcf.joint(&j.name).ok_or_else(|| PatchError::MissingJoint {
+            format: "MJCF",
+            joint: j.name.clone(),
+            joints: mjcf
                 .bodies
                 .iter()
                 .flat_map(|b| &b.joints)
-                .map(|j| j.name.as_str())
-                .collect();
-            format!(
-                "joint `{}` of the model is not in the MJCF (its joints: {})",
-                j.name,
-                names.join(", ")
-            )
+                .map(|j| j.name.clone())
+                .collect(),
         })?;
         let body = &mjcf.bodies[b];
         if body.joints[k].kind != "hinge" {
-            return Err(format!(
-                "joint `{}` is a {} joint in the MJCF, a hinge in the robot file",
-                j.name, body.joints[k].kind
-            ));
+            return Err(PatchError::JointKind {
+                joint: j.name.clone(),
+                kind: body.joints[k].kind.clone(),
+            });
         }
         if body.joints.len() > 1 {
-            return Err(format!(
-                "body `{}` holds joint `{}` and {} other(s): robotid writes one identified body per joint",
-                body.name,
-                j.name,
-                body.joints.len() - 1
-            ));
+            return Err(PatchError::SharedBody {
+                body: body.name.clone(),
+                joint: j.name.clone(),
+                others: body.joints.len() - 1,
+            });
         }
         at.push((b, k));
     }
@@ -303,7 +297,7 @@ fn model_joints(mjcf: &Mjcf, model: &Model) -> Result<Vec<(usize, usize)>, Strin
 /// The robot file's kinematics laid over the MJCF's with its base at the
 /// MJCF's world or at the body holding the first joint, whichever fits;
 /// refused past [`SAME_ROBOT`], a difference above 1e-9 said.
-fn best_overlay(mjcf: &Mjcf, model: &Model, at: &[(usize, usize)]) -> Result<(Overlay, Vec<String>), String> {
+fn best_overlay(mjcf: &Mjcf, model: &Model, at: &[(usize, usize)]) -> Result<(Overlay, Vec<String>), PatchError> {
     let mut bases = vec![(Pose::identity(), "its world frame".to_string())];
     if let Some(p) = at.first().and_then(|&(b, _)| mjcf.bodies[b].parent) {
         bases.push((mjcf.bodies[p].world, format!("its body `{}`", mjcf.bodies[p].name)));
@@ -315,13 +309,15 @@ fn best_overlay(mjcf: &Mjcf, model: &Model, at: &[(usize, usize)]) -> Result<(Ov
             let worst = |o: &Overlay| o.worst.0.max(o.worst.1);
             worst(&a.0).total_cmp(&worst(&b.0))
         })
-        .ok_or("the model has no joint")?;
+        .ok_or(PatchError::NoJoint)?;
     let (angle, distance, j) = overlay.worst;
     if angle.max(distance) > SAME_ROBOT {
-        return Err(format!(
-            "its kinematics are not the robot file's: joint `{}`'s axis is {angle:.2e} rad and {distance:.2e} m from the robot file's, with the robot file's base at {base_said} (another robot, or another zero pose)",
-            model.joints[j].name
-        ));
+        return Err(PatchError::Kinematics {
+            joint: model.joints[j].name.clone(),
+            angle_rad: angle,
+            distance_m: distance,
+            base: base_said.clone(),
+        });
     }
     let mut said = Vec::new();
     if angle.max(distance) > 1e-9 {
@@ -334,14 +330,14 @@ fn best_overlay(mjcf: &Mjcf, model: &Model, at: &[(usize, usize)]) -> Result<(Ov
 
 /// The bodies `carried` (each with its pose in `body`'s frame) together,
 /// in `body`'s frame; refused where one has no `<inertial>`.
-fn carried_share(mjcf: &Mjcf, body: usize, carried: &[(usize, Pose)]) -> Result<Option<Inertial>, String> {
+fn carried_share(mjcf: &Mjcf, body: usize, carried: &[(usize, Pose)]) -> Result<Option<Inertial>, PatchError> {
     let mut share: Option<Inertial> = None;
     for (c, pose) in carried {
         let Some((_, own)) = &mjcf.bodies[*c].inertial else {
-            return Err(format!(
-                "body `{}` moves on a joint the model holds locked and has no <inertial>: MuJoCo would take its mass from its geoms, which robotid does not compute; give it an <inertial> so that robotid can take it out of the identified body of `{}`",
-                mjcf.bodies[*c].name, mjcf.bodies[body].name
-            ));
+            return Err(PatchError::NoInertial {
+                body: mjcf.bodies[*c].name.clone(),
+                of: mjcf.bodies[body].name.clone(),
+            });
         };
         let own = pose.inertial(own);
         share = Some(share.map_or(own, |s| s.merge(&own)));
@@ -587,7 +583,8 @@ mod tests {
             .unwrap()
             .with_body("payload", &carried, "again")
             .unwrap_err();
-        assert!(e.contains("a body `payload` already"), "{e}");
+        assert!(matches!(&e, PatchError::BodyExists(n) if n == "payload"), "{e}");
+        assert!(e.to_string().contains("a body `payload` already"), "{e}");
     }
 
     #[test]
@@ -595,12 +592,24 @@ mod tests {
         let model = identified();
         let moved = MJCF.replace("pos=\"-0.1 0 0\"", "pos=\"-0.05 0 0\"");
         let e = MjcfPatch::new(moved, &model).err().unwrap();
-        assert!(e.contains("joint `elbow`'s axis") && e.contains("5.00e-2 m"), "{e}");
+        assert!(
+            matches!(&e, PatchError::Kinematics { joint, distance_m, .. } if joint == "elbow" && (distance_m - 0.05).abs() < 1e-9),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("joint `elbow`'s axis") && e.to_string().contains("5.00e-2 m"),
+            "{e}"
+        );
         let e = MjcfPatch::new(MJCF.replace("\"elbow\"", "\"wrist\""), &model)
             .err()
             .unwrap();
         assert!(
-            e.contains("joint `elbow` of the model is not in the MJCF (its joints: shoulder, wrist, grip)"),
+            matches!(&e, PatchError::MissingJoint { joint, joints, .. } if joint == "elbow" && joints == &["shoulder", "wrist", "grip"]),
+            "{e}"
+        );
+        assert!(
+            e.to_string()
+                .contains("joint `elbow` of the model is not in the MJCF (its joints: shoulder, wrist, grip)"),
             "{e}"
         );
     }

@@ -16,6 +16,7 @@ mod mjcf;
 mod mjcf_export;
 mod mjcf_patch;
 pub mod model;
+mod patch_error;
 mod r_factor;
 mod rnea;
 mod robot_file;
@@ -42,6 +43,7 @@ pub use mjcf_patch::MjcfPatch;
 pub use model::{
     Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, DEFAULT_GAIN_REL_STD, LISTED,
 };
+pub use patch_error::PatchError;
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file};

@@ -320,7 +320,7 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
         path: path.to_path_buf(),
         msg,
     };
-    let (text, warnings) = drop_duplicate_origins(text).map_err(err)?;
+    let (text, warnings) = drop_duplicate_origins(text).map_err(|e| err(e.to_string()))?;
     let robot = urdf_rs::read_from_string(&text).map_err(|e| err(format!("invalid URDF: {e}")))?;
     let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
     let children = children_of(&robot);
@@ -502,7 +502,7 @@ fn lump_fixed<'a>(
 /// Some xacro-generated URDFs carry two `<origin>` elements in one joint;
 /// ROS's parser (urdfdom) takes the first. Do the same: cut the later ones
 /// out of the text and say so.
-fn drop_duplicate_origins(text: &str) -> Result<(String, Vec<String>), String> {
+fn drop_duplicate_origins(text: &str) -> Result<(String, Vec<String>), super::xml::XmlError> {
     let doc = super::xml::parse(text)?;
     let mut cuts = Vec::new();
     let mut warnings = Vec::new();

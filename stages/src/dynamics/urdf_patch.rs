@@ -17,6 +17,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use super::model::{Inertial, Model};
+use super::patch_error::PatchError;
 use super::urdf::{parse_urdf_with, Locks};
 use super::urdf_export::{dynamics, friction_comment, inertial};
 
@@ -48,7 +49,7 @@ struct Hung<'a> {
 /// `model`'s bodies and friction written into it; `note` goes into a
 /// comment inside each replaced `<inertial>`. Refused when a joint of the
 /// model is not in the text (another robot file).
-pub fn patch_urdf(text: &str, path: &Path, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
+pub fn patch_urdf(text: &str, path: &Path, model: &Model, note: &str) -> Result<(String, Vec<Patched>), PatchError> {
     UrdfPatch::new(text.to_string(), path, model)?.apply(model, note)
 }
 
@@ -71,7 +72,7 @@ struct Tree<'a, 'i> {
 }
 
 impl<'a, 'i> Tree<'a, 'i> {
-    fn of(doc: &'a roxmltree::Document<'i>, model: &Model) -> Result<Tree<'a, 'i>, String> {
+    fn of(doc: &'a roxmltree::Document<'i>, model: &Model) -> Result<Tree<'a, 'i>, PatchError> {
         let robot = doc.root_element();
         let named = |tag: &'static str| -> HashMap<&'a str, roxmltree::Node<'a, 'i>> {
             robot
@@ -99,12 +100,17 @@ impl<'a, 'i> Tree<'a, 'i> {
         }
         let mut hung = Vec::new();
         for mj in &model.joints {
-            let joint = joints
-                .get(mj.name.as_str())
-                .ok_or_else(|| format!("joint `{}` of the model is not in the URDF", mj.name))?;
-            let link = end(*joint, "child").ok_or_else(|| format!("joint `{}` has no child link", mj.name))?;
+            let joint = joints.get(mj.name.as_str()).ok_or_else(|| PatchError::MissingJoint {
+                format: "URDF",
+                joint: mj.name.clone(),
+                joints: Vec::new(),
+            })?;
+            let link = end(*joint, "child").ok_or_else(|| PatchError::NoChild { joint: mj.name.clone() })?;
             if !links.contains_key(link) {
-                return Err(format!("link `{link}` (child of `{}`) is not in the URDF", mj.name));
+                return Err(PatchError::MissingLink {
+                    link: link.to_string(),
+                    joint: mj.name.clone(),
+                });
             }
             hung.push((link, below(link, false, &rigid)));
         }
@@ -118,7 +124,7 @@ impl<'a, 'i> Tree<'a, 'i> {
 }
 
 impl UrdfPatch {
-    pub fn new(text: String, path: &Path, model: &Model) -> Result<UrdfPatch, String> {
+    pub fn new(text: String, path: &Path, model: &Model) -> Result<UrdfPatch, PatchError> {
         let doc = super::xml::parse(&text)?;
         let tree = Tree::of(&doc, model)?;
         // The carried links' share of each body, at their locked positions:
@@ -138,7 +144,7 @@ impl UrdfPatch {
 
     /// The URDF with `model`'s bodies and friction written into it, and
     /// what was done to each link.
-    pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), String> {
+    pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), PatchError> {
         let text = self.text.as_str();
         let doc = super::xml::parse(text)?;
         let tree = Tree::of(&doc, model)?;
@@ -254,13 +260,13 @@ fn carried_shares(
     path: &Path,
     model: &Model,
     carried: &[Range<usize>],
-) -> Result<Vec<Option<Inertial>>, String> {
+) -> Result<Vec<Option<Inertial>>, PatchError> {
     let locks = Locks {
         keep: Some(model.joints.iter().map(|j| j.name.clone()).collect()),
         positions: model.locked.iter().cloned().collect(),
     };
     let bare = apply(text, carried.iter().map(|r| (r.clone(), String::new())).collect());
-    let load = |t: &str| parse_urdf_with(t, path, &locks).map_err(|e| e.to_string());
+    let load = |t: &str| parse_urdf_with(t, path, &locks).map_err(|e| PatchError::Load(Box::new(e)));
     let (with, without) = (load(text)?, load(&bare)?);
     Ok(with.links.iter().zip(&without.links).map(|(a, b)| a.minus(b)).collect())
 }
@@ -543,6 +549,13 @@ mod tests {
         let mut model = parse_urdf(URDF, Path::new("arm.urdf")).unwrap();
         model.joints[1].name = "wrist".into();
         let e = patch_urdf(URDF, Path::new("arm.urdf"), &model, "").unwrap_err();
-        assert!(e.contains("`wrist`"), "{e}");
+        assert!(
+            matches!(&e, PatchError::MissingJoint { joint, .. } if joint == "wrist"),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("joint `wrist` of the model is not in the URDF"),
+            "{e}"
+        );
     }
 }

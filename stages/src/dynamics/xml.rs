@@ -32,6 +32,62 @@ const NAMES: [&str; 16] = [
     "version",
 ];
 
+/// What is wrong in a user's URDF or MJCF, and where: the element as
+/// written (its name with it), the attribute, what was found in it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum XmlError {
+    /// Not well-formed XML, or over [`MAX_NODES`].
+    #[error("invalid XML: {0}")]
+    Syntax(String),
+    /// Elements nested deeper than [`MAX_DEPTH`], refused before parsing.
+    #[error("elements nested over {MAX_DEPTH} deep (line {line}): no robot's file is; refused before reading it")]
+    TooDeep { line: usize },
+    /// A number attribute holding NaN or an infinity.
+    #[error("{element} (line {line}), attribute `{attribute}`: `{found}` holds a number that is not finite")]
+    NotFinite {
+        element: String,
+        line: u32,
+        attribute: String,
+        found: String,
+    },
+    /// An attribute whose value is not what its element needs.
+    #[error("{element} {attribute}: `{found}` {expected}")]
+    Value {
+        element: String,
+        attribute: String,
+        found: String,
+        /// What it must be, as said after the value ("is not 3 numbers").
+        expected: String,
+    },
+    /// An element not read as written: one a reader does not take, an
+    /// attribute missing, two that exclude each other.
+    #[error("{element}: {problem}")]
+    Element { element: String, problem: String },
+    /// The document is not the format read.
+    #[error("not an {format}: its root element is <{found}>")]
+    Root { format: &'static str, found: String },
+}
+
+impl XmlError {
+    /// `found` in `attribute` of `element` is not what it must be.
+    pub fn value(element: &str, attribute: &str, found: &str, expected: impl Into<String>) -> XmlError {
+        XmlError::Value {
+            element: element.to_string(),
+            attribute: attribute.to_string(),
+            found: found.to_string(),
+            expected: expected.into(),
+        }
+    }
+
+    /// `element` is not read as written, because of `problem`.
+    pub fn element(element: impl Into<String>, problem: impl Into<String>) -> XmlError {
+        XmlError::Element {
+            element: element.into(),
+            problem: problem.into(),
+        }
+    }
+}
+
 /// `text` safe inside `<!-- … -->`: a comment may hold no "--" (names
 /// come from the user's files: "--->" must not close it), nor end in "-".
 pub fn comment(text: &str) -> String {
@@ -48,13 +104,13 @@ pub fn comment(text: &str) -> String {
 /// `text` parsed, or why not: too deep (the depth and the line),
 /// malformed, too many nodes, or a non-finite number (the element, its
 /// line and the attribute).
-pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, String> {
+pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, XmlError> {
     depth_within(text)?;
     let options = roxmltree::ParsingOptions {
         allow_dtd: false,
         nodes_limit: MAX_NODES,
     };
-    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| format!("invalid XML: {e}"))?;
+    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| XmlError::Syntax(e.to_string()))?;
     for node in doc.descendants().filter(roxmltree::Node::is_element) {
         for a in node.attributes() {
             if NAMES.contains(&a.name()) {
@@ -68,13 +124,12 @@ pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, String> {
                     .attribute("name")
                     .map(|n| format!(" name=\"{n}\""))
                     .unwrap_or_default();
-                return Err(format!(
-                    "<{}{named}> (line {}), attribute `{}`: `{}` holds a number that is not finite",
-                    node.tag_name().name(),
-                    at.row,
-                    a.name(),
-                    a.value()
-                ));
+                return Err(XmlError::NotFinite {
+                    element: format!("<{}{named}>", node.tag_name().name()),
+                    line: at.row,
+                    attribute: a.name().to_string(),
+                    found: a.value().to_string(),
+                });
             }
         }
     }
@@ -83,7 +138,7 @@ pub fn parse(text: &str) -> Result<roxmltree::Document<'_>, String> {
 
 /// Refuses nesting deeper than [`MAX_DEPTH`] by one pass over the bytes,
 /// before any parser recurses into it.
-fn depth_within(text: &str) -> Result<(), String> {
+fn depth_within(text: &str) -> Result<(), XmlError> {
     let b = text.as_bytes();
     let (mut depth, mut line, mut i) = (0usize, 1usize, 0usize);
     let skip_to = |from: usize, end: &[u8]| -> usize {
@@ -123,9 +178,7 @@ fn depth_within(text: &str) -> Result<(), String> {
                 if j > 0 && j < b.len() && b[j - 1] != b'/' {
                     depth += 1;
                     if depth > MAX_DEPTH {
-                        return Err(format!(
-                            "elements nested over {MAX_DEPTH} deep (line {line}): no robot's file is; refused before reading it"
-                        ));
+                        return Err(XmlError::TooDeep { line });
                     }
                 }
                 i = j + 1;
@@ -157,10 +210,10 @@ mod tests {
     fn depth_is_counted_as_a_parser_would() {
         let nested = |n: usize| format!("{}{}", "<a x='>'>".repeat(n), "</a>".repeat(n));
         assert!(parse(&nested(MAX_DEPTH)).is_ok());
-        let e = parse(&nested(MAX_DEPTH + 1)).unwrap_err();
+        let e = parse(&nested(MAX_DEPTH + 1)).unwrap_err().to_string();
         assert!(e.contains("nested over 512"), "{e}");
         let deep = format!("<robot>{}</robot>", nested(200_000));
-        assert!(parse(&deep).unwrap_err().contains("nested over"));
+        assert!(matches!(parse(&deep).unwrap_err(), XmlError::TooDeep { line: 1 }));
         // Empty elements, comments, CDATA and declarations do not nest.
         let flat = format!(
             "<?xml version='1.0'?><!DOCTYPE r><r>{}<!-- <a> --><![CDATA[<a>]]></r>",
@@ -183,7 +236,7 @@ mod tests {
             ("NaN", "mass"),
         ] {
             let text = format!("<mujoco>\n<worldbody>\n<body name=\"b1\" {attr}=\"{value}\"/></worldbody></mujoco>");
-            let e = parse(&text).unwrap_err();
+            let e = parse(&text).unwrap_err().to_string();
             assert!(
                 e.contains("<body name=\"b1\"> (line 3)") && e.contains(&format!("`{attr}`")),
                 "{e}"

@@ -628,24 +628,43 @@ pub fn said_undetermined(u: &[(String, f64, f64)]) -> String {
         .join(", ")
 }
 
+/// Why the payload cannot be written into an export.
+#[derive(Debug, thiserror::Error)]
+pub enum PayloadExportError {
+    #[error("the payload has no mass")]
+    NoMass,
+    /// An estimate whose inertia at its centre of mass no body has.
+    #[error("{from}'s inertia at its centre of mass (principal moments {:.3e}, {:.3e}, {:.3e} kg·m²) is no body's: declare the payload's size (its ellipsoid) for a bounded one", .moments[0], .moments[1], .moments[2])]
+    NotABody { from: &'static str, moments: [f64; 3] },
+    /// The URDF holds nothing to fix the payload to.
+    #[error("the URDF has neither a link `{link}` nor a joint `{joint}` with a child")]
+    NoParent { link: String, joint: String },
+    #[error("the URDF has no </robot>")]
+    NoEnd,
+    #[error("the URDF: {0}")]
+    Urdf(crate::dynamics::xml::XmlError),
+    #[error(transparent)]
+    Mjcf(#[from] crate::dynamics::PatchError),
+}
+
 /// The body the exports write: the bounded estimate when there is one,
 /// else the least-squares one when a simulator can take it (an inertia at
 /// its centre of mass that is positive definite and keeps the triangle
 /// inequality); with which it is, or why there is none.
-pub fn exported(fit: &PayloadFit) -> std::result::Result<(Inertial, &'static str), String> {
+pub fn exported(fit: &PayloadFit) -> std::result::Result<(Inertial, &'static str), PayloadExportError> {
     let (body, from) = match (&fit.bounded, &fit.body) {
         (Some(b), _) => (b.body, "the bounded estimate"),
         (None, Some(b)) => (*b, "the least-squares estimate"),
-        (None, None) => return Err("the payload has no mass".into()),
+        (None, None) => return Err(PayloadExportError::NoMass),
     };
     let p = body.inertia_com.symmetric_eigenvalues();
     let scale = p.amax().max(f64::MIN_POSITIVE);
     let real = p.iter().all(|&e| e > 1e-9 * scale) && (0..3).all(|k| p[k] <= p[(k + 1) % 3] + p[(k + 2) % 3]);
     if !real {
-        return Err(format!(
-            "{from}'s inertia at its centre of mass (principal moments {:.3e}, {:.3e}, {:.3e} kg·m²) is no body's: declare the payload's size (its ellipsoid) for a bounded one",
-            p[0], p[1], p[2]
-        ));
+        return Err(PayloadExportError::NotABody {
+            from,
+            moments: [p[0], p[1], p[2]],
+        });
     }
     Ok((body, from))
 }
@@ -659,18 +678,18 @@ pub fn mjcf_with_payload(
     model: &crate::dynamics::Model,
     (rot, pos): (&Matrix3<f64>, &Vector3<f64>),
     fit: &PayloadFit,
-) -> std::result::Result<String, String> {
+) -> std::result::Result<String, PayloadExportError> {
     let (body, from) = exported(fit)?;
     let in_last = Inertial {
         mass: body.mass,
         com: pos + rot * body.com,
         inertia_com: rot * body.inertia_com * rot.transpose(),
     };
-    crate::dynamics::MjcfPatch::new(mjcf.to_string(), model)?.with_body(
+    Ok(crate::dynamics::MjcfPatch::new(mjcf.to_string(), model)?.with_body(
         "robotid_payload",
         &in_last,
         &format!("the identified payload ({from}, payload.parquet)"),
-    )
+    )?)
 }
 
 /// `urdf` (a URDF's text) with the payload as a link of its own, fixed to
@@ -682,9 +701,9 @@ pub fn urdf_with_payload(
     (link, last_joint): (&str, &str),
     (rot, pos): (&Matrix3<f64>, &Vector3<f64>),
     fit: &PayloadFit,
-) -> std::result::Result<String, String> {
+) -> std::result::Result<String, PayloadExportError> {
     let (body, from) = exported(fit)?;
-    let doc = crate::dynamics::xml::parse(urdf).map_err(|e| format!("the URDF: {e}"))?;
+    let doc = crate::dynamics::xml::parse(urdf).map_err(PayloadExportError::Urdf)?;
     let has = |name: &str| {
         doc.descendants()
             .any(|n| n.has_tag_name("link") && n.attribute("name") == Some(name))
@@ -697,11 +716,14 @@ pub fn urdf_with_payload(
             .find(|n| n.has_tag_name("joint") && n.attribute("name") == Some(last_joint))
             .and_then(|j| j.children().find(|c| c.has_tag_name("child")))
             .and_then(|c| c.attribute("link"))
-            .ok_or_else(|| format!("the URDF has neither a link `{link}` nor a joint `{last_joint}` with a child"))?;
+            .ok_or_else(|| PayloadExportError::NoParent {
+                link: link.to_string(),
+                joint: last_joint.to_string(),
+            })?;
         let (r, pi, y) = nalgebra::Rotation3::from_matrix(rot).euler_angles();
         (child.to_string(), (*pos, Vector3::new(r, pi, y)))
     };
-    let end = urdf.rfind("</robot>").ok_or("the URDF has no </robot>")?;
+    let end = urdf.rfind("</robot>").ok_or(PayloadExportError::NoEnd)?;
     let l = body.listed();
     let added = format!(
         "  <!-- robotid: the identified payload ({from}, payload.parquet), on `{link}` -->\n  <link name=\"robotid_payload\">\n    <inertial>\n      <origin xyz=\"{:e} {:e} {:e}\" rpy=\"0 0 0\"/>\n      <mass value=\"{:e}\"/>\n      <inertia ixx=\"{:e}\" ixy=\"{:e}\" ixz=\"{:e}\" iyy=\"{:e}\" iyz=\"{:e}\" izz=\"{:e}\"/>\n    </inertial>\n  </link>\n  <joint name=\"robotid_payload_joint\" type=\"fixed\">\n    <parent link=\"{parent}\"/>\n    <child link=\"robotid_payload\"/>\n    <origin xyz=\"{:e} {:e} {:e}\" rpy=\"{:e} {:e} {:e}\"/>\n  </joint>\n",
