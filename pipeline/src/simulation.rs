@@ -19,11 +19,11 @@ pub type Rolled = Option<std::result::Result<Vec<RolledOut>, String>>;
 pub type ClosedLooped = Option<std::result::Result<Vec<ClosedLoopRun>, String>>;
 
 /// Per record, MuJoCo's rollout or why there is none.
-pub type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, String>];
+pub type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, crate::mujoco::MujocoError>];
 
 /// What was rolled out in MuJoCo, per record of [`Rolled`] (None: not
 /// asked for, or nothing rolled out; Err: why not).
-pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, String>>>;
+pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout, crate::mujoco::MujocoError>>>;
 
 /// The physically consistent estimate rolled out on each record of
 /// [`Rolled`] in its windows (None: no physical estimate, or nothing

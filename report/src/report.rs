@@ -528,7 +528,7 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut], beside: Beside) -> R
             )),
             Some(Err(why)) => h.push_str(&format!(
                 "<p class=\"warn\">Not rolled out in MuJoCo: {}</p>\n",
-                esc(why)
+                esc(&why.to_string())
             )),
             None => {}
         }
