@@ -188,7 +188,14 @@ pub struct Brent {
     rel: f64,
     /// The point asked for, or none when done.
     asked: Option<f64>,
+    /// Points scored so far, at most [`BRENT_POINTS`].
+    scored: usize,
 }
+
+/// The most points one search scores: golden section alone reaches 1e-16
+/// of its bracket in 77, so only a score that misleads every parabola
+/// (not a held-out score) comes near; the best point so far stands.
+pub const BRENT_POINTS: usize = 200;
 
 /// 1 − 1/φ: golden section's step as a share of the bracket.
 const GOLDEN_STEP: f64 = 0.381_966_011_250_105_1;
@@ -209,6 +216,7 @@ impl Brent {
             e: 0.0,
             rel,
             asked: Some(x),
+            scored: 0,
         }
     }
 
@@ -220,6 +228,7 @@ impl Brent {
     /// The score of the point [`next`](Self::next) gave.
     pub fn tell(&mut self, fu: f64) {
         let Some(u) = self.asked else { return };
+        self.scored += 1;
         if self.fx.is_nan() && u == self.x {
             (self.fx, self.fw, self.fv) = (fu, fu, fu);
         } else if fu <= self.fx {
@@ -241,7 +250,7 @@ impl Brent {
                 (self.v, self.fv) = (u, fu);
             }
         }
-        self.asked = self.step();
+        self.asked = if self.scored < BRENT_POINTS { self.step() } else { None };
     }
 
     fn step(&mut self) -> Option<f64> {
@@ -341,7 +350,8 @@ mod tests {
 
     /// Brent's method finds a smooth minimum to its tolerance in far fewer
     /// points than golden section; a kink (|x − v|, no parabola fits) and
-    /// an infinite region (a singular fit's score) it still brackets.
+    /// an infinite region (a singular fit's score) it still brackets; a
+    /// score that is never a number stops within its bounded count.
     #[test]
     fn brent_reaches_the_tolerance_in_fewer_points() {
         let run = |f: &dyn Fn(f64) -> f64, a: f64, b: f64, rel: f64| {
@@ -381,5 +391,8 @@ mod tests {
             1e-9,
         );
         assert!((x - 4.5).abs() < 1e-8, "{x}");
+        // A score that is never a number ends, within its count.
+        let ((x, _), n) = run(&|_| f64::NAN, 0.0, 1.0, 1e-15);
+        assert!((0.0..=1.0).contains(&x) && n <= BRENT_POINTS, "{x} after {n}");
     }
 }
