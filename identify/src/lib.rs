@@ -7,6 +7,9 @@
 //! for Ray. Everything is written into a staging folder that appears as
 //! the output folder at once when identify ends, refused or not.
 
+mod judge;
+mod payload;
+mod recordings;
 mod script;
 mod work;
 
@@ -20,7 +23,8 @@ use robotid_report::export::Exported;
 use robotid_stages::stage::estimate::Outcome;
 use robotid_stages::stage::read::ReadConfig;
 
-pub use work::{identify, payload_against_parameters, payload_from_tables};
+pub use payload::{payload_against_parameters, payload_from_tables};
+pub use work::identify;
 
 /// What to identify, and how strictly.
 #[derive(Clone, Debug)]
