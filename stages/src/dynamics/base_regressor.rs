@@ -593,6 +593,39 @@ impl BaseRegressor {
 mod tests {
     use super::*;
 
+    /// Every fade on identify's Stribeck grid keeps each joint's static
+    /// excess as a base parameter: the base set is found on random states
+    /// whose speeds (±2 rad/s) seldom fall inside a slow fade.
+    #[test]
+    fn every_stribeck_fade_keeps_its_column() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
+        let model = crate::dynamics::load_robot(&path).unwrap();
+        for vs in [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5] {
+            for d in [0.5, 1.0, 2.0] {
+                let spec = RegressorModel {
+                    friction: FrictionTerms::Stribeck,
+                    stribeck: model
+                        .joints
+                        .iter()
+                        .map(|j| {
+                            (
+                                j.name.clone(),
+                                StribeckShape {
+                                    velocity_rad_s: vs,
+                                    exponent: d,
+                                },
+                            )
+                        })
+                        .collect(),
+                    ..RegressorModel::default()
+                };
+                let b = BaseRegressor::new(&model, &spec).unwrap();
+                let fs = b.names().iter().filter(|n| n.starts_with("Fs_")).count();
+                assert_eq!(fs, model.dof(), "vs {vs}, δ {d}: {:?}", b.names());
+            }
+        }
+    }
+
     /// The whole-table matrix (batched, four samples per pass, straight into
     /// columns) equals the per-sample rows, on a length that fills neither a
     /// pass nor a chunk, for the chain and the decoupled model.
