@@ -11,8 +11,9 @@ use robotid_report::export::{Export, Format};
 use robotid_stages::estimation::{Covariance, Estimate, Estimator, System};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part};
 
+use crate::recordings::Paths;
 use crate::script::Script;
-use crate::{recordings::*, work::*};
+use crate::work::{chain, io};
 use crate::{Error, Physical, Recording, Request, Result};
 
 /// The physical fit, or why there is none, and the verdict on what is
@@ -176,7 +177,7 @@ impl Judge {
 }
 
 /// The verdict's marks on an estimate's table.
-pub(crate) fn marks(verdict: &Verdict) -> Vec<(String, String)> {
+fn marks(verdict: &Verdict) -> Vec<(String, String)> {
     let mut md = vec![(robotid_schemas::metadata::VERDICT.to_string(), verdict.said())];
     if let Some(why) = &verdict.refused {
         md.push((robotid_schemas::metadata::INADEQUATE.to_string(), why.to_string()));
@@ -272,7 +273,7 @@ pub(crate) fn estimate(
 }
 
 /// What identify measured on the way, said with a refusal.
-pub(crate) fn causes(design: &Design) -> String {
+fn causes(design: &Design) -> String {
     design
         .findings
         .iter()
@@ -294,7 +295,7 @@ pub(crate) fn causes(design: &Design) -> String {
 /// identify's estimates: least squares, 95 % intervals, the robot file's
 /// a-priori sizes; `covariance` robust (auto's where the model is right,
 /// robust to the model error real robots have where it dominates).
-pub(crate) fn estimate_config(covariance: Covariance, physical: bool) -> EstimateConfig {
+fn estimate_config(covariance: Covariance, physical: bool) -> EstimateConfig {
     EstimateConfig {
         method: Estimator::Ols,
         confidence: 0.95,
@@ -319,7 +320,7 @@ pub(crate) fn validate(staged: &Path, parameters: &str, tables: &[PathBuf], held
 }
 
 /// The physically consistent estimate's table.
-pub(crate) const PHYSICAL: &str = "parameters_physical.parquet";
+const PHYSICAL: &str = "parameters_physical.parquet";
 
 /// The physically consistent estimate, validated, or why there is none.
 pub(crate) enum Fit {
@@ -333,7 +334,7 @@ pub(crate) enum Fit {
 
 /// The physically consistent estimate (`parameters_physical.parquet`),
 /// validated on the held-out tables.
-pub(crate) fn physical_fit(
+fn physical_fit(
     parts: &[Part],
     (staged, paths): (&Path, &Paths),
     (id_tables, val_tables): (&[PathBuf], &[PathBuf]),

@@ -11,8 +11,9 @@ use robotid_stages::estimation::payload::{
 };
 use robotid_stages::estimation::Ellipsoid;
 
+use crate::recordings::run_pipelines;
 use crate::script::Script;
-use crate::{recordings::*, work::*};
+use crate::work::{absolute_path, holds_anything, io, regressor_table};
 use crate::{Error, PayloadRequest, PayloadValidation, Recording, Request, Result, Role};
 
 /// A payload's declared values checked before any work: a positive
@@ -178,7 +179,7 @@ pub fn payload_against_parameters(
 /// link's: its centre moved there, its semi-axes permuted where the
 /// frames' axes map onto each other (flanges turned by multiples of 90°),
 /// else the sphere holding it.
-pub(crate) fn bound_in_last_link(
+fn bound_in_last_link(
     bound: Option<([f64; 3], [f64; 3])>,
     (rot, pos): (&nalgebra::Matrix3<f64>, &nalgebra::Vector3<f64>),
 ) -> Option<Ellipsoid> {
@@ -292,7 +293,7 @@ pub fn payload_from_tables(
 /// the `[read]` table's) gains: each joint's gain's relative standard
 /// deviation, the robot file's `torque_constant_rel_std` or the default,
 /// and which.
-pub(crate) fn nominal_gains(
+fn nominal_gains(
     model: &robotid_stages::dynamics::Model,
     sys: &robotid_stages::estimation::System,
 ) -> Option<NominalGains> {
@@ -343,7 +344,7 @@ pub(crate) fn nominal_gains(
 /// else by the robot file's shapes of that link (a tool's geometry) when
 /// they hold the least-squares centre of mass: where the bound came from
 /// said, or why the shapes were not taken.
-pub(crate) fn bounded_payload(
+fn bounded_payload(
     request: &PayloadRequest,
     model: &robotid_stages::dynamics::Model,
     fit: impl Fn(Option<Ellipsoid>) -> robotid_stages::Result<PayloadFit>,

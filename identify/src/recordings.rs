@@ -8,8 +8,9 @@ use robotid::{Observer, RunOptions};
 use robotid_schemas::TableKind;
 use robotid_stages::stage::read::mcap_has_reference;
 
+use crate::judge::validate;
 use crate::script::Script;
-use crate::{judge::*, work::*};
+use crate::work::io;
 use crate::{Error, Ran, Recording, Request, Result, Role};
 
 /// The request's files made absolute and checked.
@@ -100,7 +101,7 @@ impl Paths {
 }
 
 /// The drives' gains of the request, one per joint.
-pub(crate) fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
+fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
     let joints = robotid_stages::dynamics::load_robot(robot)?.joint_names().len();
     let gains = match request.torque_per_amp[..] {
         [] => return Ok(None),
@@ -196,7 +197,7 @@ pub(crate) fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Record
 /// others: those joints are locked where the records held them (said), so
 /// that the estimate is of the joints that moved. Validation records (after
 /// the first `identifying`) are locked alike: one parameter set.
-pub(crate) fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<String>> {
+fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<String>> {
     let Some(all) = designs[..identifying]
         .iter()
         .map(|d| d.joint_wise.as_ref())
@@ -341,7 +342,7 @@ pub(crate) fn own_delays(
 /// The time shift of a validation table's measured torque against the
 /// estimate's prediction (s), and its pooled mean squared residue over the
 /// floor (infinite without one), and its sample rate.
-pub(crate) fn shift_and_ratio(staged: &Path, table: &Path, log: &[PathBuf]) -> Result<(Option<f64>, f64, Option<f64>)> {
+fn shift_and_ratio(staged: &Path, table: &Path, log: &[PathBuf]) -> Result<(Option<f64>, f64, Option<f64>)> {
     let v = validate(staged, "parameters.parquet", &[table.to_path_buf()], log)?;
     let shift = robotid::validation::time_shift(&v.sys, &v.predicted);
     let floor: f64 = v
@@ -357,12 +358,7 @@ pub(crate) fn shift_and_ratio(staged: &Path, table: &Path, log: &[PathBuf]) -> R
 }
 
 /// One recording's pipeline run again into its folder (its design changed).
-pub(crate) fn rerun(
-    request: &Request,
-    (staged, out): (&Path, &Path),
-    r: &Recording,
-    observer: &dyn Observer,
-) -> Result<()> {
+fn rerun(request: &Request, (staged, out): (&Path, &Path), r: &Recording, observer: &dyn Observer) -> Result<()> {
     let folder = staged.join(&r.name);
     std::fs::remove_dir_all(&folder).map_err(io(&out.join(&r.name)))?;
     run_pipelines(

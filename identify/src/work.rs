@@ -5,8 +5,12 @@ use std::path::{Path, PathBuf};
 use robotid::Observer;
 use robotid_schemas::TableKind;
 
+use crate::judge::{estimate, physical_or_why, validate};
+use crate::payload::{
+    payload_export, payload_frame, payload_from_tables, payload_validated, payload_values, write_payload,
+};
+use crate::recordings::{design_all, own_delays, run_pipelines, Paths};
 use crate::script::Script;
-use crate::{judge::*, payload::*, recordings::*};
 use crate::{Error, Identification, Physical, Recording, Request, Result, Role};
 
 /// Identifies the robot of `request` (see the crate's documentation),
@@ -164,7 +168,7 @@ pub(crate) fn regressor_table(r: &Recording) -> PathBuf {
 
 /// A recording's table of `kind`, relative to the staging folder: its
 /// pipeline runs one log, which it names by the log's stem.
-pub(crate) fn recording_table(r: &Recording, kind: TableKind) -> PathBuf {
+fn recording_table(r: &Recording, kind: TableKind) -> PathBuf {
     let own = robotid::run::recording_names(std::slice::from_ref(&r.log));
     Path::new(&r.name)
         .join(&own[0])

@@ -257,7 +257,7 @@ impl Compiler {
             true => Ok(()),
             false => Err(XmlError::value(what, key, text, format!("is not {k} numbers"))),
         };
-        let given = (text, what, key);
+        let read_from = (text, what, key);
         Ok(match key {
             "quat" => {
                 count(4)?;
@@ -269,7 +269,7 @@ impl Compiler {
             }
             "axisangle" => {
                 count(4)?;
-                let axis = nalgebra::Unit::new_unchecked(unit(Vector3::new(v[0], v[1], v[2]), given)?);
+                let axis = nalgebra::Unit::new_unchecked(unit(Vector3::new(v[0], v[1], v[2]), read_from)?);
                 axis_rotation(&axis, self.angle(v[3]))
             }
             "euler" => {
@@ -293,14 +293,14 @@ impl Compiler {
             }
             "xyaxes" => {
                 count(6)?;
-                let x = unit(Vector3::new(v[0], v[1], v[2]), given)?;
+                let x = unit(Vector3::new(v[0], v[1], v[2]), read_from)?;
                 let y = Vector3::new(v[3], v[4], v[5]);
-                let y = unit(y - x * x.dot(&y), given)?;
+                let y = unit(y - x * x.dot(&y), read_from)?;
                 Matrix3::from_columns(&[x, y, x.cross(&y)])
             }
             _ => {
                 count(3)?;
-                let z = unit(Vector3::new(v[0], v[1], v[2]), given)?;
+                let z = unit(Vector3::new(v[0], v[1], v[2]), read_from)?;
                 UnitQuaternion::rotation_between(&Vector3::z(), &z)
                     .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI))
                     .to_rotation_matrix()

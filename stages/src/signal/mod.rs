@@ -92,11 +92,11 @@ pub fn golden(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, rel: f64) -> f64 {
     search.best()
 }
 
-/// [`golden`] driven from outside: the caller scores the point it asks
-/// for, so that many searches go in lockstep and their points are scored
-/// together.
+/// [`golden`]'s steps, driven from outside: the caller scores the point
+/// it asks for. Searches run in lockstep use [`Brent`]; this one keeps
+/// [`golden`]'s points (the period search's) as they were.
 #[derive(Debug, Clone)]
-pub struct Golden {
+struct Golden {
     a: f64,
     b: f64,
     c: f64,
@@ -110,7 +110,7 @@ pub struct Golden {
 }
 
 impl Golden {
-    pub fn new(a: f64, b: f64, rel: f64) -> Golden {
+    fn new(a: f64, b: f64, rel: f64) -> Golden {
         let g = 0.5 * (5f64.sqrt() - 1.0);
         Golden {
             a,
@@ -126,12 +126,12 @@ impl Golden {
     }
 
     /// The point to score next, or None when the search is done.
-    pub fn next(&self) -> Option<f64> {
+    fn next(&self) -> Option<f64> {
         self.wants.map(|c| if c { self.c } else { self.d })
     }
 
     /// The score of the point [`next`](Self::next) gave.
-    pub fn tell(&mut self, f: f64) {
+    fn tell(&mut self, f: f64) {
         match self.wants {
             Some(true) => self.fc = f,
             Some(false) => self.fd = f,
@@ -160,7 +160,7 @@ impl Golden {
     }
 
     /// The interval's midpoint: the minimum found.
-    pub fn best(&self) -> f64 {
+    fn best(&self) -> f64 {
         0.5 * (self.a + self.b)
     }
 }
