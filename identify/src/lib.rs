@@ -11,6 +11,7 @@ mod judge;
 mod payload;
 mod recordings;
 mod script;
+mod warnings;
 mod work;
 
 use std::path::{Path, PathBuf};
@@ -24,6 +25,7 @@ use robotid_stages::stage::estimate::Outcome;
 use robotid_stages::stage::read::ReadConfig;
 
 pub use payload::{payload_against_parameters, payload_from_tables};
+pub use warnings::ROLLOUT_WORSE;
 pub use work::identify;
 
 /// What to identify, and how strictly.

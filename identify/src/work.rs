@@ -119,19 +119,10 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     };
     // Every simulation is run here, held on the identification; the page
     // only draws them.
-    let simulated = robotid::simulation::simulate(&page.asked());
+    // Each run and failure named where its files will be, not where they
+    // were read.
+    let simulated = robotid::simulation::simulate(&page.asked()).relocated(staged, &paths.out);
     robotid_report::report::render(&page, &simulated)?;
-    // Each run named where its table will be, not where it was read.
-    let closed_loop = simulated.closed_loop.map(|runs| {
-        runs.map(|mut runs| {
-            for r in &mut runs {
-                if let Ok(rel) = r.recording.strip_prefix(staged) {
-                    r.recording = paths.out.join(rel);
-                }
-            }
-            runs
-        })
-    });
     script.report(
         (id_tables, val_tables),
         fitted,
@@ -153,7 +144,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         validation,
         physical,
         rollouts: simulated.rolled,
-        closed_loop,
+        closed_loop: simulated.closed_loop,
         mujoco: simulated.mujoco,
         physical_rollouts: simulated.physical,
         payload,

@@ -1,7 +1,7 @@
 //! The pipeline crate's errors: problems of a pipeline file, each with its
 //! place, and failures of a run.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
@@ -145,9 +145,60 @@ pub enum Error {
     /// Validation recordings whose torque runs against the prediction.
     #[error("{recordings}: the measured torque runs against the identified model's prediction on {}: a reversed channel, or two joints' columns swapped, in the recording; fix the log", joints.join(", "))]
     Reversed { recordings: String, joints: Vec<String> },
+    /// A file that cannot serve what it was given for: which, and why.
+    #[error("{}: {msg}", path.display())]
+    Unfit { path: PathBuf, msg: String },
     /// Pictures or a report could not be made.
     #[error("{what}: {msg}")]
     Output { what: String, msg: String },
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// The same error with the files under `from` named under `to`
+    /// ([`robotid_stages::Error::relocated`]).
+    pub fn relocated(self, from: &Path, to: &Path) -> Error {
+        use robotid_stages::relocate_path as moved;
+        match self {
+            Error::Stage(e) => Error::Stage(e.relocated(from, to)),
+            Error::Io { mut path, source } => {
+                moved(&mut path, from, to);
+                Error::Io { path, source }
+            }
+            Error::Identify { mut log, message } => {
+                moved(&mut log, from, to);
+                Error::Identify { log, message }
+            }
+            Error::IdentifyStep { mut log, step, source } => {
+                moved(&mut log, from, to);
+                let source = Box::new(source.relocated(from, to));
+                Error::IdentifyStep { log, step, source }
+            }
+            Error::Unfit { mut path, msg } => {
+                moved(&mut path, from, to);
+                Error::Unfit { path, msg }
+            }
+            Error::Table { mut path, source } => {
+                moved(&mut path, from, to);
+                let source = source.relocated(from, to);
+                Error::Table { path, source }
+            }
+            Error::NotTheRobot {
+                robot,
+                mut parameters,
+                expected,
+                found,
+            } => {
+                moved(&mut parameters, from, to);
+                Error::NotTheRobot {
+                    robot,
+                    parameters,
+                    expected,
+                    found,
+                }
+            }
+            e => e,
+        }
+    }
+}

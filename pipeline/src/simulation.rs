@@ -13,10 +13,10 @@ pub type Rollout = std::result::Result<robotid_stages::dynamics::Rollout, roboti
 
 /// Per record, the estimate's and the robot file's rollouts (None: not
 /// asked for, or no robot file; Err: why not, as the page says).
-pub type Rolled = Option<std::result::Result<Vec<RolledOut>, String>>;
+pub type Rolled = Option<crate::Result<Vec<RolledOut>>>;
 
 /// What ran in closed loop, as [`Rolled`].
-pub type ClosedLooped = Option<std::result::Result<Vec<ClosedLoopRun>, String>>;
+pub type ClosedLooped = Option<crate::Result<Vec<ClosedLoopRun>>>;
 
 /// Per record, MuJoCo's rollout or why there is none.
 pub type MujocoRuns = [std::result::Result<crate::mujoco::MujocoRollout, crate::mujoco::MujocoError>];
@@ -27,8 +27,8 @@ pub type InMujoco = Option<Vec<std::result::Result<crate::mujoco::MujocoRollout,
 
 /// The physically consistent estimate rolled out on each record of
 /// [`Rolled`] in its windows (None: no physical estimate, or nothing
-/// rolled out; Err: why not).
-pub type PhysicalRolled = Option<Vec<std::result::Result<Rollout, String>>>;
+/// rolled out; Err: why not, for every record).
+pub type PhysicalRolled = Option<crate::Result<Vec<Rollout>>>;
 
 /// What was simulated.
 pub struct Simulated {
@@ -48,6 +48,27 @@ impl Simulated {
             closed_loop: None,
             mujoco: None,
             physical: None,
+        }
+    }
+
+    /// The same, with the files under `from` (a staging folder) named
+    /// under `to` (where it is committed): in the runs and in what failed.
+    pub fn relocated(self, from: &Path, to: &Path) -> Simulated {
+        fn err<'a, T>(from: &'a Path, to: &'a Path) -> impl Fn(crate::Result<T>) -> crate::Result<T> + 'a {
+            move |r| r.map_err(|e| e.relocated(from, to))
+        }
+        Simulated {
+            rolled: self.rolled.map(err(from, to)),
+            closed_loop: self.closed_loop.map(|runs| {
+                err(from, to)(runs).map(|mut runs| {
+                    for r in &mut runs {
+                        robotid_stages::relocate_path(&mut r.recording, from, to);
+                    }
+                    runs
+                })
+            }),
+            mujoco: self.mujoco,
+            physical: self.physical.map(err(from, to)),
         }
     }
 }
@@ -78,9 +99,13 @@ pub struct Asked<'a> {
 pub fn simulate(asked: &Asked) -> Simulated {
     let within = |p: &Path| asked.within.join(p);
     let rolled = match (asked.robot, asked.rollout_on) {
-        (Some(robot), Some(tables)) => Some(
-            crate::validation::rollouts(asked.within, asked.parameters, robot, tables, None).map_err(|e| e.to_string()),
-        ),
+        (Some(robot), Some(tables)) => Some(crate::validation::rollouts(
+            asked.within,
+            asked.parameters,
+            robot,
+            tables,
+            None,
+        )),
         _ => None,
     };
     let mujoco: InMujoco = match (&rolled, asked.mujoco) {
@@ -94,21 +119,20 @@ pub fn simulate(asked: &Asked) -> Simulated {
     };
     // The physical estimate rolled out in the estimate's windows.
     let physical: PhysicalRolled = match (&rolled, asked.physical, asked.robot) {
-        (Some(Ok(rolled)), Some(physical), Some(robot)) => Some(
-            match crate::validation::rolled_alike(asked.within, physical, robot, rolled) {
-                Ok(runs) => runs.into_iter().map(Ok).collect(),
-                Err(e) => vec![Err(e.to_string()); rolled.len()],
-            },
-        ),
+        (Some(Ok(rolled)), Some(physical), Some(robot)) => {
+            Some(crate::validation::rolled_alike(asked.within, physical, robot, rolled))
+        }
         _ => None,
     };
     let closed_loop = match (asked.robot, asked.closed_loop) {
         (Some(robot), Some((controller, tables))) => {
             let tables: Vec<PathBuf> = tables.iter().map(|t| within(t)).collect();
-            Some(
-                crate::validation::closed_loop_rollouts(&within(asked.parameters), robot, &tables, &within(controller))
-                    .map_err(|e| e.to_string()),
-            )
+            Some(crate::validation::closed_loop_rollouts(
+                &within(asked.parameters),
+                robot,
+                &tables,
+                &within(controller),
+            ))
         }
         _ => None,
     };

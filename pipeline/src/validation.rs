@@ -350,9 +350,10 @@ impl RolledOut {
         stopped_said(&self.joints, stopped)
     }
 
-    /// Per joint, the figures said; Err: why the estimate was not simulated.
-    pub fn rows(&self) -> std::result::Result<Vec<RolloutRow>, String> {
-        let est = self.estimate.as_ref().map_err(|e| self.stopped_said(e))?;
+    /// Per joint, the figures; Err: where the estimate stopped
+    /// ([`RolledOut::stopped_said`] says it).
+    pub fn rows(&self) -> std::result::Result<Vec<RolloutRow>, &robotid_stages::dynamics::Stopped> {
+        let est = self.estimate.as_ref()?;
         Ok(self
             .joints
             .iter()
@@ -493,14 +494,14 @@ fn kinematics_of(
                 source: e.into(),
             })?;
     let Some(tau) = kin.torque.take() else {
-        return Err(Error::Output {
-            what: path.display().to_string(),
+        return Err(Error::Unfit {
+            path: path.to_path_buf(),
             msg: "the kinematics table holds no torque to drive a rollout with".into(),
         });
     };
     if kin.joints != model.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>() {
-        return Err(Error::Output {
-            what: path.display().to_string(),
+        return Err(Error::Unfit {
+            path: path.to_path_buf(),
             msg: format!(
                 "joints {} are not the robot's {}",
                 kin.joints.join(", "),
@@ -607,8 +608,8 @@ pub fn rollouts(
 /// joint order (robotid's simulator writes one beside each recording,
 /// `<name>.truth.toml`).
 pub fn read_controller(path: &Path, joints: usize) -> Result<robotid_stages::dynamics::Pid> {
-    let bad = |msg: String| Error::Output {
-        what: path.display().to_string(),
+    let bad = |msg: String| Error::Unfit {
+        path: path.to_path_buf(),
         msg,
     };
     let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
@@ -681,9 +682,15 @@ pub struct ClosedLoopRow {
 }
 
 impl ClosedLoopRun {
-    /// Per joint, the figures said; Err: why the estimate was not simulated.
-    pub fn rows(&self) -> std::result::Result<Vec<ClosedLoopRow>, String> {
-        let est = self.estimate.as_ref().map_err(|e| stopped_said(&self.joints, e))?;
+    /// Why a model was not simulated, said.
+    pub fn stopped_said(&self, stopped: &robotid_stages::dynamics::Stopped) -> String {
+        stopped_said(&self.joints, stopped)
+    }
+
+    /// Per joint, the figures; Err: where the estimate stopped
+    /// ([`ClosedLoopRun::stopped_said`] says it).
+    pub fn rows(&self) -> std::result::Result<Vec<ClosedLoopRow>, &robotid_stages::dynamics::Stopped> {
+        let est = self.estimate.as_ref()?;
         Ok(self
             .joints
             .iter()
@@ -726,13 +733,13 @@ pub fn closed_loop_rollouts(
                     path: path.clone(),
                     source: e.into(),
                 })?;
-        let reference = raw.reference.as_ref().ok_or_else(|| Error::Output {
-            what: path.display().to_string(),
+        let reference = raw.reference.as_ref().ok_or_else(|| Error::Unfit {
+            path: path.to_path_buf(),
             msg: "no reference columns (`ref_<joint>`): a closed-loop rollout tracks the recorded reference".into(),
         })?;
         if raw.joints != model.joint_names() || raw.time.len() < 3 {
-            return Err(Error::Output {
-                what: path.display().to_string(),
+            return Err(Error::Unfit {
+                path: path.to_path_buf(),
                 msg: format!(
                     "joints {} over {} samples: not the robot's {} over 3 or more",
                     raw.joints.join(", "),

@@ -64,6 +64,7 @@ class Identification:
     payload: Optional[pa.Table]
     payload_validation: Optional[Tuple[float, List[Tuple[str, Optional[float]]]]]
     closed_loop: Optional[pa.Table]
+    warnings: List[str]
     rollouts: Optional[pa.Table]
 
 def identify(
@@ -101,13 +102,14 @@ def identify(
     `validate_loaded`: held-out loaded records, whose prediction is
     `payload_validation`). With `controller` (a TOML file's
     `[controller]` table, the `validate` records' PID), `closed_loop` is
-    the estimate's and the robot file's closed-loop runs on them (a
-    ValueError when they cannot be run, e.g. without reference channels;
-    the folder is written all the same). `rollouts`: the models
+    the estimate's and the robot file's closed-loop runs on them (None
+    with a warning when they cannot be run, e.g. without reference
+    channels). `rollouts`: the models
     rolled out on each validation record in robotid's windows (table,
     model: estimate, physical, robot_file, and with `mujoco` the exported
     MJCF run by this interpreter's MuJoCo; joint, q_rms in rad, qd_rms in
-    rad/s), as the report shows them."""
+    rad/s), as the report shows them. `warnings`: what the command line
+    prints as `warning:`, the same words."""
 
 def payload(
     loaded: Sequence[Union[str, PathLike]],

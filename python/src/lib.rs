@@ -338,6 +338,9 @@ struct Identification {
     /// `physical`, `robot_file`, and `mujoco` with `mujoco`: the export in
     /// MuJoCo) and joint, the position and velocity RMS error.
     rollouts: Option<Py<PyAny>>,
+    /// What `robotid identify` prints as `warning:` (a closed loop or a
+    /// MuJoCo run that could not be made among them), the same words.
+    warnings: Vec<String>,
 }
 
 #[pymethods]
@@ -486,35 +489,26 @@ fn identify(
             Some(Ok(runs)) => {
                 Some(table(py, robotid::validation::closed_loop_table(runs).map_err(py_error)?)?.unbind())
             }
-            Some(Err(why)) => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "the closed loop: {why}"
-                )))
-            }
-            None => None,
+            Some(Err(_)) | None => None,
         },
         rollouts: rollouts(py, &id)?,
+        warnings: id.warnings(),
         out: id.out,
     })
 }
 
-/// identify's rollouts as a pyarrow table (`report::rollout_summary`);
-/// with `mujoco`, a ValueError naming the record where MuJoCo could not
-/// run.
+/// identify's rollouts as a pyarrow table (`report::rollout_summary`;
+/// a record where MuJoCo could not run is among the warnings).
 fn rollouts(py: Python<'_>, id: &robotid_identify::Identification) -> PyResult<Option<Py<PyAny>>> {
     let Some(Ok(rolled)) = &id.rollouts else {
         return Ok(None);
     };
-    if let Some(runs) = &id.mujoco {
-        if let Some((r, Err(why))) = rolled.iter().zip(runs).find(|(_, m)| m.is_err()) {
-            return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                "MuJoCo's rollout on {}: {why}",
-                r.table.display()
-            )));
-        }
-    }
-    let batch = robotid_report::report::rollout_summary(rolled, id.physical_rollouts.as_deref(), id.mujoco.as_deref())
-        .map_err(py_error)?;
+    let batch = robotid_report::report::rollout_summary(
+        rolled,
+        id.physical_rollouts.as_ref().and_then(|p| p.as_deref().ok()),
+        id.mujoco.as_deref(),
+    )
+    .map_err(py_error)?;
     Ok(Some(table(py, batch)?.unbind()))
 }
 

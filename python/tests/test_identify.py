@@ -37,6 +37,9 @@ def identify_both(tmp_path, recordings, robot, validate, exit_code=0):
     by_cli = files(out)
     shutil.rmtree(out)
     result = robotid.identify(recordings, robot, validate=validate, out=out)
+    # The same warnings, as values.
+    warned = [line for line in done.stderr.splitlines() if line.startswith("warning: ")]
+    assert warned == [f"warning: {w}" for w in result.warnings], (warned, result.warnings)
     return by_cli, files(out), result
 
 
@@ -65,6 +68,25 @@ def test_a_read_file_from_python_as_from_the_command_line(examples, tmp_path):
     result = robotid.identify([log], robot, out=out, read=read)
     assert result.identified
     assert files(out) == by_cli
+    # A controller that cannot be run on the record (its references are
+    # named `goal{index}`, which `[read]` does not place) is a warning, as
+    # the command line's, not an error after the files are written.
+    controller = examples / "recordings" / "arm3" / "arm3.truth.toml"
+    held = tmp_path / "held.csv"
+    held.write_text("\n".join(log.read_text().splitlines()[:-1]) + "\n")
+    looped_out = tmp_path / "looped"
+    done = cli("identify", log, "--robot", robot, "--read", read, "--validate", held, "--controller", controller,
+               "--out", looped_out)
+    warned = [line for line in done.stderr.splitlines() if line.startswith("warning: ")]
+    by_cli = files(looped_out)
+    shutil.rmtree(looped_out)
+    looped = robotid.identify([log], robot, validate=[held], out=looped_out, read=read, controller=controller)
+    assert looped.closed_loop is None
+    assert files(looped_out) == by_cli
+    # Said where the file is, not where identify staged it.
+    why = [w for w in looped.warnings if w.startswith("not run in closed loop: ")]
+    assert why and why[0].startswith(f"not run in closed loop: {looped_out / 'held'}"), looped.warnings
+    assert warned == [f"warning: {w}" for w in looped.warnings], (warned, looped.warnings)
     with pytest.raises(robotid.RobotidError, match="no `\\[read\\]` table"):
         robotid.identify([log], robot, out=tmp_path / "x", read=robot)
 

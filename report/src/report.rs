@@ -468,7 +468,7 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
 /// exported MJCF's in MuJoCo (its path, and what MuJoCo gave).
 #[derive(Clone, Copy, Default)]
 struct Beside<'a> {
-    physical: Option<&'a [std::result::Result<Rollout, String>]>,
+    physical: Option<std::result::Result<&'a [Rollout], &'a robotid::Error>>,
     mujoco: Option<(&'a std::path::Path, &'a MujocoRuns)>,
 }
 
@@ -498,20 +498,20 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut], beside: Beside) -> R
         // Each column beside the estimate's: its header and, per joint,
         // its cell; what stopped it said once above the table.
         let mut extra: Vec<(&str, Vec<String>)> = Vec::new();
-        match beside.physical.and_then(|p| p.get(k)) {
-            Some(Ok(Ok(e))) => extra.push((
+        match beside.physical.map(|p| p.map(|runs| runs.get(k))) {
+            Some(Ok(Some(Ok(e)))) => extra.push((
                 "physical estimate's position RMS, mrad",
                 e.q_rms.iter().map(|q| format!("{:.3}", 1e3 * q)).collect(),
             )),
-            Some(Ok(Err(stop))) => h.push_str(&format!(
+            Some(Ok(Some(Err(stop)))) => h.push_str(&format!(
                 "<p class=\"warn\">The physically consistent estimate: {}</p>\n",
                 esc(&r.stopped_said(stop))
             )),
             Some(Err(why)) => h.push_str(&format!(
                 "<p class=\"warn\">The physically consistent estimate not rolled out: {}</p>\n",
-                esc(why)
+                esc(&why.to_string())
             )),
-            None => {}
+            Some(Ok(None)) | None => {}
         }
         match beside.mujoco.and_then(|(_, runs)| runs.get(k)) {
             Some(Ok(m)) => extra.push((
@@ -545,8 +545,11 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut], beside: Beside) -> R
                     ]
                 })
                 .collect(),
-            Err(why) => {
-                h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why)));
+            Err(stop) => {
+                h.push_str(&format!(
+                    "<p class=\"warn\">The estimate: {}</p>\n",
+                    esc(&r.stopped_said(stop))
+                ));
                 r.joints
                     .iter()
                     .enumerate()
@@ -701,7 +704,7 @@ pub struct Page {
 /// RMS error over the record (rad, rad/s), units in the fields' metadata.
 pub fn rollout_summary(
     rolled: &[robotid::validation::RolledOut],
-    physical: Option<&[std::result::Result<Rollout, String>]>,
+    physical: Option<&[Rollout]>,
     mujoco: Option<&MujocoRuns>,
 ) -> Result<arrow::array::RecordBatch> {
     use arrow::array::{ArrayRef, Float64Array, StringArray};
@@ -712,10 +715,7 @@ pub fn rollout_summary(
         let ours = |x: &Rollout| x.as_ref().ok().map(|x| (x.q_rms.clone(), x.qd_rms.clone()));
         let models = [
             ("estimate", ours(&r.estimate)),
-            (
-                "physical",
-                physical.and_then(|p| p.get(k)?.as_ref().ok()).and_then(ours),
-            ),
+            ("physical", physical.and_then(|p| p.get(k)).and_then(ours)),
             ("robot_file", r.prior.as_ref().and_then(ours)),
         ];
         for (model, figures) in models {
@@ -839,7 +839,7 @@ pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
     }
     if let Some(rolled) = &simulated.rolled {
         let beside = Beside {
-            physical: simulated.physical.as_deref(),
+            physical: simulated.physical.as_ref().map(|p| p.as_deref()),
             mujoco: page
                 .mujoco
                 .as_ref()
@@ -850,7 +850,7 @@ pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
             Ok(rolled) => rollouts_html(rolled, beside)?,
             Err(e) => format!(
                 "<h2 id=\"rollouts\">Rollouts</h2>\n<p class=\"warn\">Not rolled out: {}</p>\n",
-                esc(e)
+                esc(&e.to_string())
             ),
         });
     }
@@ -859,7 +859,7 @@ pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
             Ok(runs) => closed_loop_html(runs, page)?,
             Err(e) => format!(
                 "<h2 id=\"closed-loop\">Closed loop</h2>\n<p class=\"warn\">Not run: {}</p>\n",
-                esc(e)
+                esc(&e.to_string())
             ),
         });
     }
@@ -884,7 +884,10 @@ fn closed_loop_html(runs: &[robotid::validation::ClosedLoopRun], page: &Page) ->
             r.time.last().unwrap_or(&0.0) - r.time.first().unwrap_or(&0.0)
         ));
         match r.rows() {
-            Err(why) => h.push_str(&format!("<p class=\"warn\">The estimate: {}</p>\n", esc(&why))),
+            Err(why) => h.push_str(&format!(
+                "<p class=\"warn\">The estimate: {}</p>\n",
+                esc(&r.stopped_said(why))
+            )),
             Ok(rows) => {
                 h.push_str("<table><tr><th>joint</th><th>position RMS, mrad</th><th>robot file's, mrad</th><th>ratio</th></tr>\n");
                 for row in rows {

@@ -235,7 +235,7 @@ impl Drawing {
     /// that the data cannot tell); where that is no body a robot can have
     /// (outside the links' bounds, or friction < 0), the estimate's bounded
     /// fit of the draw.
-    fn fit(&self, d: &DVector<f64>) -> std::result::Result<Drawn, String> {
+    fn fit(&self, d: &DVector<f64>) -> robotid_stages::Result<Drawn> {
         let map = self.map();
         let step = &self.lift * (d - &self.centre);
         let lifted: Vec<f64> = self.own.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
@@ -250,8 +250,7 @@ impl Drawing {
             });
         }
         let cov = &self.params.covariance;
-        let fit = physically_consistent(&self.names, &self.prior, map, d, cov, &self.bounds, self.weight)
-            .map_err(|e| e.to_string())?;
+        let fit = physically_consistent(&self.names, &self.prior, map, d, cov, &self.bounds, self.weight)?;
         let base = map * DVector::from_column_slice(&fit.standard);
         let moved = (&base - d).dot(&(&self.inverse * (&base - d)));
         Ok(Drawn {

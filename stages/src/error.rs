@@ -95,7 +95,45 @@ impl From<Problem> for Error {
     }
 }
 
+/// `path` under `from` named under `to` instead (else as it is).
+pub fn relocate_path(path: &mut PathBuf, from: &std::path::Path, to: &std::path::Path) {
+    if let Ok(rel) = path.strip_prefix(from) {
+        *path = to.join(rel);
+    }
+}
+
 impl Error {
+    /// The same error with the files under `from` named under `to`: what a
+    /// staging folder made, said where it is once committed.
+    pub fn relocated(mut self, from: &std::path::Path, to: &std::path::Path) -> Error {
+        let named = |s: &mut String| {
+            let mut p = PathBuf::from(s.as_str());
+            relocate_path(&mut p, from, to);
+            *s = p.display().to_string();
+        };
+        match &mut self {
+            Error::Robot { path, .. }
+            | Error::Config { path, .. }
+            | Error::Io { path, .. }
+            | Error::Format { path, .. }
+            | Error::Decode { path, .. } => relocate_path(path, from, to),
+            Error::Data { source_name, .. } => named(source_name),
+            Error::Stage { source_name, cause, .. } => {
+                named(source_name);
+                let inner = std::mem::replace(
+                    cause.as_mut(),
+                    Error::Missing {
+                        what: String::new(),
+                        hint: String::new(),
+                    },
+                );
+                **cause = inner.relocated(from, to);
+            }
+            _ => {}
+        }
+        self
+    }
+
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Error {
         Error::Io {
             path: path.into(),

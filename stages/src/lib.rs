@@ -21,4 +21,4 @@ pub mod simulation;
 pub mod stage;
 pub mod trajectory;
 
-pub use error::{toml_message as error_message_of_toml, Error, Problem, Result};
+pub use error::{relocate_path, toml_message as error_message_of_toml, Error, Problem, Result};

@@ -180,6 +180,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let id = robotid_identify::identify(&request, &crate::progress::Bars::new(false, |_| {}))?;
     print_designs(&id, args.print_pipeline);
     print_estimate(&id);
+    for w in id.warnings() {
+        eprintln!("warning: {w}");
+    }
     let out = id.out.display();
     if let Some(why) = id.refused.as_ref().filter(|_| id.is_refused()) {
         return Err(Inadequate(format!(
@@ -196,10 +199,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.mujoco && id.mujoco.is_none() {
         eprintln!("note: nothing rolled out in MuJoCo: no MJCF was exported (no physically consistent estimate) or no record was rolled out");
     }
-    match &id.closed_loop {
-        Some(Ok(runs)) => print!("\n{}", super::validate::closed_loop_said(runs)),
-        Some(Err(why)) => println!("\nnot run in closed loop: {why}"),
-        None => {}
+    if let Some(Ok(runs)) = &id.closed_loop {
+        print!("\n{}", super::validate::closed_loop_said(runs));
     }
     print_payload(&id);
     println!("report in {}", id.path("report.html").display());
@@ -267,10 +268,6 @@ fn print_designs(id: &Identification, print_pipeline: bool) {
                 continue;
             }
             println!("  {}: {v}", k.key());
-            // A declaration the data contradict: a warning too.
-            if *k == Found::Conflict {
-                eprintln!("warning: {}: {v}", r.log.display());
-            }
         }
     }
     if let Some(said) = &id.locked {
@@ -286,9 +283,6 @@ fn print_designs(id: &Identification, print_pipeline: bool) {
         );
     }
     for (ran, r) in id.runs.iter().zip(&id.recordings) {
-        for w in &ran.warnings {
-            eprintln!("warning: robot: {w}");
-        }
         if let Some(l) = &ran.locked {
             println!("{l}");
         }
@@ -305,12 +299,6 @@ fn print_designs(id: &Identification, print_pipeline: bool) {
 
 /// The least-squares estimate, its verdict and its validation.
 fn print_estimate(id: &Identification) {
-    if !id.unjudged.is_empty() {
-        eprintln!(
-            "warning: no noise floor to judge the fit against on {}: the identification recordings do not repeat, so a residue far above the noise would pass unseen; record whole periods, or check the residue against the torque sensor's noise",
-            id.unjudged.join(", ")
-        );
-    }
     let level = if id.refused.is_some() { None } else { Some(0.95) };
     print!("{}", super::estimate::summary_at(&id.estimate.estimate, 0.95, level));
     print!("{}", super::estimate::findings(&id.estimate));
@@ -371,16 +359,10 @@ fn print_payload_fit(fit: &robotid_stages::estimation::payload::PayloadFit) {
     }
 }
 
-/// The physically consistent estimate, its validation and the exports.
-/// A model rolled out this many times the robot file's position error on
-/// a joint is warned of: for simulating that joint the robot file does
-/// better.
-const ROLLOUT_WORSE: f64 = 2.0;
-
 /// The rollouts, per record: each joint's position RMS error (mrad) of
 /// the estimate, the physically consistent estimate, the robot file and
-/// the export in MuJoCo, as far as each was run; a warning where an
-/// estimate rolls out over [`ROLLOUT_WORSE`]× the robot file's.
+/// the export in MuJoCo, as far as each was run (the warnings are
+/// [`Identification::warnings`]).
 fn print_rollouts(id: &Identification) {
     let Some(Ok(rolled)) = &id.rollouts else {
         return;
@@ -393,25 +375,15 @@ fn print_rollouts(id: &Identification) {
                 "physical",
                 id.physical_rollouts
                     .as_ref()
-                    .and_then(|p| p.get(k)?.as_ref().ok())
+                    .and_then(|p| p.as_ref().ok()?.get(k))
                     .and_then(stopped),
             ),
             ("robot file", r.prior.as_ref().and_then(stopped)),
         ];
-        if let Some(m) = id.mujoco.as_ref().map(|m| m.get(k)) {
-            match m {
-                Some(Ok(m)) => columns.push((
-                    "MuJoCo",
-                    Some(
-                        r.joints
-                            .iter()
-                            .map(|j| m.joints.iter().position(|x| x == j).map_or(f64::NAN, |i| m.q_rms[i]))
-                            .collect(),
-                    ),
-                )),
-                Some(Err(why)) => eprintln!("warning: not rolled out in MuJoCo on {}: {why}", r.table.display()),
-                None => {}
-            }
+        if let Some(Ok(m)) = id.mujoco.as_ref().and_then(|m| m.get(k)) {
+            let q = r.joints.iter();
+            let q = q.map(|j| m.joints.iter().position(|x| x == j).map_or(f64::NAN, |i| m.q_rms[i]));
+            columns.push(("MuJoCo", Some(q.collect())));
         }
         println!(
             "\nrollout on {} (windows of {:.3} s), position RMS error, mrad (\"-\": not simulated; the report says why):",
@@ -434,50 +406,26 @@ fn print_rollouts(id: &Identification) {
             }
             println!();
         }
-        let file = columns[2].1.clone();
-        for (name, values) in &columns[..2] {
-            let (Some(v), Some(f)) = (values, &file) else { continue };
-            let worse: Vec<String> = r
-                .joints
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| v[j] > ROLLOUT_WORSE * f[j])
-                .map(|(j, joint)| format!("{joint} ({:.1}×)", v[j] / f[j]))
-                .collect();
-            if !worse.is_empty() {
-                eprintln!(
-                    "warning: the {} rolls out over {ROLLOUT_WORSE}× the robot file's position error on {}: for simulating these joints the robot file's model does better than the fit's (the report's Rollouts)",
-                    if *name == "estimate" { "least-squares estimate" } else { "physically consistent estimate" },
-                    worse.join(", ")
-                );
-            }
-        }
     }
 }
 
+/// The physically consistent estimate, its validation and the exports.
 fn print_physical(id: &Identification) {
     match &id.physical {
-        Physical::Refused => {}
+        Physical::Refused | Physical::Failed(_) => {}
         Physical::JointWise => println!("no physical fit and no export for simulators: joint-wise records give the decoupled model (each joint's inertia, gravity and friction), not the links' bodies"),
-        Physical::Failed(e) => eprintln!("warning: no export for simulators: the physically consistent estimate failed: {e}"),
         Physical::Fitted {
             outcome,
-            fallback,
             validation,
             export,
+            ..
         } => {
-            if let Some(e) = fallback {
-                eprintln!("note: the physical fit with the estimate's covariance failed ({e}); again with the residual's");
-            }
             let table = id.path("parameters_physical.parquet");
             print!("{}", super::estimate::outcome_text(outcome, 0.95, &table));
             if let Some(v) = validation {
                 print!("\nthe physically consistent estimate:\n{}", super::validate::said(v, &table));
             }
             println!("{}", export.how);
-            for w in &export.warnings {
-                eprintln!("warning: {w}");
-            }
             for f in &export.files {
                 println!("{}", id.path(f).display());
             }

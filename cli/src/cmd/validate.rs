@@ -146,7 +146,7 @@ pub fn closed_loop_said(runs: &[robotid::validation::ClosedLoopRun]) -> String {
             r.time.last().unwrap_or(&0.0) - r.time[0]
         ));
         match r.rows() {
-            Err(why) => s.push_str(&format!("  estimate {why}\n")),
+            Err(stop) => s.push_str(&format!("  estimate {}\n", r.stopped_said(stop))),
             Ok(rows) => {
                 s.push_str("  joint                    position RMS (mrad)  robot file's (mrad)  ratio\n");
                 for row in rows {
@@ -175,7 +175,7 @@ pub fn rollouts_said(rolled: &[robotid::validation::RolledOut]) -> String {
             r.window_said
         ));
         match r.rows() {
-            Err(why) => s.push_str(&format!("  estimate {why}\n")),
+            Err(stop) => s.push_str(&format!("  estimate {}\n", r.stopped_said(stop))),
             Ok(rows) => {
                 s.push_str("  joint                    position RMS (mrad)  velocity RMS (mrad/s)  robot file's position RMS  ratio\n");
                 for row in rows {

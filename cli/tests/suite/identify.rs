@@ -376,10 +376,15 @@ fn real_kuka_lwr4_identified_with_only_the_robot() {
     // Friction against velocity on every data set shown.
     let sets = html.matches("<h3>Measured and predicted torque</h3>").count();
     assert!(sets >= 2 && html.matches("<h3>Friction against velocity</h3>").count() == sets);
-    let physical = id.physical_rollouts.as_ref().expect("rolled out");
+    let physical = id
+        .physical_rollouts
+        .as_ref()
+        .expect("rolled out")
+        .as_ref()
+        .expect("run");
     assert_eq!(physical.len(), 2);
     for p in physical {
-        let p = p.as_ref().expect("run").as_ref().expect("simulated");
+        let p = p.as_ref().expect("simulated");
         assert!(p.q_rms.iter().all(|q| q.is_finite() && *q > 0.0), "{:?}", p.q_rms);
     }
     // The exported URDF is the user's own: links, visuals, collisions,

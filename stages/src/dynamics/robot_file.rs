@@ -72,12 +72,15 @@ struct ExtentEntry {
 }
 
 /// A joint entry's `extent`, checked.
-fn extent_of(e: &JointEntry) -> Result<Option<super::model::Extent>, String> {
+fn extent_of(e: &JointEntry) -> Result<Option<super::model::Extent>, Problem> {
     let Some(x) = &e.extent else { return Ok(None) };
     if (0..3).any(|k| !(x.min[k].is_finite() && x.max[k].is_finite() && x.min[k] < x.max[k])) {
-        return Err(format!(
-            "`extent`: min {:?} must lie below max {:?} on every axis (finite, m)",
-            x.min, x.max
+        return Err(Problem::new(
+            "extent",
+            format!(
+                "min {:?} must lie below max {:?} on every axis (finite, m)",
+                x.min, x.max
+            ),
         ));
     }
     Ok(Some(super::model::Extent {
@@ -283,7 +286,7 @@ fn from_entries(file: &RobotFile, gravity: Vector3<f64>, path: &Path) -> Result<
             axis: Unit::new_normalize(axis),
         });
         m.links.push(Inertial { mass, com, inertia_com });
-        m.extents.push(extent_of(entry).map_err(ctx)?);
+        m.extents.push(extent_of(entry).map_err(|p| ctx(p.to_string()))?);
         let (mut d, mut f, mut l) = (Drive::default(), Friction::default(), Limits::default());
         apply_actuation(entry, &mut d, &mut f, &mut l).map_err(|p| ctx(p.to_string()))?;
         m.drives.push(d);

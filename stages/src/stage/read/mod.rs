@@ -759,7 +759,8 @@ impl Units<'_> {
         given: &Option<Vec<f64>>,
         from_model: &dyn Fn(&Model, usize) -> f64,
         what: &str,
-    ) -> std::result::Result<Vec<f64>, String> {
+        kind: &str,
+    ) -> Result<Vec<f64>> {
         let vals: Option<Vec<f64>> = given.clone().or_else(|| {
             self.model.map(|m| {
                 self.joints
@@ -775,13 +776,17 @@ impl Units<'_> {
         });
         match vals {
             Some(v) if v.len() == self.joints.len() && v.iter().all(|x| x.is_finite() && *x > 0.0) => Ok(v),
-            Some(v) if v.len() != self.joints.len() => Err(format!(
-                "`{what}` lists {} values for {} joints",
-                v.len(),
-                self.joints.len()
+            Some(v) if v.len() != self.joints.len() => Err(self.data_err(
+                kind,
+                None,
+                format!("`{what}` lists {} values for {} joints", v.len(), self.joints.len()),
             )),
-            _ => Err(format!(
-                "converting needs `{what}` per joint: give a robot file whose joints match, or `{what}` in the source"
+            _ => Err(self.data_err(
+                kind,
+                None,
+                format!(
+                    "converting needs `{what}` per joint: give a robot file whose joints match, or `{what}` in the source"
+                ),
             )),
         }
     }
@@ -800,7 +805,8 @@ impl Units<'_> {
                     &self.cfg.radians_per_count,
                     &|m, i| m.drives[i].radians_per_count(),
                     "radians_per_count",
-                ),
+                    kind,
+                )?,
                 1.0,
             ),
             Scale::Current(f) => (
@@ -808,7 +814,8 @@ impl Units<'_> {
                     &self.cfg.torque_per_amp,
                     &|m, i| m.drives[i].joint_torque_per_amp(),
                     "torque_per_amp",
-                ),
+                    kind,
+                )?,
                 f,
             ),
             Scale::Sample => {
@@ -819,7 +826,6 @@ impl Units<'_> {
                 return Ok(());
             }
         };
-        let k = k.map_err(|e| self.data_err(kind, None, e))?;
         for (c, kj) in values.iter_mut().zip(k) {
             c.iter_mut().for_each(|v| *v *= f * kj);
         }
