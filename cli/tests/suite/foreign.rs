@@ -1198,12 +1198,14 @@ fn the_foreign_corpus_is_identified_or_refused() {
 /// for 5 s between ramps, and one period alone. The least-squares
 /// estimate's 95 % intervals, pooled over the three, held the truth 66 %
 /// of the time before the effort's delay was fitted on such records
-/// (43, 25 and 39 of 54), and 89.5 % now (52, 39, 54). Asserted: pooled
-/// 85–99 % (the issue asks 90 %; 162 draws of a 95 % interval fall under
-/// 85 % with probability under 1e-5), every case's worst parameter within
-/// 5 std (the 5 s record's is 4.2: its column-normalised condition is
-/// 509, its residue 4× the 30 s record's), and the delay within a tenth
-/// of a sample of the filter's group delay at DC (6.93 samples).
+/// (43, 25 and 39 of 54), 89.5 % with it (52, 39, 54), and 94.4 % with the
+/// robust covariance lifted for what the fit takes out of the residue
+/// (53, 46, 54; the 5 s record has 84 blocks for 54 parameters). Asserted:
+/// pooled 90–99 % (the issue's 90 %; 162 draws of a 95 % interval fall
+/// under 90 % with probability 0.003), every case's worst parameter
+/// within 5 std (the 5 s record's is 3.6: its column-normalised condition
+/// is 509, its residue 4× the 30 s record's), and the delay within a
+/// tenth of a sample of the filter's group delay at DC (6.93 samples).
 #[test]
 fn intervals_hold_on_records_without_periods() {
     let Some(urdf) = example_urdf("ur_description/urdf/ur5_robot.urdf") else {
@@ -1260,22 +1262,24 @@ fn intervals_hold_on_records_without_periods() {
         "{group:.3} samples:\n{said}"
     );
     assert!(worst_of_all <= 5.0, "{said}");
-    assert!((0.85..=0.99).contains(&share), "{said}");
+    assert!((0.90..=0.99).contains(&share), "{said}");
 }
 
 /// Issue 61 item 4 on the corpus's ill-conditioned record (`illcond_5s`:
 /// 5 s of the non-periodic lines at a fiftieth of their size, column-
 /// normalised condition over 1e5). identify says the held-out block is
 /// far over the tolerance (exit 3 without `--accept-inadequate`). Least
-/// squares' robust intervals hold every parameter within 5 std of the
-/// truth. The physically consistent table takes the inertias the record
+/// squares' robust intervals hold every parameter within 3 std of the
+/// truth (worst 2.75; 4.71 before the robust covariance was lifted for
+/// what the fit takes out of the residue). The physically consistent table takes the inertias the record
 /// leaves undetermined from the robot file: their intervals carry the
 /// prior's spread (the bootstrap alone put XX_wrist_2_joint 22.7 std
 /// off, at ± 0.028 kg·m²), so each second moment is within 3 std. Its
 /// draws take least squares' robust covariance although rounding leaves
 /// that singular (it fell back to the white one, 15 374 degrees of freedom
 /// for a residue correlated over a third of the record: 38 of 54 within
-/// 2 std); now 50 of 54 are, and 46 (85 %) is asserted.
+/// 2 std); now 50 of 54 are, and 46 (85 %) is asserted. One parameter is
+/// still beyond 3 std there: Fc_wrist_3_joint at 3.8 (6.2 before the lift).
 #[test]
 fn an_ill_conditioned_record_keeps_its_prior_held_inertias_honest() {
     let Some(urdf) = example_urdf("ur_description/urdf/ur5_robot.urdf") else {
@@ -1304,7 +1308,16 @@ fn an_ill_conditioned_record_keeps_its_prior_held_inertias_honest() {
     };
     let worst = |z: &[(String, f64)]| z.iter().fold(0.0f64, |m, (_, z)| m.max(z.abs()));
     let ls = z("parameters.parquet");
-    assert!(worst(&ls) <= 5.0, "{ls:?}");
+    let physical = z("parameters_physical.parquet");
+    let beyond = |z: &[(String, f64)]| z.iter().filter(|(_, z)| z.abs() > 3.0).cloned().collect::<Vec<_>>();
+    eprintln!(
+        "least squares: worst {:.2} std, beyond 3: {:?}; physical: worst {:.2}, beyond 3: {:?}",
+        worst(&ls),
+        beyond(&ls),
+        worst(&physical),
+        beyond(&physical)
+    );
+    assert!(worst(&ls) <= 3.0, "{ls:?}");
     let second_moments: Vec<(String, f64)> = z("parameters_physical.parquet")
         .into_iter()
         .filter(|(n, _)| {
@@ -1317,8 +1330,8 @@ fn an_ill_conditioned_record_keeps_its_prior_held_inertias_honest() {
         second_moments.len() >= 20 && worst(&second_moments) <= 3.0,
         "{second_moments:?}"
     );
-    let physical = z("parameters_physical.parquet");
     let within = physical.iter().filter(|(_, z)| z.abs() <= 2.0).count();
+    eprintln!("physical: {within} of {} within 2 std", physical.len());
     assert!(
         within * 100 >= 85 * physical.len(),
         "{within} of {}: {physical:?}",

@@ -31,11 +31,19 @@ pub struct Robust {
     /// number of independent blocks the covariance is estimated from (the
     /// Student t's degrees of freedom).
     pub dof: usize,
+    /// The largest factor a variance was lifted by for the residue's
+    /// projection on the columns ([`projection_lift`]).
+    pub lift: f64,
 }
 
 /// The Bartlett-kernel sandwich covariance of θ fitted to `sys` with row
 /// weights `w` (None: ordinary least squares).
 pub fn robust_covariance(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>) -> Result<Robust> {
+    sandwich(sys, theta, w, true)
+}
+
+/// [`robust_covariance`], with or without the projection's lift.
+fn sandwich(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>, lifted: bool) -> Result<Robust> {
     let p = theta.len();
     let weight = |i: usize| w.map_or(1.0, |w| w[i]);
     let residue = &sys.b - &sys.a * theta;
@@ -85,6 +93,11 @@ pub fn robust_covariance(sys: &System, theta: &DVector<f64>, w: Option<&DVector<
         }
         blocks += n / l;
     }
+    let lift = match lifted {
+        true => projection_lift(sys, &wa, &g, &by_sample, bandwidth)?,
+        false => (DMatrix::identity(p, p), 1.0),
+    };
+    let omega = &lift.0 * omega * lift.0.transpose();
     let mut covariance = &g * omega * &g;
     // Known parameters' uncertainty, as least squares adds it:
     // θ = G·(b − A_k θ_k) adds G·AᵀWA_k·C_k·A_kᵀWA·G.
@@ -96,7 +109,92 @@ pub fn robust_covariance(sys: &System, theta: &DVector<f64>, w: Option<&DVector<
         covariance,
         bandwidth,
         dof: blocks.saturating_sub(1).max(1),
+        lift: lift.1,
     })
+}
+
+/// The most a variance is lifted for the residue's projection: a direction
+/// where the windows leave the residue under a tenth of the error's share
+/// is one the record barely tells from its own noise.
+pub const MOST_LIFT: f64 = 10.0;
+
+/// C such that C·Ω̂·Cᵀ undoes the residue's projection on the columns, and
+/// the largest variance lift it makes (≤ [`MOST_LIFT`]).
+///
+/// The residue is the error less its projection, so a window's sum of
+/// scores Ŵ_k = Σ a_i·w_i·ê_i is smaller than the error's: with white errors
+/// of variance σ²/w_i, E[Ŵ_k·Ŵ_kᵀ] = σ²·(Q_k − Q_k·G·Q_k), Q_k = A_kᵀWA_k over
+/// the window, so E[Ω̂] = σ²·(N − D), D = Σ_k Q_k·G·Q_k / L, against σ²·N
+/// (N = AᵀWA). The shortfall is about p/B of Ω̂ (p parameters, B windows):
+/// nothing on a long record, most of it where a short one has few windows
+/// per parameter (the corpus's 5 s record: 54 parameters, 84 windows,
+/// 72 % of its 95 % intervals held the truth). This is Bell and
+/// McCaffrey's (2002) bias-reduced linearisation, their working model
+/// (white errors) applied to the kernel's windows: with N = L·Lᵀ and
+/// I − L⁻¹·D·L⁻ᵀ = V·Λ·Vᵀ, C = L·V·Λ^(−1/2)·Vᵀ·L⁻¹ gives E[C·Ω̂·Cᵀ] = σ²·N.
+/// D is summed over the windows that start at 0 and at L/2 modulo L (their
+/// mean; every start would cost p³ per sample).
+fn projection_lift(
+    sys: &System,
+    wa: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    by_sample: &[BTreeMap<i64, Vec<usize>>],
+    l: usize,
+) -> Result<(DMatrix<f64>, f64)> {
+    let p = g.nrows();
+    let normal = sys.a.tr_mul(wa);
+    let mut d = DMatrix::<f64>::zeros(p, p);
+    let offsets = [0, l / 2];
+    let mut window: Vec<usize> = Vec::new();
+    for &offset in &offsets {
+        for samples in by_sample {
+            let rows: Vec<&Vec<usize>> = samples.values().collect();
+            let l = l.min(rows.len()).max(1);
+            // Windows [start, start + L), the first cut at the offset.
+            let mut start = 0;
+            while start < rows.len() {
+                let end = if start == 0 && offset > 0 {
+                    offset.min(rows.len())
+                } else {
+                    (start + l).min(rows.len())
+                };
+                window.clear();
+                window.extend(rows[start..end].iter().flat_map(|r| r.iter().copied()));
+                let q = sys.a.select_rows(&window).tr_mul(&wa.select_rows(&window));
+                d += &q * g * &q;
+                start = end;
+            }
+        }
+    }
+    d /= offsets.len() as f64;
+    // N factored on its scaled form: columns 1e13 apart keep their digits.
+    let scale = DVector::from_fn(p, |j, _| normal[(j, j)].max(f64::MIN_POSITIVE).sqrt().recip());
+    let scaled = DMatrix::from_fn(p, p, |i, j| normal[(i, j)] * scale[i] * scale[j]);
+    let chol = scaled
+        .cholesky()
+        .ok_or_else(|| Error::numerical("robust covariance", "AᵀWA is not positive definite"))?;
+    // L = S⁻¹·L_s.
+    let mut factor = chol.l();
+    for i in 0..p {
+        factor.row_mut(i).scale_mut(scale[i].recip());
+    }
+    let solve = |m: &DMatrix<f64>| {
+        factor
+            .solve_lower_triangular(m)
+            .ok_or_else(|| Error::numerical("robust covariance", "AᵀWA's factor is singular"))
+    };
+    let left = solve(&d)?;
+    let inner = solve(&left.transpose())?;
+    let kept = DMatrix::identity(p, p) - (&inner + inner.transpose()) * 0.5;
+    let eig = kept.symmetric_eigen();
+    let floor = MOST_LIFT.recip();
+    let lift = eig.eigenvalues.iter().map(|&x| 1.0 / x.max(floor)).fold(1.0, f64::max);
+    let root = DMatrix::from_diagonal(&eig.eigenvalues.map(|x| x.clamp(floor, 1.0).sqrt().recip()));
+    let inverse = solve(&DMatrix::identity(p, p))?;
+    Ok((
+        &factor * &eig.eigenvectors * root * eig.eigenvectors.transpose() * inverse,
+        lift,
+    ))
 }
 
 /// Twice the first lag at which the residue's autocorrelation, pooled over
@@ -178,6 +276,61 @@ mod tests {
             assert!((0.8..1.2).contains(&r), "parameter {j}: robust/true std {r:.3}");
             assert!(w < 0.4, "parameter {j}: white/true std {w:.3}");
         }
+    }
+
+    /// A short record with many parameters (24 smooth columns, AR(1)
+    /// errors with φ = 0.8): the residue has lost a large share of the
+    /// error to its projection on the columns, and the robust std without
+    /// the lift is 0.63–0.68 of the spread over realisations; with it
+    /// 0.81–0.84, what the Bartlett kernel's tail leaves on the long record
+    /// above (0.85–0.93), within the 300 draws' ±4 %.
+    #[test]
+    fn the_projection_lift_restores_a_short_records_robust_std() {
+        let (n, p, draws) = (1200, 24, 300);
+        let a = DMatrix::from_fn(n, p, |i, j| {
+            let t = i as f64 / n as f64;
+            let f = 0.5 + 0.37 * j as f64;
+            if j % 2 == 0 {
+                (2.0 * std::f64::consts::PI * f * t + 0.3 * j as f64).sin()
+            } else {
+                (2.0 * std::f64::consts::PI * f * t).cos() + 0.1 * t
+            }
+        });
+        let truth = DVector::from_fn(p, |j, _| 1.0 + j as f64 * 0.1);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let g = (a.transpose() * &a).try_inverse().unwrap();
+        let (mut estimates, mut lifts) = (Vec::new(), Vec::new());
+        let (mut robust, mut unlifted) = (DVector::<f64>::zeros(p), DVector::<f64>::zeros(p));
+        for _ in 0..draws {
+            let mut e = 0.0;
+            let noise = DVector::from_fn(n, |_, _| {
+                e = 0.8 * e + rng.sample::<f64, _>(StandardNormal) * 0.1;
+                e
+            });
+            let b = &a * &truth + noise;
+            let theta = &g * a.transpose() * &b;
+            let sys = one_joint(a.clone(), b.clone());
+            let r = robust_covariance(&sys, &theta, None).unwrap();
+            let u = sandwich(&sys, &theta, None, false).unwrap();
+            for j in 0..p {
+                robust[j] += r.covariance[(j, j)] / draws as f64;
+                unlifted[j] += u.covariance[(j, j)] / draws as f64;
+            }
+            lifts.push(r.lift);
+            estimates.push(theta);
+        }
+        let mut ratios = Vec::new();
+        for j in 0..p {
+            let mean = estimates.iter().map(|t| t[j]).sum::<f64>() / draws as f64;
+            let spread = (estimates.iter().map(|t| (t[j] - mean).powi(2)).sum::<f64>() / (draws - 1) as f64).sqrt();
+            ratios.push((robust[j].sqrt() / spread, unlifted[j].sqrt() / spread));
+        }
+        let lift = lifts.iter().sum::<f64>() / draws as f64;
+        assert!(lift > 2.0, "{lift}");
+        assert!(
+            ratios.iter().all(|r| (0.78..1.2).contains(&r.0) && r.1 < 0.72),
+            "{ratios:?}"
+        );
     }
 
     /// White errors: the robust std is the white one (the kernel's window

@@ -688,10 +688,11 @@ impl Reducer {
         let r = robust_covariance(&sys, &est.values, w.as_ref())?;
         let rate = sys.time.windows(2).map(|t| t[1] - t[0]).find(|d| *d > 0.0);
         let said = format!(
-            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom), not the {} covariance, which holds the residue as white noise",
+            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom; variances lifted up to {:.2}× for what the fit took out of the residue), not the {} covariance, which holds the residue as white noise",
             r.bandwidth,
             rate.map(|d| format!(", {:.0} ms", 1e3 * d * r.bandwidth as f64)).unwrap_or_default(),
             r.dof,
+            r.lift,
             est.covariance_from.name(),
         );
         est.covariance = r.covariance;
