@@ -121,8 +121,9 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     // only draws them.
     // Each run and failure named where its files will be, not where they
     // were read.
+    let read = page.read()?;
     let simulated = robotid::simulation::simulate(&page.asked()).relocated(staged, &paths.out);
-    robotid_report::report::render(&page, &simulated)?;
+    robotid_report::report::render(&page, &read, &simulated)?;
     script.report(
         (id_tables, val_tables),
         fitted,

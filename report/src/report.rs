@@ -119,7 +119,7 @@ fn sig(x: f64) -> String {
 /// relative error on each data set and its bodies.
 pub struct Physical<'a> {
     pub params: &'a Parameters,
-    pub bodies: Vec<Body>,
+    pub bodies: &'a [Body],
 }
 
 /// One data set shown in the report.
@@ -417,7 +417,7 @@ pub fn html(params: &Parameters, source: &str, sets: &[DataSet], physical: Optio
     }
     let set_stats = verdicts_html(&mut h, params, sets, physical)?;
     if let Some(ph) = physical.filter(|ph| !ph.bodies.is_empty()) {
-        h.push_str(&bodies_html(&ph.bodies));
+        h.push_str(&bodies_html(ph.bodies));
     }
     for (key, what) in [
         (metadata::WIDENED, "Intervals widened"),
@@ -784,58 +784,93 @@ impl Page {
     }
 }
 
-/// The page of `page`, written to `page.out`: its tables drawn, and what
-/// `simulated` holds ([`robotid::simulation::simulate`] of
-/// [`Page::asked`]) shown; nothing simulated here.
-pub fn render(page: &Page, simulated: &Simulated) -> Result<()> {
+/// What a page draws, read from its files and checked against each other
+/// ([`Page::read`]): before anything is simulated for it.
+pub struct Read {
+    params: Parameters,
+    excitation: Option<System>,
+    validation: Option<System>,
+    /// The physically consistent estimate and its bodies against the
+    /// robot file's.
+    physical: Option<(Parameters, Vec<Body>)>,
+    payload: Option<arrow::array::RecordBatch>,
+}
+
+impl Page {
+    /// Its tables, read once; an error where the regressor tables hold
+    /// other parameters than the estimate (so nothing is simulated for a
+    /// page that cannot be drawn).
+    pub fn read(&self) -> Result<Read> {
+        let within = |p: &std::path::Path| self.within.join(p);
+        let params = robotid::tables::read_parameters(&within(&self.parameters))?;
+        let load = |tables: &[std::path::PathBuf], title: &str| -> Result<Option<System>> {
+            if tables.is_empty() {
+                return Ok(None);
+            }
+            let sys = robotid::tables::load_system(&self.within, tables)?;
+            if sys.names != params.names {
+                return Err(Error::Stage(robotid_stages::Error::mismatch(
+                    format!("{title}: parameters"),
+                    format!("{} (the estimate's)", params.names.join(", ")),
+                    sys.names.join(", "),
+                )));
+            }
+            Ok(Some(sys))
+        };
+        let excitation = load(&self.excitation, "Excitation data")?;
+        let validation = load(&self.validation, "Validation data")?;
+        let physical = match &self.physical {
+            Some(path) => Some((
+                robotid::tables::read_parameters(&within(path))?,
+                match &self.robot {
+                    Some(r) => bodies(r, &within(path))?,
+                    None => Vec::new(),
+                },
+            )),
+            None => None,
+        };
+        let payload = match &self.payload {
+            Some(p) => Some(robotid_stages::formats::parquet::read_parquet(&within(p))?),
+            None => None,
+        };
+        Ok(Read {
+            params,
+            excitation,
+            validation,
+            physical,
+            payload,
+        })
+    }
+}
+
+/// The page of `page`, written to `page.out`: the tables `read` holds
+/// ([`Page::read`]) drawn, and what `simulated` holds
+/// ([`robotid::simulation::simulate`] of [`Page::asked`]) shown; nothing
+/// read again, nothing simulated here.
+pub fn render(page: &Page, read: &Read, simulated: &Simulated) -> Result<()> {
     let within = |p: &std::path::Path| page.within.join(p);
-    let params = robotid::tables::read_parameters(&within(&page.parameters))?;
-    let load = |tables: &[std::path::PathBuf]| {
-        (!tables.is_empty())
-            .then(|| robotid::tables::load_system(&page.within, tables))
-            .transpose()
-    };
-    let (excitation, validation) = (load(&page.excitation)?, load(&page.validation)?);
+    let params = &read.params;
     let mut sets = Vec::new();
-    if let Some(sys) = &excitation {
+    if let Some(sys) = &read.excitation {
         sets.push(DataSet {
             title: "Excitation data",
             sys,
         });
     }
-    if let Some(sys) = &validation {
+    if let Some(sys) = &read.validation {
         sets.push(DataSet {
             title: "Validation data",
             sys,
         });
     }
-    let physical_params = page
+    let physical = read
         .physical
-        .as_deref()
-        .map(|p| robotid::tables::read_parameters(&within(p)))
-        .transpose()?;
-    let physical = match (&physical_params, &page.physical) {
-        (Some(params), Some(path)) => Some(Physical {
-            params,
-            bodies: match &page.robot {
-                Some(r) => bodies(r, &within(path))?,
-                None => Vec::new(),
-            },
-        }),
-        _ => None,
-    };
-    let mut text = html(
-        &params,
-        &page.parameters.display().to_string(),
-        &sets,
-        physical.as_ref(),
-    )?;
+        .as_ref()
+        .map(|(params, bodies)| Physical { params, bodies });
+    let mut text = html(params, &page.parameters.display().to_string(), &sets, physical.as_ref())?;
     let mut sections = String::new();
-    if let Some(p) = &page.payload {
-        sections.push_str(&payload_html(
-            &robotid_stages::formats::parquet::read_parquet(&within(p))?,
-            p,
-        )?);
+    if let (Some(batch), Some(p)) = (&read.payload, &page.payload) {
+        sections.push_str(&payload_html(batch, p)?);
     }
     if let Some(rolled) = &simulated.rolled {
         let beside = Beside {

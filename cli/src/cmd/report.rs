@@ -78,7 +78,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out: args.out.clone(),
         within: PathBuf::new(),
     };
-    render(&page, &robotid::simulation::simulate(&page.asked()))?;
+    // Read and checked before anything is simulated for it.
+    let read = page.read()?;
+    render(&page, &read, &robotid::simulation::simulate(&page.asked()))?;
     println!("report in {}", args.out.display());
     Ok(())
 }

@@ -1262,7 +1262,7 @@ fn the_report_draws_what_identify_simulated() {
         out: "drawn.html".into(),
         within: out.clone(),
     };
-    robotid_report::report::render(&page, &robotid::simulation::Simulated::nothing()).unwrap();
+    robotid_report::report::render(&page, &page.read().unwrap(), &robotid::simulation::Simulated::nothing()).unwrap();
     let ours = std::fs::read_to_string(out.join("report.html")).unwrap();
     let drawn = std::fs::read_to_string(out.join("drawn.html")).unwrap();
     let at = ours
