@@ -37,7 +37,7 @@ pub use physical::{
     bootstrap_covariance, held_out_prior_weight, is_inertial, link_bounds, physically_consistent, prior_scales,
     pseudo_inertia, Ellipsoid, LinkBound, PhysicalFit, BOOTSTRAP_DRAWS, MASS_FACTOR,
 };
-pub use robust::{robust_covariance, Robust};
+pub use robust::{robust_covariance, Robust, MOST_LIFT};
 pub use summary::{Halves, KnownPart, Summary, MAX_CONDITION};
 pub use system::{
     block_rows, columns_of, row_weights, Known, RowBlocks, System, BLOCK_SAMPLES, PARAMETER_COLUMN, PERIOD_TORQUE,

@@ -379,7 +379,7 @@ fn estimate_notes(est: &Estimate, expressions: &[String]) -> BTreeMap<String, St
             metadata::IMPOSSIBLE.into(),
             impossible
                 .iter()
-                .map(|(n, v, z)| format!("{n} = {v} ({z:.1} σ)"))
+                .map(|(n, v, z)| format!("{n} = {v:.6} ({z:.1} σ)"))
                 .collect::<Vec<_>>()
                 .join(", "),
         );
@@ -688,11 +688,15 @@ impl Reducer {
         let r = robust_covariance(&sys, &est.values, w.as_ref())?;
         let rate = sys.time.windows(2).map(|t| t[1] - t[0]).find(|d| *d > 0.0);
         let said = format!(
-            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom; variances lifted up to {:.2}× for what the fit took out of the residue), not the {} covariance, which holds the residue as white noise",
+            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom; variances lifted up to {:.2}× for what the fit took out of the residue{}), not the {} covariance, which holds the residue as white noise",
             r.bandwidth,
             rate.map(|d| format!(", {:.0} ms", 1e3 * d * r.bandwidth as f64)).unwrap_or_default(),
             r.dof,
             r.lift,
+            match r.lift >= crate::estimation::MOST_LIFT {
+                true => ", the most it lifts: some direction the record barely tells from its noise, whose interval may still be short",
+                false => "",
+            },
             est.covariance_from.name(),
         );
         est.covariance = r.covariance;
