@@ -32,8 +32,9 @@ pub struct Robust {
     /// Student t's degrees of freedom).
     pub dof: usize,
     /// The largest factor a variance was lifted by for the residue's
-    /// projection on the columns ([`projection_lift`]).
-    pub lift: f64,
+    /// projection on the columns ([`projection_lift`]); None: AᵀWA too
+    /// ill-conditioned to factor, not lifted.
+    pub lift: Option<f64>,
 }
 
 /// The Bartlett-kernel sandwich covariance of θ fitted to `sys` with row
@@ -59,6 +60,7 @@ fn sandwich(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>, lifted
     };
     let normal = sys.a.tr_mul(&wa);
     let g = normal
+        .clone()
         .try_inverse()
         .ok_or_else(|| Error::numerical("robust covariance", "AᵀWA is singular although the estimate was solved"))?;
     let mut omega = DMatrix::zeros(p, p);
@@ -93,11 +95,15 @@ fn sandwich(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>, lifted
         }
         blocks += n / l;
     }
-    let lift = match lifted {
-        true => projection_lift(sys, &wa, &g, &by_sample, bandwidth)?,
-        false => (DMatrix::identity(p, p), 1.0),
+    // Not lifted where N is too ill-conditioned to factor (said: `lift`
+    // None), rather than no covariance at all.
+    let lift = lifted
+        .then(|| projection_lift(sys, (&wa, &normal), &g, &by_sample, bandwidth))
+        .flatten();
+    let omega = match &lift {
+        Some((c, _)) => c * omega * c.transpose(),
+        None => omega,
     };
-    let omega = &lift.0 * omega * lift.0.transpose();
     let mut covariance = &g * omega * &g;
     // Known parameters' uncertainty, as least squares adds it:
     // θ = G·(b − A_k θ_k) adds G·AᵀWA_k·C_k·A_kᵀWA·G.
@@ -109,7 +115,10 @@ fn sandwich(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>, lifted
         covariance,
         bandwidth,
         dof: blocks.saturating_sub(1).max(1),
-        lift: lift.1,
+        lift: match lifted {
+            true => lift.map(|l| l.1),
+            false => Some(1.0),
+        },
     })
 }
 
@@ -119,7 +128,8 @@ fn sandwich(sys: &System, theta: &DVector<f64>, w: Option<&DVector<f64>>, lifted
 pub const MOST_LIFT: f64 = 10.0;
 
 /// C such that C·Ω̂·Cᵀ undoes the residue's projection on the columns, and
-/// the largest variance lift it makes (≤ [`MOST_LIFT`]).
+/// the largest variance lift it makes (≤ [`MOST_LIFT`]); None where N
+/// does not factor.
 ///
 /// The residue is the error less its projection, so a window's sum of
 /// scores Ŵ_k = Σ a_i·w_i·ê_i is smaller than the error's: with white errors
@@ -136,13 +146,12 @@ pub const MOST_LIFT: f64 = 10.0;
 /// mean; every start would cost p³ per sample).
 fn projection_lift(
     sys: &System,
-    wa: &DMatrix<f64>,
+    (wa, normal): (&DMatrix<f64>, &DMatrix<f64>),
     g: &DMatrix<f64>,
     by_sample: &[BTreeMap<i64, Vec<usize>>],
     l: usize,
-) -> Result<(DMatrix<f64>, f64)> {
+) -> Option<(DMatrix<f64>, f64)> {
     let p = g.nrows();
-    let normal = sys.a.tr_mul(wa);
     let mut d = DMatrix::<f64>::zeros(p, p);
     let offsets = [0, l / 2];
     let mut window: Vec<usize> = Vec::new();
@@ -170,19 +179,13 @@ fn projection_lift(
     // N factored on its scaled form: columns 1e13 apart keep their digits.
     let scale = DVector::from_fn(p, |j, _| normal[(j, j)].max(f64::MIN_POSITIVE).sqrt().recip());
     let scaled = DMatrix::from_fn(p, p, |i, j| normal[(i, j)] * scale[i] * scale[j]);
-    let chol = scaled
-        .cholesky()
-        .ok_or_else(|| Error::numerical("robust covariance", "AᵀWA is not positive definite"))?;
+    let chol = scaled.cholesky()?;
     // L = S⁻¹·L_s.
     let mut factor = chol.l();
     for i in 0..p {
         factor.row_mut(i).scale_mut(scale[i].recip());
     }
-    let solve = |m: &DMatrix<f64>| {
-        factor
-            .solve_lower_triangular(m)
-            .ok_or_else(|| Error::numerical("robust covariance", "AᵀWA's factor is singular"))
-    };
+    let solve = |m: &DMatrix<f64>| factor.solve_lower_triangular(m);
     let left = solve(&d)?;
     let inner = solve(&left.transpose())?;
     let kept = DMatrix::identity(p, p) - (&inner + inner.transpose()) * 0.5;
@@ -191,7 +194,7 @@ fn projection_lift(
     let lift = eig.eigenvalues.iter().map(|&x| 1.0 / x.max(floor)).fold(1.0, f64::max);
     let root = DMatrix::from_diagonal(&eig.eigenvalues.map(|x| x.clamp(floor, 1.0).sqrt().recip()));
     let inverse = solve(&DMatrix::identity(p, p))?;
-    Ok((
+    Some((
         &factor * &eig.eigenvectors * root * eig.eigenvectors.transpose() * inverse,
         lift,
     ))
@@ -316,7 +319,7 @@ mod tests {
                 robust[j] += r.covariance[(j, j)] / draws as f64;
                 unlifted[j] += u.covariance[(j, j)] / draws as f64;
             }
-            lifts.push(r.lift);
+            lifts.push(r.lift.expect("lifted"));
             estimates.push(theta);
         }
         let mut ratios = Vec::new();

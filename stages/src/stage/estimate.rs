@@ -688,14 +688,14 @@ impl Reducer {
         let r = robust_covariance(&sys, &est.values, w.as_ref())?;
         let rate = sys.time.windows(2).map(|t| t[1] - t[0]).find(|d| *d > 0.0);
         let said = format!(
-            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom; variances lifted up to {:.2}× for what the fit took out of the residue{}), not the {} covariance, which holds the residue as white noise",
+            "{why}: the covariance is the sandwich robust to a residue correlated in time (Bartlett kernel over {} samples{}, twice the residue's correlation length; {} degrees of freedom; {}), not the {} covariance, which holds the residue as white noise",
             r.bandwidth,
             rate.map(|d| format!(", {:.0} ms", 1e3 * d * r.bandwidth as f64)).unwrap_or_default(),
             r.dof,
-            r.lift,
-            match r.lift >= crate::estimation::MOST_LIFT {
-                true => ", the most it lifts: some direction the record barely tells from its noise, whose interval may still be short",
-                false => "",
+            match r.lift {
+                Some(l) if l >= crate::estimation::MOST_LIFT => format!("variances lifted up to {l:.2}× for what the fit took out of the residue, the most it lifts: some direction the record barely tells from its noise, whose interval may still be short"),
+                Some(l) => format!("variances lifted up to {l:.2}× for what the fit took out of the residue"),
+                None => "not lifted for what the fit took out of the residue: AᵀWA too ill-conditioned to factor, so the intervals may be short".into(),
             },
             est.covariance_from.name(),
         );
