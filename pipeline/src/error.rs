@@ -156,49 +156,25 @@ pub enum Error {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
-    /// The same error with the files under `from` named under `to`
-    /// ([`robotid_stages::Error::relocated`]).
-    pub fn relocated(self, from: &Path, to: &Path) -> Error {
+    /// The files under `from` named under `to` instead
+    /// ([`robotid_stages::Error::relocate`]).
+    pub fn relocate(&mut self, from: &Path, to: &Path) {
         use robotid_stages::relocate_path as moved;
         match self {
-            Error::Stage(e) => Error::Stage(e.relocated(from, to)),
-            Error::Io { mut path, source } => {
-                moved(&mut path, from, to);
-                Error::Io { path, source }
+            Error::Stage(e) => e.relocate(from, to),
+            Error::Io { path, .. }
+            | Error::Identify { log: path, .. }
+            | Error::Unfit { path, .. }
+            | Error::NotTheRobot { parameters: path, .. } => moved(path, from, to),
+            Error::IdentifyStep { log, source, .. } => {
+                moved(log, from, to);
+                source.relocate(from, to);
             }
-            Error::Identify { mut log, message } => {
-                moved(&mut log, from, to);
-                Error::Identify { log, message }
+            Error::Table { path, source } => {
+                moved(path, from, to);
+                source.relocate(from, to);
             }
-            Error::IdentifyStep { mut log, step, source } => {
-                moved(&mut log, from, to);
-                let source = Box::new(source.relocated(from, to));
-                Error::IdentifyStep { log, step, source }
-            }
-            Error::Unfit { mut path, msg } => {
-                moved(&mut path, from, to);
-                Error::Unfit { path, msg }
-            }
-            Error::Table { mut path, source } => {
-                moved(&mut path, from, to);
-                let source = source.relocated(from, to);
-                Error::Table { path, source }
-            }
-            Error::NotTheRobot {
-                robot,
-                mut parameters,
-                expected,
-                found,
-            } => {
-                moved(&mut parameters, from, to);
-                Error::NotTheRobot {
-                    robot,
-                    parameters,
-                    expected,
-                    found,
-                }
-            }
-            e => e,
+            _ => {}
         }
     }
 }

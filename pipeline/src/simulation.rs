@@ -55,7 +55,12 @@ impl Simulated {
     /// under `to` (where it is committed): in the runs and in what failed.
     pub fn relocated(self, from: &Path, to: &Path) -> Simulated {
         fn err<'a, T>(from: &'a Path, to: &'a Path) -> impl Fn(crate::Result<T>) -> crate::Result<T> + 'a {
-            move |r| r.map_err(|e| e.relocated(from, to))
+            move |r| {
+                r.map_err(|mut e| {
+                    e.relocate(from, to);
+                    e
+                })
+            }
         }
         Simulated {
             rolled: self.rolled.map(err(from, to)),

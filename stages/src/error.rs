@@ -103,15 +103,15 @@ pub fn relocate_path(path: &mut PathBuf, from: &std::path::Path, to: &std::path:
 }
 
 impl Error {
-    /// The same error with the files under `from` named under `to`: what a
-    /// staging folder made, said where it is once committed.
-    pub fn relocated(mut self, from: &std::path::Path, to: &std::path::Path) -> Error {
+    /// The files under `from` named under `to` instead: what a staging
+    /// folder made, said where it is once committed.
+    pub fn relocate(&mut self, from: &std::path::Path, to: &std::path::Path) {
         let named = |s: &mut String| {
             let mut p = PathBuf::from(s.as_str());
             relocate_path(&mut p, from, to);
             *s = p.display().to_string();
         };
-        match &mut self {
+        match self {
             Error::Robot { path, .. }
             | Error::Config { path, .. }
             | Error::Io { path, .. }
@@ -120,18 +120,10 @@ impl Error {
             Error::Data { source_name, .. } => named(source_name),
             Error::Stage { source_name, cause, .. } => {
                 named(source_name);
-                let inner = std::mem::replace(
-                    cause.as_mut(),
-                    Error::Missing {
-                        what: String::new(),
-                        hint: String::new(),
-                    },
-                );
-                **cause = inner.relocated(from, to);
+                cause.relocate(from, to);
             }
             _ => {}
         }
-        self
     }
 
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Error {

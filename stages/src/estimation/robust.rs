@@ -253,12 +253,7 @@ mod tests {
         let (mut estimates, mut robust, mut white) = (Vec::new(), DVector::<f64>::zeros(p), DVector::<f64>::zeros(p));
         let g = (a.transpose() * &a).try_inverse().unwrap();
         for _ in 0..draws {
-            let mut e = 0.0;
-            let noise = DVector::from_fn(n, |_, _| {
-                e = 0.95 * e + rng.sample::<f64, _>(StandardNormal) * 0.1;
-                e
-            });
-            let b = &a * &truth + noise;
+            let b = &a * &truth + ar1(n, 0.95, &mut rng);
             let theta = &g * a.transpose() * &b;
             let sys = one_joint(a.clone(), b.clone());
             let r = robust_covariance(&sys, &theta, None).unwrap();
@@ -305,12 +300,7 @@ mod tests {
         let (mut estimates, mut lifts) = (Vec::new(), Vec::new());
         let (mut robust, mut unlifted) = (DVector::<f64>::zeros(p), DVector::<f64>::zeros(p));
         for _ in 0..draws {
-            let mut e = 0.0;
-            let noise = DVector::from_fn(n, |_, _| {
-                e = 0.8 * e + rng.sample::<f64, _>(StandardNormal) * 0.1;
-                e
-            });
-            let b = &a * &truth + noise;
+            let b = &a * &truth + ar1(n, 0.8, &mut rng);
             let theta = &g * a.transpose() * &b;
             let sys = one_joint(a.clone(), b.clone());
             let r = robust_covariance(&sys, &theta, None).unwrap();
@@ -353,6 +343,15 @@ mod tests {
             let ratio = (r.covariance[(j, j)] / (rss * g[(j, j)])).sqrt();
             assert!((0.85..1.15).contains(&ratio), "parameter {j}: {ratio:.3}");
         }
+    }
+
+    /// n samples of AR(1) errors e_k = φ·e_{k−1} + 0.1·ε_k.
+    fn ar1(n: usize, phi: f64, rng: &mut rand::rngs::StdRng) -> DVector<f64> {
+        let mut e = 0.0;
+        DVector::from_fn(n, |_, _| {
+            e = phi * e + rng.sample::<f64, _>(StandardNormal) * 0.1;
+            e
+        })
     }
 
     fn one_joint(a: DMatrix<f64>, b: DVector<f64>) -> System {
