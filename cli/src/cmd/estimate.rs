@@ -38,7 +38,7 @@ pub struct Args {
     #[arg(long)]
     pub robot: Option<PathBuf>,
     /// With `--physical`: the weight of the pull towards the robot file's
-    /// inertials (chosen by held-out periods when not given; by Mallows' C_p from a single period).
+    /// inertials (chosen by held-out periods when not given; with fewer than two, by held-out blocks in time where `--covariance robust` keeps the rows; else Mallows' C_p).
     #[arg(long, requires = "physical")]
     pub prior_weight: Option<f64>,
     /// Output parameters table.
@@ -257,15 +257,25 @@ pub fn summary_at(est: &Estimate, level: f64, label: Option<f64>) -> String {
     ));
     for i in 0..est.values.len() {
         s.push_str(&format!(
-            "{:<14} {:>14.6} {:>12.3e} {:>8.3} [{:>13.6}, {:>13.6}]  {}\n",
+            "{:<14} {:>14.6} {:>12.3e} {:>8} [{:>13.6}, {:>13.6}]  {}\n",
             est.names[i],
             est.values[i],
             std[i],
-            100.0 * std[i] / est.values[i].abs(),
+            relative(100.0 * std[i] / est.values[i].abs()),
             est.values[i] - half[i],
             est.values[i] + half[i],
             est.units[i]
         ));
     }
     s
+}
+
+/// A relative std in the table's column: to 3 decimals, or in powers of
+/// ten where the value is near 0 (a friction at its bound, 3.5e7 % rather
+/// than 35417295.459).
+fn relative(percent: f64) -> String {
+    match percent < 1e4 {
+        true => format!("{percent:.3}"),
+        false => format!("{percent:.1e}"),
+    }
 }

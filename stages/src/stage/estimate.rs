@@ -57,7 +57,7 @@ pub struct EstimateConfig {
     pub physical: bool,
     /// With `physical`: the weight of the pull of the inertial parameters
     /// towards the robot file (χ² units per squared a-priori scale).
-    /// Chosen by held-out periods when not given (Mallows' C_p from a single period).
+    /// Chosen by held-out periods when not given (with fewer than two, by held-out blocks in time; Mallows' C_p where the rows are not kept: a covariance other than robust).
     #[serde(default)]
     pub prior_weight: Option<f64>,
 }
@@ -526,6 +526,7 @@ impl Reducer {
     /// bootstrap covariance and adequacy), with its notes in `md`.
     fn physical(
         &self,
+        parts: &[Part],
         base: Option<&BaseRegressor>,
         summary: &Summary,
         est: &mut Estimate,
@@ -539,7 +540,7 @@ impl Reducer {
         // Held-out periods choose λ; the halves are least squares'.
         let halves = match self.cfg.method {
             Estimator::Ml => None,
-            _ => summary.halves(&est.values),
+            _ => summary.halves(&est.values).or_else(|| self.time_halves(parts)),
         };
         let (fit, covariance, note) = physical_fit(base, est, metric, halves.as_ref(), self.cfg.prior_weight)?;
         est.values = fit.base.clone();
@@ -591,7 +592,7 @@ impl Reducer {
         let mut md = summary.metadata.clone();
         let known: Vec<String> = summary.known.as_ref().map(|k| k.names.clone()).unwrap_or_default();
         let physical = match self.cfg.physical {
-            true => Some(self.physical(base.as_deref(), &summary, &mut est, &metric, &mut md)?),
+            true => Some(self.physical(parts, base.as_deref(), &summary, &mut est, &metric, &mut md)?),
             false => None,
         };
         // Judged on the values this table holds: the physical fit's where
@@ -706,6 +707,22 @@ impl Reducer {
         Ok(Some(said))
     }
 
+    /// Halves in time of the kept rows, for λ where no two periods are
+    /// (None where some part kept no rows, or a half leaves a parameter
+    /// undetermined).
+    fn time_halves(&self, parts: &[Part]) -> Option<Halves> {
+        let systems: Vec<&System> = parts
+            .iter()
+            .map(|p| p.rows.as_ref().map(|r| &r.0))
+            .collect::<Option<_>>()?;
+        let sys = System::stack(&systems).ok()?;
+        let w = match self.cfg.method {
+            Estimator::Wls => Some(row_weights(&sys, self.cfg.weights).ok()?),
+            _ => None,
+        };
+        Halves::in_time(&sys, w.as_ref())
+    }
+
     /// The map step without a chain: one recording's part from its system
     /// (as read back from a `regressor` table).
     pub fn part_of(&self, mut sys: System) -> Result<Part> {
@@ -790,7 +807,7 @@ fn physical_fit(
     let names = parameter_names(&base.model, base.terms);
     let prior = standard_parameters(&base.model, base.terms);
     let bounds = link_bounds(&base.model, &prior);
-    // λ by held-out periods where there are two or more; else C_p.
+    // λ by held-out data (periods, else blocks in time); else C_p.
     let (weight, chosen) = match (prior_weight, halves) {
         (Some(w), _) => (Some(w), None),
         (None, Some(h)) => {
@@ -802,10 +819,11 @@ fn physical_fit(
             (
                 Some(w),
                 Some(format!(
-                    "chosen by held-out periods (fitted on the even periods, scored on the odd ones and the reverse; torque error over least squares' own, per λ: {}){}",
+                    "chosen by {}; torque error over least squares' own, per λ: {}){}",
+                    h.said,
                     curve.join(", "),
                     if edge {
-                        "; the largest tried: held-out periods prefer the robot file's inertials wherever the data leave them free"
+                        "; the largest tried: the held-out data prefer the robot file's inertials wherever the data leave them free"
                     } else {
                         ""
                     }
