@@ -22,8 +22,12 @@ impl Identification {
                 }
             }
         }
-        for ran in &self.runs {
-            w.extend(ran.warnings.iter().map(|x| format!("robot: {x}")));
+        // Every run loads the same robot file: its warnings once each.
+        for x in self.runs.iter().flat_map(|ran| &ran.warnings) {
+            let said = format!("robot: {x}");
+            if !w.contains(&said) {
+                w.push(said);
+            }
         }
         if !self.unjudged.is_empty() {
             w.push(format!(
@@ -83,8 +87,9 @@ impl Identification {
                     .collect();
                 if !worse.is_empty() {
                     w.push(format!(
-                        "the {name} rolls out over {ROLLOUT_WORSE}× the robot file's position error on {}: for simulating these joints the robot file's model does better than the fit's (the report's Rollouts)",
-                        worse.join(", ")
+                        "the {name} rolls out over {ROLLOUT_WORSE}× the robot file's position error on {} ({}): for simulating these joints the robot file's model does better than the fit's (the report's Rollouts)",
+                        worse.join(", "),
+                        r.table.display()
                     ));
                 }
             }
