@@ -75,6 +75,17 @@ pub(crate) fn physical_or_why(
         std::fs::remove_file(staged.join(PHYSICAL)).map_err(io(&paths.out.join(PHYSICAL)))?;
         return Ok(refused);
     }
+    exported(fitted, (staged, paths), tables, script)
+}
+
+/// The physical fit exported for simulators (URDF, MJCF, sidecar), and its
+/// commands added to the script.
+fn exported(
+    fitted: Fit,
+    (staged, paths): (&Path, &Paths),
+    (id_tables, val_tables): (&[PathBuf], &[PathBuf]),
+    script: &mut Script,
+) -> Result<Physical> {
     match fitted {
         Fit::Failed(why) => Ok(Physical::Failed(why)),
         Fit::Fitted {
@@ -92,7 +103,6 @@ pub(crate) fn physical_or_why(
                 within: staged.to_path_buf(),
                 mjcf: paths.mjcf.clone(),
             })?;
-            let (id_tables, val_tables) = tables;
             script.estimate(id_tables, Some(if fallback.is_some() { "residual" } else { "robust" }));
             script.validate(PHYSICAL, val_tables);
             script.export(paths.mjcf.as_deref());

@@ -82,6 +82,45 @@ pub(crate) fn write_payload(
     Ok(())
 }
 
+/// The loaded records' designs: each found in its log (the first one's
+/// periods and filter shared), with the parameters table's regressor model
+/// (the payload's columns added) at the record's own band.
+fn loaded_recordings(
+    loaded: &[PathBuf],
+    robot: &Path,
+    regressor: &robotid_stages::stage::regressor::RegressorConfig,
+) -> Result<Vec<Recording>> {
+    let names = robotid::run::recording_names(loaded);
+    let mut recordings: Vec<Recording> = Vec::new();
+    for (log, name) in loaded.iter().zip(names) {
+        // The robot file lacks the payload: the first record's torques
+        // are not held against its own.
+        let mut design = match recordings.first() {
+            Some(r) => design_with(log, robot, Some(&r.design), None, None)?,
+            None => robotid::identify::design_loaded(log, robot)?,
+        };
+        // The table's model, this record's band.
+        let band = design.regressor.band_limit_hz;
+        design.regressor = robotid_stages::stage::regressor::RegressorConfig {
+            band_limit_hz: band,
+            ..regressor.clone()
+        };
+        for stage in design.plan.stages.iter_mut() {
+            if let robotid::plan::StageConfig::Regressor(c) = stage {
+                *c = design.regressor.clone();
+            }
+        }
+        design.text = robotid::identify::file_text(&design.plan)?;
+        recordings.push(Recording {
+            role: Role::Loaded,
+            name,
+            log: log.clone(),
+            design,
+        });
+    }
+    Ok(recordings)
+}
+
 /// The payload of `request` from its loaded recordings against the robot's
 /// parameters given as a table (`parameters`, of an earlier identify of
 /// `robot`), into `out` (`payload.parquet` and the loaded records'
@@ -119,34 +158,7 @@ pub fn payload_against_parameters(
             out.display()
         )));
     }
-    let names = robotid::run::recording_names(&loaded);
-    let mut recordings: Vec<Recording> = Vec::new();
-    for (log, name) in loaded.iter().zip(names) {
-        // The robot file lacks the payload: the first record's torques
-        // are not held against its own.
-        let mut design = match recordings.first() {
-            Some(r) => design_with(log, &robot, Some(&r.design), None, None)?,
-            None => robotid::identify::design_loaded(log, &robot)?,
-        };
-        // The table's model, this record's band.
-        let band = design.regressor.band_limit_hz;
-        design.regressor = robotid_stages::stage::regressor::RegressorConfig {
-            band_limit_hz: band,
-            ..regressor.clone()
-        };
-        for stage in design.plan.stages.iter_mut() {
-            if let robotid::plan::StageConfig::Regressor(c) = stage {
-                *c = design.regressor.clone();
-            }
-        }
-        design.text = robotid::identify::file_text(&design.plan)?;
-        recordings.push(Recording {
-            role: Role::Loaded,
-            name,
-            log: log.clone(),
-            design,
-        });
-    }
+    let recordings = loaded_recordings(&loaded, &robot, &regressor)?;
     let staged = staging.staged_out().to_path_buf();
     let runner = Request::new(Vec::new(), robot.clone());
     run_pipelines(&runner, (&staged, out), &recordings, &mut Script::new(&robot), observer)?;

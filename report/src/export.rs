@@ -213,6 +213,26 @@ pub(crate) fn consistent(
     })
 }
 
+/// None of the files `args` would write is one it reads (the robot file,
+/// the parameters, the user's MJCF).
+fn refuse_inputs_as_outputs(args: &Export, stem: &Path) -> Result<()> {
+    let writes: Vec<PathBuf> = dedup(&args.formats)
+        .iter()
+        .flat_map(|f| match f {
+            Format::Urdf => &["urdf"][..],
+            Format::Mjcf => &["xml"][..],
+            Format::Sidecar => &["sidecar.json", "sidecar.parquet"][..],
+        })
+        .map(|ext| args.within.join(with_ext(stem, ext)))
+        .collect();
+    let reads: Vec<PathBuf> = [args.robot.clone(), args.within.join(&args.parameters)]
+        .into_iter()
+        .chain(args.mjcf.clone())
+        .collect();
+    robotid_stages::formats::refuse_inputs(writes.iter().map(PathBuf::as_path), reads.iter().map(PathBuf::as_path))?;
+    Ok(())
+}
+
 /// Physically consistent standard parameters closest to the a-priori model
 /// that reproduce the identified base parameters, written as URDF, MJCF
 /// and a sidecar with everything neither can hold.
@@ -221,20 +241,7 @@ pub fn export(args: &Export) -> Result<Exported> {
         return Err(ExportError::PriorWeight(w));
     }
     let stem = stem(&args.out, &args.formats);
-    let writes: Vec<PathBuf> = dedup(&args.formats)
-        .iter()
-        .flat_map(|f| match f {
-            Format::Urdf => &["urdf"][..],
-            Format::Mjcf => &["xml"][..],
-            Format::Sidecar => &["sidecar.json", "sidecar.parquet"][..],
-        })
-        .map(|ext| args.within.join(with_ext(&stem, ext)))
-        .collect();
-    let reads: Vec<PathBuf> = [args.robot.clone(), args.within.join(&args.parameters)]
-        .into_iter()
-        .chain(args.mjcf.clone())
-        .collect();
-    robotid_stages::formats::refuse_inputs(writes.iter().map(PathBuf::as_path), reads.iter().map(PathBuf::as_path))?;
+    refuse_inputs_as_outputs(args, &stem)?;
     let (params, base) = physical_table(&args.robot, &args.within.join(&args.parameters), &args.parameters)?;
     let map = base.map().ok_or(ExportError::Decoupled)?;
     let names = parameter_names(&base.model, base.terms);

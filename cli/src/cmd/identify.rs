@@ -123,25 +123,18 @@ impl std::fmt::Display for Inadequate {
 
 impl std::error::Error for Inadequate {}
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(mut args: Args) -> anyhow::Result<()> {
     // With a payload the recordings named are the loaded ones; the robot
     // is identified from the unloaded.
     let (recordings, payload) = match args.payload_on {
         Some(link) => {
-            let e = &args.payload_ellipsoid;
-            if !(e.is_empty() || e.len() == 6) {
-                anyhow::bail!(
-                    "--payload-ellipsoid: {} values; give six, the centre x,y,z and the semi-axes a,b,c (m)",
-                    e.len()
-                );
-            }
-            let payload = PayloadRequest {
-                loaded: args.recordings,
+            let payload = payload_request(
                 link,
-                known_mass: args.known_payload_mass,
-                bound: (e.len() == 6).then(|| ([e[0], e[1], e[2]], [e[3], e[4], e[5]])),
-                validate: args.validate_loaded,
-            };
+                std::mem::take(&mut args.recordings),
+                &args.payload_ellipsoid,
+                args.known_payload_mass,
+                std::mem::take(&mut args.validate_loaded),
+            )?;
             if let Some(given) = &args.parameters {
                 return payload_only(
                     &payload,
@@ -209,6 +202,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(fit) if !args.accept_inadequate => payload_determined(fit, &id.path("payload.parquet")),
         _ => Ok(()),
     }
+}
+
+/// The payload's request: the recordings named are the loaded ones, and
+/// its ellipsoid six numbers or none.
+fn payload_request(
+    link: String,
+    loaded: Vec<std::path::PathBuf>,
+    e: &[f64],
+    known_mass: Option<f64>,
+    validate: Vec<std::path::PathBuf>,
+) -> anyhow::Result<PayloadRequest> {
+    if !(e.is_empty() || e.len() == 6) {
+        anyhow::bail!(
+            "--payload-ellipsoid: {} values; give six, the centre x,y,z and the semi-axes a,b,c (m)",
+            e.len()
+        );
+    }
+    Ok(PayloadRequest {
+        loaded,
+        link,
+        known_mass,
+        bound: (e.len() == 6).then(|| ([e[0], e[1], e[2]], [e[3], e[4], e[5]])),
+        validate,
+    })
 }
 
 /// Refused (exit 3) when the records leave some of the payload's values

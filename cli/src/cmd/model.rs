@@ -1,10 +1,10 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::bail;
 use nalgebra::DMatrix;
 use robotid_stages::dynamics::{
-    base_parameters, load_robot, parameter_names, parameter_unit, regressor, standard_parameters, Data, FrictionTerms,
-    RegressorTerms,
+    base_parameters, load_robot, parameter_names, parameter_unit, regressor, standard_parameters, BaseParameters, Data,
+    FrictionTerms, Model, RegressorTerms,
 };
 use robotid_stages::trajectory::{load_trajectory, Trajectory};
 
@@ -89,48 +89,62 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
         println!("\nunidentifiable: {}", u.join(", "));
     }
     if let Some(path) = &a.trajectory {
-        let traj = load_trajectory(path)?;
-        if traj.dof() != n {
-            bail!(
-                "{}: the trajectory drives {} joints, the robot has {n}",
-                path.display(),
-                traj.dof()
-            );
-        }
-        let duration = match &traj {
-            Trajectory::Fourier(f) => f.period(),
-            Trajectory::Waypoints(w) => w.duration(),
-            Trajectory::Sweeps(s) => s.duration(),
-        };
-        let samples = (duration * a.rate).round().max(1.0) as usize;
-        let mut data = Data::new(&model);
-        let mut phi = DMatrix::zeros(n, terms.count(n));
-        let mut w = DMatrix::zeros(samples * n, bp.base.len());
-        let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        for s in 0..samples {
-            traj.eval(s as f64 / a.rate, &mut q, &mut qd, &mut qdd);
-            regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
-            let base = bp.base_regressor(&phi);
-            w.rows_mut(s * n, n).copy_from(&base);
-        }
-        for mut c in w.column_iter_mut() {
-            let norm = c.norm();
-            if norm > 0.0 {
-                c /= norm;
-            }
-        }
-        let sv = w.singular_values();
-        let (max, min) = (sv.max(), sv.min());
-        println!(
-            "\ncondition number of the column-normalised base regressor along {} ({samples} samples at {} Hz): {}",
+        trajectory_condition(&model, terms, &bp, path, a.rate)?;
+    }
+    Ok(())
+}
+
+/// The condition number of the column-normalised base regressor along the
+/// trajectory file `path`, sampled at `rate` Hz, printed.
+fn trajectory_condition(
+    model: &Model,
+    terms: RegressorTerms,
+    bp: &BaseParameters,
+    path: &Path,
+    rate: f64,
+) -> anyhow::Result<()> {
+    let n = model.dof();
+    let traj = load_trajectory(path)?;
+    if traj.dof() != n {
+        bail!(
+            "{}: the trajectory drives {} joints, the robot has {n}",
             path.display(),
-            a.rate,
-            if min > 0.0 {
-                format!("{:.4e}", max / min)
-            } else {
-                "infinite (a base parameter is not excited)".into()
-            }
+            traj.dof()
         );
     }
+    let duration = match &traj {
+        Trajectory::Fourier(f) => f.period(),
+        Trajectory::Waypoints(w) => w.duration(),
+        Trajectory::Sweeps(s) => s.duration(),
+    };
+    let samples = (duration * rate).round().max(1.0) as usize;
+    let mut data = Data::new(model);
+    let mut phi = DMatrix::zeros(n, terms.count(n));
+    let mut w = DMatrix::zeros(samples * n, bp.base.len());
+    let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    for s in 0..samples {
+        traj.eval(s as f64 / rate, &mut q, &mut qd, &mut qdd);
+        regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+        let base = bp.base_regressor(&phi);
+        w.rows_mut(s * n, n).copy_from(&base);
+    }
+    for mut c in w.column_iter_mut() {
+        let norm = c.norm();
+        if norm > 0.0 {
+            c /= norm;
+        }
+    }
+    let sv = w.singular_values();
+    let (max, min) = (sv.max(), sv.min());
+    println!(
+        "\ncondition number of the column-normalised base regressor along {} ({samples} samples at {} Hz): {}",
+        path.display(),
+        rate,
+        if min > 0.0 {
+            format!("{:.4e}", max / min)
+        } else {
+            "infinite (a base parameter is not excited)".into()
+        }
+    );
     Ok(())
 }

@@ -332,6 +332,45 @@ const SPLIT_DELAYS: [f64; 9] = [-2.0, -1.0, 0.0, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0]
 /// to be taken.
 const SPLIT_DELAY_MARGIN: f64 = 0.05;
 
+/// The best delay of the grid refined by parabolas through the three
+/// scores around it (in sample; at most 6 probes, none closer than a
+/// twentieth of a sample to one made): the delay and its scores.
+#[allow(clippy::type_complexity)]
+fn refined_delay(
+    mut three: Vec<(f64, (f64, f64))>,
+    (mut k, mut s): (f64, (f64, f64)),
+    score: &dyn Fn(f64) -> Result<Option<(f64, f64)>>,
+) -> Result<(f64, (f64, f64))> {
+    for _ in 0..6 {
+        let [(x0, s0), (x1, s1), (x2, s2)] = three[..] else {
+            break;
+        };
+        let (f0, f1, f2) = (s0.0 * s0.0, s1.0 * s1.0, s2.0 * s2.0);
+        let den = (x1 - x0) * (f1 - f2) - (x1 - x2) * (f1 - f0);
+        if den.abs() < f64::MIN_POSITIVE {
+            break;
+        }
+        let x = x1 - 0.5 * ((x1 - x0).powi(2) * (f1 - f2) - (x1 - x2).powi(2) * (f1 - f0)) / den;
+        // Inside the bracket, and a step worth a probe (a twentieth of a
+        // sample).
+        if !(x > x0 && x < x2) || three.iter().any(|p| (p.0 - x).abs() < 0.05) {
+            break;
+        }
+        let Some(sx) = score(x)? else { break };
+        if sx.0 < s.0 {
+            (k, s) = (x, sx);
+        }
+        // The bracket around the best of the four.
+        let mut four = [(x0, s0), (x1, s1), (x2, s2), (x, sx)];
+        four.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let i = (1..3)
+            .min_by(|&a, &b| four[a].1 .0.total_cmp(&four[b].1 .0))
+            .expect("two");
+        three = four[i - 1..=i + 1].to_vec();
+    }
+    Ok((k, s))
+}
+
 /// The effort's delay of a record that does not repeat. In the band a
 /// motion excites, an analog anti-alias filter is its group delay (the
 /// foreign corpus's 4th-order Butterworth at 30 Hz: 6.9 samples at 500
@@ -374,34 +413,7 @@ pub(super) fn split_delay(
         .filter_map(|&i| Some((SPLIT_DELAYS[i], grid[i]?)))
         .collect();
     three.dedup_by(|a, b| a.0 == b.0);
-    let (mut k, mut s) = (SPLIT_DELAYS[best], grid[best].expect("scored"));
-    for _ in 0..6 {
-        let [(x0, s0), (x1, s1), (x2, s2)] = three[..] else {
-            break;
-        };
-        let (f0, f1, f2) = (s0.0 * s0.0, s1.0 * s1.0, s2.0 * s2.0);
-        let den = (x1 - x0) * (f1 - f2) - (x1 - x2) * (f1 - f0);
-        if den.abs() < f64::MIN_POSITIVE {
-            break;
-        }
-        let x = x1 - 0.5 * ((x1 - x0).powi(2) * (f1 - f2) - (x1 - x2).powi(2) * (f1 - f0)) / den;
-        // Inside the bracket, and a step worth a probe (a twentieth of a
-        // sample).
-        if !(x > x0 && x < x2) || three.iter().any(|p| (p.0 - x).abs() < 0.05) {
-            break;
-        }
-        let Some(sx) = score(x)? else { break };
-        if sx.0 < s.0 {
-            (k, s) = (x, sx);
-        }
-        // The bracket around the best of the four.
-        let mut four = [(x0, s0), (x1, s1), (x2, s2), (x, sx)];
-        four.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let i = (1..3)
-            .min_by(|&a, &b| four[a].1 .0.total_cmp(&four[b].1 .0))
-            .expect("two");
-        three = four[i - 1..=i + 1].to_vec();
-    }
+    let (k, s) = refined_delay(three, (SPLIT_DELAYS[best], grid[best].expect("scored")), &score)?;
     let tried = format!(
         "delays from {} to {} samples fitted by the residue over every row, the best refined, and the fit on the record's first {:.0} % predicting the rest",
         SPLIT_DELAYS[0],

@@ -128,14 +128,10 @@ fn singular_gap(w: &DMatrix<f64>, norms: &[f64], unidentifiable: &[usize], r: us
 /// slow as identify's grid goes (0.005 rad/s) is met by 2 in 5 of them.
 const SLOW_SAMPLES: usize = 40;
 
-/// Base parameters of `model` with the regressor `terms`, from `samples`
-/// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
-/// accelerations in ±5 rad/s²). With Stribeck's excess, [`SLOW_SAMPLES`]
-/// more whose speeds are log-uniform from 1e-4 to 2 rad/s: at ±2 rad/s
-/// uniform, a fade of 0.005 rad/s is met by one joint's speed in 400, and
-/// its column came out too small to be identified (at δ = 2, 3 of a UR5's
-/// 6 joints lost theirs).
-pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
+/// The regressor at `samples` random states (q in ±π, q̇ in ±2, q̈ in ±5),
+/// plus, with Stribeck's fade, [`SLOW_SAMPLES`] whose speeds are spread
+/// in log over [1e-4, 2] rad/s: rows `[sample · dof + joint]`.
+fn random_regressor(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> DMatrix<f64> {
     let n = model.dof();
     let p = terms.count(n);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -156,6 +152,19 @@ pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, see
         regressor(model, &mut data, &q, &qd, &qdd, terms, &mut phi);
         w.rows_mut(s * n, n).copy_from(&phi);
     }
+    w
+}
+
+/// Base parameters of `model` with the regressor `terms`, from `samples`
+/// random states drawn with `seed` (positions in ±π, velocities in ±2 rad/s,
+/// accelerations in ±5 rad/s²). With Stribeck's excess, [`SLOW_SAMPLES`]
+/// more whose speeds are log-uniform from 1e-4 to 2 rad/s: at ±2 rad/s
+/// uniform, a fade of 0.005 rad/s is met by one joint's speed in 400, and
+/// its column came out too small to be identified (at δ = 2, 3 of a UR5's
+/// 6 joints lost theirs).
+pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
+    let p = terms.count(model.dof());
+    let w = random_regressor(model, terms, samples, seed);
     let norms: Vec<f64> = (0..p).map(|c| w.column(c).norm()).collect();
     // Identifiability in physical units: the torque a parameter of its
     // a-priori size makes. One under 1e-6 of the largest is below any

@@ -620,67 +620,84 @@ impl Model {
         self.check_sizes()?;
         for (i, (j, l)) in self.joints.iter().zip(&self.links).enumerate() {
             let ctx = format!("joint {} (`{}`)", i + 1, j.name);
-            if !(l.mass >= 0.0) || !l.mass.is_finite() {
-                return Err(Problem::new(
-                    "mass",
-                    format!("{ctx}: link mass must be ≥ 0, found {}", l.mass),
-                ));
-            }
-            let ic = l.inertia_com;
-            if (ic - ic.transpose()).abs().max() > 1e-12 * (1.0 + ic.abs().max()) {
-                return Err(Problem::new(
-                    "inertia",
-                    format!("{ctx}: inertia tensor is not symmetric"),
-                ));
-            }
-            let eig = ic.symmetric_eigenvalues();
-            let tol = 1e-12 * (1.0 + ic.abs().max());
-            if eig.iter().any(|e| *e < -tol) {
-                return Err(Problem::new(
-                    "mass",
-                    format!("{ctx}: inertia about the centre of mass has a negative principal moment"),
-                ));
-            }
-            let (a, b, c) = (eig[0], eig[1], eig[2]);
-            if a + b < c - tol || a + c < b - tol || b + c < a - tol {
-                return Err(Problem::new(
-                    "inertia",
-                    format!("{ctx}: principal moments {a}, {b}, {c} violate the triangle inequality"),
-                ));
-            }
-            let d = &self.drives[i];
-            if !(d.gear_ratio > 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
-                return Err(Problem::new(
-                    "drive",
-                    format!("{ctx}: gear ratio, torque constant and encoder counts must be > 0"),
-                ));
-            }
-            if d.rotor_inertia < 0.0 {
-                return Err(Problem::new("inertia", format!("{ctx}: rotor inertia must be ≥ 0")));
-            }
-            if let Some(g) = d.gain_rel_std.filter(|g| !(*g >= 0.0 && *g < 1.0)) {
-                return Err(Problem::new(
-                    "torque_constant_rel_std",
-                    format!("{ctx}: a relative standard deviation in [0, 1), found {g}"),
-                ));
-            }
-            let f = &self.friction[i];
-            if f.coulomb_pos < 0.0 || f.coulomb_neg < 0.0 {
-                return Err(Problem::new(
-                    "coulomb",
-                    format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"),
-                ));
-            }
-            let s = &f.stribeck;
-            if s.velocity < 0.0 || (s.velocity > 0.0 && !(s.exponent > 0.0)) {
-                return Err(Problem::new(
-                    "stribeck",
-                    format!("{ctx}: a Stribeck fade needs a velocity ≥ 0 and, with one, an exponent > 0"),
-                ));
-            }
+            check_body(&ctx, l)?;
+            check_drive(&ctx, &self.drives[i])?;
+            check_friction(&ctx, &self.friction[i])?;
         }
         Ok(())
     }
+}
+
+/// A link's body is physical: mass ≥ 0, inertia about its centre of mass
+/// symmetric, positive semidefinite and within the triangle inequality.
+fn check_body(ctx: &str, l: &Inertial) -> Result<(), Problem> {
+    if !(l.mass >= 0.0) || !l.mass.is_finite() {
+        return Err(Problem::new(
+            "mass",
+            format!("{ctx}: link mass must be ≥ 0, found {}", l.mass),
+        ));
+    }
+    let ic = l.inertia_com;
+    if (ic - ic.transpose()).abs().max() > 1e-12 * (1.0 + ic.abs().max()) {
+        return Err(Problem::new(
+            "inertia",
+            format!("{ctx}: inertia tensor is not symmetric"),
+        ));
+    }
+    let eig = ic.symmetric_eigenvalues();
+    let tol = 1e-12 * (1.0 + ic.abs().max());
+    if eig.iter().any(|e| *e < -tol) {
+        return Err(Problem::new(
+            "mass",
+            format!("{ctx}: inertia about the centre of mass has a negative principal moment"),
+        ));
+    }
+    let (a, b, c) = (eig[0], eig[1], eig[2]);
+    if a + b < c - tol || a + c < b - tol || b + c < a - tol {
+        return Err(Problem::new(
+            "inertia",
+            format!("{ctx}: principal moments {a}, {b}, {c} violate the triangle inequality"),
+        ));
+    }
+    Ok(())
+}
+
+/// A drive's constants are positive (its gains' uncertainty in [0, 1)).
+fn check_drive(ctx: &str, d: &Drive) -> Result<(), Problem> {
+    if !(d.gear_ratio > 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
+        return Err(Problem::new(
+            "drive",
+            format!("{ctx}: gear ratio, torque constant and encoder counts must be > 0"),
+        ));
+    }
+    if d.rotor_inertia < 0.0 {
+        return Err(Problem::new("inertia", format!("{ctx}: rotor inertia must be ≥ 0")));
+    }
+    if let Some(g) = d.gain_rel_std.filter(|g| !(*g >= 0.0 && *g < 1.0)) {
+        return Err(Problem::new(
+            "torque_constant_rel_std",
+            format!("{ctx}: a relative standard deviation in [0, 1), found {g}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Coulomb friction is a magnitude, and a Stribeck fade has a shape.
+fn check_friction(ctx: &str, f: &Friction) -> Result<(), Problem> {
+    if f.coulomb_pos < 0.0 || f.coulomb_neg < 0.0 {
+        return Err(Problem::new(
+            "coulomb",
+            format!("{ctx}: Coulomb friction is a magnitude and must be ≥ 0"),
+        ));
+    }
+    let s = &f.stribeck;
+    if s.velocity < 0.0 || (s.velocity > 0.0 && !(s.exponent > 0.0)) {
+        return Err(Problem::new(
+            "stribeck",
+            format!("{ctx}: a Stribeck fade needs a velocity ≥ 0 and, with one, an exponent > 0"),
+        ));
+    }
+    Ok(())
 }
 
 /// Rotation matrix about a unit axis by angle `q` (Rodrigues), without

@@ -441,30 +441,7 @@ pub fn rollout(
     // the same at any thread count. A window after one that failed is
     // not started (the first failure is the answer).
     let starts: Vec<usize> = (0..samples).step_by(window).collect();
-    let failed = AtomicUsize::new(usize::MAX);
-    let runs: Vec<Result<Option<Simulated>, Stopped>> = starts
-        .par_iter()
-        .enumerate()
-        .map_init(
-            || {
-                (
-                    dynamics.clone(),
-                    Rk4::new(n),
-                    [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
-                )
-            },
-            |(dynamics, rk4, t), (w, &start)| {
-                if failed.load(Ordering::Relaxed) < w {
-                    return Ok(None);
-                }
-                let ran = simulate_window(dynamics, (rk4, t), (time, (q, qd, tau)), (start, window, step));
-                if ran.is_err() {
-                    failed.fetch_min(w, Ordering::Relaxed);
-                }
-                ran.map(Some)
-            },
-        )
-        .collect();
+    let runs = run_windows(dynamics, (time, (q, qd, tau)), &starts, (window, step));
     let mut sim = vec![vec![0.0; samples]; n];
     let (mut sq, mut sqd) = (vec![0.0; n], vec![0.0; n]);
     let mut count = 0usize;
@@ -508,6 +485,43 @@ pub fn rollout(
         qd_rms: rms(sqd),
         q: sim,
     })
+}
+
+/// Each window of [`rollout`] from its start, in parallel (each thread
+/// with its own dynamics and integrator), kept in window order; a window
+/// after one that failed is not started (None).
+#[allow(clippy::type_complexity)]
+fn run_windows(
+    dynamics: &BaseDynamics,
+    (time, (q, qd, tau)): (&[f64], (&[Vec<f64>], &[Vec<f64>], &[Vec<f64>])),
+    starts: &[usize],
+    (window, step): (usize, f64),
+) -> Vec<Result<Option<Simulated>, Stopped>> {
+    let n = q.len();
+    let failed = AtomicUsize::new(usize::MAX);
+    starts
+        .par_iter()
+        .enumerate()
+        .map_init(
+            || {
+                (
+                    dynamics.clone(),
+                    Rk4::new(n),
+                    [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+                )
+            },
+            |(dynamics, rk4, t), (w, &start)| {
+                if failed.load(Ordering::Relaxed) < w {
+                    return Ok(None);
+                }
+                let ran = simulate_window(dynamics, (rk4, t), (time, (q, qd, tau)), (start, window, step));
+                if ran.is_err() {
+                    failed.fetch_min(w, Ordering::Relaxed);
+                }
+                ran.map(Some)
+            },
+        )
+        .collect()
 }
 
 /// One window's simulated positions and velocities, `[joint][sample in

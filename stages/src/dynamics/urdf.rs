@@ -315,6 +315,23 @@ fn tool_point<'a>(
     frame.1
 }
 
+/// The box each link welded to the last moving one fills in its own frame
+/// (None where it has no shapes).
+fn end_extents(
+    robot: &urdf_rs::Robot,
+    end_frames: &[(String, Matrix3<f64>, Vector3<f64>)],
+    path: &Path,
+) -> Vec<Option<Extent>> {
+    let identity = (Matrix3::identity(), Vector3::zeros());
+    end_frames
+        .iter()
+        .map(|(name, _, _)| {
+            let l = robot.links.iter().find(|l| &l.name == name)?;
+            shapes_extent(&link_shapes(l, &identity, path))
+        })
+        .collect()
+}
+
 pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
     let err = |msg: String| Error::Robot {
         path: path.to_path_buf(),
@@ -384,15 +401,7 @@ pub fn parse_urdf_with(text: &str, path: &Path, locks: &Locks) -> Result<Model> 
     close_link(&mut model, &found);
     model.end_effector = tool_point(link, frame, &children, &rigid);
     welded(link, frame, &children, &rigid, &mut model.end_frames);
-    let identity = (Matrix3::identity(), Vector3::zeros());
-    model.end_extents = model
-        .end_frames
-        .iter()
-        .map(|(name, _, _)| {
-            let l = robot.links.iter().find(|l| &l.name == name)?;
-            shapes_extent(&link_shapes(l, &identity, path))
-        })
-        .collect();
+    model.end_extents = end_extents(&robot, &model.end_frames, path);
     model.warnings = warnings;
     model.locked = locked.into_iter().collect();
     if model.joints.is_empty() {

@@ -62,6 +62,22 @@ pub struct GravityFriction {
     pub estimate: Estimate,
 }
 
+/// Least squares of the sweeps' columns (gravity's sine and cosine,
+/// inertia, one friction per speed level), with its condition number;
+/// refused where gravity is not separable from friction.
+fn separable_fit(a: &DMatrix<f64>, b: &DVector<f64>, joint: &str) -> Result<(DVector<f64>, f64)> {
+    let svd = a.clone().svd(true, true);
+    let smin = svd.singular_values.min();
+    if !(smin > 1e-8 * svd.singular_values.max()) {
+        return Err(Error::numerical("sweeps", format!(
+            "joint `{joint}`: gravity is not separable from friction (the sweeps cover too little of the angle); widen the range"
+        )));
+    }
+    let condition = svd.singular_values.max() / smin;
+    let x = svd.solve(b, 0.0).map_err(|e| Error::numerical("sweeps", e))?;
+    Ok((x, condition))
+}
+
 /// Fits gravity and friction of `cfg.joint` from the cruise parts of `kin`.
 pub fn gravity_friction(kin: &Kinematics, cfg: &SweepConfig) -> Result<GravityFriction> {
     if cfg.friction.has_stribeck() {
@@ -107,15 +123,7 @@ pub fn gravity_friction(kin: &Kinematics, cfg: &SweepConfig) -> Result<GravityFr
         }
     });
     let b = DVector::from_fn(m, |i, _| tau[cruise[i]]);
-    let svd = a.clone().svd(true, true);
-    let smin = svd.singular_values.min();
-    if !(smin > 1e-8 * svd.singular_values.max()) {
-        return Err(Error::numerical("sweeps", format!(
-            "joint `{}`: gravity is not separable from friction (the sweeps cover too little of the angle); widen the range",
-            cfg.joint
-        )));
-    }
-    let x = svd.solve(&b, 0.0).map_err(|e| Error::numerical("sweeps", e))?;
+    let (x, condition) = separable_fit(&a, &b, &cfg.joint)?;
     let r = &b - &a * &x;
     let sigma2 = r.norm_squared() / (m - p) as f64;
     let ata_inv = (a.transpose() * &a)
@@ -142,7 +150,7 @@ pub fn gravity_friction(kin: &Kinematics, cfg: &SweepConfig) -> Result<GravityFr
             // Roughly one independent sample per correlation length.
             dof: (m / lag.max(1)).saturating_sub(p).max(1),
             residual_variance: sigma2,
-            condition: svd.singular_values.max() / smin,
+            condition,
             rows: m,
             iterations: 1,
             covariance_from: Covariance::Residual,

@@ -750,6 +750,39 @@ pub fn urdf_with_payload(
 /// The interval level of the payload table.
 pub const LEVEL: f64 = 0.95;
 
+/// The payload table's metadata: the link and frame, the estimate's
+/// level, degrees of freedom and covariance, and what bounded it.
+fn payload_metadata(fit: &PayloadFit, link: &str) -> BTreeMap<String, String> {
+    let mut md = BTreeMap::new();
+    md.insert(metadata::PAYLOAD_LINK.to_string(), link.to_string());
+    md.insert(
+        metadata::PAYLOAD_FRAME.to_string(),
+        format!("centre of mass and inertia in the frame of `{link}`; inertia about the centre of mass"),
+    );
+    md.insert(metadata::ESTIMATE_CONFIDENCE.to_string(), LEVEL.to_string());
+    md.insert(metadata::ESTIMATE_DOF.to_string(), fit.estimate.dof.to_string());
+    md.insert(
+        metadata::ESTIMATE_COVARIANCE.to_string(),
+        fit.estimate.covariance_from.name().to_string(),
+    );
+    if let Some(b) = &fit.bounded {
+        md.insert("robotid.payload.bounded_chi2".to_string(), b.chi2.to_string());
+    }
+    if let Some(said) = &fit.bound_said {
+        md.insert(metadata::PAYLOAD_BOUND.to_string(), said.clone());
+    }
+    if let Some(g) = &fit.gains_share {
+        md.insert(metadata::PAYLOAD_GAINS.to_string(), g.said());
+    }
+    if !fit.undetermined.is_empty() {
+        md.insert(
+            metadata::PAYLOAD_UNDETERMINED.to_string(),
+            said_undetermined(&fit.undetermined),
+        );
+    }
+    md
+}
+
 /// The `payload` table of `fit` (given about `link`): the body's ten
 /// listed values with their standard deviations and 95 % Student-t
 /// intervals, the bounded estimate beside them when there is one, and
@@ -793,33 +826,7 @@ pub fn payload_table(fit: &PayloadFit, link: &str, model: &crate::dynamics::Mode
             ));
         }
     }
-    let mut md = BTreeMap::new();
-    md.insert(metadata::PAYLOAD_LINK.to_string(), link.to_string());
-    md.insert(
-        metadata::PAYLOAD_FRAME.to_string(),
-        format!("centre of mass and inertia in the frame of `{link}`; inertia about the centre of mass"),
-    );
-    md.insert(metadata::ESTIMATE_CONFIDENCE.to_string(), LEVEL.to_string());
-    md.insert(metadata::ESTIMATE_DOF.to_string(), fit.estimate.dof.to_string());
-    md.insert(
-        metadata::ESTIMATE_COVARIANCE.to_string(),
-        fit.estimate.covariance_from.name().to_string(),
-    );
-    if let Some(b) = &fit.bounded {
-        md.insert("robotid.payload.bounded_chi2".to_string(), b.chi2.to_string());
-    }
-    if let Some(said) = &fit.bound_said {
-        md.insert(metadata::PAYLOAD_BOUND.to_string(), said.clone());
-    }
-    if let Some(g) = &fit.gains_share {
-        md.insert(metadata::PAYLOAD_GAINS.to_string(), g.said());
-    }
-    if !fit.undetermined.is_empty() {
-        md.insert(
-            metadata::PAYLOAD_UNDETERMINED.to_string(),
-            said_undetermined(&fit.undetermined),
-        );
-    }
+    let md = payload_metadata(fit, link);
     let with: &[&str] = if bounded.is_some() { &["bounded"] } else { &[] };
     let schema = Arc::new(TableKind::Payload.schema(&[], with, &md));
     let f =

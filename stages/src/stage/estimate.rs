@@ -599,14 +599,7 @@ impl Reducer {
         // it replaced least squares' (whose flags are in least squares'
         // own table; on the LWR4+ they named ZZ_lwr_0_joint = −0.76 kg·m²
         // beside the physical table's 0.018).
-        let unidentified = match base.as_ref().map(|b| (b, b.kind, b.map())) {
-            Some((base, ModelKind::Chain, Some(map))) if base.names() == est.names => {
-                let names = parameter_names(&base.model, base.terms);
-                let prior = standard_parameters(&base.model, base.terms);
-                unidentified(&est, map, &names, &prior)
-            }
-            _ => Vec::new(),
-        };
+        let unidentified = unidentified_at_prior(base.as_deref(), &est);
         md.extend(identifiability_notes(
             &unidentified,
             essential.as_ref(),
@@ -743,6 +736,19 @@ impl Reducer {
             rows: (self.cfg.covariance == Covariance::Robust).then_some((sys, None)),
             config,
         })
+    }
+}
+
+/// The parameters `est` does not tell from zero at their a-priori size (a
+/// chain's, whose robot file gives the sizes; none otherwise).
+fn unidentified_at_prior(base: Option<&BaseRegressor>, est: &Estimate) -> Vec<crate::estimation::Unidentified> {
+    match base.map(|b| (b, b.kind, b.map())) {
+        Some((base, ModelKind::Chain, Some(map))) if base.names() == est.names => {
+            let names = parameter_names(&base.model, base.terms);
+            let prior = standard_parameters(&base.model, base.terms);
+            unidentified(est, map, &names, &prior)
+        }
+        _ => Vec::new(),
     }
 }
 
