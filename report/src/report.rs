@@ -472,6 +472,44 @@ struct Beside<'a> {
     mujoco: Option<(&'a std::path::Path, &'a MujocoRuns)>,
 }
 
+/// The estimate's rollout table rows (joint, position and velocity RMS,
+/// the robot file's, their ratio); where it could not be simulated, what
+/// stopped it said into `h` and the robot file's figures kept.
+fn estimate_rows(r: &robotid::validation::RolledOut, h: &mut String) -> Vec<[String; 5]> {
+    match r.rows() {
+        Ok(rows) => rows
+            .into_iter()
+            .map(|row| {
+                [
+                    row.joint,
+                    format!("{:.3}", row.q_mrad),
+                    format!("{:.3}", row.qd_mrad_s),
+                    row.file,
+                    row.ratio,
+                ]
+            })
+            .collect(),
+        Err(stop) => {
+            h.push_str(&format!(
+                "<p class=\"warn\">The estimate: {}</p>\n",
+                esc(&r.stopped_said(stop))
+            ));
+            r.joints
+                .iter()
+                .enumerate()
+                .map(|(j, joint)| {
+                    let file = match &r.prior {
+                        Some(Ok(p)) => format!("{:.3}", 1e3 * p.q_rms[j]),
+                        Some(Err(stop)) => r.stopped_said(stop),
+                        None => "-".into(),
+                    };
+                    [joint.clone(), "not simulated".into(), "-".into(), file, "-".into()]
+                })
+                .collect()
+        }
+    }
+}
+
 /// The rollouts' section: per record, a table per joint (the estimate's
 /// position and velocity RMS error, the robot file's, their ratio; the
 /// physical estimate's and the export's in MuJoCo as `beside` gives them)
@@ -532,38 +570,7 @@ fn rollouts_html(rolled: &[robotid::validation::RolledOut], beside: Beside) -> R
             )),
             None => {}
         }
-        let rows: Vec<[String; 5]> = match r.rows() {
-            Ok(rows) => rows
-                .into_iter()
-                .map(|row| {
-                    [
-                        row.joint,
-                        format!("{:.3}", row.q_mrad),
-                        format!("{:.3}", row.qd_mrad_s),
-                        row.file,
-                        row.ratio,
-                    ]
-                })
-                .collect(),
-            Err(stop) => {
-                h.push_str(&format!(
-                    "<p class=\"warn\">The estimate: {}</p>\n",
-                    esc(&r.stopped_said(stop))
-                ));
-                r.joints
-                    .iter()
-                    .enumerate()
-                    .map(|(j, joint)| {
-                        let file = match &r.prior {
-                            Some(Ok(p)) => format!("{:.3}", 1e3 * p.q_rms[j]),
-                            Some(Err(stop)) => r.stopped_said(stop),
-                            None => "-".into(),
-                        };
-                        [joint.clone(), "not simulated".into(), "-".into(), file, "-".into()]
-                    })
-                    .collect()
-            }
-        };
+        let rows = estimate_rows(r, &mut h);
         let heads: String = extra.iter().map(|(t, _)| format!("<th>{t}</th>")).collect();
         h.push_str(&format!("<table><tr><th>joint</th><th>position RMS, mrad</th><th>velocity RMS, mrad/s</th><th>robot file's position RMS, mrad</th><th>ratio</th>{heads}</tr>\n"));
         for (j, row) in rows.iter().enumerate() {

@@ -3,9 +3,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::Vector3;
 use robotid_schemas::{metadata, Kinematics};
-use robotid_stages::dynamics::{end_effector_position, load_robot, Data};
-use robotid_stages::excitation::{design, ExciteConfig};
+use robotid_stages::dynamics::{end_effector_position, load_robot, Data, Model};
+use robotid_stages::excitation::{design, Design, ExciteConfig};
 use robotid_stages::formats::parquet::write_parquet;
 
 #[derive(clap::Args)]
@@ -47,11 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = load_robot(&cfg.robot)?;
     cfg.validate(&model)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.config.display()))?;
-    let bar = ProgressBar::new(cfg.starts as u64);
-    bar.set_style(ProgressStyle::with_template("starts [{bar:30}] {pos}/{len} {msg}").expect("template"));
-    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = starts_bar(cfg.starts);
     let progress = |done: usize, best: f64| {
         bar.set_position(done as u64);
         bar.set_message(format!("best criterion {best:.4}"));
@@ -81,24 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for (name, v) in &d.constraints {
         println!("  {v:>9.4}  {name}{}", if *v > -0.01 { "  (active)" } else { "" });
     }
-    // The trajectory file: a [trajectory] table, as the simulator and the
-    // pipeline read it, and a [result] table saying how it was made.
-    let traj = toml::Value::try_from(robotid_stages::trajectory::Trajectory::Fourier(d.trajectory.clone()))?;
-    let mut doc = toml::Table::new();
-    doc.insert("trajectory".into(), traj);
-    let mut result = toml::Table::new();
-    result.insert("criterion".into(), format!("{:?}", cfg.criterion).to_lowercase().into());
-    result.insert("value".into(), d.criterion.into());
-    result.insert("condition_number".into(), d.condition.into());
-    result.insert("seconds".into(), d.seconds.into());
-    result.insert("starts".into(), (d.starts.len() as i64).into());
-    result.insert("feasible_starts".into(), (feasible as i64).into());
-    result.insert("robot".into(), cfg.robot.display().to_string().into());
-    result.insert(
-        "active_constraints".into(),
-        toml::Value::Array(d.active().into_iter().map(|s| s.to_string().into()).collect()),
-    );
-    doc.insert("result".into(), toml::Value::Table(result));
+    let doc = trajectory_document(&cfg, &d, feasible)?;
     let toml_path = out.join("excitation.toml");
     robotid_report::plot::write_text(
         &toml_path,
@@ -115,7 +95,46 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &out.join("coefficients.parquet"),
         &d.coefficients_table(&model.joint_names())?,
     )?;
-    // The sampled trajectory as a kinematics table.
+    let (kin, ee) = sampled(&model, &cfg, f);
+    write_parquet(&out.join("trajectory.parquet"), &kin.to_record_batch()?)?;
+    let pictures = robotid_report::plot::plot_excitation(&out, &kin, &ee)?;
+    println!(
+        "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
+        toml_path.display(),
+        pictures.len()
+    );
+    Ok(())
+}
+
+/// The trajectory file's document: a [trajectory] table, as the simulator
+/// and the pipeline read it, and a [result] table saying how it was made.
+fn trajectory_document(cfg: &ExciteConfig, d: &Design, feasible: usize) -> anyhow::Result<toml::Table> {
+    let traj = toml::Value::try_from(robotid_stages::trajectory::Trajectory::Fourier(d.trajectory.clone()))?;
+    let mut doc = toml::Table::new();
+    doc.insert("trajectory".into(), traj);
+    let mut result = toml::Table::new();
+    result.insert("criterion".into(), format!("{:?}", cfg.criterion).to_lowercase().into());
+    result.insert("value".into(), d.criterion.into());
+    result.insert("condition_number".into(), d.condition.into());
+    result.insert("seconds".into(), d.seconds.into());
+    result.insert("starts".into(), (d.starts.len() as i64).into());
+    result.insert("feasible_starts".into(), (feasible as i64).into());
+    result.insert("robot".into(), cfg.robot.display().to_string().into());
+    result.insert(
+        "active_constraints".into(),
+        toml::Value::Array(d.active().into_iter().map(|s| s.to_string().into()).collect()),
+    );
+    doc.insert("result".into(), toml::Value::Table(result));
+    Ok(doc)
+}
+
+/// The trajectory sampled at the design's rate over one period, as a
+/// kinematics table, with the end effector's position at each sample.
+fn sampled(
+    model: &Model,
+    cfg: &ExciteConfig,
+    f: &robotid_stages::trajectory::FourierSeries,
+) -> (Kinematics, Vec<Vector3<f64>>) {
     let n = model.dof();
     let samples = cfg.samples();
     let mut kin = Kinematics {
@@ -139,7 +158,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ]),
     };
     let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let mut data = Data::new(&model);
+    let mut data = Data::new(model);
     let mut ee = Vec::with_capacity(samples);
     for k in 0..samples {
         let t = k as f64 / cfg.sample_rate_hz;
@@ -150,14 +169,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             kin.qd[j].push(qd[j]);
             kin.qdd[j].push(qdd[j]);
         }
-        ee.push(end_effector_position(&model, &mut data, &q));
+        ee.push(end_effector_position(model, &mut data, &q));
     }
-    write_parquet(&out.join("trajectory.parquet"), &kin.to_record_batch()?)?;
-    let pictures = robotid_report::plot::plot_excitation(&out, &kin, &ee)?;
-    println!(
-        "trajectory in {}; coefficients.parquet, trajectory.parquet and {} picture(s) beside it",
-        toml_path.display(),
-        pictures.len()
-    );
-    Ok(())
+    (kin, ee)
+}
+
+/// A bar over the design's starts, drawn only on a terminal.
+fn starts_bar(starts: usize) -> ProgressBar {
+    let bar = ProgressBar::new(starts as u64);
+    bar.set_style(ProgressStyle::with_template("starts [{bar:30}] {pos}/{len} {msg}").expect("template"));
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar
 }

@@ -368,6 +368,55 @@ pub fn design_loaded(log: &Path, robot: &Path) -> Result<Design> {
     design_checked(log, robot, None, (None, None), true)
 }
 
+/// Why a record is taken as one that does not repeat (None: it is
+/// periodic): no period found, or the identification recording was taken
+/// whole through its data filter of `whole_cutoff` Hz.
+fn not_periodic_said(
+    period: &std::result::Result<(f64, String), robotid_stages::signal::period::NoPeriod>,
+    whole_cutoff: Option<f64>,
+) -> Option<String> {
+    match (period, whole_cutoff) {
+        (Ok(_), Some(c)) => Some(format!(
+            "taken whole as a record that does not repeat, as the identification recording was, through its {c} Hz data filter"
+        )),
+        (Ok(_), None) => None,
+        (Err(why), _) => Some(format!("no: {why}")),
+    }
+}
+
+/// A record taken whole, designed by `make` at its effort's delay: an
+/// identification record's own, scored on a block held out in time (a
+/// loaded record's too, though its held-out figure is not kept: the
+/// unloaded one's estimate has its delay undone); a validation record
+/// takes the identification's.
+fn delayed_whole(
+    make: impl Fn(Option<f64>) -> Result<Design> + Sync,
+    (log, raw, fs): (&Path, &RawSamples, f64),
+    first: Option<&Design>,
+    loaded: bool,
+) -> Result<Design> {
+    match first {
+        Some(d) => make(d.delay_s),
+        None => {
+            let mut d = split_delay(make, log, raw, fs)?;
+            if loaded {
+                d.held_out_split = None;
+            }
+            Ok(d)
+        }
+    }
+}
+
+/// What the design says of the joints it locked.
+fn locked_said<Q: std::fmt::Display>(locked: &[(String, Q)]) -> String {
+    let said = locked
+        .iter()
+        .map(|(j, q)| format!("{j} at {q}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'")
+}
+
 fn design_checked(
     log: &Path,
     robot: &Path,
@@ -386,45 +435,31 @@ fn design_checked(
         read_cfg.clone(),
     );
     if !locked.is_empty() {
-        let said = locked
-            .iter()
-            .map(|(j, q)| format!("{j} at {q}"))
-            .collect::<Vec<_>>()
-            .join(", ");
-        findings.push((
-            Found::Locked,
-            format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'"),
-        ));
+        findings.push((Found::Locked, locked_said(&locked)));
         plan.lock.extend(locked);
     }
     findings.extend(layout_said(&layout, &read_cfg)?.map(|said| (Found::Read, said)));
     let (fs, fs_said) = sample_rate(&raw, &mut findings);
     let inverse = declared_filter(log, &raw, fs, first, &mut findings)?;
-    if let Some(d) = first.and_then(|d| d.delay_s) {
-        findings.push((
-            Found::EffortDelay,
-            format!(
-                "{:.3} samples ({:.3} ms) late, the identification recording's, undone",
-                d * fs,
-                d * 1e3
-            ),
-        ));
-    }
     let regressor = match first {
-        Some(d) => d.regressor.clone(),
+        Some(d) => {
+            if let Some(late) = d.delay_s {
+                let said = format!(
+                    "{:.3} samples ({:.3} ms) late, the identification recording's, undone",
+                    late * fs,
+                    late * 1e3
+                );
+                findings.push((Found::EffortDelay, said));
+            }
+            d.regressor.clone()
+        }
         None => identify_regressor(inverse.map(|(_, b)| b)),
     };
     findings.push((Found::SampleRate, fs_said));
     let period = period_of(&raw, &mut findings);
     // The identification recording was taken whole: this one alike, through its filter.
     let whole_cutoff = first.filter(|d| d.taken_whole).and_then(|d| data_cutoff(&d.plan));
-    let not_periodic = match (&period, whole_cutoff) {
-        (Ok(_), Some(c)) => Some(format!(
-            "taken whole as a record that does not repeat, as the identification recording was, through its {c} Hz data filter"
-        )),
-        (Ok(_), None) => None,
-        (Err(why), _) => Some(format!("no: {why}")),
-    };
+    let not_periodic = not_periodic_said(&period, whole_cutoff);
     if let Some(said) = not_periodic {
         findings.push((Found::Periodic, said));
         let make = |delay: Option<f64>| {
@@ -437,18 +472,7 @@ fn design_checked(
                 (inverse.as_ref(), delay),
             )
         };
-        // An identification record's own delay, scored on a block held
-        // out in time (a loaded record's too: the unloaded one's estimate
-        // has its delay undone); a validation record takes the
-        // identification's.
-        if first.is_none() {
-            let mut d = split_delay(make, log, &raw, fs)?;
-            if loaded {
-                d.held_out_split = None;
-            }
-            return Ok(d);
-        }
-        return make(first.and_then(|d| d.delay_s));
+        return delayed_whole(make, (log, &raw, fs), first, loaded);
     }
     let (period, period_said) = period.expect("periodic: checked above");
     findings.push((Found::Period, period_said));

@@ -131,6 +131,43 @@ pub(super) struct Scoring<'a> {
     pub(super) torque_check: bool,
 }
 
+/// The band [`best_band`] picks of those tried (positions' first): the
+/// Fourier fit or the positions' band unless the torques' band predicts
+/// held-out periods better by the score's spread; a band whose scores were
+/// not taken (a steady stretch's two periods far apart under it) loses to
+/// one that was; with nothing scored (one period alone) the wider band
+/// keeps whatever motion the torques show.
+fn picked_band(tried: &[(bool, String, ModelChoice)]) -> usize {
+    let split = |i: usize| tried.get(i).and_then(|t| t.2.split);
+    match (tried.first().and_then(|t| t.2.score), tried.get(1).map(|t| t.2.score)) {
+        (Some(a), Some(Some(b))) => usize::from(b < a * (1.0 - tried[1].2.margin)),
+        (Some(_), Some(None)) => 0,
+        // Neither scored by periods: by the block held out in time, the
+        // wider band only where it predicts it better.
+        (None, Some(None)) if split(0).is_some() && split(1).is_some() => {
+            usize::from(split(1).unwrap_or(f64::INFINITY) < split(0).unwrap_or(f64::INFINITY))
+        }
+        _ => tried.len() - 1,
+    }
+}
+
+/// Each band tried with its score, for the design's line.
+fn band_scores(tried: &[(bool, String, ModelChoice)]) -> String {
+    tried
+        .iter()
+        .map(|t| match (t.2.score, t.2.split) {
+            (Some(r), _) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
+            (None, Some(s)) => format!(
+                "{}: {:.2} % of the torque held out in time",
+                if t.0 { "torques' band" } else { "positions' band" },
+                100.0 * s
+            ),
+            (None, None) => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The positions' band or the torques', each with its best filter and
 /// Coulomb model (`choose_model`), chosen by held-out periods; whether the
 /// torques' won, what says so, and the model chosen.
@@ -188,35 +225,7 @@ pub(super) fn best_band(
         }
         tried.push((wide, said.clone(), choice));
     }
-    // The Fourier fit or the positions' band unless the torques' band
-    // predicts held-out periods better by the score's spread; a band
-    // whose scores were not taken (a steady stretch's two periods far
-    // apart under it) loses to one that was; with nothing scored (one
-    // period alone) the wider band keeps whatever motion the torques show.
-    let split = |i: usize| tried.get(i).and_then(|t| t.2.split);
-    let pick = match (tried.first().and_then(|t| t.2.score), tried.get(1).map(|t| t.2.score)) {
-        (Some(a), Some(Some(b))) => usize::from(b < a * (1.0 - tried[1].2.margin)),
-        (Some(_), Some(None)) => 0,
-        // Neither scored by periods: by the block held out in time, the
-        // wider band only where it predicts it better.
-        (None, Some(None)) if split(0).is_some() && split(1).is_some() => {
-            usize::from(split(1).unwrap_or(f64::INFINITY) < split(0).unwrap_or(f64::INFINITY))
-        }
-        _ => tried.len() - 1,
-    };
-    let scores: String = tried
-        .iter()
-        .map(|t| match (t.2.score, t.2.split) {
-            (Some(r), _) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
-            (None, Some(s)) => format!(
-                "{}: {:.2} % of the torque held out in time",
-                if t.0 { "torques' band" } else { "positions' band" },
-                100.0 * s
-            ),
-            (None, None) => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
+    let (pick, scores) = (picked_band(&tried), band_scores(&tried));
     let (wide, said, choice) = tried.swap_remove(pick);
     let laddered = laddered.filter(|_| wide);
     let said = if scores.contains(',') && choice.score.is_none() && choice.split.is_some() {

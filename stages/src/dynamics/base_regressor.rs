@@ -221,43 +221,7 @@ impl BaseRegressor {
     /// Regroups the standard parameters of `model` under `spec` (a
     /// restricted-pivot QR on sampled states, `base_parameters.rs`).
     pub fn new(model: &Model, spec: &RegressorModel) -> Result<BaseRegressor> {
-        let mut model = model.clone();
-        if let Some(v) = spec.coulomb_transition_rad_s {
-            if !(v >= 0.0) {
-                return Err(Error::setting("coulomb_transition_rad_s", "≥ 0 rad/s", v));
-            }
-            model.friction.iter_mut().for_each(|f| f.transition = v);
-        }
-        if !spec.stribeck.is_empty() {
-            for (name, s) in &spec.stribeck {
-                if !model.joints.iter().any(|j| j.name == *name) {
-                    return Err(Error::mismatch(
-                        "stribeck: joint",
-                        format!("one of {}", model.joint_names().join(", ")),
-                        name,
-                    ));
-                }
-                if !(s.velocity_rad_s > 0.0 && s.velocity_rad_s.is_finite() && s.exponent > 0.0 && s.exponent <= 10.0) {
-                    return Err(Error::setting(
-                        "stribeck",
-                        "velocity_rad_s > 0 and exponent in (0, 10]",
-                        format!("{name}: {} rad/s, δ {}", s.velocity_rad_s, s.exponent),
-                    ));
-                }
-            }
-            // The configuration's shapes replace the robot file's (which
-            // stand where it names none): a joint not named has none.
-            for (j, f) in model.friction.iter_mut().enumerate() {
-                f.stribeck = match spec.stribeck.get(&model.joints[j].name) {
-                    Some(s) => Stribeck {
-                        velocity: s.velocity_rad_s,
-                        exponent: s.exponent,
-                        ..f.stribeck
-                    },
-                    None => Stribeck::default(),
-                };
-            }
-        }
+        let model = with_friction_shapes(model, spec)?;
         let terms = spec.terms(&model)?;
         let n = model.dof();
         // Columns: (standard-column index into the full regressor, name, expression).
@@ -587,6 +551,50 @@ impl BaseRegressor {
         });
         out
     }
+}
+
+/// `model` with the configuration's friction shapes: its Coulomb
+/// transition, and its Stribeck fades in place of the robot file's (a
+/// joint the configuration does not name has none, where it names any).
+fn with_friction_shapes(model: &Model, spec: &RegressorModel) -> Result<Model> {
+    let mut model = model.clone();
+    if let Some(v) = spec.coulomb_transition_rad_s {
+        if !(v >= 0.0) {
+            return Err(Error::setting("coulomb_transition_rad_s", "≥ 0 rad/s", v));
+        }
+        model.friction.iter_mut().for_each(|f| f.transition = v);
+    }
+    if !spec.stribeck.is_empty() {
+        for (name, s) in &spec.stribeck {
+            if !model.joints.iter().any(|j| j.name == *name) {
+                return Err(Error::mismatch(
+                    "stribeck: joint",
+                    format!("one of {}", model.joint_names().join(", ")),
+                    name,
+                ));
+            }
+            if !(s.velocity_rad_s > 0.0 && s.velocity_rad_s.is_finite() && s.exponent > 0.0 && s.exponent <= 10.0) {
+                return Err(Error::setting(
+                    "stribeck",
+                    "velocity_rad_s > 0 and exponent in (0, 10]",
+                    format!("{name}: {} rad/s, δ {}", s.velocity_rad_s, s.exponent),
+                ));
+            }
+        }
+        // The configuration's shapes replace the robot file's (which
+        // stand where it names none): a joint not named has none.
+        for (j, f) in model.friction.iter_mut().enumerate() {
+            f.stribeck = match spec.stribeck.get(&model.joints[j].name) {
+                Some(s) => Stribeck {
+                    velocity: s.velocity_rad_s,
+                    exponent: s.exponent,
+                    ..f.stribeck
+                },
+                None => Stribeck::default(),
+            };
+        }
+    }
+    Ok(model)
 }
 
 #[cfg(test)]

@@ -593,11 +593,10 @@ pub fn read(path: &Path, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawS
     read_log(Log::File(path), cfg, model)
 }
 
-/// Reads a log, a file or bytes in memory, into `raw_samples`: its
-/// channels in SI units, checked (finite, increasing stamps, within the
-/// robot's limits), isolated spikes refused or repaired.
-pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
-    let path = log.path();
+/// The joints a log is read for (the source's, else the robot file's),
+/// once its rate settings are checked: a positive rate, and none on an
+/// MCAP log, whose messages carry their log times.
+fn checked_joints(path: &Path, ext: &str, cfg: &ReadConfig, model: Option<&Model>) -> Result<Vec<String>> {
     let joints: Vec<String> = cfg
         .joints
         .clone()
@@ -606,7 +605,6 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             path: path.to_path_buf(),
             msg: "no joint names: give `joints` in the source or a robot file".into(),
         })?;
-    let ext = log.format();
     if let Some(p) = cfg.rate_problems().first() {
         return Err(Error::Config {
             path: path.to_path_buf(),
@@ -619,6 +617,50 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             msg: "`sample_rate_hz` on an MCAP log, whose messages carry their log times".into(),
         });
     }
+    Ok(joints)
+}
+
+/// The log's times in s from its first: its time column in its unit, or
+/// with no time column `rows` rows at the declared rate (said in `md`,
+/// with the rate). Text logs stamp absolute times: their origin is kept in
+/// `md` and the times made relative to it (MCAP's are subtracted in
+/// integer nanoseconds).
+fn read_times(
+    units: &Units,
+    ext: &str,
+    (time, rows): (&mut Vec<f64>, usize),
+    md: &mut std::collections::BTreeMap<String, String>,
+) -> Result<()> {
+    let cfg = units.cfg;
+    let unit = cfg.time.as_ref().and_then(|c| c.unit.clone());
+    let time_unit = unit.unwrap_or_else(|| (if ext == "mcap" { "ns" } else { "s" }).to_string());
+    match (cfg.sample_rate_hz, cfg.time.as_ref().and_then(|c| c.column.as_ref())) {
+        // No time column: the rows' numbers at the rate.
+        (Some(rate), None) => {
+            *time = (0..rows).map(|k| k as f64 / rate).collect();
+            add_note(md, format!("read: no time column, row k at k / {rate} Hz"));
+        }
+        _ => units.convert("time", &time_unit, std::slice::from_mut(time))?,
+    }
+    // A declared rate is the recording's, as a robotid log's provenance.
+    if let Some(rate) = cfg.sample_rate_hz {
+        md.insert(metadata::SAMPLE_RATE_HZ.into(), rate.to_string());
+    }
+    if let Some(&t0) = time.first().filter(|_| TEXT_EXTENSIONS.contains(&ext)) {
+        md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
+        if t0 != 0.0 {
+            time.iter_mut().for_each(|v| *v -= t0);
+        }
+    }
+    Ok(())
+}
+
+/// Reads a log, a file or bytes in memory, into `raw_samples`: its
+/// channels in SI units, checked (finite, increasing stamps, within the
+/// robot's limits), isolated spikes refused or repaired.
+pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<RawSamples> {
+    let (path, ext) = (log.path(), log.format());
+    let joints = checked_joints(path, &ext, cfg, model)?;
     let (cols, bytes_hash) = columns_of(log, &ext, cfg, &joints)?;
     if let Log::File(p) = log {
         verify_checksum(p, &bytes_hash)?;
@@ -643,20 +685,8 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
             .and_then(|c| c.unit.clone())
             .unwrap_or_else(|| default.to_string())
     };
-    let time_unit = unit(&cfg.time, if ext == "mcap" { "ns" } else { "s" });
-    match (cfg.sample_rate_hz, cfg.time.as_ref().and_then(|c| c.column.as_ref())) {
-        // No time column: the rows' numbers at the rate.
-        (Some(rate), None) => {
-            let rows = position.first().map_or(0, Vec::len);
-            time = (0..rows).map(|k| k as f64 / rate).collect();
-            add_note(&mut md, format!("read: no time column, row k at k / {rate} Hz"));
-        }
-        _ => units.convert("time", &time_unit, std::slice::from_mut(&mut time))?,
-    }
-    // A declared rate is the recording's, as a robotid log's provenance.
-    if let Some(rate) = cfg.sample_rate_hz {
-        md.insert(metadata::SAMPLE_RATE_HZ.into(), rate.to_string());
-    }
+    let rows = position.first().map_or(0, Vec::len);
+    read_times(&units, &ext, (&mut time, rows), &mut md)?;
     units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
     units.convert("effort", &effort_unit, &mut effort)?;
@@ -672,14 +702,6 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     }
     if let Some(r) = &mut reference {
         units.convert("reference", &unit(&cfg.reference, "rad"), r)?;
-    }
-    // Text logs stamp absolute times: keep the origin, work relative to it.
-    // (MCAP's are subtracted in integer nanoseconds.)
-    if let Some(&t0) = time.first().filter(|_| TEXT_EXTENSIONS.contains(&ext.as_str())) {
-        md.insert(metadata::TIME_ORIGIN_S.into(), t0.to_string());
-        if t0 != 0.0 {
-            time.iter_mut().for_each(|v| *v -= t0);
-        }
     }
     check_channels(&units, &time, &position, &effort, reference.as_deref(), &names)?;
     repair_spikes(
