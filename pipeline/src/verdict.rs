@@ -476,52 +476,133 @@ pub fn channel_gains(sys: &System, on: Measured) -> Option<ChannelGains> {
     if n < 3 || sys.known.is_some() || sys.equations.is_some() || sys.rows() <= p + n {
         return None;
     }
-    // Each joint's Gram matrix, A_jᵀA_j, A_jᵀb_j and b_jᵀb_j, summed over
-    // blocks of rows (no copy of the whole A: a validation record's may be
-    // hundreds of MB).
-    let mut gram: Vec<(DMatrix<f64>, DVector<f64>, f64, usize)> =
-        vec![(DMatrix::zeros(p, p), DVector::zeros(p), 0.0, 0); n];
-    for start in (0..sys.rows()).step_by(GRAM_BLOCK) {
-        let end = (start + GRAM_BLOCK).min(sys.rows());
-        for (j, (g, c, s, count)) in gram.iter_mut().enumerate() {
-            let rows: Vec<usize> = (start..end).filter(|&i| sys.joint[i] == j).collect();
-            if rows.is_empty() {
-                continue;
-            }
-            let (a, b) = (sys.a.select_rows(&rows), sys.b.select_rows(&rows));
-            *g += a.tr_mul(&a);
-            *c += a.tr_mul(&b);
-            *s += b.norm_squared();
-            *count += rows.len();
-        }
-    }
-    if gram.iter().any(|(.., count)| *count <= 1) {
+    let grams = JointGrams::of(sys)?;
+    let total = grams.gram.iter().fold(DMatrix::zeros(p, p), |s, (g, ..)| s + g);
+    let rhs = grams.gram.iter().fold(DVector::zeros(p), |s, (_, c, ..)| s + c);
+    let mut theta = total.cholesky()?.solve(&rhs);
+    let mut g = vec![1.0; n];
+    let first = grams.rss(&theta, &g);
+    if first.iter().zip(&grams.gram).any(|(r, (_, _, s, _))| !(*r > 1e-9 * s)) {
         return None;
     }
-    // From the Gram matrices: exact up to rounding where the residue is
-    // over 1e-9 of the torque's energy (below, nothing is left to explain).
-    let rss = |theta: &DVector<f64>, g: &[f64]| -> Vec<f64> {
-        gram.iter()
+    let w = grams.weights(&first);
+    // Free only the gains the rows tell at the start (within 5 %): one
+    // they barely tell would go to zero, freeing θ from its joint's rows.
+    // The gain held is the best told against joint 0's (the base's own
+    // parameters take up much of its scale: a poor reference).
+    let others = |held: usize| -> Vec<(usize, usize)> {
+        (0..n)
+            .filter(|&j| j != held)
+            .enumerate()
+            .map(|(c, j)| (j, p + c))
+            .collect()
+    };
+    let sd_of = |held: usize| -> Option<Vec<Option<f64>>> {
+        let all = others(held);
+        grams.deviations(grams.normal_at(&theta, &g, &w, &all).0, &all, sys.rows())
+    };
+    let held = sd_of(0)?
+        .iter()
+        .enumerate()
+        .filter_map(|(j, sd)| sd.map(|sd| (j, sd)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(j, _)| j);
+    let at_start = sd_of(held)?;
+    let free: Vec<(usize, usize)> = (0..n)
+        .filter(|&j| at_start[j].is_some_and(|sd| sd < 0.05))
+        .enumerate()
+        .map(|(c, j)| (j, p + c))
+        .collect();
+    grams.fit_gains((&mut theta, &mut g), &w, &free);
+    // Told: a gain within 2 %, each joint's rows weighed by its own
+    // residual variance at the fit.
+    let last = grams.weights(&grams.rss(&theta, &g));
+    let sd = grams.deviations(grams.normal_at(&theta, &g, &last, &free).0, &free, sys.rows())?;
+    let told: Vec<bool> = (0..n)
+        .map(|j| j == held || sd[j].is_some_and(|sd| g[j] > 0.0 && sd < 0.02 * g[j]))
+        .collect();
+    let mut sorted: Vec<f64> = (0..n).filter(|&j| told[j]).map(|j| g[j]).collect();
+    if sorted.len() < 3 {
+        return None;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let at_fit = grams.rss(&theta, &g);
+    let channels = (0..n)
+        .map(|j| ChannelGain {
+            joint: sys.joints[j].clone(),
+            gain: told[j].then_some(g[j] / median),
+            share: 1.0 - at_fit[j] / first[j],
+        })
+        .collect();
+    Some(ChannelGains { channels, on })
+}
+
+/// Each joint's Gram matrix A_jᵀA_j, A_jᵀb_j, b_jᵀb_j and row count: all
+/// [`channel_gains`] reads of the rows.
+struct JointGrams {
+    gram: Vec<(DMatrix<f64>, DVector<f64>, f64, usize)>,
+    p: usize,
+}
+
+impl JointGrams {
+    /// Summed over blocks of rows (no copy of the whole A: a validation
+    /// record's may be hundreds of MB); None where a joint has one row or
+    /// none.
+    fn of(sys: &System) -> Option<JointGrams> {
+        let (n, p) = (sys.joints.len(), sys.parameters());
+        let mut gram: Vec<(DMatrix<f64>, DVector<f64>, f64, usize)> =
+            vec![(DMatrix::zeros(p, p), DVector::zeros(p), 0.0, 0); n];
+        for start in (0..sys.rows()).step_by(GRAM_BLOCK) {
+            let end = (start + GRAM_BLOCK).min(sys.rows());
+            for (j, (g, c, s, count)) in gram.iter_mut().enumerate() {
+                let rows: Vec<usize> = (start..end).filter(|&i| sys.joint[i] == j).collect();
+                if rows.is_empty() {
+                    continue;
+                }
+                let (a, b) = (sys.a.select_rows(&rows), sys.b.select_rows(&rows));
+                *g += a.tr_mul(&a);
+                *c += a.tr_mul(&b);
+                *s += b.norm_squared();
+                *count += rows.len();
+            }
+        }
+        (!gram.iter().any(|(.., count)| *count <= 1)).then_some(JointGrams { gram, p })
+    }
+
+    /// Each joint's residue at (θ, gains g), from the Gram matrices: exact
+    /// up to rounding where the residue is over 1e-9 of the torque's
+    /// energy (below, nothing is left to explain).
+    fn rss(&self, theta: &DVector<f64>, g: &[f64]) -> Vec<f64> {
+        self.gram
+            .iter()
             .zip(g)
             .map(|((gj, cj, s, _), g)| s - 2.0 * g * theta.dot(cj) + g * g * theta.dot(&(gj * theta)))
             .collect()
-    };
-    let total = gram.iter().fold(DMatrix::zeros(p, p), |s, (g, ..)| s + g);
-    let rhs = gram.iter().fold(DVector::zeros(p), |s, (_, c, ..)| s + c);
-    let mut theta = total.cholesky()?.solve(&rhs);
-    let mut g = vec![1.0; n];
-    let first = rss(&theta, &g);
-    if first.iter().zip(&gram).any(|(r, (_, _, s, _))| !(*r > 1e-9 * s)) {
-        return None;
     }
-    let weights = |r: &[f64]| -> Vec<f64> { r.iter().zip(&gram).map(|(r, (.., count))| *count as f64 / r).collect() };
-    // The normal equations of the weighed residue in θ and the gains of
-    // `free` (joint, its column), at (θ, g), and its gradient.
-    let normal_at = |theta: &DVector<f64>, g: &[f64], w: &[f64], free: &[(usize, usize)]| {
+
+    /// Each joint's rows weighed by their residual variance `r` / count.
+    fn weights(&self, r: &[f64]) -> Vec<f64> {
+        r.iter()
+            .zip(&self.gram)
+            .map(|(r, (.., count))| *count as f64 / r)
+            .collect()
+    }
+
+    /// The normal equations of the weighed residue in θ and the gains of
+    /// `free` (joint, its column), at (θ, g), and its gradient.
+    fn normal_at(
+        &self,
+        theta: &DVector<f64>,
+        g: &[f64],
+        w: &[f64],
+        free: &[(usize, usize)],
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        let p = self.p;
         let k = p + free.len();
         let mut normal = DMatrix::zeros(k, k);
         let mut grad = DVector::zeros(k);
-        for (j, (gj, cj, ..)) in gram.iter().enumerate() {
+        for (j, (gj, cj, ..)) in self.gram.iter().enumerate() {
             let gt = gj * theta;
             let mut block = normal.view_mut((0, 0), (p, p));
             block += gj * (w[j] * g[j] * g[j]);
@@ -536,17 +617,18 @@ pub fn channel_gains(sys: &System, on: Measured) -> Option<ChannelGains> {
             }
         }
         (normal, grad)
-    };
-    // Each gain's standard deviation, where the rows tell it (the normal
-    // matrix ridged by 1e-12 of its scale: a gain they leave free has
-    // none), the weighed residue's σ² 1 per row.
-    let deviations = |normal: DMatrix<f64>, free: &[(usize, usize)]| -> Option<Vec<Option<f64>>> {
+    }
+
+    /// Each gain's standard deviation, where the rows tell it (the normal
+    /// matrix ridged by 1e-12 of its scale: a gain they leave free has
+    /// none), the weighed residue's σ² 1 per row.
+    fn deviations(&self, normal: DMatrix<f64>, free: &[(usize, usize)], rows: usize) -> Option<Vec<Option<f64>>> {
         let k = normal.nrows();
         let ridge = 1e-12 * normal.diagonal().max();
         let inverse = (normal + DMatrix::identity(k, k) * ridge).cholesky()?.inverse();
-        let dof = sys.rows().saturating_sub(k).max(1) as f64 / sys.rows() as f64;
+        let dof = rows.saturating_sub(k).max(1) as f64 / rows as f64;
         Some(
-            (0..n)
+            (0..self.gram.len())
                 .map(|j| {
                     free.iter()
                         .find(|(f, _)| *f == j)
@@ -554,93 +636,48 @@ pub fn channel_gains(sys: &System, on: Measured) -> Option<ChannelGains> {
                 })
                 .collect(),
         )
-    };
-    let w = weights(&first);
-    let weighed = |r: &[f64]| r.iter().zip(&w).map(|(r, w)| r * w).sum::<f64>();
-    let start = weighed(&first);
-    // Free only the gains the rows tell at the start (within 5 %): one
-    // they barely tell would go to zero, freeing θ from its joint's rows.
-    // The gain held is the best told against joint 0's (the base's own
-    // parameters take up much of its scale: a poor reference).
-    let others = |held: usize| -> Vec<(usize, usize)> {
-        (0..n)
-            .filter(|&j| j != held)
-            .enumerate()
-            .map(|(c, j)| (j, p + c))
-            .collect()
-    };
-    let sd_of = |held: usize| -> Option<Vec<Option<f64>>> {
-        let all = others(held);
-        deviations(normal_at(&theta, &g, &w, &all).0, &all)
-    };
-    let held = sd_of(0)?
-        .iter()
-        .enumerate()
-        .filter_map(|(j, sd)| sd.map(|sd| (j, sd)))
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(0, |(j, _)| j);
-    let at_start = sd_of(held)?;
-    let free: Vec<(usize, usize)> = (0..n)
-        .filter(|&j| at_start[j].is_some_and(|sd| sd < 0.05))
-        .enumerate()
-        .map(|(c, j)| (j, p + c))
-        .collect();
-    let mut now = start;
-    let mut mu = 1e-9;
-    for _ in 0..50 {
-        let (normal, grad) = normal_at(&theta, &g, &w, &free);
-        // Levenberg–Marquardt: the diagonal raised until the residue falls.
-        let accepted = loop {
-            let mut damped = normal.clone();
-            for d in 0..damped.nrows() {
-                damped[(d, d)] *= 1.0 + mu;
-            }
-            if let Some(step) = damped.cholesky().map(|c| c.solve(&grad)) {
-                let t = &theta + step.rows(0, p);
-                let mut h = g.clone();
-                for &(j, c) in &free {
-                    h[j] += step[c];
+    }
+
+    /// θ and the `free` gains fitted by Levenberg–Marquardt from (θ, g),
+    /// the rows weighed by `w` (at most 50 steps; the diagonal raised until
+    /// the weighed residue falls).
+    fn fit_gains(&self, (theta, g): (&mut DVector<f64>, &mut Vec<f64>), w: &[f64], free: &[(usize, usize)]) {
+        let p = self.p;
+        let weighed = |r: &[f64]| r.iter().zip(w).map(|(r, w)| r * w).sum::<f64>();
+        let mut now = weighed(&self.rss(theta, g));
+        let mut mu = 1e-9;
+        for _ in 0..50 {
+            let (normal, grad) = self.normal_at(theta, g, w, free);
+            let accepted = loop {
+                let mut damped = normal.clone();
+                for d in 0..damped.nrows() {
+                    damped[(d, d)] *= 1.0 + mu;
                 }
-                let r = weighed(&rss(&t, &h));
-                if r <= now {
-                    mu = (mu / 10.0).max(1e-12);
-                    break Some((t, h, r));
+                if let Some(step) = damped.cholesky().map(|c| c.solve(&grad)) {
+                    let t = &*theta + step.rows(0, p);
+                    let mut h = g.clone();
+                    for &(j, c) in free {
+                        h[j] += step[c];
+                    }
+                    let r = weighed(&self.rss(&t, &h));
+                    if r <= now {
+                        mu = (mu / 10.0).max(1e-12);
+                        break Some((t, h, r));
+                    }
                 }
+                mu *= 10.0;
+                if mu > 1e8 {
+                    break None;
+                }
+            };
+            let Some((t, h, r)) = accepted else { break };
+            let done = now - r <= 1e-10 * now;
+            (*theta, *g, now) = (t, h, r);
+            if done {
+                break;
             }
-            mu *= 10.0;
-            if mu > 1e8 {
-                break None;
-            }
-        };
-        let Some((t, h, r)) = accepted else { break };
-        let done = now - r <= 1e-10 * now;
-        (theta, g, now) = (t, h, r);
-        if done {
-            break;
         }
     }
-    // Told: a gain within 2 %, each joint's rows weighed by its own
-    // residual variance at the fit.
-    let last = weights(&rss(&theta, &g));
-    let sd = deviations(normal_at(&theta, &g, &last, &free).0, &free)?;
-    let told: Vec<bool> = (0..n)
-        .map(|j| j == held || sd[j].is_some_and(|sd| g[j] > 0.0 && sd < 0.02 * g[j]))
-        .collect();
-    let mut sorted: Vec<f64> = (0..n).filter(|&j| told[j]).map(|j| g[j]).collect();
-    if sorted.len() < 3 {
-        return None;
-    }
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    let at_fit = rss(&theta, &g);
-    let channels = (0..n)
-        .map(|j| ChannelGain {
-            joint: sys.joints[j].clone(),
-            gain: told[j].then_some(g[j] / median),
-            share: 1.0 - at_fit[j] / first[j],
-        })
-        .collect();
-    Some(ChannelGains { channels, on })
 }
 
 /// The velocity of `joint` on its `rows`: its viscous column (or the sum

@@ -431,45 +431,14 @@ pub(super) fn choose_model(
         true => None,
         false => stribeck_fit(&systems, &scorer, (friction, pick.0), first, &score, margin)?,
     };
-    // The delay and the filter were searched with a friction that left
-    // the static friction in the residue (on the corpus's Stribeck arm a
-    // Chebyshev filter and 0.86 samples early, the truth a Butterworth and
-    // none): with the fades found, searched again, and the fades again
-    // under what that finds (vs 0.054 → 0.050 rad/s there, the residue
-    // from 2.6× the floor to 1.0×); kept where the score is better.
-    let (late, search, stribeck) = match stribeck {
-        None => (late, search, None),
-        Some(first_fit) => {
-            let terms = friction.with_stribeck(true);
-            let (sys, _) = systems.system_with(terms, pick.0, Some(first), &first_fit.shapes)?;
-            match sys
-                .as_ref()
-                .and_then(|sys| choose_delay(sys, declared, (lowest_hz, 0.5 * fs), fs, margin))
-            {
-                Some(again) => {
-                    let rescorer = Scorer {
-                        search: again.search.as_ref(),
-                        delay_s: again.delay_s,
-                        ..scorer
-                    };
-                    let (without_sys, _) = systems.system(friction, pick.0, Some(first))?;
-                    let without = without_sys.as_ref().and_then(|s| rescorer.score(s));
-                    let refit = match &without {
-                        Some((_, w)) => stribeck_fit(&systems, &rescorer, (friction, pick.0), first, w, margin)?,
-                        None => None,
-                    };
-                    match refit {
-                        Some(r) if r.fit.1.ratio < first_fit.fit.1.ratio => {
-                            let search = again.search.clone();
-                            (again, search, Some(r))
-                        }
-                        _ => (late, search, Some(first_fit)),
-                    }
-                }
-                None => (late, search, Some(first_fit)),
-            }
-        }
-    };
+    let at = (friction, pick.0, first);
+    let (late, search, stribeck) = stribeck_again(
+        &systems,
+        &scorer,
+        at,
+        (declared, (lowest_hz, fs), margin),
+        (late, stribeck),
+    )?;
     let (friction, stribeck, stribeck_said, (filter, score)) = match stribeck {
         Some(s) => (friction.with_stribeck(true), s.shapes, Some(s.said), s.fit),
         None => (friction, Default::default(), None, (filter, score)),
@@ -637,6 +606,156 @@ pub(super) struct StribeckChoice {
     said: String,
 }
 
+/// With Stribeck's fades found (`first_fit`; none: the delay's search as
+/// it was), the delay and the filter
+/// searched again, and the fades again under what that finds: the delay's
+/// search, its filter search and the fades, the new ones where they score
+/// better. The delay and the filter were searched with a friction that
+/// left the static friction in the residue (on the corpus's Stribeck arm a
+/// Chebyshev filter and 0.86 samples early, the truth a Butterworth and
+/// none); searched again, vs 0.054 → 0.050 rad/s there, the residue from
+/// 2.6× the floor to 1.0×.
+#[allow(clippy::type_complexity)]
+fn stribeck_again(
+    systems: &LineSystems,
+    scorer: &Scorer,
+    (friction, v, first): (FrictionTerms, f64, Lines),
+    (declared, (lowest_hz, fs), margin): (Option<FilterSpec>, (f64, f64), f64),
+    (late, first_fit): (Late, Option<StribeckChoice>),
+) -> Result<(Late, Option<FilterChoice>, Option<StribeckChoice>)> {
+    let search = late.search.clone();
+    let Some(first_fit) = first_fit else {
+        return Ok((late, search, None));
+    };
+    let terms = friction.with_stribeck(true);
+    let (sys, _) = systems.system_with(terms, v, Some(first), &first_fit.shapes)?;
+    Ok(
+        match sys
+            .as_ref()
+            .and_then(|sys| choose_delay(sys, declared, (lowest_hz, 0.5 * fs), fs, margin))
+        {
+            Some(again) => {
+                let rescorer = Scorer {
+                    search: again.search.as_ref(),
+                    delay_s: again.delay_s,
+                    ..*scorer
+                };
+                let (without_sys, _) = systems.system(friction, v, Some(first))?;
+                let without = without_sys.as_ref().and_then(|s| rescorer.score(s));
+                let refit = match &without {
+                    Some((_, w)) => stribeck_fit(systems, &rescorer, (friction, v), first, w, margin)?,
+                    None => None,
+                };
+                match refit {
+                    Some(r) if r.fit.1.ratio < first_fit.fit.1.ratio => {
+                        let search = again.search.clone();
+                        (again, search, Some(r))
+                    }
+                    _ => (late, search, Some(first_fit)),
+                }
+            }
+            None => (late, search, Some(first_fit)),
+        },
+    )
+}
+
+/// A joint's held-out ratio in `s` (infinite where not scored).
+fn joint_ratio(s: &Option<Score>, j: usize) -> f64 {
+    s.as_ref()
+        .and_then(|s| s.per_joint.get(j).copied())
+        .filter(|r| r.is_finite())
+        .unwrap_or(f64::INFINITY)
+}
+
+/// Each taken joint's fade: the refined one where it scores better than
+/// its grid point, else that; with what says so.
+#[allow(clippy::type_complexity)]
+fn chosen_fades(
+    taken: &[(usize, (f64, f64), f64, f64)],
+    (best, refined): (&[f64], &Option<Score>),
+    joints: &[String],
+) -> (std::collections::BTreeMap<String, StribeckShape>, Vec<String>) {
+    let mut shapes = std::collections::BTreeMap::new();
+    let mut said = Vec::new();
+    for (&(j, (vs, d), r, before), &x) in taken.iter().zip(best) {
+        let name = &joints[j];
+        let (vs, r) = match joint_ratio(refined, j) {
+            rx if rx < r => ((x - 10.0).exp(), rx),
+            _ => (vs, r),
+        };
+        let shape = StribeckShape {
+            velocity_rad_s: vs,
+            exponent: d,
+        };
+        shapes.insert(name.clone(), shape);
+        said.push(format!(
+            "{name} vs {vs:.4} rad/s, δ {d} ({r:.2}× the noise floor held out, {before:.2}× without)"
+        ));
+    }
+    (shapes, said)
+}
+
+/// Per joint: its best fade on the grid, its ratio there and without,
+/// where that beats its ratio without by the per-joint spread.
+#[allow(clippy::type_complexity)]
+fn grid_winners(
+    scored: &[((f64, f64), Option<Fitted>)],
+    without: &Score,
+    joints: usize,
+    margin: f64,
+) -> Vec<(usize, (f64, f64), f64, f64)> {
+    let per_joint_margin = margin * (joints as f64).sqrt();
+    (0..joints)
+        .filter_map(|j| {
+            let before = without.per_joint.get(j).copied().unwrap_or(f64::NAN);
+            let (fade, r) = scored
+                .iter()
+                .filter_map(|(s, f)| Some((*s, f.as_ref()?.1.per_joint.get(j).copied()?)))
+                .filter(|(_, r)| r.is_finite())
+                .min_by(|a, b| a.1.total_cmp(&b.1))?;
+            (r < before * (1.0 - per_joint_margin)).then_some((j, fade, r, before))
+        })
+        .collect()
+}
+
+/// Each taken joint's fade speed refined in log at its grid δ, on its own
+/// ratio, by Brent searches in lockstep: a joint's Stribeck column enters
+/// its own rows only, so one system with every taken joint at its own
+/// point scores them all (`at`, in ln vs + 10, positive for the relative
+/// tolerance: about 1 % in vs; within a factor 2 of the grid point). The
+/// points and the score at them.
+#[allow(clippy::type_complexity)]
+fn refined_fades(
+    taken: &[(usize, (f64, f64), f64, f64)],
+    at: &dyn Fn(&[f64]) -> Result<Option<Score>>,
+) -> Result<(Vec<f64>, Option<Score>)> {
+    let mut searches: Vec<robotid_stages::signal::Brent> = taken
+        .iter()
+        .map(|&(_, (vs, _), _, _)| {
+            robotid_stages::signal::Brent::new((vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
+        })
+        .collect();
+    loop {
+        // A search that is done stays at its best.
+        let xs: Vec<f64> = searches
+            .iter()
+            .map(|g| g.next().unwrap_or_else(|| g.best().0))
+            .collect();
+        if searches.iter().all(|g| g.next().is_none()) {
+            break;
+        }
+        let scored = at(&xs)?;
+        for (g, &(j, ..)) in searches.iter_mut().zip(taken) {
+            if g.next().is_some() {
+                g.tell(joint_ratio(&scored, j));
+            }
+        }
+    }
+    let best: Vec<f64> = searches.iter().map(|g| g.best().0).collect();
+    let refined = at(&best)?;
+    Ok((best, refined))
+}
+
 /// Stribeck's static friction on top of `friction` (at turn-over `v`):
 /// every fade of the grid given to every joint at once, each scored on
 /// held-out periods (a joint's friction columns enter its own rows only,
@@ -681,30 +800,10 @@ pub(super) fn stribeck_fit(
         .par_iter()
         .map(|&(vs, d)| Ok(((vs, d), score_of(&every(shape(vs, d)), false)?)))
         .collect::<Result<_>>()?;
-    // Per joint: its best fade on the grid and its ratio there, where that
-    // beats its ratio without by the per-joint spread.
-    let per_joint_margin = margin * (joints.len() as f64).sqrt();
-    let taken: Vec<(usize, (f64, f64), f64, f64)> = joints
-        .iter()
-        .enumerate()
-        .filter_map(|(j, _)| {
-            let before = without.per_joint.get(j).copied().unwrap_or(f64::NAN);
-            let (fade, r) = scored
-                .iter()
-                .filter_map(|(s, f)| Some((*s, f.as_ref()?.1.per_joint.get(j).copied()?)))
-                .filter(|(_, r)| r.is_finite())
-                .min_by(|a, b| a.1.total_cmp(&b.1))?;
-            (r < before * (1.0 - per_joint_margin)).then_some((j, fade, r, before))
-        })
-        .collect();
+    let taken = grid_winners(&scored, without, joints.len(), margin);
     if taken.is_empty() {
         return Ok(None);
     }
-    // Each taken joint's vs refined in log at its grid δ, on its own ratio,
-    // by Brent searches in lockstep: a joint's Stribeck column enters its
-    // own rows only, so one system with every taken joint at its own point
-    // scores them all (in ln vs + 10, positive for the relative tolerance:
-    // about 1 % in vs).
     let at = |xs: &[f64]| -> Result<Option<Score>> {
         let shapes = taken
             .iter()
@@ -713,49 +812,8 @@ pub(super) fn stribeck_fit(
             .collect();
         Ok(score_of(&shapes, false)?.map(|(_, s, _)| s))
     };
-    let ratio_of = |s: &Option<Score>, j: usize| -> f64 {
-        s.as_ref()
-            .and_then(|s| s.per_joint.get(j).copied())
-            .filter(|r| r.is_finite())
-            .unwrap_or(f64::INFINITY)
-    };
-    let mut searches: Vec<robotid_stages::signal::Brent> = taken
-        .iter()
-        .map(|&(_, (vs, _), _, _)| {
-            robotid_stages::signal::Brent::new((vs / 2.0).ln() + 10.0, (vs * 2.0).ln() + 10.0, 1e-3)
-        })
-        .collect();
-    loop {
-        // A search that is done stays at its best.
-        let xs: Vec<f64> = searches
-            .iter()
-            .map(|g| g.next().unwrap_or_else(|| g.best().0))
-            .collect();
-        if searches.iter().all(|g| g.next().is_none()) {
-            break;
-        }
-        let scored = at(&xs)?;
-        for (g, &(j, ..)) in searches.iter_mut().zip(&taken) {
-            if g.next().is_some() {
-                g.tell(ratio_of(&scored, j));
-            }
-        }
-    }
-    let best: Vec<f64> = searches.iter().map(|g| g.best().0).collect();
-    let refined = at(&best)?;
-    let mut shapes = BTreeMap::new();
-    let mut said = Vec::new();
-    for (&(j, (vs, d), r, before), &x) in taken.iter().zip(&best) {
-        let name = &joints[j];
-        let (vs, r) = match ratio_of(&refined, j) {
-            rx if rx < r => ((x - 10.0).exp(), rx),
-            _ => (vs, r),
-        };
-        shapes.insert(name.clone(), shape(vs, d));
-        said.push(format!(
-            "{name} vs {vs:.4} rad/s, δ {d} ({r:.2}× the noise floor held out, {before:.2}× without)"
-        ));
-    }
+    let (best, refined) = refined_fades(&taken, &at)?;
+    let (shapes, said) = chosen_fades(&taken, (&best, &refined), joints);
     if shapes.is_empty() {
         return Ok(None);
     }
