@@ -1124,7 +1124,9 @@ pub(super) struct LineSystems<'a> {
     pub(super) spectra: robotid_stages::signal::Spectra,
 }
 
-/// A line system's columns and their names, for another to reuse.
+/// A line system's columns and their names, for another to reuse: the
+/// sign(q̇) system's (Coulomb transition 0), whose friction columns
+/// [`LineSystems::system_with`] reuses where they are the same functions.
 pub(super) type Lines<'a> = (&'a [robotid_stages::signal::Complex64], &'a [String]);
 
 impl<'a> LineSystems<'a> {
@@ -1187,11 +1189,17 @@ impl<'a> LineSystems<'a> {
         let (cols, names) = (base.parameters(), base.names());
         let spec = match reuse {
             Some((lines0, names0)) => {
+                // A column of the same name is the same function of the
+                // motion as the reused one's (the sign(q̇) system's, at
+                // v = 0), except a fade's and, off sign(q̇), Coulomb's: the
+                // Stribeck grid makes only its fades.
+                let same = |c: usize| match base.friction_term(c) {
+                    None => true,
+                    Some((_, k)) => !friction.is_fade(k) && (v == 0.0 || !friction.is_coulomb(k)),
+                };
                 let before = |c: usize| {
                     let name = &names[c];
-                    (base.friction_term(c).is_none())
-                        .then(|| names0.iter().position(|n| n == name))
-                        .flatten()
+                    same(c).then(|| names0.iter().position(|n| n == name)).flatten()
                 };
                 let fresh: Vec<usize> = (0..cols).filter(|&c| before(c).is_none()).collect();
                 let mut spec = column_spectra_of(&base, self.kin, lines - 1, &self.spectra, Some(&fresh));

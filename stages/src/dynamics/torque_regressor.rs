@@ -87,6 +87,17 @@ impl FrictionTerms {
     }
 
     /// Whether column `index` of a joint's friction (as [`friction_values`]
+    /// orders them) is a Stribeck fade's: the one column whose function
+    /// depends on the joint's fade.
+    pub fn is_fade(self, index: usize) -> bool {
+        match self {
+            FrictionTerms::Stribeck => index == 2,
+            FrictionTerms::StribeckAsymmetric => index >= 4,
+            _ => false,
+        }
+    }
+
+    /// Whether column `index` of a joint's friction (as [`friction_values`]
     /// orders them) is Coulomb's: sign or tanh of q̇, one-sided or not.
     pub fn is_coulomb(self, index: usize) -> bool {
         match self {
