@@ -13,6 +13,63 @@ use crate::recordings::{design_all, own_delays, run_pipelines, Paths};
 use crate::script::Script;
 use crate::{Error, Identification, Physical, Recording, Request, Result, Role};
 
+/// The payload of `request`, fitted on the loaded records' tables against
+/// the robot the identification tables give, validated on the held-out
+/// loaded ones, and written (with the robot file's `model`).
+#[allow(clippy::type_complexity)]
+fn payload_part(
+    request: &Request,
+    (robot, staged): (&Path, &Path),
+    (id_tables, loaded_tables): (&[PathBuf], &[PathBuf]),
+    model: Option<&robotid_stages::dynamics::Model>,
+) -> Result<(
+    Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
+    Option<crate::PayloadValidation>,
+)> {
+    let Some(p) = &request.payload else {
+        return Ok((None, None));
+    };
+    let (fit_tables, held_loaded) = loaded_tables.split_at(p.loaded.len());
+    let fit = Box::new(payload_from_tables(p, robot, staged, id_tables, fit_tables)?);
+    let validation = match held_loaded.is_empty() {
+        true => None,
+        false => payload_validated(&fit, staged, held_loaded)?,
+    };
+    if let Some(model) = model {
+        write_payload(p, &fit, validation.as_ref(), model, staged)?;
+    }
+    Ok((Some(fit), validation))
+}
+
+/// The report's page of an identification: its tables, the physical
+/// estimate where fitted, the payload, the closed loop under the user's
+/// controller on the validation records' raw samples, and MuJoCo.
+fn report_page(
+    request: &Request,
+    (staged, paths): (&Path, &Paths),
+    (id_tables, val_tables, raw_tables): (&[PathBuf], &[PathBuf], &[PathBuf]),
+    fitted: bool,
+    payload: bool,
+) -> robotid_report::report::Page {
+    robotid_report::report::Page {
+        parameters: "parameters.parquet".into(),
+        excitation: id_tables.to_vec(),
+        validation: val_tables.to_vec(),
+        physical: fitted.then(|| "parameters_physical.parquet".into()),
+        robot: Some(paths.robot.clone()),
+        rollout: true,
+        payload: payload.then(|| "payload.parquet".into()),
+        closed_loop: paths.controller.clone().map(|c| (c, raw_tables.to_vec())),
+        mujoco: request
+            .mujoco
+            .clone()
+            .filter(|_| fitted)
+            .map(|python| ("identified.xml".into(), python)),
+        out: "report.html".into(),
+        within: staged.to_path_buf(),
+    }
+}
+
 /// Identifies the robot of `request` (see the crate's documentation),
 /// `observer` told of each pipeline's steps and of the physical fit. A
 /// refused fit is an [`Identification`] whose `refused` says why, its
@@ -64,24 +121,12 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
-    let (fit_tables, held_loaded) = loaded_tables.split_at(request.payload.as_ref().map_or(0, |p| p.loaded.len()));
-    let payload = match &request.payload {
-        Some(p) => Some(Box::new(payload_from_tables(
-            p,
-            &paths.robot,
-            staged,
-            id_tables,
-            fit_tables,
-        )?)),
-        None => None,
-    };
-    let payload_validation = match &payload {
-        Some(fit) if !held_loaded.is_empty() => payload_validated(fit, staged, held_loaded)?,
-        _ => None,
-    };
-    if let (Some(p), Some(fit), Some(model)) = (&request.payload, &payload, &payload_model) {
-        write_payload(p, fit, payload_validation.as_ref(), model, staged)?;
-    }
+    let (payload, payload_validation) = payload_part(
+        request,
+        (&paths.robot, staged),
+        (id_tables, loaded_tables),
+        payload_model.as_ref(),
+    )?;
     let physical = physical_or_why(
         request,
         &mut judged,
@@ -100,23 +145,13 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         .filter(|r| r.role == Role::Validation)
         .map(|r| recording_table(r, TableKind::RawSamples))
         .collect();
-    let page = robotid_report::report::Page {
-        parameters: "parameters.parquet".into(),
-        excitation: id_tables.to_vec(),
-        validation: val_tables.to_vec(),
-        physical: fitted.then(|| "parameters_physical.parquet".into()),
-        robot: Some(paths.robot.clone()),
-        rollout: true,
-        payload: payload.as_ref().map(|_| "payload.parquet".into()),
-        closed_loop: paths.controller.clone().map(|c| (c, raw_tables.clone())),
-        mujoco: request
-            .mujoco
-            .clone()
-            .filter(|_| fitted)
-            .map(|python| ("identified.xml".into(), python)),
-        out: "report.html".into(),
-        within: staged.to_path_buf(),
-    };
+    let page = report_page(
+        request,
+        (staged, &paths),
+        (id_tables, val_tables, &raw_tables),
+        fitted,
+        payload.is_some(),
+    );
     // Every simulation is run here, held on the identification; the page
     // only draws them.
     // Each run and failure named where its files will be, not where they

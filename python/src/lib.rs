@@ -362,6 +362,55 @@ fn written<'py>(py: Python<'py>, path: &Path) -> PyResult<Py<PyAny>> {
     Ok(table(py, batch)?.unbind())
 }
 
+/// As the command line: with a payload, `recordings` carry it and the
+/// robot is identified from `unloaded`.
+#[allow(clippy::type_complexity)]
+fn roles(
+    (recordings, unloaded): (Vec<PathBuf>, Vec<PathBuf>),
+    payload_on: Option<String>,
+    known_mass: Option<f64>,
+    bound: Option<([f64; 3], [f64; 3])>,
+    validate: Vec<PathBuf>,
+) -> PyResult<(Vec<PathBuf>, Option<robotid_identify::PayloadRequest>)> {
+    let Some(link) = payload_on else {
+        return Ok((recordings, None));
+    };
+    if unloaded.is_empty() {
+        return Err(pyo3::exceptions::PyValueError::new_err(
+            "payload_on: give the recordings without the payload as `unloaded`",
+        ));
+    }
+    let p = robotid_identify::PayloadRequest {
+        loaded: recordings,
+        link,
+        known_mass,
+        bound,
+        validate,
+    };
+    Ok((unloaded, Some(p)))
+}
+
+/// Each recording's role, name, log, design findings and pipeline, as
+/// Python dictionaries.
+fn recordings_listed(py: Python<'_>, id: &robotid_identify::Identification) -> PyResult<Py<PyList>> {
+    let listed = PyList::empty(py);
+    for r in &id.recordings {
+        let d = PyDict::new(py);
+        d.set_item("role", r.role.name())?;
+        d.set_item("name", &r.name)?;
+        d.set_item("log", &r.log)?;
+        d.set_item("periodic", r.design.periodic().is_some())?;
+        let found = PyDict::new(py);
+        for (k, v) in &r.design.findings {
+            found.set_item(k.key(), v)?;
+        }
+        d.set_item("findings", found)?;
+        d.set_item("pipeline", &r.design.text)?;
+        listed.append(d)?;
+    }
+    Ok(listed.unbind())
+}
+
 /// From recordings and a robot file to a validated model, as `robotid
 /// identify` (the same files, byte for byte).
 #[pyfunction]
@@ -388,27 +437,14 @@ fn identify(
     mujoco: bool,
     read: Option<PathBuf>,
 ) -> PyResult<Identification> {
-    use robotid_identify::{PayloadRequest, Physical, Request};
-    // As the command line: with a payload, `recordings` carry it and the
-    // robot is identified from `unloaded`.
-    let (recordings, payload) = match payload_on {
-        Some(link) => {
-            if unloaded.is_empty() {
-                return Err(pyo3::exceptions::PyValueError::new_err(
-                    "payload_on: give the recordings without the payload as `unloaded`",
-                ));
-            }
-            let p = PayloadRequest {
-                loaded: recordings,
-                link,
-                known_mass: known_payload_mass,
-                bound: payload_ellipsoid,
-                validate: validate_loaded,
-            };
-            (unloaded, Some(p))
-        }
-        None => (recordings, None),
-    };
+    use robotid_identify::Request;
+    let (recordings, payload) = roles(
+        (recordings, unloaded),
+        payload_on,
+        known_payload_mass,
+        payload_ellipsoid,
+        validate_loaded,
+    )?;
     let request = Request {
         validate,
         out,
@@ -438,21 +474,18 @@ fn identify(
     let id = py
         .detach(|| robotid_identify::identify_quietly(&request))
         .map_err(py_identify_error)?;
-    let listed = PyList::empty(py);
-    for r in &id.recordings {
-        let d = PyDict::new(py);
-        d.set_item("role", r.role.name())?;
-        d.set_item("name", &r.name)?;
-        d.set_item("log", &r.log)?;
-        d.set_item("periodic", r.design.periodic().is_some())?;
-        let found = PyDict::new(py);
-        for (k, v) in &r.design.findings {
-            found.set_item(k.key(), v)?;
-        }
-        d.set_item("findings", found)?;
-        d.set_item("pipeline", &r.design.text)?;
-        listed.append(d)?;
-    }
+    identification(py, id, accept_inadequate)
+}
+
+/// What Python returns of an identification: its verdict, the tables it
+/// wrote as pyarrow, its exports, rollouts and warnings.
+fn identification(
+    py: Python<'_>,
+    id: robotid_identify::Identification,
+    accept_inadequate: bool,
+) -> PyResult<Identification> {
+    use robotid_identify::Physical;
+    let listed = recordings_listed(py, &id)?;
     let (physical, exports) = match &id.physical {
         Physical::Fitted { export, .. } => (
             Some(written(py, &id.path("parameters_physical.parquet"))?),
@@ -473,7 +506,7 @@ fn identify(
         verdict: id.verdict.said(),
         relative_error: id.verdict.relative.0,
         measured: id.verdict.relative.1.said().to_string(),
-        recordings: listed.unbind(),
+        recordings: listed,
         parameters: written(py, &id.path("parameters.parquet"))?,
         physical,
         exports,
