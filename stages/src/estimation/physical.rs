@@ -428,6 +428,31 @@ pub fn bootstrap_covariance(
     Ok(cov + problem.prior_share(map, prior_weight)?)
 }
 
+/// The interior point's settings; `cautious`, for a second try where the
+/// first ended short: a static regularisation 10× clarabel's default and
+/// steps of at most 0.9 of the way to the cones' boundary.
+fn program_settings(cautious: bool) -> Result<clarabel::solver::DefaultSettings<f64>> {
+    DefaultSettingsBuilder::default()
+        .verbose(false)
+        .max_iter(500)
+        // The step's start x_u can lie far outside the bounds (a 100 kg
+        // estimate of a 2 kg link): at the default 1e-8 the solver took
+        // that distance for infeasibility, though the robot file's own
+        // body is always feasible.
+        .tol_infeas_abs(1e-14)
+        .tol_infeas_rel(1e-14)
+        .reduced_tol_infeas_abs(1e-14)
+        .reduced_tol_infeas_rel(1e-14)
+        .time_limit(30.0)
+        // Draws too: without it, draws against the links' bounds ended
+        // in NaN iterates (the real LWR4+, 1 in ~50).
+        .iterative_refinement_enable(true)
+        .static_regularization_constant(if cautious { 1e-7 } else { 1e-8 })
+        .max_step_fraction(if cautious { 0.9 } else { 0.99 })
+        .build()
+        .map_err(|e| Error::numerical("physical fit", format!("solver settings: {e:?}")))
+}
+
 /// R with R·Rᵀ = C, to draw from N(0, C). C is factored as its correlation
 /// matrix, so parameters whose variances span many decades (a mass moment's
 /// and an offset's, 1e13 on an ill-conditioned record) do not lose the
@@ -694,46 +719,37 @@ impl Problem {
         let p = objective(normal);
         let q = vec![0.0; ns];
         let (a, b, cones) = self.constraints(x_u);
-        let settings = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .max_iter(500)
-            // The step's start x_u can lie far outside the bounds (a 100 kg
-            // estimate of a 2 kg link): at the default 1e-8 the solver took
-            // that distance for infeasibility, though the robot file's own
-            // body is always feasible.
-            .tol_infeas_abs(1e-14)
-            .tol_infeas_rel(1e-14)
-            .reduced_tol_infeas_abs(1e-14)
-            .reduced_tol_infeas_rel(1e-14)
-            .time_limit(30.0)
-            // Draws too: without it, draws against the links' bounds ended
-            // in NaN iterates (the real LWR4+, 1 in ~50).
-            .iterative_refinement_enable(true)
-            .build()
-            .map_err(|e| Error::numerical("physical fit", format!("solver settings: {e:?}")))?;
-        one_blas_thread();
-        let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
-            .map_err(|e| Error::numerical("physical fit", format!("the problem as clarabel sees it: {e:?}")))?;
-        // A panic inside the solver (its dense eigen-decompositions `expect`)
-        // is this fit's failure, not the program's.
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| solver.solve())).map_err(|_| {
-            Error::numerical(
-                "physical fit",
-                format!("the semidefinite solver failed inside (λ = {weight})"),
-            )
-        })?;
-        let status = solver.solution.status;
-        if !matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) {
-            return Err(Error::numerical(
-                "physical fit",
-                format!(
-                    "the semidefinite program ended {status:?} after {} iterations (λ = {weight})",
-                    solver.solution.iterations
-                ),
-            ));
+        // A program that ends short of its optimum (clarabel's
+        // NumericalError: the corpus's `stribeck_fast` at λ = 1, so its
+        // fit failed and nothing was exported) is solved again more
+        // cautiously: a larger static regularisation of the KKT system and
+        // shorter steps into the cones.
+        let mut tried = Vec::new();
+        for cautious in [false, true] {
+            let settings = program_settings(cautious)?;
+            one_blas_thread();
+            let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
+                .map_err(|e| Error::numerical("physical fit", format!("the problem as clarabel sees it: {e:?}")))?;
+            // A panic inside the solver (its dense eigen-decompositions
+            // `expect`) is this fit's failure, not the program's.
+            let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| solver.solve()));
+            let status = solver.solution.status;
+            match ran {
+                Ok(()) if matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) => {
+                    let x: Vec<f64> = (0..ns).map(|i| x_u[i] + solver.solution.x[i]).collect();
+                    return Ok(self.solved(x, chol, fit, solver.solution.iterations as usize));
+                }
+                Ok(()) => tried.push(format!("{status:?} after {} iterations", solver.solution.iterations)),
+                Err(_) => tried.push("a failure inside the solver".to_string()),
+            }
         }
-        let x: Vec<f64> = (0..ns).map(|i| x_u[i] + solver.solution.x[i]).collect();
-        Ok(self.solved(x, chol, fit, solver.solution.iterations as usize))
+        Err(Error::numerical(
+            "physical fit",
+            format!(
+                "the semidefinite program ended {} (λ = {weight})",
+                tried.join(", and solved again more cautiously, ")
+            ),
+        ))
     }
 
     /// Constraints s = b − A·δ in the cones, for the step δ from `x_u`
