@@ -95,27 +95,31 @@ impl Halves {
     }
 
     /// Halves in time: each recording's samples cut into [`TIME_BLOCKS`]
-    /// contiguous blocks, the even blocks' least squares and the odd ones'.
-    /// None where a half does not determine every parameter.
-    pub fn in_time(sys: &System, weights: Option<&DVector<f64>>) -> Option<Halves> {
-        let p = sys.parameters();
-        let mut first = vec![i64::MAX; sys.recordings.len().max(1)];
-        let mut last = vec![i64::MIN; first.len()];
-        for (i, &s) in sys.sample.iter().enumerate() {
-            let r = sys.recording[i];
-            first[r] = first[r].min(s);
-            last[r] = last[r].max(s);
-        }
+    /// contiguous blocks, the even blocks' least squares and the odd ones',
+    /// over the recordings' systems (each with its row weights), summed
+    /// where they lie: no stacked copy of the rows. None where a half does
+    /// not determine every parameter.
+    pub fn in_time(systems: &[(&System, Option<&DVector<f64>>)]) -> Option<Halves> {
+        let p = systems.first()?.0.parameters();
         let mut normals = [DMatrix::zeros(p, p), DMatrix::zeros(p, p)];
         let mut rhs = [DVector::zeros(p), DVector::zeros(p)];
-        for i in 0..sys.rows() {
-            let r = sys.recording[i];
-            let span = (last[r] - first[r] + 1) as usize;
-            let block = (sys.sample[i] - first[r]) as usize * TIME_BLOCKS / span;
-            let w = weights.map_or(1.0, |w| w[i]);
-            let a = sys.a.row(i);
-            normals[block % 2].ger(w, &a.transpose(), &a.transpose(), 1.0);
-            rhs[block % 2].axpy(w * sys.b[i], &a.transpose(), 1.0);
+        for &(sys, weights) in systems {
+            let mut first = vec![i64::MAX; sys.recordings.len().max(1)];
+            let mut last = vec![i64::MIN; first.len()];
+            for (i, &s) in sys.sample.iter().enumerate() {
+                let r = sys.recording[i];
+                first[r] = first[r].min(s);
+                last[r] = last[r].max(s);
+            }
+            for i in 0..sys.rows() {
+                let r = sys.recording[i];
+                let span = (last[r] - first[r] + 1) as usize;
+                let block = (sys.sample[i] - first[r]) as usize * TIME_BLOCKS / span;
+                let w = weights.map_or(1.0, |w| w[i]);
+                let a = sys.a.row(i);
+                normals[block % 2].ger(w, &a.transpose(), &a.transpose(), 1.0);
+                rhs[block % 2].axpy(w * sys.b[i], &a.transpose(), 1.0);
+            }
         }
         let solve = |h: usize| normals[h].clone().cholesky().map(|c| c.solve(&rhs[h]));
         let (even, odd) = (solve(0)?, solve(1)?);
@@ -672,7 +676,7 @@ mod tests {
         let a = DMatrix::from_fn(n, 2, |i, j| if j == 0 { 1.0 } else { i as f64 / n as f64 });
         let b = DVector::from_fn(n, |i, _| 0.3 + 2.0 * a[(i, 1)] + (0.7 * i as f64).sin());
         let sys = System::one_joint(vec!["c".into(), "s".into()], a.clone(), b.clone(), 0.01);
-        let h = Halves::in_time(&sys, None).unwrap();
+        let h = Halves::in_time(&[(&sys, None)]).unwrap();
         let rows = |parity: usize| -> Vec<usize> { (0..n).filter(|i| (i / 10) % 2 == parity).collect() };
         let fit = |rows: &[usize]| {
             let a = a.select_rows(rows);

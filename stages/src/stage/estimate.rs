@@ -708,12 +708,15 @@ impl Reducer {
             .iter()
             .map(|p| p.rows.as_ref().map(|r| &r.0))
             .collect::<Option<_>>()?;
-        let sys = System::stack(&systems).ok()?;
-        let w = match self.cfg.method {
-            Estimator::Wls => Some(row_weights(&sys, self.cfg.weights).ok()?),
-            _ => None,
-        };
-        Halves::in_time(&sys, w.as_ref())
+        let weights: Vec<Option<nalgebra::DVector<f64>>> = systems
+            .iter()
+            .map(|sys| match self.cfg.method {
+                Estimator::Wls => row_weights(sys, self.cfg.weights).ok().map(Some),
+                _ => Some(None),
+            })
+            .collect::<Option<_>>()?;
+        let weighted: Vec<_> = systems.iter().zip(&weights).map(|(s, w)| (*s, w.as_ref())).collect();
+        Halves::in_time(&weighted)
     }
 
     /// The map step without a chain: one recording's part from its system
