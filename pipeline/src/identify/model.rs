@@ -155,14 +155,13 @@ fn picked_band(tried: &[(bool, String, ModelChoice)]) -> usize {
 fn band_scores(tried: &[(bool, String, ModelChoice)]) -> String {
     tried
         .iter()
-        .map(|t| match (t.2.score, t.2.split) {
-            (Some(r), _) => format!("{}: {r:.3}", if t.0 { "torques' band" } else { "positions' band" }),
-            (None, Some(s)) => format!(
-                "{}: {:.2} % of the torque held out in time",
-                if t.0 { "torques' band" } else { "positions' band" },
-                100.0 * s
-            ),
-            (None, None) => format!("{}: not scored", if t.0 { "torques' band" } else { "positions' band" }),
+        .map(|t| {
+            let band = if t.0 { "torques' band" } else { "positions' band" };
+            match (t.2.score, t.2.split) {
+                (Some(r), _) => format!("{band}: {r:.3}"),
+                (None, Some(s)) => format!("{band}: {:.2} % of the torque held out in time", 100.0 * s),
+                (None, None) => format!("{band}: not scored"),
+            }
         })
         .collect::<Vec<_>>()
         .join(", ")

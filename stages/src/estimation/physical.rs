@@ -376,27 +376,22 @@ pub const BOOTSTRAP_DRAWS: usize = 200;
 
 /// The covariance of the physically consistent estimate itself, by a
 /// parametric bootstrap from the fitted model: the base estimate drawn
-/// from N(θ_fit, Σ), θ_fit the fit's own base values (seeded, one
+/// from N(`centre`, Σ), `centre` the fit's own base values (seeded, one
 /// generator per draw, so the result is the same at any thread count),
 /// each draw fitted with the same λ, the base values' spread taken. Where
 /// a constraint is active about half the draws fall past it, so a
-/// parameter held at its bound spreads as a half-normal (0.58 of Σ's std),
-/// and what it correlates with keeps its spread along the bound. Drawn
-/// about θ̂_b instead, an estimate far past a bound had nearly every draw
-/// projected onto the same face, and its spread, with that of everything
-/// correlated with it, collapsed (the corpus's one-period record: 13 of
-/// 54 physical intervals held the truth). Elsewhere the spread is Σ. `covariances` are the fit's
-/// metric and the Σ drawn from: the same, except where the base estimate's
-/// intervals are robust to model error (`Covariance::Robust`): the fit
-/// keeps the noise's metric, the draws take the robust spread. The draws
-/// vary the data only; what the prior supplies is added as
-/// `Problem::prior_share`, so a direction the record leaves to the robot
-/// file carries the prior's spread, not the draws' near-zero one.
+/// parameter held at its bound spreads as a half-normal (0.58 of Σ's
+/// std), and what it correlates with keeps its spread along the bound.
+/// Drawn about least squares' estimate instead, one far past a bound had
+/// nearly every draw projected onto the same face, and its spread, with
+/// that of everything correlated with it, collapsed (the corpus's
+/// one-period record: 13 of 54 physical intervals held the truth).
+/// Elsewhere the spread is Σ. `covariances` are the fit's
 pub fn bootstrap_covariance(
     names: &[String],
     prior: &[f64],
     map: &DMatrix<f64>,
-    base_estimate: &DVector<f64>,
+    centre: &DVector<f64>,
     covariances: [&DMatrix<f64>; 2],
     bounds: &[LinkBound],
     prior_weight: f64,
@@ -404,17 +399,16 @@ pub fn bootstrap_covariance(
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
     let [base_covariance, spread] = covariances;
-    let problem = Problem::new(names, prior, map, base_estimate, base_covariance, bounds)?;
-    let nb = base_estimate.len();
+    let problem = Problem::new(names, prior, map, centre, base_covariance, bounds)?;
+    let nb = centre.len();
     let l = covariance_root(spread)
         .ok_or_else(|| Error::numerical("physical fit", "the estimate's covariance is not positive semidefinite"))?;
-    let centre = problem.base_values(map, &problem.solve(prior_weight, Fit::Central)?);
     let draws: Vec<DVector<f64>> = (0..BOOTSTRAP_DRAWS)
         .into_par_iter()
         .map(|k| {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(k as u64);
             let z = DVector::from_fn(nb, |_, _| StandardNormal.sample(&mut rng));
-            let drawn = &centre + &l * z;
+            let drawn = centre + &l * z;
             let p = problem.with_estimate(&drawn);
             Ok(problem.base_values(map, &p.solve(prior_weight, Fit::Draw)?))
         })
@@ -980,8 +974,6 @@ mod tests {
         }
     }
 
-    /// The rod's bounds: [0.4, 10] kg, an ellipsoid of semi-axes (0.3, 0.15,
-    /// 0.15) m about its middle (the rod inside it).
     /// The rod's mass estimated 5 std past its bound (10.05 kg against
     /// 10, std 0.01): the fit holds it at 10, and the bootstrap, drawn
     /// about the fit, spreads it as a half-normal: 0.58 of the std
@@ -1007,12 +999,14 @@ mod tests {
         )
         .unwrap();
         assert!((fit.standard[9] - 10.0).abs() < 1e-5, "{}", fit.standard[9]);
-        let cov_b = bootstrap_covariance(&names, &prior, &map, &est, [&cov, &cov], &[bound], 1e-6).unwrap();
+        let cov_b = bootstrap_covariance(&names, &prior, &map, &fit.base, [&cov, &cov], &[bound], 1e-6).unwrap();
         let half_normal = (0.5 - 0.5 / std::f64::consts::PI).sqrt() * 0.01;
         let std = cov_b[(9, 9)].sqrt();
         assert!((std / half_normal - 1.0).abs() < 0.3, "{std} against {half_normal}");
     }
 
+    /// The rod's bounds: [0.4, 10] kg, an ellipsoid of semi-axes (0.3, 0.15,
+    /// 0.15) m about its middle (the rod inside it).
     fn rod_bound() -> LinkBound {
         LinkBound {
             mass: (0.4, 10.0),

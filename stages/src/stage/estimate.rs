@@ -863,7 +863,7 @@ fn physical_fit(
         &names,
         &prior,
         map,
-        &est.values,
+        &fit.base,
         [metric, &est.covariance],
         &bounds,
         fit.prior_weight,
