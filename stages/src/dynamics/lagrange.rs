@@ -48,6 +48,16 @@ pub fn mass_matrix_lagrange(model: &Model, data: &mut Data, q: &[f64]) -> DMatri
     for k in 0..n {
         m[(k, k)] += model.drives[k].reflected_inertia();
     }
+    // Coupled rotors: Rᵀ·J·R's rows past the diagonal J·gear² above.
+    for k in (0..n).filter(|_| !model.couplings.is_empty()) {
+        let mut unit = vec![0.0; n];
+        unit[k] = 1.0;
+        let mut column = vec![0.0; n];
+        model.add_coupled_torque(&vec![0.0; n], &unit, (true, false), &mut column);
+        for (r, v) in column.iter().enumerate() {
+            m[(r, k)] += v;
+        }
+    }
     m
 }
 

@@ -41,7 +41,8 @@ pub use kinematics::{end_effector_position, forward_kinematics};
 pub use mjcf_export::{principal_axes, to_mjcf};
 pub use mjcf_patch::MjcfPatch;
 pub use model::{
-    Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, DEFAULT_GAIN_REL_STD, LISTED,
+    Coupling, Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, DEFAULT_GAIN_REL_STD,
+    LISTED,
 };
 pub use patch_error::PatchError;
 pub use r_factor::RFactor;

@@ -242,7 +242,8 @@ impl Friction {
 /// into joint torque and angle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Drive {
-    /// Motor turns per joint turn (≥ 1 for a reducer).
+    /// Motor turns per joint turn (|·| ≥ 1 for a reducer; negative where
+    /// the motor turns the other way).
     pub gear_ratio: f64,
     /// Motor torque per ampere, N·m/A (motor side).
     pub torque_constant: f64,
@@ -254,6 +255,10 @@ pub struct Drive {
     /// (torque constant × gear ratio) as declared; None: not declared, and
     /// a current read through it carries [`DEFAULT_GAIN_REL_STD`].
     pub gain_rel_std: Option<f64>,
+    /// The motor's angle at joint angle 0 (its encoder's calibration), rad
+    /// motor side: a motor-side position θ reads as the joint's through
+    /// θ − offset.
+    pub motor_offset: f64,
 }
 
 /// A nominal drive gain's relative standard deviation where the robot
@@ -270,6 +275,7 @@ impl Default for Drive {
             encoder_counts_per_rev: 1_048_576.0,
             rotor_inertia: 0.0,
             gain_rel_std: None,
+            motor_offset: 0.0,
         }
     }
 }
@@ -359,6 +365,27 @@ pub struct Model {
     /// frame (None: it has none): a tool's geometry, where the description
     /// carries one.
     pub end_extents: Vec<Option<Extent>>,
+    /// Motors that turn with more than their own joint (a coupled wrist),
+    /// base first; every other motor turns with its joint alone, by its
+    /// drive's gear ratio.
+    pub couplings: Vec<Coupling>,
+}
+
+/// A motor that also turns with other joints: its angle is
+/// θ = gear_ratio·q_motor + Σ turns·q_joint, so the transmission matrix R
+/// (motor angles θ = R·q) has `turns` off its diagonal in this motor's row.
+/// It acts on each joint it turns with: joint torques τ = Rᵀ·τ_motor, its
+/// rotor inertia enters the mass matrix as Rᵀ·J·R.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coupling {
+    /// The motor's own joint (its drive is that joint's).
+    pub motor: usize,
+    /// The other joints it turns with: (joint, motor turns per joint turn).
+    pub with: Vec<(usize, f64)>,
+    /// The motor's viscous friction, motor side, N·m·s/rad.
+    pub viscous: f64,
+    /// The motor's Coulomb friction, motor side, N·m (a magnitude).
+    pub coulomb: f64,
 }
 
 /// A shape of a link, placed in its frame.
@@ -491,6 +518,7 @@ impl Model {
                 ("torque_constant", d.torque_constant),
                 ("encoder_counts_per_rev", d.encoder_counts_per_rev),
                 ("rotor_inertia", d.rotor_inertia),
+                ("motor_offset", d.motor_offset),
                 ("viscous", f.viscous_pos),
                 ("viscous", f.viscous_neg),
                 ("coulomb", f.coulomb_pos),
@@ -529,12 +557,83 @@ impl Model {
             base_shapes: Vec::new(),
             end_frames: Vec::new(),
             end_extents: Vec::new(),
+            couplings: Vec::new(),
         }
     }
 
     /// Link `l`'s extent, when its description has shapes.
     pub fn extent(&self, l: usize) -> Option<Extent> {
         self.extents.get(l).copied().flatten()
+    }
+
+    /// The transmission matrix R: motor angles θ = R·q + offsets. Diagonal
+    /// (the gear ratios) but for coupled motors' rows.
+    pub fn transmission(&self) -> nalgebra::DMatrix<f64> {
+        let n = self.dof();
+        let mut r = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+            n,
+            self.drives.iter().map(|d| d.gear_ratio),
+        ));
+        for c in &self.couplings {
+            for &(j, turns) in &c.with {
+                r[(c.motor, j)] += turns;
+            }
+        }
+        r
+    }
+
+    /// What a description without transmissions cannot hold of joint `i`'s
+    /// motor, for the exports' `robotid:` comments: its offset and its
+    /// coupling with friction ("" for a motor that turns with its joint
+    /// alone from 0, so such comments stay as they were).
+    pub fn motor_said(&self, i: usize) -> String {
+        let mut said = String::new();
+        if self.drives[i].motor_offset != 0.0 {
+            said += &format!(", motor_offset = {} (motor side)", self.drives[i].motor_offset);
+        }
+        if let Some(c) = self.couplings.iter().find(|c| c.motor == i) {
+            let with: Vec<String> = c
+                .with
+                .iter()
+                .map(|&(j, t)| format!("{} = {t}", self.joints[j].name))
+                .collect();
+            said += &format!(
+                ", coupling = {{ {} }} with motor_viscous = {}, motor_coulomb = {} (the motor turns with those joints too)",
+                with.join(", "),
+                c.viscous,
+                c.coulomb
+            );
+        }
+        said
+    }
+
+    /// What coupled motors add to joint torques `tau` beyond each joint's
+    /// own terms (which hold J·gear²·q̈ of every rotor and the joints'
+    /// friction): the rotor inertia's cross terms of Rᵀ·J·R·q̈ (`rotor`) and
+    /// the motor's friction at its speed r·q̇ through Rᵀ (`friction`). Nothing
+    /// without couplings.
+    pub fn add_coupled_torque(&self, qd: &[f64], qdd: &[f64], (rotor, friction): (bool, bool), tau: &mut [f64]) {
+        for c in &self.couplings {
+            let m = c.motor;
+            let (g, j_m) = (self.drives[m].gear_ratio, self.drives[m].rotor_inertia);
+            let cross_qdd: f64 = c.with.iter().map(|&(k, t)| t * qdd[k]).sum();
+            let speed = g * qd[m] + c.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
+            let mut own = 0.0; // motor torque on the motor's own joint's row, less J·g²·q̈
+            let mut motor = 0.0; // the motor torque every coupled joint sees through its turns
+            if rotor {
+                own += j_m * g * cross_qdd;
+                motor += j_m * (g * qdd[m] + cross_qdd);
+            }
+            if friction {
+                let f = c.viscous * speed + c.coulomb * speed.signum() * (speed != 0.0) as i32 as f64;
+                own += g * f;
+                motor += f;
+            }
+            tau[m] += own;
+            for &(k, t) in &c.with {
+                tau[k] += t * motor;
+            }
+        }
     }
 
     /// Number of joints (degrees of freedom).
@@ -624,6 +723,55 @@ impl Model {
             check_drive(&ctx, &self.drives[i])?;
             check_friction(&ctx, &self.friction[i])?;
         }
+        self.check_couplings()
+    }
+
+    /// Each coupled motor names joints of the chain other than its own,
+    /// once each; its friction is finite (Coulomb a magnitude); and R is
+    /// invertible, so motor-side channels determine the joints.
+    fn check_couplings(&self) -> Result<(), Problem> {
+        let n = self.dof();
+        let mut seen = vec![false; n];
+        for c in &self.couplings {
+            if c.motor >= n {
+                return Err(Problem::new(
+                    "coupling",
+                    format!("a coupled motor of joint {} of {n}", c.motor + 1),
+                ));
+            }
+            let name = &self.joints[c.motor].name;
+            if std::mem::replace(&mut seen[c.motor], true) {
+                return Err(Problem::new(
+                    "coupling",
+                    format!("joint `{name}`: its motor is coupled twice"),
+                ));
+            }
+            for (k, &(j, t)) in c.with.iter().enumerate() {
+                if j >= n || j == c.motor || c.with[..k].iter().any(|w| w.0 == j) || !(t.is_finite() && t != 0.0) {
+                    return Err(Problem::new(
+                        "coupling",
+                        format!("joint `{name}`: each coupled joint is another joint of the chain, once, with finite non-zero turns"),
+                    ));
+                }
+            }
+            if !(c.viscous.is_finite() && c.coulomb.is_finite() && c.coulomb >= 0.0) {
+                return Err(Problem::new(
+                    "coupling",
+                    format!("joint `{name}`: motor friction must be finite, Coulomb's ≥ 0"),
+                ));
+            }
+        }
+        if !self.couplings.is_empty() {
+            let r = self.transmission();
+            let scale = r.abs().max();
+            let smallest = r.clone().svd(false, false).singular_values.min();
+            if !(smallest > 1e-9 * scale) {
+                return Err(Problem::new(
+                    "coupling",
+                    format!("the transmission matrix is singular (smallest singular value {smallest:.3e} against {scale:.3e}): motor angles would not determine the joints'"),
+                ));
+            }
+        }
         Ok(())
     }
 }
@@ -664,10 +812,10 @@ fn check_body(ctx: &str, l: &Inertial) -> Result<(), Problem> {
 
 /// A drive's constants are positive (its gains' uncertainty in [0, 1)).
 fn check_drive(ctx: &str, d: &Drive) -> Result<(), Problem> {
-    if !(d.gear_ratio > 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
+    if !(d.gear_ratio != 0.0 && d.torque_constant > 0.0 && d.encoder_counts_per_rev > 0.0) {
         return Err(Problem::new(
             "drive",
-            format!("{ctx}: gear ratio, torque constant and encoder counts must be > 0"),
+            format!("{ctx}: torque constant and encoder counts must be > 0, the gear ratio non-zero (negative: the motor turns the other way)"),
         ));
     }
     if d.rotor_inertia < 0.0 {

@@ -64,6 +64,7 @@ pub fn rnea_terms<'a>(
         }
         data.tau[i] = t;
     }
+    model.add_coupled_torque(qd, qdd, (terms.rotor, terms.friction), data.tau.as_mut_slice());
     &data.tau
 }
 

@@ -50,6 +50,14 @@ struct JointEntry {
     torque_constant_rel_std: Option<f64>,
     encoder_counts_per_rev: Option<f64>,
     rotor_inertia: Option<f64>,
+    /// The motor's angle at joint angle 0, rad motor side.
+    motor_offset: Option<f64>,
+    /// Other joints this joint's motor turns with: name → motor turns per
+    /// joint turn (a coupled wrist).
+    coupling: Option<std::collections::BTreeMap<String, f64>>,
+    /// A coupled motor's own friction, motor side.
+    motor_viscous: Option<f64>,
+    motor_coulomb: Option<f64>,
     viscous: Option<f64>,
     viscous_pos: Option<f64>,
     viscous_neg: Option<f64>,
@@ -176,6 +184,7 @@ fn parse_robot_file_with(text: &str, path: &Path, locks: &Locks) -> Result<Model
         model.end_effector = Vector3::from(ee);
     }
     model.drives_declared = file.joints.iter().any(declares_drive);
+    model.couplings = couplings(&file.joints, &model).map_err(|p| err(p.to_string()))?;
     let mut names: Vec<&str> = model.joints.iter().map(|j| j.name.as_str()).collect();
     names.sort_unstable();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
@@ -302,6 +311,46 @@ fn declares_drive(e: &JointEntry) -> bool {
         || e.torque_constant.is_some()
         || e.encoder_counts_per_rev.is_some()
         || e.rotor_inertia.is_some()
+        || e.coupling.is_some()
+}
+
+/// The coupled motors of the entries, by the model's joint numbers (the
+/// model checks the rest: [`Model::validate`]).
+fn couplings(entries: &[JointEntry], model: &Model) -> Result<Vec<super::Coupling>, Problem> {
+    let index = |name: &str| model.joints.iter().position(|j| j.name == name);
+    let mut out = Vec::new();
+    for e in entries {
+        let Some(with) = &e.coupling else {
+            if e.motor_viscous.is_some() || e.motor_coulomb.is_some() {
+                return Err(Problem::new(
+                    "motor_viscous",
+                    format!("joint `{}`: `motor_viscous` and `motor_coulomb` are a coupled motor's; an uncoupled motor's friction is the joint's (`viscous` = motor's × gear², `coulomb` = motor's × gear)", e.name),
+                ));
+            }
+            continue;
+        };
+        let mut pairs = Vec::with_capacity(with.len());
+        for (name, turns) in with {
+            let j = index(name).ok_or_else(|| {
+                Problem::new(
+                    "coupling",
+                    format!(
+                        "joint `{}`: `coupling` names `{name}`, not a moving joint of the robot",
+                        e.name
+                    ),
+                )
+            })?;
+            pairs.push((j, *turns));
+        }
+        out.push(super::Coupling {
+            motor: index(&e.name).expect("every entry is a joint of the model"),
+            with: pairs,
+            viscous: e.motor_viscous.unwrap_or(0.0),
+            coulomb: e.motor_coulomb.unwrap_or(0.0),
+        });
+    }
+    out.sort_by_key(|c| c.motor);
+    Ok(out)
 }
 
 /// Drive, friction and limit keys of a joint entry, over the given defaults.
@@ -320,6 +369,9 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     }
     if let Some(v) = e.rotor_inertia {
         d.rotor_inertia = v;
+    }
+    if let Some(v) = e.motor_offset {
+        d.motor_offset = v;
     }
     let pick = |both: Option<f64>, one: Option<f64>, name: &str, current: f64| -> Result<f64, Problem> {
         match (both, one) {

@@ -39,6 +39,17 @@ fn stream(seed: u64, id: u64) -> ChaCha8Rng {
 /// Simulates `cfg` on `model`. `provenance` is merged into the raw table's
 /// schema metadata (config file name and hash, …).
 pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, String>) -> Result<Simulation> {
+    // Its drives turn currents and counts into torques and angles joint by
+    // joint: a coupled motor's channels would not read back through R.
+    if let Some(c) = model.couplings.first() {
+        return Err(Error::Robot {
+            path: cfg.robot.clone(),
+            msg: format!(
+                "the motor of `{}` is coupled: the simulator logs each joint's own motor and cannot write a coupled one's channels yet (docs/robot-file.md, Transmissions)",
+                model.joints[c.motor].name
+            ),
+        });
+    }
     let plant_model = plant_model(cfg, model)?;
     let model = &plant_model;
     let n = model.dof();
