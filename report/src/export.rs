@@ -693,14 +693,16 @@ struct Sidecar<'a> {
 /// Where a standard parameter goes: (URDF holds it, MJCF holds it). The
 /// symmetric friction pair goes into both (`friction`/`frictionloss`,
 /// `damping`); asymmetric coefficients only as their means; Stribeck's
-/// static excess, offsets, springs and the URDF's rotor inertia nowhere
+/// static excess, offsets, springs and the URDF's rotor inertia (and a
+/// coupled motor's friction, which the MJCF's tendon holds) nowhere
 /// (the sidecar and the robotid comments carry them).
 fn representable(name: &str) -> (bool, bool) {
     use robotid_stages::dynamics::ParameterKind as K;
     match K::of(name) {
         K::Inertia | K::FirstMoment | K::Mass => (true, true),
         K::Viscous { one_sided } | K::Coulomb { one_sided } => (!one_sided, !one_sided),
-        K::RotorInertia => (false, true),
+        // A coupled motor's own friction: the MJCF's tendon holds it.
+        K::RotorInertia | K::MotorViscous | K::MotorCoulomb => (false, true),
         K::Static { .. } | K::JointInertia | K::Gravity | K::Offset | K::Spring | K::Unknown => (false, false),
     }
 }

@@ -43,7 +43,7 @@ fn robot(c: &mut Criterion, name: &str, model: &Model) {
     };
     let (q, qd, qdd) = (lanes(0), lanes(1), lanes(2));
     let mut data = Data::new(model);
-    let mut phi = DMatrix::zeros(n, terms.count(n));
+    let mut phi = DMatrix::zeros(n, terms.count(model));
     let batched = Batched::new(model);
     let mut ws = batched.workspace(terms);
     let mut tau = vec![[0.0; LANES]; n];

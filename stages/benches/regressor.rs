@@ -13,7 +13,7 @@ fn bench(c: &mut Criterion) {
         ..RegressorTerms::DEFAULT
     };
     let mut data = Data::new(&model);
-    let mut phi = DMatrix::zeros(6, terms.count(6));
+    let mut phi = DMatrix::zeros(6, terms.count(&model));
     let q = [0.1, -1.2, 1.0, -1.4, -1.5, 0.3];
     let qd = [0.5, -0.3, 0.2, 0.6, -0.4, 0.1];
     let mut g = c.benchmark_group("regressor_ur5");

@@ -72,7 +72,7 @@ fn inspect(a: InspectArgs) -> anyhow::Result<()> {
     for (name, v) in names.iter().zip(&theta) {
         println!("  {name:<28} {v:>14.6e} {}", parameter_unit(name));
     }
-    let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+    let bp = base_parameters(&model, terms, 40 + 6 * terms.count(&model) / n, 7);
     let values = bp.base_values(&theta);
     println!(
         "\n{} base parameters ({} unidentifiable; singular values at the rank {:.2e} | {:.2e}):",
@@ -119,7 +119,7 @@ fn trajectory_condition(
     };
     let samples = (duration * rate).round().max(1.0) as usize;
     let mut data = Data::new(model);
-    let mut phi = DMatrix::zeros(n, terms.count(n));
+    let mut phi = DMatrix::zeros(n, terms.count(model));
     let mut w = DMatrix::zeros(samples * n, bp.base.len());
     let (mut q, mut qd, mut qdd) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
     for s in 0..samples {

@@ -133,7 +133,7 @@ const SLOW_SAMPLES: usize = 40;
 /// in log over [1e-4, 2] rad/s: rows `[sample · dof + joint]`.
 fn random_regressor(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> DMatrix<f64> {
     let n = model.dof();
-    let p = terms.count(n);
+    let p = terms.count(model);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut data = Data::new(model);
     let slow = if terms.friction.has_stribeck() { SLOW_SAMPLES } else { 0 };
@@ -163,7 +163,7 @@ fn random_regressor(model: &Model, terms: RegressorTerms, samples: usize, seed: 
 /// its column came out too small to be identified (at δ = 2, 3 of a UR5's
 /// 6 joints lost theirs).
 pub fn base_parameters(model: &Model, terms: RegressorTerms, samples: usize, seed: u64) -> BaseParameters {
-    let p = terms.count(model.dof());
+    let p = terms.count(model);
     let w = random_regressor(model, terms, samples, seed);
     let norms: Vec<f64> = (0..p).map(|c| w.column(c).norm()).collect();
     // Identifiability in physical units: the torque a parameter of its

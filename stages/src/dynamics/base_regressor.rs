@@ -17,7 +17,7 @@ use super::{
     base_parameters, decoupled_names, decoupled_regressor, regressor, Batched, Data, FrictionTerms, Model,
     RegressorTerms, Spring, Stribeck, LANES,
 };
-use super::{rnea::rigid_torque, torque_regressor::joint_columns};
+use super::{rnea::rigid_torque, torque_regressor::joint_columns, torque_regressor::MOTOR_COLUMNS};
 use crate::{Error, Result};
 
 /// Which dynamic model the regressor describes.
@@ -227,14 +227,14 @@ impl BaseRegressor {
         // Columns: (standard-column index into the full regressor, name, expression).
         let (full_count, columns, map) = match spec.model {
             ModelKind::Chain => {
-                let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+                let bp = base_parameters(&model, terms, 40 + 6 * terms.count(&model) / n, 7);
                 let cols = bp
                     .base
                     .iter()
                     .enumerate()
                     .map(|(i, &c)| (c, bp.names[c].clone(), bp.expression(i)))
                     .collect();
-                (terms.count(n), cols, Some(bp.map))
+                (terms.count(&model), cols, Some(bp.map))
             }
             ModelKind::Decoupled => {
                 if terms.rotor || terms.spring.is_some() {
@@ -410,9 +410,21 @@ impl BaseRegressor {
                 *t += ws.phi[(j, c)] * full[c];
             }
         }
+        let motors = self.terms.motors_at(n);
         if let Some(sp) = self.terms.spring {
-            for c in n * (10 + per)..self.full_count {
+            for c in n * (10 + per)..motors {
                 out[sp.joint] += ws.phi[(sp.joint, c)] * full[c];
+            }
+        }
+        // A coupled motor's columns reach the other joints it turns with:
+        // its friction's every row, its rotor's rows past its own.
+        for (i, c) in self.model.couplings.iter().enumerate() {
+            let rotor = self.terms.rotor.then_some(10 * n + per * c.motor);
+            let friction = motors + MOTOR_COLUMNS * i..motors + MOTOR_COLUMNS * (i + 1);
+            for row in std::iter::once(c.motor).chain(c.with.iter().map(|w| w.0)) {
+                for col in friction.clone().chain(rotor.filter(|_| row != c.motor)) {
+                    out[row] += ws.phi[(row, col)] * full[col];
+                }
             }
         }
     }

@@ -19,7 +19,8 @@
 use nalgebra::Matrix3;
 use wide::f64x4;
 
-use super::torque_regressor::{friction_values, FrictionTerms, RegressorTerms};
+use super::model::MAX_JOINTS;
+use super::torque_regressor::{coupled, friction_values, FrictionTerms, RegressorTerms};
 use super::Model;
 
 /// Samples per pass.
@@ -165,7 +166,7 @@ impl Batched {
 
     pub fn workspace(&self, terms: RegressorTerms) -> BatchData {
         let n = self.dof();
-        let count = terms.count(n);
+        let count = terms.count(&self.model);
         BatchData {
             rot: vec![M3([[V::ZERO; 3]; 3]); n],
             w: vec![V3::ZERO; n],
@@ -222,7 +223,7 @@ impl Batched {
     }
 
     /// The full regressor Φ(q, q̇, q̈) of one pass (as [`regressor`](super::regressor),
-    /// n × `terms.count(n)`), into `ws` ([`BatchData::phi`]). Inputs are per
+    /// n × `terms.count(model)`), into `ws` ([`BatchData::phi`]). Inputs are per
     /// joint, a lane per sample; `ws` comes from [`Batched::workspace`] with
     /// the same `terms`.
     pub fn regressor(
@@ -234,7 +235,7 @@ impl Batched {
         terms: RegressorTerms,
     ) {
         let n = self.dof();
-        let count = terms.count(n);
+        let count = terms.count(&self.model);
         assert!(q.len() == n && qd.len() == n && qdd.len() == n && ws.count == count);
         self.forward(ws, q, qd, qdd, true);
         ws.phi.fill(V::ZERO);
@@ -283,7 +284,7 @@ impl Batched {
     ) {
         let n = self.dof();
         let count = ws.count;
-        let per = (count - 10 * n - terms.spring.map_or(0, |s| 2 * s.harmonics as usize)) / n.max(1);
+        let per = terms.per_joint();
         for j in 0..n {
             let mut c = 10 * n + per * j;
             let base = j * count;
@@ -319,6 +320,19 @@ impl Batched {
                 }
                 ws.phi[c0 + 2 * (h - 1)] = V::new(co);
                 ws.phi[c0 + 2 * (h - 1) + 1] = V::new(s);
+            }
+        }
+        if !self.model.couplings.is_empty() {
+            let (mut v, mut a) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+            for l in 0..LANES {
+                for j in 0..n {
+                    (v[j], a[j]) = (qd[j][l], qdd[j][l]);
+                }
+                coupled(&self.model, (&v[..n], &a[..n]), terms, &mut |row, col, x| {
+                    let mut lanes = ws.phi[row * count + col].to_array();
+                    lanes[l] = x;
+                    ws.phi[row * count + col] = V::new(lanes);
+                });
             }
         }
     }
@@ -357,6 +371,19 @@ impl Batched {
                 tau[j][l] = t[l] + rotor * qdd[j][l] + fr.torque(qd[j][l]);
             }
         }
+        if !self.model.couplings.is_empty() {
+            let (mut v, mut a, mut t) = ([0.0; MAX_JOINTS], [0.0; MAX_JOINTS], [0.0; MAX_JOINTS]);
+            for l in 0..LANES {
+                for j in 0..n {
+                    (v[j], a[j], t[j]) = (qd[j][l], qdd[j][l], 0.0);
+                }
+                self.model
+                    .add_coupled_torque(&v[..n], &a[..n], (true, true), &mut t[..n]);
+                for j in 0..n {
+                    tau[j][l] += t[j];
+                }
+            }
+        }
     }
 }
 
@@ -377,15 +404,30 @@ mod tests {
             .collect()
     }
 
-    /// Every lane equals the per-sample kernels, for every kind of term.
+    /// Every lane equals the per-sample kernels, for every kind of term,
+    /// with a coupled wrist and without.
     #[test]
     fn lanes_equal_the_per_sample_kernels() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/ur5.toml");
         let mut model = crate::dynamics::load_robot(&path).unwrap();
         model.friction[2].transition = 0.05;
+        let mut wrist = model.clone();
+        wrist.couplings.push(crate::dynamics::Coupling {
+            motor: 5,
+            with: vec![(4, -30.0)],
+            viscous: 2e-4,
+            coulomb: 0.01,
+        });
+        wrist.drives[5].rotor_inertia = 3e-5;
+        for model in [model, wrist] {
+            lanes_equal_on(&model);
+        }
+    }
+
+    fn lanes_equal_on(model: &Model) {
         let n = model.dof();
-        let batched = Batched::new(&model);
-        let mut data = Data::new(&model);
+        let batched = Batched::new(model);
+        let mut data = Data::new(model);
         let mut rng = 7u64;
         for terms in [
             RegressorTerms::DEFAULT,
@@ -397,7 +439,7 @@ mod tests {
             },
         ] {
             let mut ws = batched.workspace(terms);
-            let count = terms.count(n);
+            let count = terms.count(model);
             let mut phi = DMatrix::zeros(n, count);
             let mut tau = vec![[0.0; LANES]; n];
             for _ in 0..25 {
@@ -411,7 +453,7 @@ mod tests {
                 for l in 0..LANES {
                     let pick = |x: &[[f64; LANES]]| x.iter().map(|v| v[l]).collect::<Vec<_>>();
                     let (ql, qdl, qddl) = (pick(&q), pick(&qd), pick(&qdd));
-                    regressor(&model, &mut data, &ql, &qdl, &qddl, terms, &mut phi);
+                    regressor(model, &mut data, &ql, &qdl, &qddl, terms, &mut phi);
                     let scale = phi.amax();
                     for j in 0..n {
                         for c in 0..count {
@@ -424,7 +466,7 @@ mod tests {
                             );
                         }
                     }
-                    let t = rnea(&model, &mut data, &ql, &qdl, &qddl);
+                    let t = rnea(model, &mut data, &ql, &qdl, &qddl);
                     for j in 0..n {
                         assert!(
                             (tau[j][l] - t[j]).abs() <= 1e-12 * t.amax(),

@@ -129,18 +129,29 @@ impl RegressorTerms {
         self.rotor as usize + self.friction.width() + self.offset as usize
     }
 
-    /// Number of parameters for `n` joints.
-    pub fn count(&self, n: usize) -> usize {
+    /// Number of parameters of `model`'s regressor: each joint's, the
+    /// spring's, and each coupled motor's friction ([`MOTOR_COLUMNS`]).
+    pub fn count(&self, model: &Model) -> usize {
+        self.motors_at(model.dof()) + MOTOR_COLUMNS * model.couplings.len()
+    }
+
+    /// The first coupled motor's friction column, for `n` joints: past the
+    /// joints' and the spring's.
+    pub(crate) fn motors_at(&self, n: usize) -> usize {
         n * (10 + self.per_joint()) + self.spring.map_or(0, |s| 2 * s.harmonics as usize)
     }
 }
+
+/// Columns per coupled motor: its viscous and Coulomb friction (motor
+/// side; its rotor is its joint's `Ia`, whose column carries the coupling).
+pub const MOTOR_COLUMNS: usize = 2;
 
 /// Parameter name prefixes (before `_<joint>`).
 const INERTIAL: [&str; 10] = ["XX", "XY", "XZ", "YY", "YZ", "ZZ", "MX", "MY", "MZ", "M"];
 
 /// Parameter names (`ZZ_<joint>`, `Fv_<joint>`, …), in column order.
 pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
-    let mut names = Vec::with_capacity(terms.count(model.dof()));
+    let mut names = Vec::with_capacity(terms.count(model));
     for j in &model.joints {
         names.extend(INERTIAL.iter().map(|p| format!("{p}_{}", j.name)));
     }
@@ -159,6 +170,10 @@ pub fn parameter_names(model: &Model, terms: RegressorTerms) -> Vec<String> {
         for l in 1..=sp.harmonics {
             names.extend([format!("SpA{l}_{n}"), format!("SpB{l}_{n}")]);
         }
+    }
+    for c in &model.couplings {
+        let n = &model.joints[c.motor].name;
+        names.extend([format!("Fvm_{n}"), format!("Fcm_{n}")]);
     }
     names
 }
@@ -188,6 +203,11 @@ pub enum ParameterKind {
     /// Stribeck's static excess over Coulomb at rest, N·m (`Fs`, or
     /// `Fs+`/`Fs-`), fading with speed by the joint's own shape.
     Static { one_sided: bool },
+    /// A coupled motor's viscous friction at its own speed, motor side,
+    /// N·m·s/rad (`Fvm`).
+    MotorViscous,
+    /// A coupled motor's Coulomb friction, motor side, N·m (`Fcm`).
+    MotorCoulomb,
     /// A constant torque offset, N·m.
     Offset,
     /// A spring's Fourier coefficient, N·m.
@@ -212,6 +232,8 @@ impl ParameterKind {
             "Fc+" | "Fc-" => ParameterKind::Coulomb { one_sided: true },
             "Fs" => ParameterKind::Static { one_sided: false },
             "Fs+" | "Fs-" => ParameterKind::Static { one_sided: true },
+            "Fvm" => ParameterKind::MotorViscous,
+            "Fcm" => ParameterKind::MotorCoulomb,
             "Off" => ParameterKind::Offset,
             p if p.starts_with("SpA") || p.starts_with("SpB") => ParameterKind::Spring,
             _ => ParameterKind::Unknown,
@@ -243,6 +265,8 @@ impl ParameterKind {
                 | ParameterKind::Viscous { .. }
                 | ParameterKind::Coulomb { .. }
                 | ParameterKind::Static { .. }
+                | ParameterKind::MotorViscous
+                | ParameterKind::MotorCoulomb
         )
     }
 
@@ -251,8 +275,9 @@ impl ParameterKind {
             ParameterKind::Inertia | ParameterKind::RotorInertia | ParameterKind::JointInertia => "kg*m^2",
             ParameterKind::FirstMoment => "kg*m",
             ParameterKind::Mass => "kg",
-            ParameterKind::Viscous { .. } => "N*m*s/rad",
+            ParameterKind::Viscous { .. } | ParameterKind::MotorViscous => "N*m*s/rad",
             ParameterKind::Coulomb { .. }
+            | ParameterKind::MotorCoulomb
             | ParameterKind::Static { .. }
             | ParameterKind::Gravity
             | ParameterKind::Offset
@@ -282,7 +307,7 @@ pub fn upper(i: &Matrix3<f64>) -> [f64; 6] {
 /// The model's own parameter values in [`parameter_names`] order. With
 /// symmetric terms, asymmetric friction is averaged.
 pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
-    let mut theta = Vec::with_capacity(terms.count(model.dof()));
+    let mut theta = Vec::with_capacity(terms.count(model));
     for l in &model.links {
         theta.extend(l.standard());
     }
@@ -319,6 +344,9 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
     if let Some(sp) = terms.spring {
         theta.extend(std::iter::repeat_n(0.0, 2 * sp.harmonics as usize));
     }
+    for c in &model.couplings {
+        theta.extend([c.viscous, c.coulomb]);
+    }
     theta
 }
 
@@ -327,7 +355,7 @@ pub fn standard_parameters(model: &Model, terms: RegressorTerms) -> Vec<f64> {
 /// rotor·gear² matches), friction and offsets taken from `theta`. Spring
 /// coefficients have no place in the model and are ignored.
 pub fn with_standard_parameters(model: &Model, terms: RegressorTerms, theta: &[f64]) -> Model {
-    assert_eq!(theta.len(), terms.count(model.dof()), "standard parameter count");
+    assert_eq!(theta.len(), terms.count(model), "standard parameter count");
     let mut m = model.clone();
     for (k, l) in m.links.iter_mut().enumerate() {
         let t = &theta[10 * k..10 * k + 10];
@@ -379,6 +407,10 @@ pub fn with_standard_parameters(model: &Model, terms: RegressorTerms, theta: &[f
             at += 1;
         }
     }
+    let at = terms.motors_at(m.dof());
+    for (k, c) in m.couplings.iter_mut().enumerate() {
+        (c.viscous, c.coulomb) = (theta[at + MOTOR_COLUMNS * k], theta[at + MOTOR_COLUMNS * k + 1]);
+    }
     m
 }
 
@@ -393,7 +425,7 @@ fn k_of(v: &Vector3<f64>) -> SMatrix<f64, 3, 6> {
     )
 }
 
-/// Fills `out` (n × terms.count(n)) with Φ(q, q̇, q̈). `transition` of each
+/// Fills `out` (n × terms.count(model)) with Φ(q, q̇, q̈). `transition` of each
 /// joint's friction shapes the Coulomb column as in the model (sign or tanh).
 pub fn regressor(
     model: &Model,
@@ -407,7 +439,7 @@ pub fn regressor(
     let n = model.dof();
     assert_eq!(
         out.shape(),
-        (n, terms.count(n)),
+        (n, terms.count(model)),
         "regressor: output matrix has the wrong shape"
     );
     kinematics(model, data, q, qd, qdd, true);
@@ -441,8 +473,9 @@ pub fn regressor(
     joint_columns(model, (q, qd, qdd), terms, out);
 }
 
-/// The columns of Φ(q, q̇, q̈) past the links' 10·n that each joint holds
-/// alone (rotor, friction, offset, spring), into `out`; the rest untouched.
+/// The columns of Φ(q, q̇, q̈) past the links' 10·n: each joint's own
+/// (rotor, friction, offset, spring) and the coupled motors' ([`coupled`]),
+/// into `out`; the rest untouched.
 pub(crate) fn joint_columns(
     model: &Model,
     (q, qd, qdd): (&[f64], &[f64], &[f64]),
@@ -468,6 +501,37 @@ pub(crate) fn joint_columns(
             let (s, c) = (l as f64 * q[sp.joint]).sin_cos();
             out[(sp.joint, c0 + 2 * (l - 1))] = c;
             out[(sp.joint, c0 + 2 * (l - 1) + 1)] = s;
+        }
+    }
+    coupled(model, (qd, qdd), terms, &mut |row, col, v| out[(row, col)] = v);
+}
+
+/// Each coupled motor's columns, as (row, column, value) to `put`: its
+/// rotor's `Ia` (J·gear², the motor's own joint's column) on every joint
+/// it turns with, (r·q̈)·r/gear² with r its row of the transmission
+/// (Rᵀ·J·R·q̈; q̈ alone where it is not coupled), and its friction at its
+/// own speed θ̇ = r·q̇: θ̇·r (`Fvm`) and sign(θ̇)·r (`Fcm`).
+pub(crate) fn coupled(
+    model: &Model,
+    (qd, qdd): (&[f64], &[f64]),
+    terms: RegressorTerms,
+    put: &mut dyn FnMut(usize, usize, f64),
+) {
+    let n = model.dof();
+    let first = terms.motors_at(n);
+    for (i, c) in model.couplings.iter().enumerate() {
+        let (m, g) = (c.motor, model.drives[c.motor].gear_ratio);
+        let speed = g * qd[m] + c.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
+        let accel = g * qdd[m] + c.with.iter().map(|&(k, t)| t * qdd[k]).sum::<f64>();
+        let sign = speed.signum() * (speed != 0.0) as i32 as f64;
+        let row = std::iter::once((m, g)).chain(c.with.iter().copied());
+        let (viscous, coulomb) = (first + MOTOR_COLUMNS * i, first + MOTOR_COLUMNS * i + 1);
+        for (k, r) in row {
+            if terms.rotor {
+                put(k, 10 * n + terms.per_joint() * m, accel * r / (g * g));
+            }
+            put(k, viscous, speed * r);
+            put(k, coulomb, sign * r);
         }
     }
 }

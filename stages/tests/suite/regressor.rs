@@ -54,7 +54,7 @@ fn regressor_times_parameters_is_rnea() {
             let n = model.dof();
             let theta = nalgebra::DVector::from_vec(standard_parameters(&model, terms));
             let mut data = Data::new(&model);
-            let mut phi = DMatrix::zeros(n, terms.count(n));
+            let mut phi = DMatrix::zeros(n, terms.count(&model));
             let mut worst = 0.0f64;
             for _ in 0..100 {
                 let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
@@ -100,11 +100,11 @@ fn base_parameters_predict_like_the_full_set() {
     ] {
         let model = dynamics::load_robot(&fixture(robot)).unwrap();
         let n = model.dof();
-        let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+        let bp = base_parameters(&model, terms, 40 + 6 * terms.count(&model) / n, 7);
         println!(
             "{}: {} standard, {} base, {} unidentifiable; singular values at the rank {:.2e} | {:.2e}",
             model.name,
-            terms.count(n),
+            terms.count(&model),
             bp.base.len(),
             bp.unidentifiable.len(),
             bp.gap.0,
@@ -125,7 +125,7 @@ fn base_parameters_predict_like_the_full_set() {
         let theta = standard_parameters(&model, terms);
         let theta_b = bp.base_values(&theta);
         let mut data = Data::new(&model);
-        let mut phi = DMatrix::zeros(n, terms.count(n));
+        let mut phi = DMatrix::zeros(n, terms.count(&model));
         let mut rng = ChaCha8Rng::seed_from_u64(99);
         for _ in 0..50 {
             let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
@@ -295,7 +295,7 @@ fn spring_terms_are_a_fourier_series_in_the_joint_angle() {
     theta[k..].copy_from_slice(&coef);
     let theta = nalgebra::DVector::from_vec(theta);
     let mut data = Data::new(&model);
-    let mut phi = DMatrix::zeros(3, terms.count(3));
+    let mut phi = DMatrix::zeros(3, terms.count(&model));
     let (q, qd, qdd) = ([0.3, -0.7, 1.1], [0.5, -0.2, 0.1], [1.0, 2.0, -1.5]);
     regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
     let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).clone();
@@ -435,7 +435,7 @@ fn base_parameter_counts_match_the_literature() {
     ] {
         let model = dynamics::load_robot(&fixture(robot)).unwrap();
         let n = model.dof();
-        let bp = base_parameters(&model, terms, 40 + 6 * terms.count(n) / n, 7);
+        let bp = base_parameters(&model, terms, 40 + 6 * terms.count(&model) / n, 7);
         assert_eq!(bp.base.len(), expected, "{robot} {terms:?}");
         assert!(bp.gap.1 < 1e-12 * bp.gap.0, "{robot}: rank gap {:?}", bp.gap);
     }
@@ -497,4 +497,76 @@ fn parameter_names_read_back_as_their_kind() {
     assert_eq!(K::of("MY_j1").unit(), "kg*m");
     assert_eq!(K::of("Fv-_j1").unit(), "N*m*s/rad");
     assert!(K::of("Ia_j1").non_negative() && !K::of("Off_j1").non_negative());
+}
+
+/// A coupled wrist (the UR5's last motor also turning with joint 5, the
+/// other way, with rotor and friction of its own): Φ·θ equals RNEA, whose
+/// coupled terms are written independently of the regressor's
+/// (`Model::add_coupled_torque`); the base regressor's rows times its
+/// base values equal the full torque, and so does its O(n) `torque`.
+/// The coupled motor's three parameters (`Ia`, `Fvm`, `Fcm`) are each
+/// identifiable on their own: none is regrouped.
+#[test]
+fn a_coupled_wrist_regressor_is_its_dynamics() {
+    use robotid_stages::stage::regressor::RegressorConfig;
+    let mut model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
+    model.couplings.push(dynamics::Coupling {
+        motor: 5,
+        with: vec![(4, -40.0)],
+        viscous: 3e-4,
+        coulomb: 0.02,
+    });
+    model.drives[5].rotor_inertia = 2.5e-5;
+    model.validate().unwrap();
+    let terms = RegressorTerms {
+        rotor: true,
+        friction: FrictionTerms::Asymmetric,
+        offset: true,
+        spring: None,
+    };
+    let theta = nalgebra::DVector::from_vec(standard_parameters(&model, terms));
+    let names = dynamics::parameter_names(&model, terms);
+    assert_eq!(names[names.len() - 2..], ["Fvm_wrist_3_joint", "Fcm_wrist_3_joint"]);
+    let base = RegressorConfig {
+        friction: FrictionTerms::Asymmetric,
+        offset: true,
+        rotor: Some(true),
+        ..RegressorConfig::default()
+    }
+    .base_regressor(&model)
+    .unwrap();
+    for name in ["Ia_wrist_3_joint", "Fvm_wrist_3_joint", "Fcm_wrist_3_joint"] {
+        let at = base
+            .names()
+            .iter()
+            .position(|n| n == name)
+            .unwrap_or_else(|| panic!("{name} regrouped"));
+        assert_eq!(base.expressions()[at], name, "{name} stands alone");
+    }
+    let theta_b = base.base_values(&model).unwrap();
+    let full = base.full_values(theta_b.as_slice()).unwrap();
+    let n = model.dof();
+    let (mut data, mut ws) = (Data::new(&model), base.workspace());
+    let mut phi = DMatrix::zeros(n, terms.count(&model));
+    let mut rows = vec![0.0; n * base.parameters()];
+    let mut fast = vec![0.0; n];
+    let mut rng = ChaCha8Rng::seed_from_u64(43);
+    let mut worst = [0.0f64; 3];
+    for _ in 0..100 {
+        let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
+        let (q, qd, qdd) = (v(3.0), v(2.0), v(5.0));
+        regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).clone();
+        let scale = tau.amax();
+        worst[0] = worst[0].max((&phi * &theta - &tau).amax() / scale);
+        base.rows(&mut ws, &q, &qd, &qdd, &mut rows);
+        let y = DMatrix::from_row_slice(n, base.parameters(), &rows);
+        worst[1] = worst[1].max((&y * &theta_b - &tau).amax() / scale);
+        base.torque(&mut ws, (&q, &qd, &qdd), &full, &mut fast);
+        worst[2] = worst[2].max((0..n).map(|j| (fast[j] - tau[j]).abs()).fold(0.0, f64::max) / scale);
+    }
+    assert!(
+        worst.iter().all(|w| *w < 1e-10),
+        "Φ·θ, Y·θ_b, torque against RNEA: {worst:?}"
+    );
 }

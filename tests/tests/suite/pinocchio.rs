@@ -105,7 +105,7 @@ fn rnea_and_regressor_match_pinocchio() {
         };
         let theta = DVector::from_vec(standard_parameters(&model, terms));
         let mut data = Data::new(&model);
-        let mut phi = DMatrix::zeros(n, terms.count(n));
+        let mut phi = DMatrix::zeros(n, terms.count(&model));
         let (mut worst_rnea, mut worst_reg) = (0.0f64, 0.0f64);
         for (k, tau_pin) in v["tau"].as_array().unwrap().iter().enumerate() {
             let tau_pin = DVector::from_iterator(n, tau_pin.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()));
