@@ -168,6 +168,7 @@ pub(crate) fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Record
                     topic: None,
                     field: None,
                     unit: None,
+                    side: None,
                 });
             }
             d.text = robotid::identify::file_text(&d.plan)?;

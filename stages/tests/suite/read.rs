@@ -106,6 +106,7 @@ fn counts_and_degrees_are_converted() {
             topic: None,
             field: None,
             unit: Some("count".into()),
+            side: None,
         }),
         ..Default::default()
     };
@@ -234,6 +235,7 @@ fn bad_inputs_name_file_channel_and_sample() {
             topic: None,
             field: None,
             unit: Some("furlong".into()),
+            side: None,
         }),
         ..Default::default()
     };
@@ -269,6 +271,7 @@ fn bad_inputs_name_file_channel_and_sample() {
             topic: Some("/torques".into()),
             field: Some("effort".into()),
             unit: Some("N*m".into()),
+            side: None,
         }),
         ..Default::default()
     };
@@ -349,6 +352,7 @@ fn text_logs_as_they_come() {
             topic: None,
             field: None,
             unit: Some("s".into()),
+            side: None,
         }),
         position: Some(Channel {
             column: Some(Column::Each(
@@ -360,6 +364,7 @@ fn text_logs_as_they_come() {
             topic: None,
             field: None,
             unit: Some("rad".into()),
+            side: None,
         }),
         effort: Some(Channel {
             column: Some(Column::Each(
@@ -371,6 +376,7 @@ fn text_logs_as_they_come() {
             topic: None,
             field: None,
             unit: Some("A".into()),
+            side: None,
         }),
         ..Default::default()
     };
@@ -508,6 +514,7 @@ fn units_default_as_documented() {
             topic: topic.map(Into::into),
             field: field.map(Into::into),
             unit: None,
+            side: None,
         }),
         ..Default::default()
     };
@@ -789,6 +796,7 @@ builtin_interfaces/Duration time_from_start
             topic: Some(topic.into()),
             field: Some(field.into()),
             unit: None,
+            side: None,
         })
     };
     let cfg = ReadConfig {
@@ -1225,6 +1233,7 @@ fn logs_stamped_by_their_rate() {
         topic: None,
         field: None,
         unit: Some(unit.into()),
+        side: None,
     };
     let numbers = ReadConfig {
         time: Some(time_column("n", "sample")),

@@ -105,6 +105,7 @@ fn channel(header: &[String], joints: &[String], table: &[(&str, &str)]) -> Opti
                         topic: None,
                         field: None,
                         unit: Some(unit.to_string()),
+                        side: None,
                     });
                 }
             }
@@ -181,6 +182,7 @@ pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, No
                 topic: None,
                 field: None,
                 unit: Some(unit.to_string()),
+                side: None,
             })
         })
         .ok_or(NoColumn::Time)?;
@@ -208,6 +210,7 @@ pub fn headerless_layouts(width: usize, n: usize) -> Vec<(ReadConfig, String)> {
         topic: None,
         field: None,
         unit: Some(unit.to_string()),
+        side: None,
     };
     let layout = |q: usize, e: usize, said: String| {
         (
@@ -217,6 +220,7 @@ pub fn headerless_layouts(width: usize, n: usize) -> Vec<(ReadConfig, String)> {
                     topic: None,
                     field: None,
                     unit: Some("s".into()),
+                    side: None,
                 }),
                 position: Some(block(q, "rad")),
                 effort: Some(block(e, "N*m")),

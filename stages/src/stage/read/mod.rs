@@ -10,6 +10,7 @@ mod guess;
 mod mcap;
 mod parquet;
 mod text;
+mod transmission;
 
 pub use guess::{guess_read, headerless_layouts, named_joints, NoColumn};
 
@@ -42,6 +43,19 @@ pub struct Channel {
     /// N·m for a JointState `effort` field or a torque-named column, A for
     /// a current-named one; other effort columns must say.
     pub unit: Option<String>,
+    /// Which side of the transmission the channel measures: `motor` goes
+    /// through the robot file's transmission (coupled motors, gear ratios,
+    /// motor offsets) to the joints. Default: motor for encoder counts and
+    /// currents, joint otherwise.
+    pub side: Option<Side>,
+}
+
+/// The side of the transmission a position or effort channel measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Side {
+    Joint,
+    Motor,
 }
 
 /// Where a channel is in a text or Parquet log.
@@ -640,7 +654,7 @@ fn read_times(
             *time = (0..rows).map(|k| k as f64 / rate).collect();
             add_note(md, format!("read: no time column, row k at k / {rate} Hz"));
         }
-        _ => units.convert("time", &time_unit, std::slice::from_mut(time))?,
+        _ => units.convert(("time", None), &time_unit, std::slice::from_mut(time), md)?,
     }
     // A declared rate is the recording's, as a robotid log's provenance.
     if let Some(rate) = cfg.sample_rate_hz {
@@ -687,9 +701,15 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     };
     let rows = position.first().map_or(0, Vec::len);
     read_times(&units, &ext, (&mut time, rows), &mut md)?;
-    units.convert("position", &unit(&cfg.position, "rad"), &mut position)?;
+    let side = |ch: &Option<Channel>| ch.as_ref().and_then(|c| c.side);
+    units.convert(
+        ("position", side(&cfg.position)),
+        &unit(&cfg.position, "rad"),
+        &mut position,
+        &mut md,
+    )?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
-    units.convert("effort", &effort_unit, &mut effort)?;
+    units.convert(("effort", side(&cfg.effort)), &effort_unit, &mut effort, &mut md)?;
     // A torque from a current is only as good as its gain: said, so that
     // what depends on the torque's absolute scale (a payload's mass) can
     // carry the gain's uncertainty.
@@ -701,7 +721,12 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
         md.insert(metadata::EFFORT_GAINS.into(), format!("{effort_unit} × {from}"));
     }
     if let Some(r) = &mut reference {
-        units.convert("reference", &unit(&cfg.reference, "rad"), r)?;
+        units.convert(
+            ("reference", side(&cfg.reference)),
+            &unit(&cfg.reference, "rad"),
+            r,
+            &mut md,
+        )?;
     }
     check_channels(&units, &time, &position, &effort, reference.as_deref(), &names)?;
     repair_spikes(
@@ -797,7 +822,7 @@ impl Units<'_> {
             })
         });
         match vals {
-            Some(v) if v.len() == self.joints.len() && v.iter().all(|x| x.is_finite() && *x > 0.0) => Ok(v),
+            Some(v) if v.len() == self.joints.len() && v.iter().all(|x| x.is_finite() && *x != 0.0) => Ok(v),
             Some(v) if v.len() != self.joints.len() => Err(self.data_err(
                 kind,
                 None,
@@ -814,9 +839,37 @@ impl Units<'_> {
     }
 
     /// `values` (per joint) from `unit` to SI: a factor, encoder counts by
-    /// each joint's radians per count, motor currents by its torque per ampere.
-    fn convert(&self, kind: &str, unit: &str, values: &mut [Vec<f64>]) -> Result<()> {
+    /// each joint's radians per count, motor currents by its torque per
+    /// ampere; a motor-side channel through the transmission where the
+    /// joint's own gear does not say it all ([`Units::through_motors`]).
+    fn convert(
+        &self,
+        (kind, side): (&str, Option<Side>),
+        unit: &str,
+        values: &mut [Vec<f64>],
+        md: &mut std::collections::BTreeMap<String, String>,
+    ) -> Result<()> {
         let scale = unit_scale(kind, unit).map_err(|e| self.data_err(kind, None, e.to_string()))?;
+        let motor = match (side, scale) {
+            (Some(Side::Joint), Scale::Counts | Scale::Current(_)) => {
+                return Err(self.data_err(
+                    kind,
+                    None,
+                    format!("`side = \"joint\"` with {unit}: encoder counts and currents are the motor's; give the channel in rad or N·m"),
+                ))
+            }
+            (Some(Side::Motor), Scale::Sample) => {
+                return Err(self.data_err(kind, None, "`side` is for positions and efforts".into()))
+            }
+            (Some(s), _) => s == Side::Motor,
+            (None, Scale::Counts | Scale::Current(_)) => true,
+            (None, _) => false,
+        };
+        if motor && self.through_motors(kind, scale)? {
+            let said = self.to_joint_side(kind, scale, values)?;
+            add_note(md, format!("read: {kind} {unit} motor side, {said}"));
+            return Ok(());
+        }
         let (k, f) = match scale {
             Scale::Factor(f) => {
                 values.iter_mut().for_each(|c| c.iter_mut().for_each(|v| *v *= f));
@@ -852,6 +905,45 @@ impl Units<'_> {
             c.iter_mut().for_each(|v| *v *= f * kj);
         }
         Ok(())
+    }
+
+    /// Whether a motor-side channel of `kind` in `scale` goes through the
+    /// robot file's transmission: always where the robot has coupled
+    /// motors or (positions) motor offsets, and for motor radians or motor
+    /// torques. Counts and currents of an uncoupled robot keep their
+    /// per-joint factor (gear × constant), the same numbers to the bit.
+    /// Joint-side factors given in `[read]` cannot be mixed with it.
+    fn through_motors(&self, kind: &str, scale: Scale) -> Result<bool> {
+        let given = match scale {
+            Scale::Counts => self.cfg.radians_per_count.is_some(),
+            Scale::Current(_) => self.cfg.torque_per_amp.is_some(),
+            _ => false,
+        };
+        let Some(model) = self.model else {
+            return match (given, scale) {
+                (true, _) | (_, Scale::Counts | Scale::Current(_)) => Ok(false),
+                _ => Err(self.data_err(
+                    kind,
+                    None,
+                    "a motor-side channel goes through the robot file's transmission: give a robot file".into(),
+                )),
+            };
+        };
+        let position = kind != "effort";
+        let needed = !model.couplings.is_empty()
+            || (position && model.drives.iter().any(|d| d.motor_offset != 0.0))
+            || matches!(scale, Scale::Factor(_));
+        match (needed, given) {
+            (true, true) => Err(self.data_err(
+                kind,
+                None,
+                format!(
+                    "`{}` are joint-side factors, but the channel is the motor's and the robot file has a transmission for it: drop them",
+                    if position { "radians_per_count" } else { "torque_per_amp" }
+                ),
+            )),
+            (needed, _) => Ok(needed),
+        }
     }
 
     /// The effort channels' unit: the reader's, the `[read]` table's, or
