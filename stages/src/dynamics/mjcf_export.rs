@@ -13,7 +13,9 @@
 //! and into the export's sidecar. The robot file's shapes (URDF collision
 //! shapes, else visual ones) are each body's `<geom>`s, meshes as assets
 //! at their STL files' absolute paths, so that the model is seen and
-//! collides; the explicit inertials, not the geoms, give the mass.
+//! collides; the explicit inertials, not the geoms, give the mass. A
+//! coupled motor (docs/robot-file.md, Transmissions) is a fixed tendon over
+//! the joints it turns with, carrying its rotor and its friction.
 
 use std::fmt::Write;
 
@@ -172,8 +174,8 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "{pad}  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{} -->",
-            f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said()
+            "{pad}  <!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{}{} -->",
+            f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said(), model.motor_said(i)
         );
         let range = match model.limits[i].position {
             Some((lo, hi)) => format!(" range=\"{lo:?} {hi:?}\""),
@@ -184,7 +186,7 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
             "{pad}  <joint name=\"{}\" type=\"hinge\" axis=\"{}\"{range} armature=\"{:?}\" damping=\"{:?}\" frictionloss=\"{:?}\" solreffriction=\"{FRICTION_TIMECONST_S:?} 1\"/>",
             j.name,
             v3(&j.axis),
-            model.drives[i].reflected_inertia(),
+            own_armature(model, i),
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg)
         );
@@ -194,7 +196,47 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
         let _ = writeln!(s, "{}</body>", "  ".repeat(i + 2));
     }
     let _ = writeln!(s, "  </worldbody>");
+    s.push_str(&coupled_tendons(model, &|j| model.joints[j].name.clone()));
     let _ = writeln!(s, "</mujoco>");
+    s
+}
+
+/// Joint `i`'s armature: its rotor reflected through the gear, unless the
+/// rotor is a coupled motor's, which its tendon carries.
+pub(super) fn own_armature(model: &Model, i: usize) -> f64 {
+    match model.couplings.iter().any(|c| c.motor == i) {
+        true => 0.0,
+        false => model.drives[i].reflected_inertia(),
+    }
+}
+
+/// Each coupled motor as a fixed tendon whose length is the motor's angle
+/// θ = r·q (r its row of the transmission): its `armature` J adds J·rᵀ·r
+/// to the mass matrix, its `damping` the motor's viscous friction and its
+/// `frictionloss` its Coulomb friction, each through rᵀ, as Rᵀ does. The
+/// MJCF's name of model joint j is `joint(j)`.
+pub(super) fn coupled_tendons(model: &Model, joint: &dyn Fn(usize) -> String) -> String {
+    if model.couplings.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from("  <tendon>\n");
+    for c in &model.couplings {
+        let d = &model.drives[c.motor];
+        let _ = writeln!(
+            s,
+            "    <fixed name=\"motor_{}\" armature=\"{:?}\" damping=\"{:?}\" frictionloss=\"{:?}\">",
+            joint(c.motor),
+            d.rotor_inertia,
+            c.viscous,
+            c.coulomb
+        );
+        let row = std::iter::once((c.motor, d.gear_ratio)).chain(c.with.iter().copied());
+        for (j, coef) in row {
+            let _ = writeln!(s, "      <joint joint=\"{}\" coef=\"{coef:?}\"/>", joint(j));
+        }
+        let _ = writeln!(s, "    </fixed>");
+    }
+    s.push_str("  </tendon>\n");
     s
 }
 

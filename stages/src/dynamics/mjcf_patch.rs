@@ -147,6 +147,14 @@ impl MjcfPatch {
                 said: over,
             });
         }
+        // Coupled motors: tendons before the document's end.
+        if let (false, Some(end)) = (model.couplings.is_empty(), text.rfind("</mujoco>")) {
+            let name = |j: usize| {
+                let p = &self.placed[j];
+                self.mjcf.bodies[p.body].joints[p.joint].name.clone()
+            };
+            edits.push((end..end, super::mjcf_export::coupled_tendons(model, &name)));
+        }
         Ok((super::urdf_patch::apply(text, edits), patched))
     }
 
@@ -158,7 +166,7 @@ impl MjcfPatch {
         let j = &self.mjcf.bodies[p.body].joints[p.joint];
         let f = &model.friction[i];
         let values = [
-            model.drives[i].reflected_inertia(),
+            super::mjcf_export::own_armature(model, i),
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg),
         ];
@@ -175,8 +183,8 @@ impl MjcfPatch {
         edits.push((
             j.range.start..j.range.start,
             format!(
-                "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{} -->\n{indent}",
-                f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said()
+                "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (damping and frictionloss are their means), coulomb_transition = {}, offset = {}{}{} -->\n{indent}",
+                f.viscous_pos, f.viscous_neg, f.coulomb_pos, f.coulomb_neg, f.transition, f.offset, f.stribeck_said(), model.motor_said(i)
             ),
         ));
         let over: Vec<String> = (0..3)

@@ -26,7 +26,7 @@ fn rpy(m: &nalgebra::Matrix3<f64>) -> String {
 pub(super) fn friction_comment(model: &Model, i: usize) -> String {
     let (f, d) = (&model.friction[i], &model.drives[i]);
     format!(
-        "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (<dynamics> carries the means of the two signs), offset = {}, coulomb_transition = {}{}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {} (URDF has no place for it) -->",
+        "<!-- robotid: viscous_pos = {}, viscous_neg = {}, coulomb_pos = {}, coulomb_neg = {} (<dynamics> carries the means of the two signs), offset = {}, coulomb_transition = {}{}, rotor_inertia = {} (motor side), gear_ratio = {}, reflected rotor inertia = {}{} (URDF has no place for it) -->",
         f.viscous_pos,
         f.viscous_neg,
         f.coulomb_pos,
@@ -36,7 +36,8 @@ pub(super) fn friction_comment(model: &Model, i: usize) -> String {
         f.stribeck_said(),
         d.rotor_inertia,
         d.gear_ratio,
-        d.reflected_inertia()
+        d.reflected_inertia(),
+        model.motor_said(i)
     )
 }
 
