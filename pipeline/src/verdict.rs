@@ -122,6 +122,9 @@ pub struct Verdict {
     pub in_sample: f64,
     /// The effort channels' gains against each other (None: not told).
     pub channels: Option<ChannelGains>,
+    /// Efforts over the floor that hold another joint's torque
+    /// ([`crossed_efforts`]).
+    pub crossed: Vec<Crossed>,
     /// Why the fit is refused; None: identified.
     pub refused: Option<Refusal>,
 }
@@ -140,6 +143,9 @@ pub enum Refusal {
     /// own (joint, gain against the others'), and the share of the residue
     /// the gains explain: a lab mistake.
     ScaledChannel(Vec<ChannelGain>, Measured),
+    /// Efforts that hold another joint's torque: a transmission coupling
+    /// the robot file lacks, or channels mixed (a lab mistake).
+    CrossedEffort(Vec<Crossed>),
     /// A friction the model lacks: functions of each joint's own velocity
     /// explain most of its residue (joint, share, ratio).
     MissingFriction(Vec<(String, f64, f64)>),
@@ -187,6 +193,21 @@ impl std::fmt::Display for Refusal {
                     .collect::<Vec<_>>()
                     .join(", "),
                 on.said()
+            ),
+            Refusal::CrossedEffort(crossed) => write!(
+                f,
+                "an effort holds another joint's torque: {} (a gain on the other joint's measured torque fitted with the parameters, in sample). A transmission the robot file lacks: one joint's motor also turns with the other (a coupled wrist: `coupling = {{ <joint> = turns }}` on the motor's joint, docs/robot-file.md; the gain only hints at the turns, as the angles read are mixed too), or the effort channels are mixed",
+                crossed
+                    .iter()
+                    .map(|c| format!(
+                        "{}'s effort {:+.3}× {}'s torque (explaining {:.0} % of its residue)",
+                        c.joint,
+                        c.gain,
+                        c.other,
+                        100.0 * c.share
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
             Refusal::MissingFriction(joints) => write!(
                 f,
@@ -357,12 +378,27 @@ pub fn judge(
         .collect();
     let in_sample = validation::relative_error(&stats);
     let relative = held_out.unwrap_or((in_sample, Measured::InSample));
+    let over: Vec<usize> = stats
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| {
+            est.adequacy_of(&s.joint)
+                .and_then(|a| a.ratio())
+                .is_some_and(|r| !(r <= REFUSE_RATIO))
+        })
+        .map(|(j, _)| j)
+        .collect();
+    let crossed = match policy.strict || over.is_empty() {
+        true => Vec::new(),
+        false => crossed_efforts(sys, &over),
+    };
     let mut verdict = Verdict {
         policy,
         joints,
         relative,
         in_sample,
         channels,
+        crossed,
         refused: None,
     };
 
@@ -390,6 +426,11 @@ fn refusal(v: &Verdict) -> Option<Refusal> {
         } else {
             (!suspect.is_empty() && suspect.len() == v.joints.len()).then(|| Refusal::FloorSuspect(said(suspect)))
         };
+    }
+    // Before the gains: another joint's torque in an effort leaves gains
+    // that are not the channel's own.
+    if !v.crossed.is_empty() {
+        return Some(Refusal::CrossedEffort(v.crossed.clone()));
     }
     if let Some(c) = &v.channels {
         let scaled: Vec<ChannelGain> = c.channels.iter().filter(|c| c.scaled()).cloned().collect();
@@ -424,6 +465,114 @@ pub const SCALED_GAIN: f64 = 1.2;
 /// The share of its joint's residue a channel's gain must explain to be
 /// said as a scaled channel.
 pub const SCALED_SHARE: f64 = 0.5;
+
+/// An effort whose residue another joint's measured torque explains this
+/// share of, with a gain at least [`CROSSED_GAIN`] either way, holds that
+/// torque: a missed coupling puts −turns/gear of the coupled motor's
+/// joint torque into the joint it turns with (`coupled_wrist`: −1.00×,
+/// 97 % of wrist_2's residue), where the model's own error leaves a few
+/// per cent.
+pub const CROSSED_SHARE: f64 = 0.5;
+
+/// The smallest gain on another joint's torque said as crossed.
+pub const CROSSED_GAIN: f64 = 0.1;
+
+/// One effort holding another joint's torque.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Crossed {
+    pub joint: String,
+    /// The joint whose torque it holds.
+    pub other: String,
+    /// b_joint ≈ A·θ + gain·b_other.
+    pub gain: f64,
+    /// The share of the joint's least-squares residue the gain explains.
+    pub share: f64,
+}
+
+/// For each joint of `joints` (those over the floor), the other joint
+/// whose measured torque, at the same samples, best explains its residue
+/// as one more column of the least-squares fit: b_k ≈ A_k·θ + c·b_m. By
+/// the partial regression on least squares' own residue r, that column
+/// x moves the residue by −c·(x − A·(AᵀA)⁻¹u), with c = xᵀr/s,
+/// s = xᵀx − uᵀ(AᵀA)⁻¹u and u = Aᵀx: one Cholesky factor for every pair,
+/// and the joint's own residue measured with it.
+/// Said where it explains [`CROSSED_SHARE`] of the joint's residue with a
+/// gain of [`CROSSED_GAIN`] or more. Empty where the rows are projected,
+/// hold known columns, or A is singular.
+pub fn crossed_efforts(sys: &System, joints: &[usize]) -> Vec<Crossed> {
+    let (n, p) = (sys.joints.len(), sys.parameters());
+    if n < 2 || sys.known.is_some() || sys.equations.is_some() || sys.rows() <= p {
+        return Vec::new();
+    }
+    // Columns scaled to unit norm (the same span, so the same residues):
+    // the raw columns' norms span orders of magnitude.
+    let d = DVector::from_iterator(p, sys.a.column_iter().map(|c| 1.0 / c.norm().max(f64::MIN_POSITIVE)));
+    let gram = sys.a.tr_mul(&sys.a).component_mul(&(&d * d.transpose()));
+    let Some(chol) = gram.cholesky() else {
+        return Vec::new();
+    };
+    let theta = chol.solve(&sys.a.tr_mul(&sys.b).component_mul(&d)).component_mul(&d);
+    let residue = &sys.b - &sys.a * &theta;
+    // Each sample's row per joint.
+    let mut at: std::collections::HashMap<(usize, i64), Vec<usize>> = std::collections::HashMap::new();
+    for i in 0..sys.rows() {
+        at.entry((sys.recording[i], sys.sample[i]))
+            .or_insert_with(|| vec![usize::MAX; n])[sys.joint[i]] = i;
+    }
+    let mut crossed = Vec::new();
+    for &k in joints {
+        let rows: Vec<usize> = (0..sys.rows()).filter(|&i| sys.joint[i] == k).collect();
+        let rss: f64 = rows.iter().map(|&i| residue[i].powi(2)).sum();
+        if !(rss > 0.0) {
+            continue;
+        }
+        let best = (0..n)
+            .filter(|&m| m != k)
+            .filter_map(|m| {
+                let x: Vec<f64> = rows
+                    .iter()
+                    .map(|&i| match at[&(sys.recording[i], sys.sample[i])][m] {
+                        usize::MAX => 0.0,
+                        o => sys.b[o],
+                    })
+                    .collect();
+                let (mut u, mut xx, mut xr) = (DVector::zeros(p), 0.0, 0.0);
+                for (&i, &x) in rows.iter().zip(&x) {
+                    for c in 0..p {
+                        u[c] += sys.a[(i, c)] * x;
+                    }
+                    (xx, xr) = (xx + x * x, xr + x * residue[i]);
+                }
+                let u = u.component_mul(&d);
+                let w = chol.solve(&u);
+                let s = xx - u.dot(&w);
+                if !(s > 1e-12 * xx) {
+                    return None;
+                }
+                // The joint's own residue with the column: r − c·(x − A·w).
+                let (gain, w) = (xr / s, w.component_mul(&d));
+                let left: f64 = rows
+                    .iter()
+                    .zip(&x)
+                    .map(|(&i, &x)| {
+                        let aw: f64 = (0..p).map(|c| sys.a[(i, c)] * w[c]).sum();
+                        (residue[i] - gain * (x - aw)).powi(2)
+                    })
+                    .sum();
+                Some((m, gain, (1.0 - left / rss).max(0.0)))
+            })
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        if let Some((m, gain, share)) = best.filter(|&(_, g, s)| s >= CROSSED_SHARE && g.abs() >= CROSSED_GAIN) {
+            crossed.push(Crossed {
+                joint: sys.joints[k].clone(),
+                other: sys.joints[m].clone(),
+                gain,
+                share,
+            });
+        }
+    }
+    crossed
+}
 
 /// Rows gathered at a time into each joint's Gram matrix.
 const GRAM_BLOCK: usize = 4096;
@@ -773,6 +922,7 @@ mod tests {
             relative: (relative, Measured::HeldOutPeriods),
             in_sample: relative,
             channels: None,
+            crossed: Vec::new(),
             refused: None,
         }
     }
