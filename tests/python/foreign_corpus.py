@@ -110,7 +110,23 @@ CASES = {
         nonperiodic=True,
         scale=0.02,
     ),
+    # An industrial wrist: motor 6 turns with joints 5 and 6, the controller
+    # logs motor-side encoder counts (offset by calibration) and motor
+    # currents, at 5 kHz, with no time column.
+    "coupled_wrist": dict(
+        filter=("butter", 4, 200.0, None), friction="sign", periods=4, f0=0.2, fs=5000.0, transmission=True
+    ),
 }
+
+# The transmission of "coupled_wrist": gear ratios (motor turns per joint
+# turn; joint 4's motor turns the other way), motor 6 also turning 32 times
+# per turn of joint 5, motor-side encoders and torque constants.
+GEARS = [32.0, 32.0, 45.0, -48.0, 45.0, 32.0]
+COUPLED = (5, 4, 32.0)  # (motor, joint, turns)
+MOTOR_COUNTS = 2**14
+TORQUE_CONSTANT = [0.11, 0.11, 0.09, 0.07, 0.07, 0.07]
+MOTOR_FRICTION = (2.0e-4, 0.01)  # the coupled motor's, motor side: N·m·s/rad, N·m
+CURRENT_NOISE = 0.004  # A, white, after the filter
 
 # The payload of "payload_loaded", in tool0's frame: kg, m, kg·m² at its
 # centre of mass (a 12 × 8 × 6 cm box turned 0.3 rad about z).
@@ -217,7 +233,8 @@ def main(urdf, out, case):
     a[held], b[held] = 0.0, 0.0
     total = pre + ramp_in + spec["periods"] * period + ramp_out + rest
     fs = spec.get("fs", FS)
-    t = np.arange(int(round(total * fs * FINE))) / (fs * FINE)
+    fine = spec.get("fine", FINE)
+    t = np.arange(int(round(total * fs * fine))) / (fs * fine)
     # The excitation starts at full phase when the ramp-in ends; before it,
     # it is faded in by a smooth window, after the periods faded out.
     q, qd, qdd = excitation(t - pre - ramp_in)
@@ -286,11 +303,26 @@ def main(urdf, out, case):
         vs, delta, ratio = spec.get("stribeck", (0.05, 2.0, 0.5))
         tau += fv * qd + (fc + ratio * fc * np.exp(-((np.abs(qd) / vs) ** delta))) * np.sign(qd)
     tau += spec.get("offset", 0.0)
+    motors = None
+    if spec.get("transmission"):
+        # θ = R·q: each motor's rotor inertia as Rᵀ·J·R·q̈, the coupled
+        # motor's friction at its own speed through Rᵀ.
+        R = np.diag(GEARS)
+        R[COUPLED[0], COUPLED[1]] = COUPLED[2]
+        rotor = rng.uniform(1e-5, 4e-5, nq)
+        offsets = rng.uniform(-3.0, 3.0, nq)
+        speed = qd @ R.T
+        motor_tau = (qdd @ R.T) * rotor
+        m = COUPLED[0]
+        motor_tau[:, m] += MOTOR_FRICTION[0] * speed[:, m] + MOTOR_FRICTION[1] * np.sign(speed[:, m])
+        tau += motor_tau @ R
+        motors = dict(R=R, rotor=rotor, offsets=offsets)
     if held:
         # A stiff position loop (5000 N·m/rad) holds them: they sag by the
         # change of their gravity load as the moving joint swings.
         start = int(round(pre * fs * FINE))
         q[:, held] -= (tau[:, held] - tau[start, held]) / 5000.0
+    clean_tau = tau.copy() if motors else None
     filt = None
     if spec["filter"]:
         family, order, cutoff, ripple = spec["filter"]
@@ -304,30 +336,46 @@ def main(urdf, out, case):
         sys_ = signal.lti(num, den)
         tau = np.stack([signal.lsim(sys_, tau[:, j], t)[1] for j in range(nq)], axis=1)
         filt = dict(family=family, order=order, cutoff_hz=cutoff, ripple_db=ripple)
-    late = int(round(spec.get("delay", 0.0) * FINE))
+    late = int(round(spec.get("delay", 0.0) * fine))
     if late:
         # The effort logged late: each sample holds the torque of `delay`
         # samples before (the first held at the start's).
         tau = np.concatenate([np.repeat(tau[:1], late, axis=0), tau[:-late]])
-    logged = slice(0, None, FINE)
+    logged = slice(0, None, fine)
+    clean = (t[logged], q[logged], qd[logged], qdd[logged], clean_tau[logged]) if motors else None
     t, q, tau = t[logged], q[logged], tau[logged]
     if spec.get("seed_case"):
         # The excitation and the arm another case's, the noise its own.
         rng = np.random.default_rng(list(CASES).index(case) + 1)
-    tau = tau + rng.normal(0, NOISE, tau.shape)
-    step = 2 * np.pi / COUNTS
-    if held:
-        # Held exactly half a count off a boundary, their encoders flicker.
-        q[:, held] += step / 2 + rng.normal(0, step / 4, (len(t), len(held)))
-    q = np.round(q / step) * step
-    table = np.column_stack([t, q, tau])
-    if spec.get("form") == "txt":
-        np.savetxt(f"{out}/excitation.txt", table, fmt="%.9g", delimiter=" ")
-    elif spec.get("form") == "mcap":
-        write_mcap(f"{out}/excitation.mcap", names, t, q, tau)
+    if motors:
+        # What the controller logs: motor currents i = R⁻ᵀ·τ / k with their
+        # own noise, motor encoder counts of θ = R·q + offsets; no time.
+        current = np.linalg.solve(motors["R"].T, tau.T).T / TORQUE_CONSTANT
+        current += rng.normal(0, CURRENT_NOISE, current.shape)
+        counts = np.round((q @ motors["R"].T + motors["offsets"]) / (2 * np.pi / MOTOR_COUNTS))
+        header = ",".join([f"enc_{k + 1}" for k in range(nq)] + [f"cur_{k + 1}" for k in range(nq)])
+        np.savetxt(f"{out}/motors.csv", np.column_stack([counts, current]), fmt="%.9g", delimiter=",", header=header, comments="")
+        # The joint side the log hides, every 25th sample: exact angles and
+        # their derivatives, the torque before the filter and the noise.
+        every = slice(0, None, 25)
+        tc, qc, qdc, qddc, tauc = (x[every] for x in clean)
+        cols = [tc[:, None], qc, qdc, qddc, tauc]
+        np.savetxt(f"{out}/joint_side.csv", np.column_stack(cols), fmt="%.17g", delimiter=",")
     else:
-        header = ",".join(["time_s"] + [f"{n}_pos_rad" for n in names] + [f"{n}_effort_Nm" for n in names])
-        np.savetxt(f"{out}/excitation.csv", table, fmt="%.9g", delimiter=",", header=header, comments="")
+        tau = tau + rng.normal(0, NOISE, tau.shape)
+        step = 2 * np.pi / COUNTS
+        if held:
+            # Held exactly half a count off a boundary, their encoders flicker.
+            q[:, held] += step / 2 + rng.normal(0, step / 4, (len(t), len(held)))
+        q = np.round(q / step) * step
+        table = np.column_stack([t, q, tau])
+        if spec.get("form") == "txt":
+            np.savetxt(f"{out}/excitation.txt", table, fmt="%.9g", delimiter=" ")
+        elif spec.get("form") == "mcap":
+            write_mcap(f"{out}/excitation.mcap", names, t, q, tau)
+        else:
+            header = ",".join(["time_s"] + [f"{n}_pos_rad" for n in names] + [f"{n}_effort_Nm" for n in names])
+            np.savetxt(f"{out}/excitation.csv", table, fmt="%.9g", delimiter=",", header=header, comments="")
     truth = dict(
         joints=names,
         fs_hz=fs,
@@ -357,6 +405,19 @@ def main(urdf, out, case):
     )
     if truth_payload:
         truth["payload"] = truth_payload
+    if motors:
+        truth["effort_noise_std_Nm"] = None
+        truth["current_noise_std_A"] = CURRENT_NOISE
+        truth["transmission"] = dict(
+            gear_ratio=GEARS,
+            coupling=dict(motor=names[COUPLED[0]], joint=names[COUPLED[1]], turns=COUPLED[2]),
+            motor_offset_rad=motors["offsets"].tolist(),
+            torque_constant=TORQUE_CONSTANT,
+            rotor_inertia=motors["rotor"].tolist(),
+            motor_viscous=MOTOR_FRICTION[0],
+            motor_coulomb=MOTOR_FRICTION[1],
+            encoder_counts_per_rev=MOTOR_COUNTS,
+        )
     if held:
         # The joint-wise (decoupled) model of each moving joint, the others
         # at rest: τ = Mi·q̈ + Gs·sin q + Gc·cos q + friction.

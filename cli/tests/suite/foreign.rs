@@ -788,7 +788,7 @@ fn ratios(table: &Path) -> Vec<(String, f64)> {
 /// The corpus case `case` of `urdf` and its log: made once by
 /// `tests/python/foreign_corpus.py`, kept in the test cache keyed by the
 /// generator, the URDF, the case and the test venv's requirements.
-fn corpus(urdf: &Path, case: &str) -> (PathBuf, PathBuf) {
+pub(super) fn corpus(urdf: &Path, case: &str) -> (PathBuf, PathBuf) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/foreign_corpus.py");
     let requirements = script.with_file_name("requirements.txt");
     let inputs = [&script, urdf, &requirements].map(|f| std::fs::read(f).unwrap());
@@ -809,7 +809,7 @@ fn corpus(urdf: &Path, case: &str) -> (PathBuf, PathBuf) {
             );
         },
     );
-    let log = ["excitation.csv", "excitation.txt", "excitation.mcap"]
+    let log = ["excitation.csv", "excitation.txt", "excitation.mcap", "motors.csv"]
         .iter()
         .map(|f| dir.join(f))
         .find(|f| f.is_file())

@@ -35,3 +35,4 @@ mod foreign;
 mod identify;
 mod payload;
 mod pipeline;
+mod transmission;
