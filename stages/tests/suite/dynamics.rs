@@ -160,17 +160,30 @@ fn real_kuka_lwr4_urdf_loads_and_matches_lagrangian() {
     check_against_lagrangian(&model, 5);
 }
 
+/// Also on a coupled wrist: its rotor (in M) and its friction (at the
+/// motor's speed, through Rᵀ) both inverted.
 #[test]
 fn forward_dynamics_inverts_rnea() {
     let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
-    let mut data = Data::new(&model);
-    let mut rng = ChaCha8Rng::seed_from_u64(6);
-    for _ in 0..50 {
-        let (q, qd, qdd) = random_state(&mut rng, 6);
-        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).as_slice().to_vec();
-        let mut back = vec![0.0; 6];
-        dynamics::forward_dynamics(&model, &mut data, &q, &qd, &tau, &mut back);
-        assert!(rel_err(&back, &qdd) < 1e-9, "{back:?} vs {qdd:?}");
+    let mut coupled = model.clone();
+    coupled.couplings.push(dynamics::Coupling {
+        motor: 5,
+        with: vec![(4, -40.0)],
+        viscous: 3e-3,
+        coulomb: 0.2,
+    });
+    coupled.drives[5].rotor_inertia = 2.5e-4;
+    coupled.validate().unwrap();
+    for model in [model, coupled] {
+        let mut data = Data::new(&model);
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        for _ in 0..50 {
+            let (q, qd, qdd) = random_state(&mut rng, 6);
+            let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).as_slice().to_vec();
+            let mut back = vec![0.0; 6];
+            dynamics::forward_dynamics(&model, &mut data, &q, &qd, &tau, &mut back);
+            assert!(rel_err(&back, &qdd) < 1e-9, "{back:?} vs {qdd:?}");
+        }
     }
 }
 
