@@ -11,22 +11,22 @@ export ROBOTID_PYTHON="$venv/bin/python"
 cargo fmt --all --check
 # pyo3's build script runs again whenever the Python environment it sees
 # changes, and with it every crate that links arrow (whose `pyarrow`
-# feature the Python package turns on for the whole workspace): cargo and
-# maturin see one environment, maturin's own (its interpreter, signature
-# and the pyo3 configuration file it writes, so maturin builds first).
-export PYO3_PYTHON="$venv/bin/python" PYTHON_SYS_EXECUTABLE="$venv/bin/python"
-PYO3_ENVIRONMENT_SIGNATURE=$("$venv/bin/python" -c 'import platform, struct, sys; print("%s-%d.%d-%dbit" % (platform.python_implementation().lower(), sys.version_info[0], sys.version_info[1], 8 * struct.calcsize("P")))')
-export PYO3_ENVIRONMENT_SIGNATURE
-# The Python package, built by maturin into the venv (tested below). Same
-# dev profile as the cargo builds, but cargo resolves the package's
-# features on their own, so a first build compiles its dependency graph
-# again (about 8 min cold on 2 cores; 10 s warm).
-VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" maturin develop --locked -q -m python/Cargo.toml
-config=$(ls "${CARGO_TARGET_DIR:-target}"/maturin/pyo3-config-*.txt 2>/dev/null | head -1)
-if [ -n "$config" ]; then
-  export PYO3_CONFIG_FILE="$config"
-fi
+# feature the Python package turns on for the whole workspace): every
+# cargo command below sees one environment, the venv's interpreter,
+# building an extension module (what maturin would set).
+export PYO3_PYTHON="$venv/bin/python" PYTHON_SYS_EXECUTABLE="$venv/bin/python" PYO3_BUILD_EXTENSION_MODULE=1
 cargo clippy --workspace --all-targets --locked -- -D warnings
+# The workspace's libraries and tests in one build: the Python package's
+# extension compiles here with the features the tests resolve, so the
+# dependencies compile once. `maturin develop` resolves the package's
+# features on its own (serde's `rc`, half, hashbrown, … differ) and
+# compiled the whole graph a second time: 18 of a cold run's 55 min
+# (2026-12-07). The extension is then put where maturin's editable install
+# puts it, and the venv points at python/ as that install does.
+cargo build --workspace --lib --tests --locked
+cp "${CARGO_TARGET_DIR:-target}/debug/lib_robotid.so" python/robotid/_robotid.abi3.so
+site=$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+echo "$PWD/python" > "$site/robotid.pth"
 # Tests skip (with a message) only when an input is absent, and never
 # under CI (`.ci/run` sets CI): the skips are counted and listed.
 skipped=$(mktemp)
