@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use robotid::tables::{parts, reduce, Marks};
-use robotid_stages::estimation::{Covariance, Estimate, Estimator};
+use robotid_stages::estimation::{expressions_of, Covariance, Estimate, Estimator};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Reducer};
 
 #[derive(clap::Args)]
@@ -76,7 +76,7 @@ pub fn print_outcome(args: &Args, out: &Outcome) {
 
 /// An estimate's outcome as text, its table at `table`.
 pub fn outcome_text(out: &Outcome, confidence: f64, table: &std::path::Path) -> String {
-    let mut s = summary(&out.estimate, confidence) + &findings(out);
+    let mut s = summary(&out.estimate, confidence, &expressions_of(&out.table)) + &findings(out);
     if let Some(fit) = &out.physical {
         s.push_str(&format!(
             "physically consistent: prior weight {:e}{}\n",
@@ -219,16 +219,18 @@ pub fn adequacy(est: &Estimate) -> String {
     s
 }
 
-/// The parameter table as text: value, std, relative std and interval.
-pub fn summary(est: &Estimate, level: f64) -> String {
-    summary_at(est, level, Some(level))
+/// The parameter table as text: value, std, relative std and interval
+/// (the table's: `expressions` are its column, empty where each parameter
+/// is its own).
+pub fn summary(est: &Estimate, level: f64, expressions: &[String]) -> String {
+    summary_at(est, level, Some(level), expressions)
 }
 
 /// The same, with the intervals' label: `None` where the fit is
 /// inadequate and the intervals are at no known level.
-pub fn summary_at(est: &Estimate, level: f64, label: Option<f64>) -> String {
+pub fn summary_at(est: &Estimate, level: f64, label: Option<f64>, expressions: &[String]) -> String {
     let std = est.std();
-    let half = est.half_width(level);
+    let (low, high) = robotid_stages::estimation::intervals(est, level, expressions);
     let mut s = format!(
         "{} on {} rows, condition number {:.3}, covariance from {} ({} degrees of freedom), residual variance {:.4e}{}\n",
         est.method.name(),
@@ -262,8 +264,8 @@ pub fn summary_at(est: &Estimate, level: f64, label: Option<f64>) -> String {
             est.values[i],
             std[i],
             relative(100.0 * std[i] / est.values[i].abs()),
-            est.values[i] - half[i],
-            est.values[i] + half[i],
+            low[i],
+            high[i],
             est.units[i]
         ));
     }

@@ -317,7 +317,15 @@ fn print_designs(id: &Identification, print_pipeline: bool) {
 /// The least-squares estimate, its verdict and its validation.
 fn print_estimate(id: &Identification) {
     let level = if id.refused.is_some() { None } else { Some(0.95) };
-    print!("{}", super::estimate::summary_at(&id.estimate.estimate, 0.95, level));
+    print!(
+        "{}",
+        super::estimate::summary_at(
+            &id.estimate.estimate,
+            0.95,
+            level,
+            &robotid_stages::estimation::expressions_of(&id.estimate.table)
+        )
+    );
     print!("{}", super::estimate::findings(&id.estimate));
     println!("verdict: {}", id.verdict.said());
     println!("parameters in {}", id.path("parameters.parquet").display());

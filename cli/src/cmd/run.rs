@@ -79,7 +79,14 @@ pub fn run_pipeline(pipeline: Pipeline, args: Args, shown: &std::path::Path) -> 
     }
     if let (Some(est), Some(path)) = (&run.estimate, &run.parameters) {
         let level = pipeline.plan.estimate().map_or(0.95, |c| c.confidence);
-        print!("{}", super::estimate::summary(&est.estimate, level));
+        print!(
+            "{}",
+            super::estimate::summary(
+                &est.estimate,
+                level,
+                &robotid_stages::estimation::expressions_of(&est.table)
+            )
+        );
         if let Some(fit) = &est.physical {
             println!(
                 "physically consistent: χ² = {:.4} from the unconstrained estimate, prior weight {:e}{}, {:.1} effective parameters, smallest pseudo-inertia eigenvalue per link {:?}",

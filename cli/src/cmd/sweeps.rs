@@ -59,7 +59,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "gravity: k = {:.4} N·m, q_off = {:.5} rad (Bona eq. 23)",
         gf.k, gf.q_off
     );
-    print!("{}", super::estimate::summary(&gf.estimate, args.confidence));
+    print!("{}", super::estimate::summary(&gf.estimate, args.confidence, &[]));
     let mut md = kin.metadata.clone();
     md.insert(metadata::DEDICATED.into(), "sweeps".into());
     let table = parameters_table(&gf.estimate, args.confidence, &gf.estimate.names, &md)?;

@@ -42,7 +42,7 @@ pub use summary::{Halves, KnownPart, Summary, MAX_CONDITION};
 pub use system::{
     block_rows, columns_of, row_weights, Known, RowBlocks, System, BLOCK_SAMPLES, PARAMETER_COLUMN, PERIOD_TORQUE,
 };
-pub use table::{expressions_of, parameters_from_table, parameters_table, Parameters};
+pub use table::{expressions_of, intervals, parameters_from_table, parameters_table, Parameters};
 
 /// Which estimator, chosen in the pipeline's `estimate` stage or on the
 /// command line.

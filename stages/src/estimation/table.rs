@@ -48,7 +48,7 @@ pub fn parameters_table(
 ) -> Result<RecordBatch> {
     let p = est.values.len();
     let std = est.std();
-    let half = est.half_width(level);
+    let (low, high) = intervals(est, level, expressions);
     let mut md = extra.clone();
     md.insert(METHOD.into(), est.method.name().into());
     md.insert(CONFIDENCE.into(), level.to_string());
@@ -72,12 +72,8 @@ pub fn parameters_table(
         Arc::new(Float64Array::from(
             (0..p).map(|i| 100.0 * std[i] / values[i].abs()).collect::<Vec<_>>(),
         )),
-        Arc::new(Float64Array::from(
-            (0..p).map(|i| values[i] - half[i]).collect::<Vec<_>>(),
-        )),
-        Arc::new(Float64Array::from(
-            (0..p).map(|i| values[i] + half[i]).collect::<Vec<_>>(),
-        )),
+        Arc::new(Float64Array::from(low)),
+        Arc::new(Float64Array::from(high)),
         Arc::new(StringArray::from(
             (0..p)
                 .map(|i| expressions.get(i).cloned().unwrap_or_else(|| est.names[i].clone()))
@@ -101,6 +97,31 @@ pub fn parameters_table(
         .map_err(|e| robotid_schemas::SchemaError::Arrow(e.to_string()))?;
     TableKind::Parameters.validate(&batch.schema())?;
     Ok(batch)
+}
+
+/// Each parameter's Student-t interval at `level`, (lows, highs). The
+/// physically consistent fit's values keep to its bounds, and so does the
+/// truth: where a rotor inertia or a friction coefficient is a base
+/// parameter on its own (its expression is its name), its interval is cut
+/// at 0. A symmetric interval about a value held at 0 (the real LWR4+'s
+/// `Fv_lwr_1_joint`, 0 ± 0.43) would claim negative friction possible;
+/// the cut one holds the truth whenever the whole one does. Least
+/// squares' intervals are those of an unconstrained estimator, kept whole
+/// (a negative value's interval is how it is seen to be impossible).
+pub fn intervals(est: &Estimate, level: f64, expressions: &[String]) -> (Vec<f64>, Vec<f64>) {
+    let half = est.half_width(level);
+    let constrained = est.covariance_from == super::Covariance::Bootstrap;
+    (0..est.values.len())
+        .map(|i| {
+            let (v, n) = (est.values[i], &est.names[i]);
+            let alone = expressions.get(i).is_none_or(|e| e == n);
+            let floor = match constrained && alone && crate::dynamics::ParameterKind::of(n).non_negative() {
+                true => 0.0,
+                false => f64::NEG_INFINITY,
+            };
+            ((v - half[i]).max(floor), v + half[i])
+        })
+        .unzip()
 }
 
 /// A parameters table's `expression` column (empty when it has none).
@@ -158,4 +179,46 @@ pub fn parameters_from_table(batch: &RecordBatch) -> Result<Parameters> {
         covariance,
         metadata: schema.metadata().clone().into_iter().collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimation::{Covariance, Estimator};
+
+    fn estimate(from: Covariance) -> Estimate {
+        let names: Vec<String> = ["Fv_j1", "Fc_j1", "MX_j1", "Fv_j2"].map(String::from).to_vec();
+        Estimate {
+            units: vec!["1".into(); names.len()],
+            names,
+            method: Estimator::Ols,
+            values: DVector::from_vec(vec![0.0, 0.5, 0.0, 0.0]),
+            covariance: DMatrix::from_diagonal(&DVector::from_vec(vec![0.04, 0.01, 0.04, 0.04])),
+            dof: usize::MAX / 2,
+            residual_variance: 1.0,
+            condition: 1.0,
+            rows: 100,
+            iterations: 1,
+            covariance_from: from,
+            adequacy: vec![],
+            widened: false,
+        }
+    }
+
+    /// The physical fit's friction held at 0 gets [0, 1.96·std]; a
+    /// friction far from its bound, an inertial parameter (which may be
+    /// negative), a friction regrouped with others, and least squares'
+    /// intervals keep the symmetric ones.
+    #[test]
+    fn a_bound_cuts_the_physical_intervals_only() {
+        let z = 1.959_964;
+        let expressions = ["Fv_j1", "Fc_j1", "MX_j1", "Fv_j2 + Fv_j3"].map(String::from);
+        let (lo, hi) = intervals(&estimate(Covariance::Bootstrap), 0.95, &expressions);
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-5;
+        assert!(lo[0] == 0.0 && close(hi[0], 0.2 * z), "{lo:?} {hi:?}");
+        assert!(close(lo[1], 0.5 - 0.1 * z) && close(hi[1], 0.5 + 0.1 * z));
+        assert!(close(lo[2], -0.2 * z) && close(lo[3], -0.2 * z), "{lo:?}");
+        let (lo, _) = intervals(&estimate(Covariance::Periods), 0.95, &expressions);
+        assert!(close(lo[0], -0.2 * z), "{lo:?}");
+    }
 }
