@@ -27,13 +27,8 @@ pub fn forward_dynamics(model: &Model, data: &mut Data, q: &[f64], qd: &[f64], t
     for i in 0..n {
         qdd[i] = tau[i] - data.tau[i] - model.friction[i].torque(qd[i]);
     }
-    if !model.couplings.is_empty() {
-        // The coupled motors' friction through Rᵀ (their rotors are in M):
-        // taken from the torques left, as the joints' own above.
-        qdd.iter_mut().for_each(|a| *a = -*a);
-        model.add_coupled_torque(qd, qd, (false, true), qdd); // q̈ unread without rotors
-        qdd.iter_mut().for_each(|a| *a = -*a);
-    }
+    // The coupled motors' friction (their rotors are in M).
+    model.take_coupled_friction(qd, qdd);
     mass_matrix(model, data, q);
     cholesky_solve_in_place(&mut data.mass, qdd);
 }

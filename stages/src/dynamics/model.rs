@@ -388,6 +388,15 @@ pub struct Coupling {
     pub coulomb: f64,
 }
 
+impl Coupling {
+    /// The motor's friction torque (motor side) at its speed g·q̇_motor +
+    /// Σ turns·q̇, for its own joint's gear ratio `g`.
+    fn friction_at(&self, g: f64, qd: &[f64]) -> f64 {
+        let speed = g * qd[self.motor] + self.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
+        self.viscous * speed + self.coulomb * speed.signum() * (speed != 0.0) as i32 as f64
+    }
+}
+
 /// A shape of a link, placed in its frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Shape {
@@ -617,21 +626,35 @@ impl Model {
             let m = c.motor;
             let (g, j_m) = (self.drives[m].gear_ratio, self.drives[m].rotor_inertia);
             let cross_qdd: f64 = c.with.iter().map(|&(k, t)| t * qdd[k]).sum();
-            let speed = g * qd[m] + c.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
-            let mut own = 0.0; // motor torque on the motor's own joint's row, less J·g²·q̈
-            let mut motor = 0.0; // the motor torque every coupled joint sees through its turns
+            // The motor torque on the motor's own joint's row (less J·g²·q̈),
+            // and the one every coupled joint sees through its turns.
+            let (mut own, mut motor) = (0.0, 0.0);
             if rotor {
                 own += j_m * g * cross_qdd;
                 motor += j_m * (g * qdd[m] + cross_qdd);
             }
             if friction {
-                let f = c.viscous * speed + c.coulomb * speed.signum() * (speed != 0.0) as i32 as f64;
+                let f = c.friction_at(g, qd);
                 own += g * f;
                 motor += f;
             }
             tau[m] += own;
             for &(k, t) in &c.with {
                 tau[k] += t * motor;
+            }
+        }
+    }
+
+    /// The coupled motors' friction through Rᵀ taken from joint torques
+    /// `tau`: forward dynamics takes it, as each joint's own friction, from
+    /// the torque that is left to accelerate the bodies.
+    pub fn take_coupled_friction(&self, qd: &[f64], tau: &mut [f64]) {
+        for c in &self.couplings {
+            let g = self.drives[c.motor].gear_ratio;
+            let f = c.friction_at(g, qd);
+            tau[c.motor] -= g * f;
+            for &(k, t) in &c.with {
+                tau[k] -= t * f;
             }
         }
     }

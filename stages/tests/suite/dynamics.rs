@@ -165,15 +165,7 @@ fn real_kuka_lwr4_urdf_loads_and_matches_lagrangian() {
 #[test]
 fn forward_dynamics_inverts_rnea() {
     let model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
-    let mut coupled = model.clone();
-    coupled.couplings.push(dynamics::Coupling {
-        motor: 5,
-        with: vec![(4, -40.0)],
-        viscous: 3e-3,
-        coulomb: 0.2,
-    });
-    coupled.drives[5].rotor_inertia = 2.5e-4;
-    coupled.validate().unwrap();
+    let coupled = super::coupled_ur5(2.5e-4, (3e-3, 0.2));
     for model in [model, coupled] {
         let mut data = Data::new(&model);
         let mut rng = ChaCha8Rng::seed_from_u64(6);

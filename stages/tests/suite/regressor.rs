@@ -509,15 +509,7 @@ fn parameter_names_read_back_as_their_kind() {
 #[test]
 fn a_coupled_wrist_regressor_is_its_dynamics() {
     use robotid_stages::stage::regressor::RegressorConfig;
-    let mut model = dynamics::load_robot(&fixture("robots/ur5.toml")).unwrap();
-    model.couplings.push(dynamics::Coupling {
-        motor: 5,
-        with: vec![(4, -40.0)],
-        viscous: 3e-4,
-        coulomb: 0.02,
-    });
-    model.drives[5].rotor_inertia = 2.5e-5;
-    model.validate().unwrap();
+    let model = super::coupled_ur5(2.5e-5, (3e-4, 0.02));
     let terms = RegressorTerms {
         rotor: true,
         friction: FrictionTerms::Asymmetric,
