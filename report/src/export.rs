@@ -775,6 +775,11 @@ impl Sidecar<'_> {
         if self.terms.rotor {
             not_in_urdf.push("the rotor inertia (MJCF: armature)");
         }
+        // A coupled motor's rotor is its tendon's armature (`transmission`).
+        let coupled = self.model.couplings.iter().any(|c| c.motor == i);
+        if coupled {
+            not_in_urdf.push("the coupled motor (MJCF: a fixed tendon; see `transmission`)");
+        }
         json!({
             "name": j.name,
             "viscous_pos": f.viscous_pos, "viscous_neg": f.viscous_neg,
@@ -783,10 +788,41 @@ impl Sidecar<'_> {
             "stribeck": {"excess_pos": s.excess_pos, "excess_neg": s.excess_neg, "velocity_rad_s": s.velocity, "exponent": s.exponent},
             "reflected_rotor_inertia": ia,
             "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
-            "mjcf": {"armature": ia, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+            "mjcf": {"armature": if coupled { 0.0 } else { ia }, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
             "not_in_urdf": not_in_urdf,
             "not_in_mjcf": lost_both,
         })
+    }
+
+    /// The transmission where a motor turns with other joints than its
+    /// own (None otherwise, so uncoupled sidecars stay as they were): R
+    /// (motor angles θ = R·q + offsets), and each coupled motor with its
+    /// identified rotor and friction as the MJCF's fixed tendon holds them.
+    /// URDF has no element for a motor: a `<mimic>` ties joint angles,
+    /// which a coupled motor does not.
+    fn transmission_json(&self) -> Option<serde_json::Value> {
+        use serde_json::json;
+        let m = self.model;
+        if m.couplings.is_empty() {
+            return None;
+        }
+        let r = m.transmission();
+        let name = |j: usize| m.joints[j].name.clone();
+        Some(json!({
+            "joints": (0..m.dof()).map(name).collect::<Vec<_>>(),
+            "matrix": (0..r.nrows()).map(|i| r.row(i).iter().copied().collect::<Vec<f64>>()).collect::<Vec<_>>(),
+            "motor_offset_rad": m.drives.iter().map(|d| d.motor_offset).collect::<Vec<_>>(),
+            "coupled_motors": m.couplings.iter().map(|c| json!({
+                "motor_of": name(c.motor),
+                "gear_ratio": m.drives[c.motor].gear_ratio,
+                "turns": c.with.iter().map(|&(j, t)| (name(j), json!(t))).collect::<serde_json::Map<_, _>>(),
+                "rotor_inertia": m.drives[c.motor].rotor_inertia,
+                "motor_viscous": c.viscous,
+                "motor_coulomb": c.coulomb,
+                "mjcf": {"tendon": format!("motor_{}", name(c.motor)), "armature": m.drives[c.motor].rotor_inertia, "damping": c.viscous, "frictionloss": c.coulomb},
+            })).collect::<Vec<_>>(),
+            "not_in_urdf": "the coupling: URDF has no motor element, and a <mimic> ties joint angles, which a coupled motor does not (the robotid comments state it)",
+        }))
     }
 
     fn json(&self) -> Result<String> {
@@ -816,7 +852,7 @@ impl Sidecar<'_> {
             .map(|r| (0..p.names.len()).map(|c| p.covariance[(r, c)]).collect())
             .collect();
         let confidence = p.metadata.get(metadata::ESTIMATE_CONFIDENCE).cloned();
-        let doc = json!({
+        let mut doc = json!({
             "robot": self.model.name,
             "provenance": self.provenance()?,
             "confidence": confidence,
@@ -848,6 +884,9 @@ impl Sidecar<'_> {
                 })).collect::<Vec<_>>(),
             })),
         });
+        if let Some(t) = self.transmission_json() {
+            doc["transmission"] = t;
+        }
         Ok(serde_json::to_string_pretty(&doc)? + "\n")
     }
 

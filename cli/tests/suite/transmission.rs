@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use robotid_stages::dynamics::{load_robot, rnea, rnea_terms, to_mjcf, Data, Model, Terms};
+use robotid_stages::dynamics::{forward_dynamics, load_robot, rnea, rnea_terms, to_mjcf, Data, Model, Terms};
 use robotid_stages::stage::read::{read_log, Channel, Column, Log, ReadConfig};
 use robotid_tests::example_urdf;
 
@@ -201,6 +201,46 @@ fn a_coupled_wrist_is_read_and_modelled_through_its_transmission() {
     );
 }
 
+/// What the rollouts integrate: robotid's forward dynamics of the coupled
+/// wrist (the rotor through Rᵀ·J·R in M, the coupled motor's friction
+/// taken from the torque) given the generator's joint torques (Pinocchio
+/// with the coupling applied by hand) returns the generator's
+/// accelerations, to 1e-9 of their size, on every 25th sample of the
+/// record (5000 states, rest and motion).
+#[test]
+fn a_coupled_wrists_forward_dynamics_is_the_generators() {
+    let Some((urdf, dir, _, tmp)) = case() else {
+        return;
+    };
+    let model = load_robot(&robot_file(&urdf, &dir, true, tmp.path())).unwrap();
+    let n = model.dof();
+    let mut data = Data::new(&model);
+    let (mut worst, mut top) = (0.0f64, 0.0f64);
+    let mut qdd = vec![0.0; n];
+    let rows = joint_side(&dir, n);
+    for row in &rows {
+        let (q, qd, want, tau) = (
+            &row[1..1 + n],
+            &row[1 + n..1 + 2 * n],
+            &row[1 + 2 * n..1 + 3 * n],
+            &row[1 + 3 * n..],
+        );
+        forward_dynamics(&model, &mut data, q, qd, tau, &mut qdd);
+        for j in 0..n {
+            worst = worst.max((qdd[j] - want[j]).abs());
+            top = top.max(want[j].abs());
+        }
+    }
+    eprintln!(
+        "coupled wrist forward dynamics: {worst:.3e} rad/s² off the generator's over {} states (|q̈| up to {top:.3})",
+        rows.len()
+    );
+    assert!(
+        top > 1.0 && worst <= 1e-9 * top,
+        "{worst:.3e} rad/s² off (|q̈| up to {top:.3})"
+    );
+}
+
 /// The coupled wrist exported to MJCF: the coupled motor is a fixed tendon
 /// over joints 5 and 6 (coefficients its row of R), carrying its rotor as
 /// the tendon's armature and its viscous friction as the tendon's
@@ -344,6 +384,38 @@ fn a_coupled_wrist_is_identified_and_a_missed_coupling_refused() {
             truth[i]
         );
     }
+
+    // The sidecar states the transmission, the coupled motor's identified
+    // rotor and friction as the MJCF's tendon holds them (the physical
+    // table's values), and its joint no armature of its own.
+    let sidecar: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("identified.sidecar.json")).unwrap()).unwrap();
+    let physical = parameters_from_table(&read_parquet(&out.join("parameters_physical.parquet")).unwrap()).unwrap();
+    let value = |name: &str| physical.values[physical.names.iter().position(|n| n == name).unwrap()];
+    let t = &sidecar["transmission"];
+    let motor = &t["coupled_motors"][0];
+    assert_eq!(motor["motor_of"], "wrist_3_joint", "{t}");
+    assert_eq!(motor["turns"]["wrist_2_joint"].as_f64(), Some(32.0), "{t}");
+    for (key, name) in [
+        ("motor_viscous", "Fvm_wrist_3_joint"),
+        ("motor_coulomb", "Fcm_wrist_3_joint"),
+    ] {
+        let got = motor[key].as_f64().unwrap();
+        assert!(
+            (got - value(name)).abs() <= 1e-12 * value(name).abs(),
+            "{key} {got}, {name} {}",
+            value(name)
+        );
+    }
+    assert_eq!(motor["mjcf"]["tendon"], "motor_wrist_3_joint");
+    assert_eq!(t["matrix"][5][4].as_f64(), Some(32.0), "{t}");
+    let joint = sidecar["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|j| j["name"] == "wrist_3_joint")
+        .unwrap();
+    assert_eq!(joint["mjcf"]["armature"].as_f64(), Some(0.0), "{joint}");
 
     let missed = run(&robot_file(&urdf, &dir, false, tmp.path()), &tmp.path().join("missed"));
     let said = super::text(&missed);
