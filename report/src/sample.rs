@@ -98,18 +98,25 @@ const JOINT: [(&str, &str); 3] = [
 /// The simulator's quantities of `model`, in [`quantities`]' order: each
 /// body (inertia about its centre of mass, link-frame axes), then each
 /// joint (damping and frictionloss the means of the two directions;
-/// armature the rotor inertia reflected to the joint).
+/// armature the rotor inertia reflected to the joint), then each coupled
+/// motor as the MJCF's fixed tendon `motor_<joint>` holds it (its rotor,
+/// motor side, as armature, and its own friction; its joint's armature is
+/// then 0, as in the MJCF).
 fn values(model: &Model) -> Vec<f64> {
     let mut v = Vec::with_capacity(13 * model.dof());
     for l in &model.links {
         v.extend(l.listed());
     }
-    for (f, d) in model.friction.iter().zip(&model.drives) {
+    for (i, (f, d)) in model.friction.iter().zip(&model.drives).enumerate() {
+        let coupled = model.couplings.iter().any(|c| c.motor == i);
         v.extend([
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg),
-            d.reflected_inertia(),
+            if coupled { 0.0 } else { d.reflected_inertia() },
         ]);
+    }
+    for c in &model.couplings {
+        v.extend([c.viscous, c.coulomb, model.drives[c.motor].rotor_inertia]);
     }
     v
 }
@@ -126,6 +133,10 @@ fn quantities(model: &Model) -> Vec<(String, &'static str, &'static str)> {
     };
     let mut out = of(&robotid_stages::dynamics::LISTED);
     out.extend(of(&JOINT));
+    for c in &model.couplings {
+        let tendon = format!("motor_{}", model.joints[c.motor].name);
+        out.extend(JOINT.iter().map(|&(n, u)| (tendon.clone(), n, u)));
+    }
     out
 }
 
@@ -505,7 +516,14 @@ fn samples_table(
     };
     let schema = Schema::new(vec![
         field("draw", DataType::UInt32, "the draw's index (draws the bounded fit could not map are left out)"),
-        field("joint", DataType::Utf8, "the joint: its own quantity, or the body it moves"),
+        field(
+            "joint",
+            DataType::Utf8,
+            match identified.couplings.is_empty() {
+                true => "the joint: its own quantity, or the body it moves",
+                false => "the joint: its own quantity, or the body it moves; motor_<joint>: a coupled motor, the MJCF's fixed tendon of that name",
+            },
+        ),
         field("quantity", DataType::Utf8, "mass, com_x..com_z (link frame), ixx..izz (about the centre of mass, link-frame axes), damping, frictionloss, armature"),
         field("unit", DataType::Utf8, "the value's unit"),
         field("value", DataType::Float64, "the drawn value, in `unit`"),

@@ -417,6 +417,49 @@ fn a_coupled_wrist_is_identified_and_a_missed_coupling_refused() {
         .unwrap();
     assert_eq!(joint["mjcf"]["armature"].as_f64(), Some(0.0), "{joint}");
 
+    // Drawn for domain randomisation: each draw's coupled motor is its
+    // MJCF's tendon, and the samples table names it so (its joint's own
+    // armature 0, as in the MJCF).
+    let drawn = tmp.path().join("drawn");
+    let o = super::robotid(&[
+        Path::new("sample"),
+        Path::new("2"),
+        Path::new("--robot"),
+        &robot,
+        Path::new("-p"),
+        &out.join("parameters_physical.parquet"),
+        Path::new("--format"),
+        Path::new("mjcf"),
+        Path::new("--out"),
+        &drawn,
+    ]);
+    assert!(o.status.success(), "{}", super::text(&o));
+    let samples = read_parquet(&drawn.join("samples.parquet")).unwrap();
+    let column = |c: &str| samples.column_by_name(c).unwrap().clone();
+    let strings = |c: &str| {
+        let a = column(c);
+        let a = a.as_any().downcast_ref::<arrow::array::StringArray>().unwrap();
+        a.iter().map(|v| v.unwrap().to_string()).collect::<Vec<_>>()
+    };
+    let (element, quantity) = (strings("joint"), strings("quantity"));
+    let (values, draw) = (column("value"), column("draw"));
+    let values = values.as_any().downcast_ref::<arrow::array::Float64Array>().unwrap();
+    let draw = draw.as_any().downcast_ref::<arrow::array::UInt32Array>().unwrap();
+    let row = |e: &str, q: &str| {
+        (0..element.len())
+            .find(|&i| element[i] == e && quantity[i] == q)
+            .unwrap()
+    };
+    assert_eq!(values.value(row("wrist_3_joint", "armature")), 0.0);
+    let at = row("motor_wrist_3_joint", "armature");
+    let mjcf = std::fs::read_to_string(drawn.join(format!("draw_{:05}.xml", draw.value(at)))).unwrap();
+    let tendon = mjcf
+        .split("<fixed name=\"motor_wrist_3_joint\" armature=\"")
+        .nth(1)
+        .unwrap();
+    let armature: f64 = tendon.split('"').next().unwrap().parse().unwrap();
+    assert_eq!(values.value(at), armature, "{mjcf}");
+
     let missed = run(&robot_file(&urdf, &dir, false, tmp.path()), &tmp.path().join("missed"));
     let said = super::text(&missed);
     assert_eq!(missed.status.code(), Some(3), "{said}");
