@@ -166,9 +166,11 @@ fn payload_index(names: &[String]) -> Result<Vec<usize>> {
 
 /// Identifies the payload in `loaded` (a system with the payload's
 /// columns) against `robot`.
-pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<'_>) -> Result<PayloadFit> {
-    payload_index(&loaded.names)?;
-    let sys = match robot {
+/// The system the payload is fitted on: the loaded records with the
+/// robot's parameters taken as known, or stacked on the unloaded records
+/// (which get the payload's columns as zeros).
+fn payload_system(loaded: &System, robot: Robot, options: &PayloadOptions<'_>) -> Result<System> {
+    Ok(match robot {
         Robot::Known(known) => {
             if options.known_mass.is_some() {
                 return Err(Error::setting(
@@ -213,7 +215,71 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
                 .extend(loaded.expressions[loaded.expressions.len() - 10..].iter().cloned());
             System::stack(&[&u, loaded])?
         }
-    };
+    })
+}
+
+/// The payload's ten standard parameters and their covariance out of
+/// `estimate`, with where each is in it (usize::MAX: a known mass, whose
+/// column left the system).
+fn payload_part(estimate: &Estimate, known_mass: Option<f64>) -> (Vec<usize>, [f64; 10], DMatrix<f64>) {
+    // With a known mass its column left the system: usize::MAX.
+    let at: Vec<usize> = PAYLOAD_COLUMNS
+        .iter()
+        .map(|p| estimate.names.iter().position(|n| n == p).unwrap_or(usize::MAX))
+        .collect();
+    let mut standard = [0.0; 10];
+    let mut covariance = DMatrix::zeros(10, 10);
+    for (k, &i) in at.iter().enumerate() {
+        standard[k] = if i == usize::MAX {
+            known_mass.unwrap_or(0.0)
+        } else {
+            estimate.values[i]
+        };
+        for (l, &j) in at.iter().enumerate() {
+            if i != usize::MAX && j != usize::MAX {
+                covariance[(k, l)] = estimate.covariance[(i, j)];
+            }
+        }
+    }
+    (at, standard, covariance)
+}
+
+/// Each drive's gain fitted with a known mass (`gains`: joint and index
+/// in `estimate`), and given the bounded payload (`given`); refused where
+/// that comes out no drive's.
+fn drive_gains(
+    estimate: &Estimate,
+    gains: Option<Vec<(String, usize)>>,
+    given: Option<&DVector<f64>>,
+) -> Result<Vec<Gain>> {
+    let gains = gains
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(joint, i)| Gain {
+            joint,
+            scale: estimate.values[i],
+            std: estimate.covariance[(i, i)].max(0.0).sqrt(),
+            bounded: given.map(|g| g[i]),
+        })
+        .collect::<Vec<_>>();
+    if let Some(g) = gains.iter().find(|g| g.bounded.is_some_and(|b| !(b > 0.0))) {
+        return Err(Error::numerical(
+            "drive gains",
+            format!(
+                "`{}`: its gain given the bounded payload came out {:.4} (not a drive's; {:.4} ± {:.4} without the bound): does the known mass move that joint's torque?",
+                g.joint,
+                g.bounded.unwrap_or_default(),
+                g.scale,
+                g.std
+            ),
+        ));
+    }
+    Ok(gains)
+}
+
+pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<'_>) -> Result<PayloadFit> {
+    payload_index(&loaded.names)?;
+    let sys = payload_system(loaded, robot, options)?;
     let estimate = match options.known_mass {
         Some(m) => gains_fit(&sys, m)?,
         None => super::solve_least_squares(&sys, None, Covariance::Auto)?,
@@ -226,25 +292,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
             .filter_map(|(i, n)| Some((n.strip_prefix("gain_")?.to_string(), i)))
             .collect()
     });
-    // With a known mass its column left the system: usize::MAX.
-    let at: Vec<usize> = PAYLOAD_COLUMNS
-        .iter()
-        .map(|p| estimate.names.iter().position(|n| n == p).unwrap_or(usize::MAX))
-        .collect();
-    let mut standard = [0.0; 10];
-    let mut covariance = DMatrix::zeros(10, 10);
-    for (k, &i) in at.iter().enumerate() {
-        standard[k] = if i == usize::MAX {
-            options.known_mass.unwrap_or(0.0)
-        } else {
-            estimate.values[i]
-        };
-        for (l, &j) in at.iter().enumerate() {
-            if i != usize::MAX && j != usize::MAX {
-                covariance[(k, l)] = estimate.covariance[(i, j)];
-            }
-        }
-    }
+    let (at, standard, mut covariance) = payload_part(&estimate, options.known_mass);
     // With the robot's parameters known (identified through the same
     // gains), a common error scales them and the payload alike.
     let gains_share = match (options.gains, options.known_mass) {
@@ -274,28 +322,7 @@ pub fn identify_payload(loaded: &System, robot: Robot, options: &PayloadOptions<
     let given = bounded
         .as_ref()
         .map(|b| given_payload(&estimate.values, &estimate.covariance, &at, &b.standard));
-    let gains = gains
-        .unwrap_or_default()
-        .into_iter()
-        .map(|(joint, i)| Gain {
-            joint,
-            scale: estimate.values[i],
-            std: estimate.covariance[(i, i)].max(0.0).sqrt(),
-            bounded: given.as_ref().map(|g| g[i]),
-        })
-        .collect::<Vec<_>>();
-    if let Some(g) = gains.iter().find(|g| g.bounded.is_some_and(|b| !(b > 0.0))) {
-        return Err(Error::numerical(
-            "drive gains",
-            format!(
-                "`{}`: its gain given the bounded payload came out {:.4} (not a drive's; {:.4} ± {:.4} without the bound): does the known mass move that joint's torque?",
-                g.joint,
-                g.bounded.unwrap_or_default(),
-                g.scale,
-                g.std
-            ),
-        ));
-    }
+    let gains = drive_gains(&estimate, gains, given.as_ref())?;
     Ok(PayloadFit {
         estimate,
         standard,
