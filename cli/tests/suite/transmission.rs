@@ -94,6 +94,11 @@ fn joint_side(dir: &Path, n: usize) -> Vec<Vec<f64>> {
     rows
 }
 
+/// A truth row's q, q̇, q̈ and τ, each `n` long.
+fn state(row: &[f64], n: usize) -> [&[f64]; 4] {
+    [0, 1, 2, 3].map(|k| &row[1 + k * n..1 + (k + 1) * n])
+}
+
 /// The samples the logged currents' filter delays them by: an analog
 /// Butterworth of order n at f_c has the group delay
 /// 1/(2π·f_c·sin(π/2n)) at low frequencies (2.08 ms, 10 samples, for the
@@ -156,12 +161,7 @@ fn a_coupled_wrist_is_read_and_modelled_through_its_transmission() {
     let mut data = Data::new(&model);
     let (mut worst, mut scale) = (0.0f64, 0.0f64);
     for row in &rows {
-        let (q, qd, qdd, tau) = (
-            &row[1..1 + n],
-            &row[1 + n..1 + 2 * n],
-            &row[1 + 2 * n..1 + 3 * n],
-            &row[1 + 3 * n..],
-        );
+        let [q, qd, qdd, tau] = state(row, n);
         let ours = rnea(&model, &mut data, q, qd, qdd);
         for j in 0..n {
             worst = worst.max((ours[j] - tau[j]).abs());
@@ -219,12 +219,7 @@ fn a_coupled_wrists_forward_dynamics_is_the_generators() {
     let mut qdd = vec![0.0; n];
     let rows = joint_side(&dir, n);
     for row in &rows {
-        let (q, qd, want, tau) = (
-            &row[1..1 + n],
-            &row[1 + n..1 + 2 * n],
-            &row[1 + 2 * n..1 + 3 * n],
-            &row[1 + 3 * n..],
-        );
+        let [q, qd, want, tau] = state(row, n);
         forward_dynamics(&model, &mut data, q, qd, tau, &mut qdd);
         for j in 0..n {
             worst = worst.max((qdd[j] - want[j]).abs());
@@ -259,7 +254,7 @@ fn a_coupled_motor_is_a_tendon_in_mujoco() {
     assert!(text.contains("<fixed name=\"motor_wrist_3_joint\""), "{text}");
     std::fs::write(&mjcf, text).unwrap();
     let rows: Vec<Vec<f64>> = joint_side(&dir, n).into_iter().step_by(20).collect();
-    let part = |k: usize| -> Vec<&[f64]> { rows.iter().map(|r| &r[1 + k * n..1 + (k + 1) * n]).collect() };
+    let part = |k: usize| -> Vec<&[f64]> { rows.iter().map(|r| state(r, n)[k]).collect() };
     let states = out.path().join("states.json");
     std::fs::write(
         &states,
@@ -277,7 +272,7 @@ fn a_coupled_motor_is_a_tendon_in_mujoco() {
     let mut data = Data::new(&model);
     let (mut worst, mut top) = (0.0f64, 0.0f64);
     for (k, row) in rows.iter().enumerate() {
-        let (q, v, a) = (&row[1..1 + n], &row[1 + n..1 + 2 * n], &row[1 + 2 * n..1 + 3 * n]);
+        let [q, v, a, _] = state(row, n);
         let want = rnea_terms(&viscous_only, &mut data, q, v, a, Terms::ALL);
         for j in 0..n {
             worst = worst.max((got["tau"][k][j].as_f64().unwrap() - want[j]).abs());
