@@ -388,15 +388,6 @@ pub struct Coupling {
     pub coulomb: f64,
 }
 
-impl Coupling {
-    /// The motor's friction torque (motor side) at its speed g·q̇_motor +
-    /// Σ turns·q̇, for its own joint's gear ratio `g`.
-    fn friction_at(&self, g: f64, qd: &[f64]) -> f64 {
-        let speed = g * qd[self.motor] + self.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
-        self.viscous * speed + self.coulomb * speed.signum() * (speed != 0.0) as i32 as f64
-    }
-}
-
 /// A shape of a link, placed in its frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Shape {
@@ -634,7 +625,7 @@ impl Model {
                 motor += j_m * (g * qdd[m] + cross_qdd);
             }
             if friction {
-                let f = c.friction_at(g, qd);
+                let f = self.coupled_friction(c, qd);
                 own += g * f;
                 motor += f;
             }
@@ -645,13 +636,34 @@ impl Model {
         }
     }
 
+    /// A coupled motor's friction torque (motor side) at its speed θ̇ =
+    /// g·q̇_motor + Σ turns·q̇: its Coulomb turn-over is its own joint's
+    /// (`transition`, sign(θ̇) at 0) at the motor's speed, v·|g|, so that
+    /// a model smoothed for the simulator or chosen by identify turns the
+    /// coupled motor over alike.
+    pub fn coupled_friction(&self, c: &Coupling, qd: &[f64]) -> f64 {
+        let g = self.drives[c.motor].gear_ratio;
+        let speed = g * qd[c.motor] + c.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
+        c.viscous * speed + c.coulomb * self.motor_sign(c, speed)
+    }
+
+    /// sign(θ̇) of coupled motor `c`, or tanh(θ̇/(v·|gear|)) where its joint
+    /// turns over smoothly at v.
+    pub fn motor_sign(&self, c: &Coupling, speed: f64) -> f64 {
+        let v = self.friction[c.motor].transition * self.drives[c.motor].gear_ratio.abs();
+        match v > 0.0 {
+            true => (speed / v).tanh(),
+            false => speed.signum() * (speed != 0.0) as i32 as f64,
+        }
+    }
+
     /// The coupled motors' friction through Rᵀ taken from joint torques
     /// `tau`: forward dynamics takes it, as each joint's own friction, from
     /// the torque that is left to accelerate the bodies.
     pub fn take_coupled_friction(&self, qd: &[f64], tau: &mut [f64]) {
         for c in &self.couplings {
             let g = self.drives[c.motor].gear_ratio;
-            let f = c.friction_at(g, qd);
+            let f = self.coupled_friction(c, qd);
             tau[c.motor] -= g * f;
             for &(k, t) in &c.with {
                 tau[k] -= t * f;

@@ -510,7 +510,8 @@ pub(crate) fn joint_columns(
 /// rotor's `Ia` (J·gear², the motor's own joint's column) on every joint
 /// it turns with, (r·q̈)·r/gear² with r its row of the transmission
 /// (Rᵀ·J·R·q̈; q̈ alone where it is not coupled), and its friction at its
-/// own speed θ̇ = r·q̇: θ̇·r (`Fvm`) and sign(θ̇)·r (`Fcm`).
+/// own speed θ̇ = r·q̇: θ̇·r (`Fvm`) and sign(θ̇)·r (`Fcm`; smoothed as its
+/// joint's Coulomb friction is, [`Model::motor_sign`]).
 pub(crate) fn coupled(
     model: &Model,
     (qd, qdd): (&[f64], &[f64]),
@@ -523,7 +524,7 @@ pub(crate) fn coupled(
         let (m, g) = (c.motor, model.drives[c.motor].gear_ratio);
         let speed = g * qd[m] + c.with.iter().map(|&(k, t)| t * qd[k]).sum::<f64>();
         let accel = g * qdd[m] + c.with.iter().map(|&(k, t)| t * qdd[k]).sum::<f64>();
-        let sign = speed.signum() * (speed != 0.0) as i32 as f64;
+        let sign = model.motor_sign(c, speed);
         let row = std::iter::once((m, g)).chain(c.with.iter().copied());
         let (viscous, coulomb) = (first + MOTOR_COLUMNS * i, first + MOTOR_COLUMNS * i + 1);
         for (k, r) in row {

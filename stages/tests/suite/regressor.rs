@@ -509,56 +509,61 @@ fn parameter_names_read_back_as_their_kind() {
 #[test]
 fn a_coupled_wrist_regressor_is_its_dynamics() {
     use robotid_stages::stage::regressor::RegressorConfig;
-    let model = super::coupled_ur5(2.5e-5, (3e-4, 0.02));
-    let terms = RegressorTerms {
-        rotor: true,
-        friction: FrictionTerms::Asymmetric,
-        offset: true,
-        spring: None,
-    };
-    let theta = nalgebra::DVector::from_vec(standard_parameters(&model, terms));
-    let names = dynamics::parameter_names(&model, terms);
-    assert_eq!(names[names.len() - 2..], ["Fvm_wrist_3_joint", "Fcm_wrist_3_joint"]);
-    let base = RegressorConfig {
-        friction: FrictionTerms::Asymmetric,
-        offset: true,
-        rotor: Some(true),
-        ..RegressorConfig::default()
+    // sign(q̇), and a smooth turn-over: the coupled motor's follows its
+    // joint's (`Model::motor_sign`) in RNEA and in its `Fcm` column alike.
+    for transition in [0.0, 0.02] {
+        let mut model = super::coupled_ur5(2.5e-5, (3e-4, 0.02));
+        model.friction.iter_mut().for_each(|f| f.transition = transition);
+        let terms = RegressorTerms {
+            rotor: true,
+            friction: FrictionTerms::Asymmetric,
+            offset: true,
+            spring: None,
+        };
+        let theta = nalgebra::DVector::from_vec(standard_parameters(&model, terms));
+        let names = dynamics::parameter_names(&model, terms);
+        assert_eq!(names[names.len() - 2..], ["Fvm_wrist_3_joint", "Fcm_wrist_3_joint"]);
+        let base = RegressorConfig {
+            friction: FrictionTerms::Asymmetric,
+            offset: true,
+            rotor: Some(true),
+            ..RegressorConfig::default()
+        }
+        .base_regressor(&model)
+        .unwrap();
+        for name in ["Ia_wrist_3_joint", "Fvm_wrist_3_joint", "Fcm_wrist_3_joint"] {
+            let at = base
+                .names()
+                .iter()
+                .position(|n| n == name)
+                .unwrap_or_else(|| panic!("{name} regrouped"));
+            assert_eq!(base.expressions()[at], name, "{name} stands alone");
+        }
+        let theta_b = base.base_values(&model).unwrap();
+        let full = base.full_values(theta_b.as_slice()).unwrap();
+        let n = model.dof();
+        let (mut data, mut ws) = (Data::new(&model), base.workspace());
+        let mut phi = DMatrix::zeros(n, terms.count(&model));
+        let mut rows = vec![0.0; n * base.parameters()];
+        let mut fast = vec![0.0; n];
+        let mut rng = ChaCha8Rng::seed_from_u64(43);
+        let mut worst = [0.0f64; 3];
+        for _ in 0..100 {
+            let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
+            let (q, qd, qdd) = (v(3.0), v(2.0), v(5.0));
+            regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
+            let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).clone();
+            let scale = tau.amax();
+            worst[0] = worst[0].max((&phi * &theta - &tau).amax() / scale);
+            base.rows(&mut ws, &q, &qd, &qdd, &mut rows);
+            let y = DMatrix::from_row_slice(n, base.parameters(), &rows);
+            worst[1] = worst[1].max((&y * &theta_b - &tau).amax() / scale);
+            base.torque(&mut ws, (&q, &qd, &qdd), &full, &mut fast);
+            worst[2] = worst[2].max((0..n).map(|j| (fast[j] - tau[j]).abs()).fold(0.0, f64::max) / scale);
+        }
+        assert!(
+            worst.iter().all(|w| *w < 1e-10),
+            "Φ·θ, Y·θ_b, torque against RNEA at turn-over {transition}: {worst:?}"
+        );
     }
-    .base_regressor(&model)
-    .unwrap();
-    for name in ["Ia_wrist_3_joint", "Fvm_wrist_3_joint", "Fcm_wrist_3_joint"] {
-        let at = base
-            .names()
-            .iter()
-            .position(|n| n == name)
-            .unwrap_or_else(|| panic!("{name} regrouped"));
-        assert_eq!(base.expressions()[at], name, "{name} stands alone");
-    }
-    let theta_b = base.base_values(&model).unwrap();
-    let full = base.full_values(theta_b.as_slice()).unwrap();
-    let n = model.dof();
-    let (mut data, mut ws) = (Data::new(&model), base.workspace());
-    let mut phi = DMatrix::zeros(n, terms.count(&model));
-    let mut rows = vec![0.0; n * base.parameters()];
-    let mut fast = vec![0.0; n];
-    let mut rng = ChaCha8Rng::seed_from_u64(43);
-    let mut worst = [0.0f64; 3];
-    for _ in 0..100 {
-        let mut v = |s: f64| (0..n).map(|_| rng.random_range(-s..s)).collect::<Vec<f64>>();
-        let (q, qd, qdd) = (v(3.0), v(2.0), v(5.0));
-        regressor(&model, &mut data, &q, &qd, &qdd, terms, &mut phi);
-        let tau = dynamics::rnea(&model, &mut data, &q, &qd, &qdd).clone();
-        let scale = tau.amax();
-        worst[0] = worst[0].max((&phi * &theta - &tau).amax() / scale);
-        base.rows(&mut ws, &q, &qd, &qdd, &mut rows);
-        let y = DMatrix::from_row_slice(n, base.parameters(), &rows);
-        worst[1] = worst[1].max((&y * &theta_b - &tau).amax() / scale);
-        base.torque(&mut ws, (&q, &qd, &qdd), &full, &mut fast);
-        worst[2] = worst[2].max((0..n).map(|j| (fast[j] - tau[j]).abs()).fold(0.0, f64::max) / scale);
-    }
-    assert!(
-        worst.iter().all(|w| *w < 1e-10),
-        "Φ·θ, Y·θ_b, torque against RNEA: {worst:?}"
-    );
 }
