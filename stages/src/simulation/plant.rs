@@ -99,6 +99,23 @@ pub struct Plant<'m> {
     /// Accelerations of the last `derivative` call, rad/s².
     pub qdd: Vec<f64>,
     scratch: [Vec<f64>; 5],
+    /// With coupled motors: the motor currents per joint torque, K⁻¹·R⁻ᵀ
+    /// (τ_joint = Rᵀ·K·i); None where each motor drives its joint alone.
+    amps: Option<nalgebra::DMatrix<f64>>,
+}
+
+/// K⁻¹·R⁻ᵀ of a model with coupled motors (R its transmission, K its
+/// torque constants), None without: the motor torques τ_m = R⁻ᵀ·τ that
+/// give joint torques τ = Rᵀ·τ_m, each over its torque constant.
+fn currents_of(model: &Model) -> Option<nalgebra::DMatrix<f64>> {
+    if model.couplings.is_empty() {
+        return None;
+    }
+    // R is checked non-singular when the robot file is loaded.
+    let r_inv_t = model.transmission().try_inverse()?.transpose();
+    Some(nalgebra::DMatrix::from_fn(r_inv_t.nrows(), r_inv_t.ncols(), |m, j| {
+        r_inv_t[(m, j)] / model.drives[m].torque_constant
+    }))
 }
 
 impl<'m> Plant<'m> {
@@ -123,6 +140,7 @@ impl<'m> Plant<'m> {
             tau: vec![0.0; n],
             qdd: vec![0.0; n],
             scratch: Default::default(),
+            amps: currents_of(model),
         };
         let len = p.state_len();
         p.scratch = std::array::from_fn(|_| vec![0.0; len]);
@@ -162,9 +180,13 @@ impl<'m> Plant<'m> {
         }
     }
 
-    /// Motor current for commanded joint torque `u` on joint `i`, A.
-    pub fn current(&self, i: usize, u: f64) -> f64 {
-        u / self.model.drives[i].joint_torque_per_amp()
+    /// Motor `i`'s current for commanded joint torques `u`, A: each joint's
+    /// own, or through the transmission where motors are coupled.
+    pub fn current(&self, i: usize, u: &[f64]) -> f64 {
+        match &self.amps {
+            None => u[i] / self.model.drives[i].joint_torque_per_amp(),
+            Some(a) => (0..u.len()).map(|j| a[(i, j)] * u[j]).sum(),
+        }
     }
 
     /// dx/dt at (t, x).
@@ -185,7 +207,7 @@ impl<'m> Plant<'m> {
         if let Some(f) = &self.filter {
             let m = f.states();
             for i in 0..n {
-                let input = self.u[i] / self.model.drives[i].joint_torque_per_amp();
+                let input = self.current(i, &self.u);
                 let s = 3 * n + i * m;
                 f.derivative(&x[s..s + m], input, &mut dx[s..s + m]);
             }
@@ -224,7 +246,7 @@ impl<'m> Plant<'m> {
                 let s = 3 * self.dof() + i * m;
                 f.output(&x[s..s + m])
             }
-            None => self.current(i, self.u[i]),
+            None => self.current(i, &self.u),
         }
     }
 }

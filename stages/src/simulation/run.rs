@@ -39,17 +39,6 @@ fn stream(seed: u64, id: u64) -> ChaCha8Rng {
 /// Simulates `cfg` on `model`. `provenance` is merged into the raw table's
 /// schema metadata (config file name and hash, …).
 pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, String>) -> Result<Simulation> {
-    // Its drives turn currents and counts into torques and angles joint by
-    // joint: a coupled motor's channels would not read back through R.
-    if let Some(c) = model.couplings.first() {
-        return Err(Error::Robot {
-            path: cfg.robot.clone(),
-            msg: format!(
-                "the motor of `{}` is coupled: the simulator logs each joint's own motor and cannot write a coupled one's channels yet (docs/robot-file.md, Transmissions)",
-                model.joints[c.motor].name
-            ),
-        });
-    }
     let plant_model = plant_model(cfg, model)?;
     let model = &plant_model;
     let n = model.dof();
@@ -135,6 +124,8 @@ pub fn simulate(cfg: &SimConfig, model: &Model, provenance: &BTreeMap<String, St
 fn plant_model(cfg: &SimConfig, model: &Model) -> Result<Model> {
     let n = model.dof();
     let mut plant_model = model.clone();
+    // A coupled motor turns over with its joint (`Model::motor_sign`): a
+    // sign(θ̇) in RK4 dithers about each of the motor's reversals.
     for f in &mut plant_model.friction {
         if f.transition == 0.0 {
             f.transition = cfg.plant.coulomb_transition_rad_s;
@@ -327,7 +318,7 @@ fn held_at_rest(plant: &mut Plant, model: &Model, data: &mut Data, rest: &[f64])
         let order = f.states();
         for i in 0..n {
             let s = 3 * n + i * order;
-            let current = plant.current(i, plant.u[i]);
+            let current = plant.current(i, &plant.u);
             f.steady_state(current, &mut x[s..s + order]);
         }
     }
@@ -378,6 +369,8 @@ fn run_plant(
         current_clean: cols(len),
     };
     let mut dx = vec![0.0; x.len()];
+    let mut motors = Motors::of(model);
+    let mut noisy = vec![0.0; n];
     let mut step = 0usize;
     for &idx in schedule {
         while step < idx {
@@ -395,7 +388,6 @@ fn run_plant(
         plant.derivative(t, &x, &mut dx);
         truth.time.push(t);
         for i in 0..n {
-            let drive = &model.drives[i];
             truth.q[i].push(x[i]);
             truth.qd[i].push(x[n + i]);
             truth.qdd[i].push(plant.qdd[i]);
@@ -404,14 +396,25 @@ fn run_plant(
             let clean = plant.filtered_current(&x, i);
             truth.current_clean[i].push(clean);
             let zq: f64 = rng_pos.sample(StandardNormal);
-            let noisy = x[i] + noise.pos_std[i] * zq;
-            let quantum = drive.radians_per_count();
-            let counts = (noisy / quantum).round();
-            raw.counts[i].push(counts as i64);
-            // `+ 0.0` turns −0 into 0 so files never show "-0".
-            raw.q[i].push(if noise.quantise { counts * quantum + 0.0 } else { noisy });
+            noisy[i] = x[i] + noise.pos_std[i] * zq;
             let zi: f64 = rng_cur.sample(StandardNormal);
             raw.current[i].push(clean + noise.cur_std[i] * zi);
+        }
+        match &mut motors {
+            None => {
+                for i in 0..n {
+                    let quantum = model.drives[i].radians_per_count();
+                    let counts = (noisy[i] / quantum).round();
+                    raw.counts[i].push(counts as i64);
+                    // `+ 0.0` turns −0 into 0 so files never show "-0".
+                    raw.q[i].push(if noise.quantise {
+                        counts * quantum + 0.0
+                    } else {
+                        noisy[i]
+                    });
+                }
+            }
+            Some(m) => m.log(&noisy, noise.quantise, &mut raw),
         }
         let (r, _) = plant.reference_at(t);
         for i in 0..n {
@@ -419,6 +422,60 @@ fn run_plant(
         }
     }
     Ok((truth, raw))
+}
+
+/// The motors' encoders of a robot whose motors are not each its joint's
+/// alone from 0 (a coupling or a motor offset): each counts its motor's
+/// angle θ = R·q + offset (motor side, as a lab's log has it), and the
+/// angles logged are what those counts read back as, q = R⁻¹·(θ − offset),
+/// as `[read]` reads them.
+struct Motors {
+    r: nalgebra::DMatrix<f64>,
+    r_inv: nalgebra::DMatrix<f64>,
+    offset: Vec<f64>,
+    /// Motor radians per count.
+    step: Vec<f64>,
+    /// Scratch: the motors' quantised angles less their offsets.
+    theta: Vec<f64>,
+}
+
+impl Motors {
+    fn of(model: &Model) -> Option<Motors> {
+        if model.couplings.is_empty() && model.drives.iter().all(|d| d.motor_offset == 0.0) {
+            return None;
+        }
+        let r = model.transmission();
+        // R is checked non-singular when the robot file is loaded.
+        let r_inv = r.clone().try_inverse()?;
+        Some(Motors {
+            r,
+            r_inv,
+            offset: model.drives.iter().map(|d| d.motor_offset).collect(),
+            step: model
+                .drives
+                .iter()
+                .map(|d| 2.0 * std::f64::consts::PI / d.encoder_counts_per_rev)
+                .collect(),
+            theta: vec![0.0; model.dof()],
+        })
+    }
+
+    /// One sample's counts and angles from the joints' noisy angles `q`.
+    fn log(&mut self, q: &[f64], quantise: bool, raw: &mut Logged) {
+        let n = q.len();
+        let theta = &mut self.theta;
+        for m in 0..n {
+            let angle: f64 = (0..n).map(|j| self.r[(m, j)] * q[j]).sum::<f64>() + self.offset[m];
+            let counts = (angle / self.step[m]).round();
+            raw.counts[m].push(counts as i64);
+            theta[m] = counts * self.step[m] - self.offset[m];
+        }
+        for j in 0..n {
+            let read: f64 = (0..n).map(|m| self.r_inv[(j, m)] * theta[m]).sum();
+            // `+ 0.0` turns −0 into 0 so files never show "-0".
+            raw.q[j].push(if quantise { read + 0.0 } else { q[j] });
+        }
+    }
 }
 
 /// RK4 beyond its stability limit (a light link under stiff gains) blows

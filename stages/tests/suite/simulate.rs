@@ -286,3 +286,96 @@ fn absurd_sizes_are_refused_before_allocating() {
         assert!(e.to_string().contains(key), "{e}");
     }
 }
+
+/// A coupled wrist with calibrated encoders (the UR5's last motor also
+/// turning with joint 5, 40 turns the other way; motor offsets on joints
+/// 2 and 6): the simulator logs each motor's encoder counts and current,
+/// and `[read]`, taking counts and amperes through the robot file's
+/// transmission (an implementation of its own: R⁻¹ and Rᵀ per sample),
+/// gives back the joint angles the simulator logged (to round-off) and
+/// the commanded joint torques (current noise and filter off: to 1e-9 of
+/// their size). The simulated motion is the coupled dynamics: RNEA at
+/// the true states gives the applied torques. Without the motors' own
+/// encoders, joint 6 read from its counts as an uncoupled joint is off by
+/// joint 5's turns.
+#[test]
+fn a_coupled_wrist_is_simulated_through_its_motors() {
+    use robotid_stages::simulation::OutputFormat;
+    use robotid_stages::stage::read::{read_log, Channel, Column, Log, ReadConfig};
+    let (mut cfg, _) = load("sims/ur5.toml");
+    cfg.measurement.filter = None;
+    cfg.measurement.current_noise_std_a = Default::default();
+    let mut model = super::coupled_ur5(2.5e-5, (3e-4, 0.02));
+    model.drives[1].motor_offset = 0.7;
+    model.drives[5].motor_offset = -2.1;
+    model.validate().unwrap();
+    let s = run(&cfg, &model);
+    let n = model.dof();
+
+    // The plant's model: each joint's own Coulomb friction smoothed as the
+    // simulator does (the coupled motor's turns over with its joint's).
+    let mut plant = model.clone();
+    for f in plant.friction.iter_mut().filter(|f| f.transition == 0.0) {
+        f.transition = cfg.plant.coulomb_transition_rad_s;
+    }
+    let mut data = Data::new(&plant);
+    let (mut worst, mut top) = (0.0f64, 0.0f64);
+    for k in 0..s.truth.time.len() {
+        let at = |v: &[Vec<f64>]| (0..n).map(|j| v[j][k]).collect::<Vec<f64>>();
+        let tau = dynamics::rnea(&plant, &mut data, &at(&s.truth.q), &at(&s.truth.qd), &at(&s.truth.qdd));
+        for j in 0..n {
+            let applied = s.truth.torque[j][k] + s.truth.disturbance[j][k];
+            worst = worst.max((tau[j] - applied).abs());
+            top = top.max(applied.abs());
+        }
+    }
+    assert!(
+        worst <= 1e-9 * top,
+        "RNEA {worst:.3e} N·m off the applied torque (up to {top:.3})"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let written = write_simulation(dir.path(), "coupled", &[OutputFormat::Csv], &s, &model).unwrap();
+    let csv = written
+        .files
+        .iter()
+        .find(|f| f.extension().is_some_and(|e| e == "csv"))
+        .unwrap();
+    let channel = |column: &str, unit: &str| Channel {
+        column: Some(Column::Name(column.into())),
+        topic: None,
+        field: None,
+        unit: Some(unit.into()),
+        side: None,
+    };
+    let read = ReadConfig {
+        position: Some(channel("counts_{joint}", "count")),
+        effort: Some(channel("current_{joint}", "A")),
+        ..Default::default()
+    };
+    let raw = read_log(Log::File(csv), &read, Some(&model)).unwrap();
+    assert_eq!(raw.len(), s.truth.time.len());
+    let (mut dq, mut dtau, mut size) = (0.0f64, 0.0f64, 0.0f64);
+    for j in 0..n {
+        for k in 0..raw.len() {
+            dq = dq.max((raw.q[j][k] - s.raw.q[j][k]).abs());
+            dtau = dtau.max((raw.effort[j][k] - s.truth.torque[j][k]).abs());
+            size = size.max(s.truth.torque[j][k].abs());
+        }
+    }
+    assert!(dq < 1e-12, "angles read {dq:.3e} rad off the logged");
+    assert!(
+        dtau <= 1e-9 * size,
+        "torques read {dtau:.3e} N·m off the commanded (up to {size:.3})"
+    );
+
+    // Joint 6 read as if its motor were its own (no coupling, no offsets).
+    let mut own = model.clone();
+    own.couplings.clear();
+    own.drives.iter_mut().for_each(|d| d.motor_offset = 0.0);
+    let wrong = read_log(Log::File(csv), &read, Some(&own)).unwrap();
+    let off = (0..wrong.len())
+        .map(|k| (wrong.q[5][k] - s.raw.q[5][k]).abs())
+        .fold(0.0, f64::max);
+    assert!(off > 0.1, "joint 6 read uncoupled: {off:.3e} rad off");
+}
