@@ -776,8 +776,7 @@ impl Sidecar<'_> {
             not_in_urdf.push("the rotor inertia (MJCF: armature)");
         }
         // A coupled motor's rotor is its tendon's armature (`transmission`).
-        let coupled = self.model.couplings.iter().any(|c| c.motor == i);
-        if coupled {
+        if self.model.couplings.iter().any(|c| c.motor == i) {
             not_in_urdf.push("the coupled motor (MJCF: a fixed tendon; see `transmission`)");
         }
         json!({
@@ -788,7 +787,7 @@ impl Sidecar<'_> {
             "stribeck": {"excess_pos": s.excess_pos, "excess_neg": s.excess_neg, "velocity_rad_s": s.velocity, "exponent": s.exponent},
             "reflected_rotor_inertia": ia,
             "urdf": {"damping": 0.5 * (f.viscous_pos + f.viscous_neg), "friction": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
-            "mjcf": {"armature": if coupled { 0.0 } else { ia }, "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
+            "mjcf": {"armature": self.model.own_armature(i), "damping": 0.5 * (f.viscous_pos + f.viscous_neg), "frictionloss": 0.5 * (f.coulomb_pos + f.coulomb_neg)},
             "not_in_urdf": not_in_urdf,
             "not_in_mjcf": lost_both,
         })

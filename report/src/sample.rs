@@ -107,12 +107,11 @@ fn values(model: &Model) -> Vec<f64> {
     for l in &model.links {
         v.extend(l.listed());
     }
-    for (i, (f, d)) in model.friction.iter().zip(&model.drives).enumerate() {
-        let coupled = model.couplings.iter().any(|c| c.motor == i);
+    for (i, f) in model.friction.iter().enumerate() {
         v.extend([
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg),
-            if coupled { 0.0 } else { d.reflected_inertia() },
+            model.own_armature(i),
         ]);
     }
     for c in &model.couplings {

@@ -186,7 +186,7 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
             "{pad}  <joint name=\"{}\" type=\"hinge\" axis=\"{}\"{range} armature=\"{:?}\" damping=\"{:?}\" frictionloss=\"{:?}\" solreffriction=\"{FRICTION_TIMECONST_S:?} 1\"/>",
             j.name,
             v3(&j.axis),
-            own_armature(model, i),
+            model.own_armature(i),
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg)
         );
@@ -199,15 +199,6 @@ pub fn to_mjcf(model: &Model, note: &str) -> String {
     s.push_str(&coupled_tendons(model, &|j| model.joints[j].name.clone()));
     let _ = writeln!(s, "</mujoco>");
     s
-}
-
-/// Joint `i`'s armature: its rotor reflected through the gear, unless the
-/// rotor is a coupled motor's, which its tendon carries.
-pub(super) fn own_armature(model: &Model, i: usize) -> f64 {
-    match model.couplings.iter().any(|c| c.motor == i) {
-        true => 0.0,
-        false => model.drives[i].reflected_inertia(),
-    }
 }
 
 /// Each coupled motor as a fixed tendon whose length is the motor's angle

@@ -166,7 +166,7 @@ impl MjcfPatch {
         let j = &self.mjcf.bodies[p.body].joints[p.joint];
         let f = &model.friction[i];
         let values = [
-            super::mjcf_export::own_armature(model, i),
+            model.own_armature(i),
             0.5 * (f.viscous_pos + f.viscous_neg),
             0.5 * (f.coulomb_pos + f.coulomb_neg),
         ];

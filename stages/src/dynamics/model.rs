@@ -657,6 +657,16 @@ impl Model {
         }
     }
 
+    /// The rotor inertia a simulator puts on joint `i` itself (MJCF
+    /// `armature`): its reflected rotor, or 0 where its motor is coupled,
+    /// whose rotor the motor's fixed tendon carries.
+    pub fn own_armature(&self, i: usize) -> f64 {
+        match self.couplings.iter().any(|c| c.motor == i) {
+            true => 0.0,
+            false => self.drives[i].reflected_inertia(),
+        }
+    }
+
     /// The coupled motors' friction through Rᵀ taken from joint torques
     /// `tau`: forward dynamics takes it, as each joint's own friction, from
     /// the torque that is left to accelerate the bodies.
