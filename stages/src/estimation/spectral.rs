@@ -52,6 +52,46 @@ pub struct LineSystem {
     periods: [usize; 2],
     /// Σ_l m_l over the lines kept: the samples' worth of the band.
     band_samples: f64,
+    /// The filters' Gram sums made so far, shared by the delayed copies.
+    grams: std::sync::Arc<Grams>,
+}
+
+/// Each filter's Gram sum Σ_l |H_l|²·G_l once made, shared by a system's
+/// delayed copies: a delay turns the torque, not the columns, so the
+/// delay search's filter grid (the same filters at every delay) makes
+/// each filter's sum once and re-reads only the cross terms after. The
+/// sums kept are bounded by [`GRAM_BYTES`]; past it they are made again,
+/// to the same bits.
+#[derive(Default)]
+struct Grams {
+    made: std::sync::Mutex<(std::collections::HashMap<FilterKey, std::sync::Arc<DMatrix<f64>>>, usize)>,
+}
+
+/// A filter as a key: family, order, cutoff and ripple bits (None: no
+/// filter).
+type FilterKey = Option<(FilterFamily, usize, u64, Option<u64>)>;
+
+fn filter_key(spec: Option<&FilterSpec>) -> FilterKey {
+    spec.map(|s| (s.family, s.order, s.cutoff_hz.to_bits(), s.ripple_db.map(f64::to_bits)))
+}
+
+/// The most a system's kept Gram sums take (bytes): 64 MiB, a thousand
+/// filters of 90 columns.
+const GRAM_BYTES: usize = 64 << 20;
+
+impl Grams {
+    fn get(&self, key: &FilterKey) -> Option<std::sync::Arc<DMatrix<f64>>> {
+        self.made.lock().expect("not poisoned").0.get(key).cloned()
+    }
+
+    fn keep(&self, key: FilterKey, g: &DMatrix<f64>) {
+        let bytes = g.len() * std::mem::size_of::<f64>();
+        let mut made = self.made.lock().expect("not poisoned");
+        if made.1 + bytes <= GRAM_BYTES && !made.0.contains_key(&key) {
+            made.0.insert(key, std::sync::Arc::new(g.clone()));
+            made.1 += bytes;
+        }
+    }
 }
 
 /// A candidate's held-out score.
@@ -274,6 +314,7 @@ impl LineSystem {
             weight,
             periods: counts,
             band_samples,
+            grams: Default::default(),
         })
     }
 
@@ -318,6 +359,7 @@ impl LineSystem {
             weight: self.weight.clone(),
             periods: self.periods,
             band_samples: self.band_samples,
+            grams: self.grams.clone(),
         }
     }
 
@@ -455,17 +497,48 @@ impl LineSystem {
     pub fn ratios(&self, specs: &[Option<FilterSpec>]) -> Vec<f64> {
         let mut out = Vec::with_capacity(specs.len());
         for chunk in specs.chunks(BATCH) {
+            let keys: Vec<FilterKey> = chunk.iter().map(|s| filter_key(s.as_ref())).collect();
             let hs: Vec<Option<Vec<Complex64>>> = chunk.iter().map(|s| self.response(s.as_ref())).collect();
-            let made: Vec<&[Complex64]> = hs.iter().flatten().map(Vec::as_slice).collect();
+            let kept: Vec<Option<std::sync::Arc<DMatrix<f64>>>> = keys.iter().map(|k| self.grams.get(k)).collect();
+            let made: Vec<&[Complex64]> = hs
+                .iter()
+                .zip(&kept)
+                .filter(|(_, g)| g.is_none())
+                .filter_map(|(h, _)| h.as_deref())
+                .collect();
             let mut normals = self.normals(&made).into_iter();
-            out.extend(hs.iter().map(|h| {
-                h.as_ref()
-                    .and_then(|_| normals.next())
-                    .and_then(|(g, r)| self.held_out_of(g, r))
-                    .map_or(f64::INFINITY, |x| x.0)
-            }));
+            for ((key, h), g) in keys.into_iter().zip(&hs).zip(kept) {
+                let Some(h) = h else {
+                    out.push(f64::INFINITY);
+                    continue;
+                };
+                let normal = match g {
+                    Some(g) => Some(((*g).clone(), self.crosses(h))),
+                    None => normals.next().inspect(|(g, _)| self.grams.keep(key, g)),
+                };
+                out.push(
+                    normal
+                        .and_then(|(g, r)| self.held_out_of(g, r))
+                        .map_or(f64::INFINITY, |x| x.0),
+                );
+            }
         }
         out
+    }
+
+    /// The cross terms Σ Re(h̄·c_l) of each half alone, summed in the
+    /// order [`normals`](Self::normals) sums them: the same bits.
+    fn crosses(&self, h: &[Complex64]) -> [DVector<f64>; 2] {
+        let mut r = [DVector::zeros(self.cols), DVector::zeros(self.cols)];
+        for (l, hl) in h.iter().enumerate().take(self.lines) {
+            let (from, to) = (self.sums.starts[l], self.sums.starts[l + 1]);
+            for (i, &c) in self.sums.active[from..to].iter().enumerate() {
+                for (half, r) in r.iter_mut().enumerate() {
+                    r[c as usize] += (hl.conj() * self.sums.cross[half][from + i]).re;
+                }
+            }
+        }
+        r
     }
 
     /// The held-out residue over the noise floor under the filter response
@@ -816,10 +889,41 @@ mod tests {
             .collect();
         let alone: Vec<u64> = specs.iter().map(|s| sys.ratio(s.as_ref()).to_bits()).collect();
         for k in [1, 3, 4, 5, 16, 19] {
-            let together: Vec<u64> = sys.ratios(&specs[..k]).iter().map(|r| r.to_bits()).collect();
+            // A fresh system each time: `sys` keeps the sums it has made.
+            let fresh = random_system(12, 200);
+            let together: Vec<u64> = fresh.ratios(&specs[..k]).iter().map(|r| r.to_bits()).collect();
             assert_eq!(together, alone[..k], "{k} at a time");
         }
         assert!(alone.iter().all(|r| f64::from_bits(*r).is_finite()));
+        // Scored again, from the sums kept: the same bits.
+        let again: Vec<u64> = sys.ratios(&specs).iter().map(|r| r.to_bits()).collect();
+        assert_eq!(again, alone);
+    }
+
+    /// A delayed copy scores its filters from the Gram sums the system
+    /// already made (a delay turns the torque only), mixed with new ones,
+    /// to the bits a fresh system's delayed copy gives; and the delay
+    /// changes the scores, so the cross terms were not taken from the
+    /// first.
+    #[test]
+    fn a_delayed_copy_reuses_the_gram_sums_to_the_same_bits() {
+        let spec = |i: usize| FilterSpec {
+            family: [FilterFamily::Butterworth, FilterFamily::Chebyshev1][i % 2],
+            order: 2 + i % 4,
+            cutoff_hz: 3.0 + i as f64,
+            ripple_db: (i % 2 == 1).then_some(0.5),
+        };
+        let tried: Vec<Option<FilterSpec>> = std::iter::once(None).chain((0..20).map(|i| Some(spec(i)))).collect();
+        // Half tried before the delay, half new to it.
+        let asked: Vec<Option<FilterSpec>> = (10..30).map(|i| Some(spec(i))).collect();
+        let sys = random_system(12, 200);
+        let before = sys.ratios(&tried);
+        let kept = sys.delayed(0.013).ratios(&asked);
+        let fresh = random_system(12, 200).delayed(0.013).ratios(&asked);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&kept), bits(&fresh));
+        assert!(kept.iter().all(|r| r.is_finite()));
+        assert!(kept[..10].iter().zip(&before[11..]).all(|(d, b)| d != b));
     }
 
     /// A known filter on a synthetic two-column regression (a smooth

@@ -13,7 +13,7 @@ use std::f64::consts::PI;
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FilterFamily {
     Butterworth,
