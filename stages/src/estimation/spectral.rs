@@ -56,15 +56,16 @@ pub struct LineSystem {
     grams: std::sync::Arc<Grams>,
 }
 
-/// Each filter's Gram sum Σ_l |H_l|²·G_l once made, shared by a system's
-/// delayed copies: a delay turns the torque, not the columns, so the
-/// delay search's filter grid (the same filters at every delay) makes
-/// each filter's sum once and re-reads only the cross terms after. The
-/// sums kept are bounded by [`GRAM_BYTES`]; past it they are made again,
-/// to the same bits.
+/// The filter grid's Gram sums Σ_l |H_l|²·G_l once made (each lower
+/// triangle, packed), shared by a system's delayed copies: a delay turns
+/// the torque, not the columns, so the delay search's filter grid (the
+/// same filters at every delay) makes each filter's sum once and re-reads
+/// only the cross terms after. Only the grid's are kept (the refinements'
+/// cutoffs differ from delay to delay), at most [`GRAM_BYTES`]; past it
+/// they are made again, to the same bits.
 #[derive(Default)]
 struct Grams {
-    made: std::sync::Mutex<(std::collections::HashMap<FilterKey, std::sync::Arc<DMatrix<f64>>>, usize)>,
+    made: std::sync::Mutex<(std::collections::HashMap<FilterKey, std::sync::Arc<Vec<f64>>>, usize)>,
 }
 
 /// A filter as a key: family, order, cutoff and ripple bits (None: no
@@ -75,22 +76,34 @@ fn filter_key(spec: Option<&FilterSpec>) -> FilterKey {
     spec.map(|s| (s.family, s.order, s.cutoff_hz.to_bits(), s.ripple_db.map(f64::to_bits)))
 }
 
-/// The most a system's kept Gram sums take (bytes): 64 MiB, a thousand
-/// filters of 90 columns.
+/// The most a system's kept Gram sums take (bytes): 64 MiB, twice the
+/// filter grid at 90 columns.
 const GRAM_BYTES: usize = 64 << 20;
 
 impl Grams {
-    fn get(&self, key: &FilterKey) -> Option<std::sync::Arc<DMatrix<f64>>> {
+    fn get(&self, key: &FilterKey) -> Option<std::sync::Arc<Vec<f64>>> {
         self.made.lock().expect("not poisoned").0.get(key).cloned()
     }
 
     fn keep(&self, key: FilterKey, g: &DMatrix<f64>) {
-        let bytes = g.len() * std::mem::size_of::<f64>();
+        let n = g.nrows();
+        let bytes = n * (n + 1) / 2 * std::mem::size_of::<f64>();
         let mut made = self.made.lock().expect("not poisoned");
         if made.1 + bytes <= GRAM_BYTES && !made.0.contains_key(&key) {
-            made.0.insert(key, std::sync::Arc::new(g.clone()));
+            let lower = (0..n).flat_map(|c| (c..n).map(move |d| g[(d, c)])).collect();
+            made.0.insert(key, std::sync::Arc::new(lower));
             made.1 += bytes;
         }
+    }
+
+    /// A kept lower triangle as the symmetric matrix it packs.
+    fn unpacked(lower: &[f64], n: usize) -> DMatrix<f64> {
+        // Column c's entries d ≥ c follow the n − k of each column k < c.
+        let start = |c: usize| c * (2 * n - c + 1) / 2;
+        DMatrix::from_fn(n, n, |a, b| {
+            let (c, d) = (a.min(b), a.max(b));
+            lower[start(c) + d - c]
+        })
     }
 }
 
@@ -495,11 +508,17 @@ impl LineSystem {
     /// [`ratio`](Self::ratio) of each filter of `specs`, the same numbers,
     /// the responses taken together ([`normals`](Self::normals)).
     pub fn ratios(&self, specs: &[Option<FilterSpec>]) -> Vec<f64> {
+        self.ratios_kept(specs, false)
+    }
+
+    /// [`ratios`](Self::ratios), the Gram sums made kept for this system's
+    /// delayed copies where `keep` (the filter grid's, [`Grams`]).
+    fn ratios_kept(&self, specs: &[Option<FilterSpec>], keep: bool) -> Vec<f64> {
         let mut out = Vec::with_capacity(specs.len());
         for chunk in specs.chunks(BATCH) {
             let keys: Vec<FilterKey> = chunk.iter().map(|s| filter_key(s.as_ref())).collect();
             let hs: Vec<Option<Vec<Complex64>>> = chunk.iter().map(|s| self.response(s.as_ref())).collect();
-            let kept: Vec<Option<std::sync::Arc<DMatrix<f64>>>> = keys.iter().map(|k| self.grams.get(k)).collect();
+            let kept: Vec<Option<std::sync::Arc<Vec<f64>>>> = keys.iter().map(|k| self.grams.get(k)).collect();
             let made: Vec<&[Complex64]> = hs
                 .iter()
                 .zip(&kept)
@@ -513,8 +532,12 @@ impl LineSystem {
                     continue;
                 };
                 let normal = match g {
-                    Some(g) => Some(((*g).clone(), self.crosses(h))),
-                    None => normals.next().inspect(|(g, _)| self.grams.keep(key, g)),
+                    Some(g) => Some((Grams::unpacked(&g, self.cols), self.crosses(h))),
+                    None => normals.next().inspect(|(g, _)| {
+                        if keep {
+                            self.grams.keep(key, g)
+                        }
+                    }),
                 };
                 out.push(
                     normal
@@ -719,10 +742,11 @@ fn best_cutoffs(sys: &LineSystem, shapes: &[FilterSpec], (lo, hi): (f64, f64), s
     let grid: Vec<Vec<f64>> = shapes
         .par_iter()
         .map(|&shape| {
-            sys.ratios(
+            sys.ratios_kept(
                 &(0..GRID)
                     .map(|i| Some(at(shape, lo + step * i as f64)))
                     .collect::<Vec<_>>(),
+                true,
             )
         })
         .collect();
@@ -895,9 +919,11 @@ mod tests {
             assert_eq!(together, alone[..k], "{k} at a time");
         }
         assert!(alone.iter().all(|r| f64::from_bits(*r).is_finite()));
-        // Scored again, from the sums kept: the same bits.
-        let again: Vec<u64> = sys.ratios(&specs).iter().map(|r| r.to_bits()).collect();
-        assert_eq!(again, alone);
+        // Kept as the filter grid's are, then scored from the sums kept:
+        // the same bits.
+        let bits = |v: Vec<f64>| v.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(sys.ratios_kept(&specs, true)), alone);
+        assert_eq!(bits(sys.ratios(&specs)), alone);
     }
 
     /// A delayed copy scores its filters from the Gram sums the system
@@ -917,7 +943,7 @@ mod tests {
         // Half tried before the delay, half new to it.
         let asked: Vec<Option<FilterSpec>> = (10..30).map(|i| Some(spec(i))).collect();
         let sys = random_system(12, 200);
-        let before = sys.ratios(&tried);
+        let before = sys.ratios_kept(&tried, true);
         let kept = sys.delayed(0.013).ratios(&asked);
         let fresh = random_system(12, 200).delayed(0.013).ratios(&asked);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
