@@ -65,8 +65,11 @@ pub struct LineSystem {
 /// they are made again, to the same bits.
 #[derive(Default)]
 struct Grams {
-    made: std::sync::Mutex<(std::collections::HashMap<FilterKey, std::sync::Arc<Vec<f64>>>, usize)>,
+    /// The sums by filter, and the bytes they take.
+    made: std::sync::Mutex<(Kept, usize)>,
 }
+
+type Kept = std::collections::HashMap<FilterKey, std::sync::Arc<Vec<f64>>>;
 
 /// A filter as a key: family, order, cutoff and ripple bits (None: no
 /// filter).
