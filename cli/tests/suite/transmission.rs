@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 
 use robotid_stages::dynamics::{forward_dynamics, load_robot, rnea, rnea_terms, to_mjcf, Data, Model, Terms};
-use robotid_stages::stage::read::{read_log, Channel, Column, Log, ReadConfig};
+use robotid_stages::stage::read::{read_log, Channel, Log, ReadConfig};
 use robotid_tests::example_urdf;
 
 use super::foreign::corpus;
@@ -67,13 +67,7 @@ fn case() -> Option<(PathBuf, PathBuf, PathBuf, tempfile::TempDir)> {
 
 /// The `[read]` table of the log: counts and currents by column, the rate.
 fn read_config() -> ReadConfig {
-    let channel = |column: &str, unit: &str| Channel {
-        column: Some(Column::Name(column.into())),
-        topic: None,
-        field: None,
-        unit: Some(unit.into()),
-        side: None,
-    };
+    let channel = |column: &str, unit: &str| Channel::at(column, unit);
     ReadConfig {
         position: Some(channel("enc_{index}", "count")),
         effort: Some(channel("cur_{index}", "A")),

@@ -1228,13 +1228,7 @@ fn logs_stamped_by_their_rate() {
         "{:?}",
         r.metadata
     );
-    let time_column = |column: &str, unit: &str| Channel {
-        column: Some(column.into()),
-        topic: None,
-        field: None,
-        unit: Some(unit.into()),
-        side: None,
-    };
+    let time_column = |column: &str, unit: &str| Channel::at(column, unit);
     let numbers = ReadConfig {
         time: Some(time_column("n", "sample")),
         ..by_rate.clone()

@@ -301,7 +301,7 @@ fn absurd_sizes_are_refused_before_allocating() {
 #[test]
 fn a_coupled_wrist_is_simulated_through_its_motors() {
     use robotid_stages::simulation::OutputFormat;
-    use robotid_stages::stage::read::{read_log, Channel, Column, Log, ReadConfig};
+    use robotid_stages::stage::read::{read_log, Channel, Log, ReadConfig};
     let (mut cfg, _) = load("sims/ur5.toml");
     cfg.measurement.filter = None;
     cfg.measurement.current_noise_std_a = Default::default();
@@ -341,13 +341,7 @@ fn a_coupled_wrist_is_simulated_through_its_motors() {
         .iter()
         .find(|f| f.extension().is_some_and(|e| e == "csv"))
         .unwrap();
-    let channel = |column: &str, unit: &str| Channel {
-        column: Some(Column::Name(column.into())),
-        topic: None,
-        field: None,
-        unit: Some(unit.into()),
-        side: None,
-    };
+    let channel = |column: &str, unit: &str| Channel::at(column, unit);
     let read = ReadConfig {
         position: Some(channel("counts_{joint}", "count")),
         effort: Some(channel("current_{joint}", "A")),

@@ -205,13 +205,8 @@ pub fn guess_read(header: &[String], joints: &[String]) -> Result<ReadConfig, No
 /// velocities between them when there are three (left unread: robotid
 /// differentiates the positions). Each with what it says of the columns.
 pub fn headerless_layouts(width: usize, n: usize) -> Vec<(ReadConfig, String)> {
-    let block = |from: usize, unit: &str| Channel {
-        column: Some(Column::Each((from..from + n).map(OneColumn::Index).collect())),
-        topic: None,
-        field: None,
-        unit: Some(unit.to_string()),
-        side: None,
-    };
+    let block =
+        |from: usize, unit: &str| Channel::at(Column::Each((from..from + n).map(OneColumn::Index).collect()), unit);
     let layout = |q: usize, e: usize, said: String| {
         (
             ReadConfig {

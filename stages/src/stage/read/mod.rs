@@ -50,6 +50,20 @@ pub struct Channel {
     pub side: Option<Side>,
 }
 
+impl Channel {
+    /// The channel at `column` in `unit`: what `{ column = …, unit = … }`
+    /// says in a `[read]` table.
+    pub fn at(column: impl Into<Column>, unit: &str) -> Channel {
+        Channel {
+            column: Some(column.into()),
+            topic: None,
+            field: None,
+            unit: Some(unit.into()),
+            side: None,
+        }
+    }
+}
+
 /// The side of the transmission a position or effort channel measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
