@@ -424,7 +424,6 @@ impl LineSystem {
         let cols = self.cols;
         // The lower triangle: entry (d ≥ c) at c·cols + d, one slot per response.
         let mut lower = vec![[0.0; K]; cols * cols];
-        let mut r = vec![[DVector::zeros(cols), DVector::zeros(cols)]; hs.len()];
         let mut s = [0.0; K];
         for l in 0..self.lines {
             for (s, h) in s.iter_mut().zip(hs) {
@@ -441,19 +440,13 @@ impl LineSystem {
                     }
                 }
                 y = rest;
-                let cross = [0, 1].map(|half| self.sums.cross[half][self.sums.starts[l] + i]);
-                for (r, h) in r.iter_mut().zip(hs) {
-                    for half in 0..2 {
-                        r[half][c as usize] += (h[l].conj() * cross[half]).re;
-                    }
-                }
             }
         }
-        r.into_iter()
+        hs.iter()
             .enumerate()
-            .map(|(k, r)| {
+            .map(|(k, h)| {
                 let g = DMatrix::from_fn(cols, cols, |a, b| lower[a.min(b) * cols + a.max(b)][k]);
-                (g, r)
+                (g, self.crosses(h))
             })
             .collect()
     }
@@ -552,8 +545,8 @@ impl LineSystem {
         out
     }
 
-    /// The cross terms Σ Re(h̄·c_l) of each half alone, summed in the
-    /// order [`normals`](Self::normals) sums them: the same bits.
+    /// The cross terms Σ Re(h̄·c_l) of each half, summed line by line
+    /// (so the same bits whether the Gram sums were kept or made).
     fn crosses(&self, h: &[Complex64]) -> [DVector<f64>; 2] {
         let mut r = [DVector::zeros(self.cols), DVector::zeros(self.cols)];
         for (l, hl) in h.iter().enumerate().take(self.lines) {
