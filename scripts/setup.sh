@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The Debian packages robotid needs beyond the stock Rust toolchain:
 # OpenBLAS and LAPACK for clarabel's semidefinite cones (the physically
-# consistent estimate), and Chromium to render the HTML report in a test.
+# consistent estimate), Chromium to render the HTML report in a test, and
+# strace, with which a test counts what identify reads.
 # Installs only what is missing; needs root or sudo when something is.
 set -euo pipefail
-packages=(libopenblas-dev libgfortran-12-dev chromium fonts-dejavu-core)
+packages=(libopenblas-dev libgfortran-12-dev chromium fonts-dejavu-core strace)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -94,7 +94,7 @@ fn exported(
             validation,
         } => {
             let export = robotid_report::export::export(&Export {
-                robot: paths.robot.clone(),
+                robot: paths.robot_file.clone(),
                 parameters: PHYSICAL.into(),
                 formats: vec![Format::Urdf, Format::Mjcf, Format::Sidecar],
                 out: "identified".into(),
@@ -252,7 +252,7 @@ pub(crate) fn estimate(
     };
     let reducer = robotid::tables::reducer(
         &estimate_config(Covariance::Robust, false),
-        Some((&paths.robot, &locks)),
+        Some((&paths.robot_file, &locks)),
     )?;
     let parts = robotid::tables::parts(&reducer, staged, id_tables)?;
     let outcome = robotid::tables::solve(&reducer, &parts)?;
@@ -355,7 +355,7 @@ fn physical_fit(
             Some(t) => robotid::tables::table_locks(&staged.join(t))?,
             None => Default::default(),
         };
-        let reducer = robotid::tables::reducer(&estimate_config(covariance, true), Some((&paths.robot, &locks)))?;
+        let reducer = robotid::tables::reducer(&estimate_config(covariance, true), Some((&paths.robot_file, &locks)))?;
         observer.busy(Some(
             "physical fit: the prior weight on held-out periods, then the bootstrap's semidefinite programs",
         ));

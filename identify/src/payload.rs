@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use robotid::identify::{absolute, design_with};
 use robotid::Observer;
+use robotid_stages::dynamics::Robot;
 use robotid_stages::estimation::payload::{
     identify_payload, NominalGains, PayloadFit, PayloadOptions, Robot as PayloadRobot,
 };
@@ -87,7 +88,7 @@ pub(crate) fn write_payload(
 /// (the payload's columns added) at the record's own band.
 fn loaded_recordings(
     loaded: &[PathBuf],
-    robot: &Path,
+    robot: &std::sync::Arc<Robot>,
     regressor: &robotid_stages::stage::regressor::RegressorConfig,
 ) -> Result<Vec<Recording>> {
     let names = robotid::run::recording_names(loaded);
@@ -135,7 +136,7 @@ pub fn payload_against_parameters(
     out: &Path,
     observer: &dyn Observer,
 ) -> Result<PayloadFit> {
-    let robot = absolute(robot)?;
+    let robot = std::sync::Arc::new(Robot::read(&absolute(robot)?)?);
     let loaded = request
         .loaded
         .iter()
@@ -145,7 +146,7 @@ pub fn payload_against_parameters(
         return Err(Error::Request("--payload-on: no recording with the payload".into()));
     }
     payload_values(request)?;
-    let model = robotid_stages::dynamics::load_robot(&robot)?;
+    let model = robot.model(&Default::default())?;
     payload_frame(&model, &request.link)?;
     let table = robotid_stages::formats::parquet::read_parquet(parameters)?;
     let given = robotid_stages::estimation::parameters_from_table(&table)?;
@@ -160,8 +161,14 @@ pub fn payload_against_parameters(
     }
     let recordings = loaded_recordings(&loaded, &robot, &regressor)?;
     let staged = staging.staged_out().to_path_buf();
-    let runner = Request::new(Vec::new(), robot.clone());
-    run_pipelines(&runner, (&staged, out), &recordings, &mut Script::new(&robot), observer)?;
+    let runner = Request::new(Vec::new(), robot.path().to_path_buf());
+    run_pipelines(
+        (&runner, &robot),
+        (&staged, out),
+        &recordings,
+        &mut Script::new(robot.path()),
+        observer,
+    )?;
     let tables: Vec<PathBuf> = recordings.iter().map(regressor_table).collect();
     let system = robotid::tables::load_system(&staged, &tables)?;
     let known = robotid_stages::estimation::Known {
@@ -285,10 +292,21 @@ pub fn payload_from_tables(
     loaded: &[PathBuf],
 ) -> Result<PayloadFit> {
     let model = robotid_stages::dynamics::load_robot(robot)?;
+    payload_of_tables(request, &model, within, unloaded, loaded)
+}
+
+/// [`payload_from_tables`] with the robot's model loaded.
+pub(crate) fn payload_of_tables(
+    request: &PayloadRequest,
+    model: &robotid_stages::dynamics::Model,
+    within: &Path,
+    unloaded: &[PathBuf],
+    loaded: &[PathBuf],
+) -> Result<PayloadFit> {
     let unloaded = robotid::tables::load_system(within, unloaded)?;
     let loaded = robotid::tables::load_system(within, loaded)?;
-    let gains = nominal_gains(&model, &loaded);
-    bounded_payload(request, &model, |bound| {
+    let gains = nominal_gains(model, &loaded);
+    bounded_payload(request, model, |bound| {
         identify_payload(
             &loaded,
             PayloadRobot::Unloaded(&unloaded),

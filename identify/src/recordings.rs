@@ -2,10 +2,12 @@
 //! pipeline designed, run, and its effort channel's delay found.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use robotid::identify::{absolute, design_with, Design, Found};
 use robotid::{Observer, RunOptions};
 use robotid_schemas::TableKind;
+use robotid_stages::dynamics::Robot;
 use robotid_stages::stage::read::mcap_has_reference;
 
 use crate::judge::validate;
@@ -16,6 +18,8 @@ use crate::{Error, Ran, Recording, Request, Result, Role};
 /// The request's files made absolute and checked.
 pub(crate) struct Paths {
     pub(crate) robot: PathBuf,
+    /// The robot file, read once for the whole run.
+    pub(crate) robot_file: Arc<Robot>,
     /// The user's MJCF, to patch.
     pub(crate) mjcf: Option<PathBuf>,
     /// The validation records' controller, read.
@@ -32,6 +36,7 @@ impl Paths {
     pub(crate) fn of(request: &Request) -> Result<Paths> {
         let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<robotid::Result<Vec<_>>>();
         let robot = absolute(&request.robot)?;
+        let robot_file = Arc::new(Robot::read(&robot)?);
         let mjcf = request.mjcf.as_deref().map(absolute).transpose()?;
         if let Some(m) = mjcf.as_deref().filter(|m| !m.is_file()) {
             return Err(Error::Request(format!("--mjcf {}: no such file", m.display())));
@@ -46,7 +51,7 @@ impl Paths {
                     c.display()
                 )));
             }
-            let dof = robotid_stages::dynamics::load_robot(&robot)?.dof();
+            let dof = robot_file.model(&Default::default())?.dof();
             robotid::validation::read_controller(c, dof)?;
         }
         let identifying = all.len();
@@ -89,6 +94,7 @@ impl Paths {
         }
         Ok(Paths {
             robot,
+            robot_file,
             mjcf,
             controller,
             all,
@@ -101,8 +107,8 @@ impl Paths {
 }
 
 /// The drives' gains of the request, one per joint.
-fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
-    let joints = robotid_stages::dynamics::load_robot(robot)?.joint_names().len();
+fn gains(request: &Request, robot: &Robot) -> Result<Option<Vec<f64>>> {
+    let joints = robot.model(&Default::default())?.joint_names().len();
     let gains = match request.torque_per_amp[..] {
         [] => return Ok(None),
         [k] => vec![k; joints],
@@ -125,13 +131,13 @@ fn gains(request: &Request, robot: &Path) -> Result<Option<Vec<f64>>> {
 /// Every recording's pipeline designed; all take the first one's
 /// regressor stage, so that their tables share one parameter set.
 pub(crate) fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Recording>, Option<String>)> {
-    let gains = gains(request, &paths.robot)?;
+    let gains = gains(request, &paths.robot_file)?;
     let mut designs: Vec<Design> = Vec::new();
     for log in &paths.all {
         // Its errors name the recording.
         let d = design_with(
             log,
-            &paths.robot,
+            &paths.robot_file,
             designs.first(),
             request.read.as_ref(),
             gains.as_deref(),
@@ -237,7 +243,7 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<
 /// Each recording's pipeline written to `pipelines/` and run into its
 /// folder (inside the staging folder); `out` is where they will appear.
 pub(crate) fn run_pipelines(
-    request: &Request,
+    (request, robot): (&Request, &Arc<Robot>),
     (staged, out): (&Path, &Path),
     recordings: &[Recording],
     script: &mut Script,
@@ -250,7 +256,9 @@ pub(crate) fn run_pipelines(
         // the manifest say of it names its final place.
         let rel = Path::new("pipelines").join(format!("{}.toml", r.name));
         std::fs::write(staged.join(&rel), &r.design.text).map_err(io(&out.join(&rel)))?;
-        let built = robotid::Pipeline::from_toml(&r.design.text, out.join(&rel))?.build()?;
+        let built = robotid::Pipeline::from_toml(&r.design.text, out.join(&rel))?
+            .with_robot(robot.clone())
+            .build()?;
         let warnings: Vec<String> = built.model.iter().flat_map(|m| m.warnings.clone()).collect();
         let locked = built.model.as_ref().filter(|m| !m.locked.is_empty()).map(|m| {
             let l: Vec<String> = m.locked.iter().map(|(j, x)| format!("{j} at {x}")).collect();
@@ -322,7 +330,7 @@ pub(crate) fn own_delays(
                 first_ratio
             );
             r.design.with_delay(delay, fs, said)?;
-            rerun(request, (staged, &paths.out), r, observer)?;
+            rerun((request, &paths.robot_file), (staged, &paths.out), r, observer)?;
             let (s, now, _) = shift_and_ratio(staged, table, std::slice::from_ref(&r.log))?;
             ratio = ratio.min(now);
             match s {
@@ -334,7 +342,7 @@ pub(crate) fn own_delays(
             changed = true;
         } else {
             r.design = before;
-            rerun(request, (staged, &paths.out), r, observer)?;
+            rerun((request, &paths.robot_file), (staged, &paths.out), r, observer)?;
         }
     }
     Ok(changed)
@@ -359,11 +367,16 @@ fn shift_and_ratio(staged: &Path, table: &Path, log: &[PathBuf]) -> Result<(Opti
 }
 
 /// One recording's pipeline run again into its folder (its design changed).
-fn rerun(request: &Request, (staged, out): (&Path, &Path), r: &Recording, observer: &dyn Observer) -> Result<()> {
+fn rerun(
+    run: (&Request, &Arc<Robot>),
+    (staged, out): (&Path, &Path),
+    r: &Recording,
+    observer: &dyn Observer,
+) -> Result<()> {
     let folder = staged.join(&r.name);
     std::fs::remove_dir_all(&folder).map_err(io(&out.join(&r.name)))?;
     run_pipelines(
-        request,
+        run,
         (staged, out),
         std::slice::from_ref(r),
         &mut Script::new(Path::new("")),

@@ -7,7 +7,7 @@ use robotid_schemas::TableKind;
 
 use crate::judge::{estimate, physical_or_why, validate};
 use crate::payload::{
-    payload_export, payload_frame, payload_from_tables, payload_validated, payload_values, write_payload,
+    payload_export, payload_frame, payload_of_tables, payload_validated, payload_values, write_payload,
 };
 use crate::recordings::{design_all, own_delays, run_pipelines, Paths};
 use crate::script::Script;
@@ -19,25 +19,23 @@ use crate::{Error, Identification, Physical, Recording, Request, Result, Role};
 #[allow(clippy::type_complexity)]
 fn payload_part(
     request: &Request,
-    (robot, staged): (&Path, &Path),
+    staged: &Path,
     (id_tables, loaded_tables): (&[PathBuf], &[PathBuf]),
     model: Option<&robotid_stages::dynamics::Model>,
 ) -> Result<(
     Option<Box<robotid_stages::estimation::payload::PayloadFit>>,
     Option<crate::PayloadValidation>,
 )> {
-    let Some(p) = &request.payload else {
+    let (Some(p), Some(model)) = (&request.payload, model) else {
         return Ok((None, None));
     };
     let (fit_tables, held_loaded) = loaded_tables.split_at(p.loaded.len());
-    let fit = Box::new(payload_from_tables(p, robot, staged, id_tables, fit_tables)?);
+    let fit = Box::new(payload_of_tables(p, model, staged, id_tables, fit_tables)?);
     let validation = match held_loaded.is_empty() {
         true => None,
         false => payload_validated(&fit, staged, held_loaded)?,
     };
-    if let Some(model) = model {
-        write_payload(p, &fit, validation.as_ref(), model, staged)?;
-    }
+    write_payload(p, &fit, validation.as_ref(), model, staged)?;
     Ok((Some(fit), validation))
 }
 
@@ -56,7 +54,7 @@ fn report_page(
         excitation: id_tables.to_vec(),
         validation: val_tables.to_vec(),
         physical: fitted.then(|| "parameters_physical.parquet".into()),
-        robot: Some(paths.robot.clone()),
+        robot: Some(paths.robot_file.clone()),
         rollout: true,
         payload: payload.then(|| "payload.parquet".into()),
         closed_loop: paths.controller.clone().map(|c| (c, raw_tables.to_vec())),
@@ -81,7 +79,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     // checked before anything runs.
     let payload_model = match &request.payload {
         Some(p) => {
-            let model = robotid_stages::dynamics::load_robot(&paths.robot)?;
+            let model = paths.robot_file.model(&Default::default())?.as_ref().clone();
             payload_frame(&model, &p.link)?;
             Some(model)
         }
@@ -104,7 +102,13 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     // appears as `out`, and when it is moved.
     let staged = staging.staged_out();
     let mut script = Script::new(&paths.robot);
-    let runs = run_pipelines(request, (staged, &paths.out), &recordings, &mut script, observer)?;
+    let runs = run_pipelines(
+        (request, &paths.robot_file),
+        (staged, &paths.out),
+        &recordings,
+        &mut script,
+        observer,
+    )?;
     let tables: Vec<PathBuf> = recordings.iter().map(regressor_table).collect();
     let (id_tables, rest) = tables.split_at(paths.identifying);
     let (val_tables, loaded_tables) = rest.split_at(paths.held.len());
@@ -121,12 +125,8 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         tables => Some(Box::new(validate(staged, "parameters.parquet", tables, &paths.held)?)),
     };
     script.validate("parameters.parquet", val_tables);
-    let (payload, payload_validation) = payload_part(
-        request,
-        (&paths.robot, staged),
-        (id_tables, loaded_tables),
-        payload_model.as_ref(),
-    )?;
+    let (payload, payload_validation) =
+        payload_part(request, staged, (id_tables, loaded_tables), payload_model.as_ref())?;
     let physical = physical_or_why(
         request,
         &mut judged,

@@ -22,7 +22,7 @@ use std::time::Instant;
 use arrow::array::RecordBatch;
 use rayon::prelude::*;
 use robotid_schemas::{metadata, Kinematics, PeriodMean, RawSamples, TableKind};
-use robotid_stages::dynamics::Model;
+use robotid_stages::dynamics::{Model, Robot};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::signal::Spectra;
 use robotid_stages::stage::estimate::{Outcome as Estimated, Part, Reducer};
@@ -30,13 +30,15 @@ use robotid_stages::stage::read::{read_log, Log};
 use robotid_stages::stage::{Chain, Context, PeriodsUse, Product, Stage};
 
 use crate::error::{Error, Problems, Result};
-use crate::plan::{lint, output_problems, parse, Plan, Resolved, StageConfig};
+use crate::plan::{lint_with, output_problems, parse, Plan, Resolved, StageConfig};
 use crate::run::{recording_names, tables_of, write_tables, Observer, Outcome, Quiet, RecordingResult, RunOptions};
 
 /// A parsed pipeline file.
 #[derive(Debug, Clone)]
 pub struct Pipeline {
     pub plan: Plan,
+    /// The plan's robot file, already read ([`Pipeline::with_robot`]).
+    robot: Option<Arc<Robot>>,
 }
 
 /// A pipeline ready to run: robot loaded, logs found, stages built.
@@ -88,6 +90,7 @@ impl Pipeline {
     pub fn from_toml(text: &str, file: impl AsRef<Path>) -> Result<Pipeline> {
         Ok(Pipeline {
             plan: parse(text, file.as_ref())?,
+            robot: None,
         })
     }
 
@@ -125,14 +128,25 @@ impl Pipeline {
         let lines = vec![0; plan.stages.len()];
         Ok(Pipeline {
             plan: Plan { lines, ..plan },
+            robot: None,
         })
+    }
+
+    /// The same pipeline with its robot file already read: where `robot`
+    /// is the plan's, linting and building take it instead of reading the
+    /// file again.
+    pub fn with_robot(self, robot: Arc<Robot>) -> Pipeline {
+        Pipeline {
+            robot: Some(robot),
+            ..self
+        }
     }
 
     /// Step 2, context: every problem knowable without reading samples,
     /// for a run into a folder (it must write something there).
     pub fn lint(&self) -> Result<Resolved> {
         let nothing = output_problems(&self.plan);
-        match lint(&self.plan) {
+        match lint_with(&self.plan, self.robot.as_deref(), true) {
             Ok(r) if nothing.is_empty() => Ok(r),
             Ok(_) => Err(Problems(nothing).into()),
             Err(Problems(mut all)) => {
@@ -144,14 +158,22 @@ impl Pipeline {
 
     /// Lints (as for a run in memory), then builds every stage once.
     pub fn build(&self) -> Result<Built> {
-        let resolved = lint(&self.plan)?;
+        let resolved = lint_with(&self.plan, self.robot.as_deref(), true)?;
+        self.build_with(resolved)
+    }
+
+    /// [`build`](Self::build) for a run on samples already read
+    /// ([`Built::run_stages`], as identify's probes run): the source's logs
+    /// are not read again to check their channels and rate.
+    pub fn build_for_samples(&self) -> Result<Built> {
+        let resolved = lint_with(&self.plan, self.robot.as_deref(), false)?;
         self.build_with(resolved)
     }
 
     /// Builds against an already linted context.
     pub fn build_with(&self, resolved: Resolved) -> Result<Built> {
         let plan = self.plan.clone();
-        let model = resolved.model.map(Arc::new);
+        let model = resolved.model;
         let context = Context {
             model: model.clone(),
             base_dir: plan.base_dir().to_path_buf(),
@@ -191,19 +213,9 @@ impl Pipeline {
                     .unwrap_or(PeriodsUse::None)
             })
             .collect();
-        let robot_sha256 = match &plan.robot {
-            Some(path) => {
-                let bytes = std::fs::read(path).map_err(|source| Error::Io {
-                    path: path.clone(),
-                    source,
-                })?;
-                Some(robotid_stages::formats::sha256_hex(&bytes))
-            }
-            None => None,
-        };
         Ok(Built {
             plan,
-            robot_sha256,
+            robot_sha256: resolved.robot_sha256,
             model,
             logs: resolved.logs,
             start: resolved.start,

@@ -5,9 +5,10 @@
 //! log's samples until the whole pipeline checks.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use robotid_schemas::{metadata, TableKind};
-use robotid_stages::dynamics::{load_robot_with, Model};
+use robotid_stages::dynamics::{Model, Robot};
 use robotid_stages::stage::align::AlignConfig;
 use robotid_stages::stage::average::AverageConfig;
 use robotid_stages::stage::decimate::DecimateConfig;
@@ -366,7 +367,9 @@ pub fn parse(text: &str, file: &Path) -> Result<Plan, Problems> {
 /// What step 2 found: the robot, the logs and what they hold.
 #[derive(Debug, Clone)]
 pub struct Resolved {
-    pub model: Option<Model>,
+    pub model: Option<Arc<Model>>,
+    /// SHA-256 of the robot file's bytes, when the plan names one.
+    pub robot_sha256: Option<String>,
     pub logs: Vec<PathBuf>,
     pub start: Product,
 }
@@ -482,21 +485,40 @@ pub fn source_kind(path: &Path) -> robotid_stages::Result<(Product, Option<bool>
 /// Step 2, context: the robot loads, the source names existing logs of one
 /// kind, every stage lints clean against them, the joints match.
 pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
+    lint_with(plan, None, true)
+}
+
+/// The plan's robot `path` with its locks, and the file's digest: from
+/// `read` where that is the file, else read now.
+fn robot_of(plan: &Plan, path: &Path, read: Option<&Robot>) -> robotid_stages::Result<(Arc<Model>, String)> {
+    let fresh;
+    let robot = match read.filter(|x| x.path() == path) {
+        Some(x) => x,
+        None => {
+            fresh = Robot::read(path)?;
+            &fresh
+        }
+    };
+    Ok((robot.model(&plan.locks())?, robot.sha256().to_string()))
+}
+
+/// [`lint`] with the robot file already read: `robot`, where it is the
+/// plan's (else the plan's is read); the logs' channels and rate checked
+/// where `read_logs` (not for a run on samples already read).
+pub fn lint_with(plan: &Plan, robot: Option<&Robot>, read_logs: bool) -> Result<Resolved, Problems> {
     let mut problems = Vec::new();
     let at = |place: Place, message: String| Placed {
         file: plan.file.clone(),
         place,
         message,
     };
-    let model = match &plan.robot {
-        Some(r) => match load_robot_with(r, &plan.locks()) {
-            Ok(m) => Some(m),
-            Err(e) => {
-                problems.push(at(Place::Key("robot".into()), e.to_string()));
-                None
-            }
-        },
-        None => None,
+    let (model, robot_sha256) = match plan.robot.as_deref().map(|r| robot_of(plan, r, robot)) {
+        Some(Ok((m, sha))) => (Some(m), Some(sha)),
+        Some(Err(e)) => {
+            problems.push(at(Place::Key("robot".into()), e.to_string()));
+            (None, None)
+        }
+        None => (None, None),
     };
     let needs_all = plan.stages.iter().any(|s| matches!(s, StageConfig::Regressor(_)));
     if let Some(m) = &model {
@@ -540,12 +562,17 @@ pub fn lint(plan: &Plan) -> Result<Resolved, Problems> {
             None
         };
     }
-    problems.extend(check_chain(plan, model.as_ref(), start, provenance));
+    problems.extend(check_chain(plan, model.as_deref(), start, provenance));
     if start == Product::Raw {
-        problems.extend(source_problems(plan, &logs));
+        problems.extend(source_problems(plan, &logs, read_logs));
     }
     if problems.is_empty() {
-        Ok(Resolved { model, logs, start })
+        Ok(Resolved {
+            model,
+            robot_sha256,
+            logs,
+            start,
+        })
     } else {
         Err(Problems(problems))
     }
@@ -570,7 +597,7 @@ pub fn output_problems(plan: &Plan) -> Vec<Placed> {
 /// their format or summary does not have (`read::log_problems`), and the
 /// stages' bands and harmonics beyond the Nyquist frequency of the rate
 /// declared (`align.sample_rate_hz`) or told by an MCAP summary.
-fn source_problems(plan: &Plan, logs: &[PathBuf]) -> Vec<Placed> {
+fn source_problems(plan: &Plan, logs: &[PathBuf], read_logs: bool) -> Vec<Placed> {
     use robotid_stages::stage::read::{log_problems, log_rate};
     let at = |place: Place, message: String| Placed {
         file: plan.file.clone(),
@@ -578,6 +605,7 @@ fn source_problems(plan: &Plan, logs: &[PathBuf]) -> Vec<Placed> {
         message,
     };
     let mut out = Vec::new();
+    let logs = if read_logs { logs } else { &[] };
     for log in logs {
         out.extend(
             log_problems(log, &plan.read)
@@ -631,7 +659,7 @@ fn source_problems(plan: &Plan, logs: &[PathBuf]) -> Vec<Placed> {
     out
 }
 
-/// The logs a source names, sorted: a file, every log file in a folder, or/// The logs a source names, sorted: a file, every log file in a folder, or
+/// The logs a source names, sorted: a file, every log file in a folder, or
 /// the matches of a glob. A file of an extension no reader takes is refused.
 pub fn source_files(plan: &Plan) -> robotid_stages::Result<Vec<PathBuf>> {
     let full = plan.base_dir().join(&plan.source);

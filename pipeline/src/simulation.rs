@@ -6,6 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
+use robotid_stages::dynamics::Robot;
+
 use crate::validation::{ClosedLoopRun, RolledOut};
 
 /// A rollout, or where it stopped.
@@ -85,8 +87,8 @@ pub struct Asked<'a> {
     pub parameters: &'a Path,
     /// A physically consistent estimate, rolled out in the same windows.
     pub physical: Option<&'a Path>,
-    /// The robot file (nothing is simulated without one).
-    pub robot: Option<&'a Path>,
+    /// The robot file, read (nothing is simulated without one).
+    pub robot: Option<&'a Robot>,
     /// The regressor tables to roll out on (None: no rollouts), over
     /// windows chosen from each record's noise
     /// ([`crate::validation::rollouts`]).

@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use robotid_stages::dynamics::{load_robot_with, BaseRegressor, Locks, Model};
+use robotid_stages::dynamics::{BaseRegressor, Locks, Model, Robot};
 use robotid_stages::estimation::{parameters_from_table, Parameters, System};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Part, Reducer};
@@ -111,9 +111,9 @@ pub fn read_parameters(path: &Path) -> Result<Parameters> {
 }
 
 /// The reduce step of `cfg`, its a-priori model the robot file's when
-/// given (the physical fit's prior; the sizes that flag parameters the
-/// data cannot tell).
-pub fn reducer(cfg: &EstimateConfig, robot: Option<(&Path, &Locks)>) -> Result<Reducer> {
+/// given, read (the physical fit's prior; the sizes that flag parameters
+/// the data cannot tell).
+pub fn reducer(cfg: &EstimateConfig, robot: Option<(&Robot, &Locks)>) -> Result<Reducer> {
     if let Some(p) = cfg.settings_problems().into_iter().next() {
         return Err(Error::Settings {
             key: p.key,
@@ -121,7 +121,7 @@ pub fn reducer(cfg: &EstimateConfig, robot: Option<(&Path, &Locks)>) -> Result<R
         });
     }
     let model = match robot {
-        Some((r, locks)) => Some(std::sync::Arc::new(load_robot_with(r, locks)?)),
+        Some((r, locks)) => Some(r.model(locks)?),
         None => None,
     };
     Ok(cfg.reducer(&robotid_stages::stage::Context {
@@ -155,13 +155,21 @@ pub fn table_locks(path: &Path) -> Result<Locks> {
 /// regressor rebuilt from the regressor configuration it carries; refused
 /// when the robot does not give the table's base parameters.
 pub fn identified(robot: &Path, parameters: &Path) -> Result<(Parameters, Model, std::sync::Arc<BaseRegressor>)> {
+    identified_with(&Robot::read(robot)?, parameters)
+}
+
+/// [`identified`] with the robot file read.
+pub fn identified_with(robot: &Robot, parameters: &Path) -> Result<(Parameters, Model, std::sync::Arc<BaseRegressor>)> {
     let in_table = |source| Error::Table {
         path: parameters.to_path_buf(),
         source,
     };
     let params = read_parameters(parameters)?;
     let cfg = RegressorConfig::of_metadata(&params.metadata).map_err(in_table)?;
-    let model = load_robot_with(robot, &locks_of(&params.metadata).map_err(in_table)?)?;
+    let model = robot
+        .model(&locks_of(&params.metadata).map_err(in_table)?)?
+        .as_ref()
+        .clone();
     let base = cfg.base_regressor(&model)?;
     if base.names() != params.names {
         return Err(Error::NotTheRobot {

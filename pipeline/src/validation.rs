@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::DVector;
+use robotid_stages::dynamics::Robot;
 use robotid_stages::estimation::{Parameters, System};
 
 use crate::error::{Error, Result};
@@ -523,11 +524,11 @@ fn kinematics_of(
 pub fn rolled_alike(
     within: &Path,
     parameters: &Path,
-    robot: &Path,
+    robot: &Robot,
     rolled: &[RolledOut],
 ) -> Result<Vec<std::result::Result<robotid_stages::dynamics::Rollout, robotid_stages::dynamics::Stopped>>> {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
-    let (params, model, base) = crate::tables::identified(&within.join(robot), &within.join(parameters))?;
+    let (params, model, base) = crate::tables::identified_with(robot, &within.join(parameters))?;
     let theta: Vec<f64> = params.values.iter().copied().collect();
     rolled
         .iter()
@@ -548,12 +549,12 @@ pub fn rolled_alike(
 pub fn rollouts(
     within: &Path,
     parameters: &Path,
-    robot: &Path,
+    robot: &Robot,
     regressors: &[PathBuf],
     window_s: Option<f64>,
 ) -> Result<Vec<RolledOut>> {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
-    let (params, model, base) = crate::tables::identified(&within.join(robot), &within.join(parameters))?;
+    let (params, model, base) = crate::tables::identified_with(robot, &within.join(parameters))?;
     let theta: Vec<f64> = params.values.iter().copied().collect();
     let prior: Option<Vec<f64>> = base.base_values(&model).map(|v| v.iter().copied().collect());
     let mut out = Vec::new();
@@ -716,12 +717,12 @@ impl ClosedLoopRun {
 /// sample's state; the robot file's parameters the same way.
 pub fn closed_loop_rollouts(
     parameters: &Path,
-    robot: &Path,
+    robot: &Robot,
     recordings: &[PathBuf],
     controller: &Path,
 ) -> Result<Vec<ClosedLoopRun>> {
     use robotid_stages::dynamics::{closed_loop, BaseDynamics};
-    let (params, model, base) = crate::tables::identified(robot, parameters)?;
+    let (params, model, base) = crate::tables::identified_with(robot, parameters)?;
     let controller = &read_controller(controller, model.dof())?;
     let theta: Vec<f64> = params.values.iter().copied().collect();
     let prior: Option<Vec<f64>> = base.base_values(&model).map(|v| v.iter().copied().collect());

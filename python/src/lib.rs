@@ -599,6 +599,7 @@ fn rollout<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let batch = py
         .detach(|| {
+            let robot = robotid_stages::dynamics::Robot::read(&robot)?;
             let rolled = robotid::validation::rollouts(Path::new(""), &parameters, &robot, &regressors, window_s)?;
             robotid::validation::rollout_table(&rolled)
         })
@@ -623,6 +624,7 @@ fn closed_loop<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let batch = py
         .detach(|| {
+            let robot = robotid_stages::dynamics::Robot::read(&robot)?;
             let runs = robotid::validation::closed_loop_rollouts(&parameters, &robot, &recordings, &controller)?;
             robotid::validation::closed_loop_table(&runs)
         })

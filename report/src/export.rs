@@ -11,7 +11,7 @@ use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
     parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, MjcfPatch, Model,
-    Patched, UrdfPatch,
+    Patched, Robot, UrdfPatch,
 };
 use robotid_stages::estimation::{physically_consistent, LinkBound};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
@@ -40,8 +40,9 @@ pub enum Format {
 #[derive(Clone, Debug)]
 pub struct Export {
     /// The robot file the parameters were identified for: its inertials
-    /// are the a-priori model the exported standard parameters stay close to.
-    pub robot: PathBuf,
+    /// are the a-priori model the exported standard parameters stay close
+    /// to. Read by the caller (identify has read it already).
+    pub robot: Arc<Robot>,
     /// The identified parameters (physically consistent).
     pub parameters: PathBuf,
     pub formats: Vec<Format>,
@@ -225,7 +226,7 @@ fn refuse_inputs_as_outputs(args: &Export, stem: &Path) -> Result<()> {
         })
         .map(|ext| args.within.join(with_ext(stem, ext)))
         .collect();
-    let reads: Vec<PathBuf> = [args.robot.clone(), args.within.join(&args.parameters)]
+    let reads: Vec<PathBuf> = [args.robot.path().to_path_buf(), args.within.join(&args.parameters)]
         .into_iter()
         .chain(args.mjcf.clone())
         .collect();
@@ -269,7 +270,7 @@ pub fn export(args: &Export) -> Result<Exported> {
         "identified by robotid {} from {} (a-priori model {}); physically consistent",
         env!("CARGO_PKG_VERSION"),
         args.parameters.display(),
-        args.robot.display(),
+        args.robot.path().display(),
     );
     let (urdf, patched) = urdf_of(args, &identified, &note, &mut warnings)?;
     let (mjcf, mjcf_patched) = match args.formats.contains(&Format::Mjcf) {
@@ -331,7 +332,7 @@ fn urdf_of(
     );
     let (text, links) = user
         .apply(identified, &short)
-        .map_err(|p| patch_error(&args.robot, p))?;
+        .map_err(|p| patch_error(args.robot.path(), p))?;
     warnings.extend(relative_meshes(&text));
     warnings.extend(links.iter().filter_map(|p| p.said.clone()));
     Ok((text, Some(links)))
@@ -417,16 +418,13 @@ fn relative_assets(mjcf: &str) -> Option<String> {
 
 /// The robot file's own URDF read for patching with models of it like
 /// `model` (None: the robot file is not a URDF).
-pub(crate) fn user_urdf(robot: &Path, model: &Model) -> Result<Option<UrdfPatch>> {
-    if !robot.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf")) {
+pub(crate) fn user_urdf(robot: &Robot, model: &Model) -> Result<Option<UrdfPatch>> {
+    let path = robot.path();
+    if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf")) {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(robot).map_err(|source| ExportError::Io {
-        path: robot.to_path_buf(),
-        source,
-    })?;
     Ok(Some(
-        UrdfPatch::new(text, robot, model).map_err(|problem| patch_error(robot, problem))?,
+        UrdfPatch::new(robot.text().to_string(), path, model).map_err(|problem| patch_error(path, problem))?,
     ))
 }
 
@@ -462,21 +460,21 @@ fn relative_meshes(urdf: &str) -> Option<String> {
 /// identified for; refused unless it is a physically consistent estimate
 /// of the chain model.
 pub(crate) fn physical_table(
-    robot: &Path,
+    robot: &Robot,
     path: &Path,
     shown: &Path,
 ) -> Result<(
     robotid_stages::estimation::Parameters,
     Arc<robotid_stages::dynamics::BaseRegressor>,
 )> {
-    let (params, _, base) = robotid::tables::identified(robot, path)?;
+    let (params, _, base) = robotid::tables::identified_with(robot, path)?;
     if base.map().is_none() {
         return Err(ExportError::Decoupled);
     }
     if !params.metadata.contains_key(metadata::PHYSICAL) {
         return Err(ExportError::NotPhysical {
             parameters: shown.to_path_buf(),
-            robot: robot.to_path_buf(),
+            robot: robot.path().to_path_buf(),
         });
     }
     Ok((params, base))
@@ -736,8 +734,8 @@ impl Sidecar<'_> {
             "parameters_sha256".into(),
             sha256_hex(&bytes(&self.args.within.join(&self.args.parameters))?).into(),
         );
-        m.insert("robot_file".into(), self.args.robot.display().to_string().into());
-        m.insert("robot_sha256".into(), sha256_hex(&bytes(&self.args.robot)?).into());
+        m.insert("robot_file".into(), self.args.robot.path().display().to_string().into());
+        m.insert("robot_sha256".into(), self.args.robot.sha256().into());
         // The estimate's own provenance: recordings, pipeline and config
         // hashes, method, adequacy, what the physical fit cost.
         for (k, v) in &self.params.metadata {

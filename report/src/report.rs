@@ -7,6 +7,7 @@
 use nalgebra::DVector;
 use robotid::{Error, Result};
 use robotid_schemas::metadata;
+use robotid_stages::dynamics::Robot;
 use robotid_stages::estimation::{Parameters, System};
 
 use crate::plot::{density_svg, friction_svg, residues_by_joint, torques_svg};
@@ -35,9 +36,9 @@ pub struct Body {
 
 /// The bodies of a physically consistent parameters table (its
 /// `robotid.physical.standard`) identified for `robot`.
-pub fn bodies(robot: &std::path::Path, physical: &std::path::Path) -> Result<Vec<Body>> {
+pub fn bodies(robot: &Robot, physical: &std::path::Path) -> Result<Vec<Body>> {
     use robotid_stages::dynamics::{standard_parameters, with_standard_parameters};
-    let (params, _, base) = robotid::tables::identified(robot, physical)?;
+    let (params, _, base) = robotid::tables::identified_with(robot, physical)?;
     let standard: Vec<f64> = params
         .metadata
         .get(metadata::PHYSICAL_STANDARD)
@@ -680,7 +681,8 @@ pub struct Page {
     pub physical: Option<std::path::PathBuf>,
     /// The robot file the parameters were identified for: the physical
     /// estimate's bodies are shown against its own, and `rollout` needs it.
-    pub robot: Option<std::path::PathBuf>,
+    /// Read by the caller (identify has read it already).
+    pub robot: Option<std::sync::Arc<Robot>>,
     /// Roll the estimate out (and the robot file's own parameters) on the
     /// validation records, else the excitation's (see
     /// [`robotid::validation::rollouts`]), over windows chosen from each

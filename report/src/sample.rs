@@ -16,7 +16,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, prior_scales, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model,
+    parameter_names, prior_scales, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model, Robot,
 };
 use robotid_stages::estimation::{link_bounds, physically_consistent};
 use robotid_stages::formats::parquet::write_parquet;
@@ -194,8 +194,8 @@ struct Drawn {
 }
 
 impl Drawing {
-    fn of(args: &Sample) -> Result<Drawing> {
-        let (params, base) = crate::export::physical_table(&args.robot, &args.parameters, &args.parameters)?;
+    fn of(args: &Sample, robot: &Robot) -> Result<Drawing> {
+        let (params, base) = crate::export::physical_table(robot, &args.parameters, &args.parameters)?;
         let map = base.map().ok_or(ExportError::Decoupled)?;
         let names = parameter_names(&base.model, base.terms);
         let prior = standard_parameters(&base.model, base.terms);
@@ -330,7 +330,9 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
         return Err(ExportError::Draws(args.draws));
     }
     draws_within_ceiling(args.draws as u64, !args.formats.is_empty())?;
-    let drawing = Drawing::of(args)?;
+    // Read once: the draws' prior and the patched URDF's carried links.
+    let robot = Robot::read(&args.robot)?;
+    let drawing = Drawing::of(args, &robot)?;
     let identified = with_standard_parameters(&drawing.base.model, drawing.base.terms, &drawing.own);
     // Drawn around the estimate's own bodies (the exported model) with the
     // identification's covariance, in order, then fitted in parallel: the
@@ -390,7 +392,7 @@ pub fn sample(args: &Sample) -> Result<Sampled> {
         write_text(&dir.join(file), &text)?;
         files.push(file.into());
     }
-    files.extend(model_files(args, dir, &models)?);
+    files.extend(model_files(args, &robot, dir, &models)?);
     staging.commit()?;
     sampled.files = files;
     Ok(sampled)
@@ -596,10 +598,10 @@ fn yaml(v: &serde_json::Value, indent: usize) -> String {
 }
 
 /// One model file per draw and format (`draw_00000.urdf`, `.xml`).
-fn model_files(args: &Sample, dir: &Path, models: &[(u32, Model)]) -> Result<Vec<PathBuf>> {
+fn model_files(args: &Sample, robot: &Robot, dir: &Path, models: &[(u32, Model)]) -> Result<Vec<PathBuf>> {
     // Read once: the carried links' shares are the robot file's.
     let user = match (args.formats.contains(&Format::Urdf), models.first()) {
-        (true, Some((_, m))) => crate::export::user_urdf(&args.robot, m)?,
+        (true, Some((_, m))) => crate::export::user_urdf(robot, m)?,
         _ => None,
     };
     let user_mjcf = match (args.formats.contains(&Format::Mjcf), models.first()) {

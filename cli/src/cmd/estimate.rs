@@ -2,6 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use robotid::tables::{parts, reduce, Marks};
+use robotid_stages::dynamics::Robot;
 use robotid_stages::estimation::{expressions_of, Covariance, Estimate, Estimator};
 use robotid_stages::stage::estimate::{EstimateConfig, Outcome, Reducer};
 
@@ -138,11 +139,11 @@ pub fn reducer(args: &Args) -> anyhow::Result<Reducer> {
     }
     // The robot as the tables were made with it (a gripper the log did not hold, locked).
     let robot = match (&args.robot, args.regressors.first()) {
-        (Some(r), Some(t)) => Some((r.as_path(), robotid::tables::table_locks(t)?)),
-        (Some(r), None) => Some((r.as_path(), Default::default())),
+        (Some(r), Some(t)) => Some((Robot::read(r)?, robotid::tables::table_locks(t)?)),
+        (Some(r), None) => Some((Robot::read(r)?, Default::default())),
         (None, _) => None,
     };
-    Ok(robotid::tables::reducer(&cfg, robot.as_ref().map(|(r, l)| (*r, l)))?)
+    Ok(robotid::tables::reducer(&cfg, robot.as_ref().map(|(r, l)| (r, l)))?)
 }
 
 /// What the reduce found beside the estimate: parameters not identified

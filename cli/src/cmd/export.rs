@@ -70,7 +70,7 @@ impl From<Format> for robotid_report::export::Format {
 /// and a sidecar with everything neither can hold.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let done = export(&Export {
-        robot: args.robot,
+        robot: std::sync::Arc::new(robotid_stages::dynamics::Robot::read(&args.robot)?),
         parameters: args.parameters,
         formats: args.format.into_iter().map(Into::into).collect(),
         out: args.out,

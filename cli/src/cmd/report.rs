@@ -70,7 +70,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         excitation: args.excitation,
         validation: args.validation,
         physical: args.physical,
-        robot: args.robot,
+        robot: match &args.robot {
+            Some(r) => Some(std::sync::Arc::new(robotid_stages::dynamics::Robot::read(r)?)),
+            None => None,
+        },
         rollout: args.rollout,
         payload: args.payload,
         closed_loop: args.controller.map(|c| (c, args.closed_loop)),

@@ -52,14 +52,18 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let v = robotid::validation::validate(Path::new(""), &args.parameters, &args.regressors)?;
     print!("{}", said(&v, &args.parameters));
-    let rolled = match args.robot.as_ref().filter(|_| args.rollout) {
+    let robot = match &args.robot {
+        Some(r) => Some(robotid_stages::dynamics::Robot::read(r)?),
+        None => None,
+    };
+    let rolled = match robot.as_ref().filter(|_| args.rollout) {
         Some(robot) => {
             robotid::validation::rollouts(Path::new(""), &args.parameters, robot, &args.regressors, args.window_s)?
         }
         None => Vec::new(),
     };
     print!("{}", rollouts_said(&rolled));
-    if let (Some(robot), Some(controller)) = (&args.robot, &args.controller) {
+    if let (Some(robot), Some(controller)) = (&robot, &args.controller) {
         let runs = robotid::validation::closed_loop_rollouts(&args.parameters, robot, &args.closed_loop, controller)?;
         print!("{}", closed_loop_said(&runs));
     }

@@ -372,13 +372,14 @@ fn mujoco_printed(said: &str) -> Vec<f64> {
 fn rollout_errors(out: &Path, urdf: &Path, truth: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     use robotid_stages::dynamics::{rollout, BaseDynamics};
     let table = PathBuf::from("validation/validation/regressor.parquet");
-    let rolled = ::robotid::validation::rollouts(out, Path::new("parameters.parquet"), urdf, &[table], None).unwrap();
+    let urdf = robotid_stages::dynamics::Robot::read(urdf).unwrap();
+    let rolled = ::robotid::validation::rollouts(out, Path::new("parameters.parquet"), &urdf, &[table], None).unwrap();
     let r = &rolled[0];
     eprintln!("rollout window: {}", r.window_said);
     let mrad = |v: &[f64]| v.iter().map(|x| 1e3 * x).collect::<Vec<_>>();
     let estimate = mrad(&r.estimate.as_ref().expect("simulated").q_rms);
     let file = mrad(&r.prior.as_ref().expect("the URDF's").as_ref().expect("simulated").q_rms);
-    let (_, _, base) = ::robotid::tables::identified(urdf, &out.join("parameters.parquet")).unwrap();
+    let (_, _, base) = ::robotid::tables::identified_with(&urdf, &out.join("parameters.parquet")).unwrap();
     let kin = robotid_schemas::Kinematics::from_record_batch(
         &read_parquet(&out.join("validation/validation/kinematics.parquet")).unwrap(),
     )

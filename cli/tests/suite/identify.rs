@@ -583,10 +583,11 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
     // 0.955× on the excitation's averaged period and 1.109× on the
     // non-periodic validation record (whose 5 Hz filter smears the motion
     // both are driven along).
+    let read = robotid_stages::dynamics::Robot::read(&robot).unwrap();
     let rolled = robotid::validation::rollouts(
         &out,
         Path::new("parameters.parquet"),
-        &robot,
+        &read,
         &[
             PathBuf::from("kuka_axis3/kuka_axis3/regressor.parquet"),
             PathBuf::from("kuka_axis3_validation/kuka_axis3_validation/regressor.parquet"),
@@ -621,6 +622,7 @@ fn simulated_kuka_axis_identified_with_only_the_robot() {
 fn closed_loop_judges_the_model(w: &Path, parameters: &Path, robot: &Path) {
     use robotid_stages::dynamics::{closed_loop, BaseDynamics};
     let (_, model, base) = robotid::tables::identified(robot, parameters).unwrap();
+    let robot = robotid_stages::dynamics::Robot::read(robot).unwrap();
     let truth: Vec<f64> = base.base_values(&model).unwrap().iter().copied().collect();
     let mut heavy = model.clone();
     heavy.links[0].mass *= 1.1;
@@ -636,7 +638,7 @@ fn closed_loop_judges_the_model(w: &Path, parameters: &Path, robot: &Path) {
         let pid = robotid::validation::read_controller(&declared, 1).unwrap();
         let recording = dir.join(format!("{rec}.parquet"));
         let runs =
-            robotid::validation::closed_loop_rollouts(parameters, robot, std::slice::from_ref(&recording), &declared)
+            robotid::validation::closed_loop_rollouts(parameters, &robot, std::slice::from_ref(&recording), &declared)
                 .unwrap();
         let (ours, exact) = (
             runs[0].estimate.as_ref().unwrap().q_rms[0],
@@ -1273,7 +1275,9 @@ fn the_report_draws_what_identify_simulated() {
         excitation: tables,
         validation: Vec::new(),
         physical: None,
-        robot: Some(robot.clone()),
+        robot: Some(std::sync::Arc::new(
+            robotid_stages::dynamics::Robot::read(&robot).unwrap(),
+        )),
         rollout: true,
         closed_loop: None,
         payload: None,
@@ -1289,4 +1293,51 @@ fn the_report_draws_what_identify_simulated() {
         .expect("identify's page shows its rollouts");
     assert!(!drawn.contains("id=\"rollouts\""), "the page simulated");
     assert!(drawn.len() > at / 2 && ours[..at].contains(&drawn[..drawn.find("<h2").unwrap()]));
+}
+
+/// What a run opens of `file`, counted by strace (the independent
+/// observer): the successful `open`s of a path ending in `/file`.
+fn opens(trace: &str, file: &str) -> usize {
+    let quoted = format!("/{file}\"");
+    trace
+        .lines()
+        .filter(|l| l.contains("open") && l.contains(&quoted) && !l.contains("= -1"))
+        .count()
+}
+
+/// One identify reads its robot file once (issue 62): the design of each
+/// recording, its probes, the pipelines, the estimate's prior, the
+/// export, the rollouts and the report all take the run's one reading of
+/// it (a UR5 robot file naming its URDF, with a validation recording).
+/// Counted by strace on the command line, every `open` of the file.
+#[test]
+fn identify_reads_the_robot_file_once() {
+    if Command::new("strace").arg("-V").output().is_err() {
+        robotid_tests::absent("strace is not installed (scripts/setup.sh installs it)");
+        return;
+    }
+    let ws = robotid_tests::workspace(&["ur5", "ur5_validation"]);
+    let w = ws.path();
+    let trace = w.join("trace.txt");
+    let out = w.join("out");
+    let o = Command::new("strace")
+        .args(["-f", "-qq", "-e", "trace=open,openat,openat2", "-o"])
+        .arg(&trace)
+        .arg(env!("CARGO_BIN_EXE_robotid"))
+        .arg("identify")
+        .arg(w.join("recordings/ur5/ur5.mcap"))
+        .arg("--robot")
+        .arg(w.join("robots/ur5.toml"))
+        .arg("--validate")
+        .arg(w.join("recordings/ur5_validation/ur5_validation.mcap"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let said = super::text(&o);
+    assert!(out.join("parameters.parquet").is_file(), "{said}");
+    let trace = std::fs::read_to_string(&trace).unwrap();
+    assert_eq!(opens(&trace, "robots/ur5.toml"), 1, "the robot file:\n{said}");
+    // The URDF it names, once per model made of it (one set of locks).
+    assert_eq!(opens(&trace, "robots/ur5.urdf"), 1, "its URDF:\n{said}");
 }

@@ -1009,6 +1009,7 @@ fn infinities_are_never_written() {
     let pipeline = Pipeline::from_toml(toml, dir.path().join("p.toml")).unwrap();
     let resolved = robotid::plan::Resolved {
         model: None,
+        robot_sha256: None,
         logs: vec![],
         start: robotid_stages::stage::Product::Raw,
     };

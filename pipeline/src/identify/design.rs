@@ -10,6 +10,7 @@ use super::*;
 pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
     let Draft {
         log,
+        robot,
         first,
         model,
         raw,
@@ -22,7 +23,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
     } = d;
     let (own_regressor, joints) = (first.is_none(), model.joint_names());
     let mut delay = first.and_then(|d| d.delay_s);
-    let (tol, chain) = steady(log, &plan, &raw, (period, fs), &findings)?;
+    let (tol, chain) = steady((log, &raw), robot, &plan, (period, fs), &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
     findings.push((Found::Steady, steady_said(p, tol)));
@@ -49,6 +50,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         let (wide, said, choice, ladder) = best_band(
             &Scoring {
                 log,
+                robot,
                 plan: &plan,
                 raw: &raw,
                 model: &model,
@@ -81,6 +83,7 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         (None, Some(split)) if moving.is_none() && !loaded => whole_record(
             Draft {
                 log,
+                robot,
                 first,
                 model: model.clone(),
                 raw: raw.clone(),
@@ -137,7 +140,7 @@ fn whole_record(d: Draft, p: &robotid_stages::stage::Periods, period_split: f64)
         &d.regressor,
         (d.inverse.as_ref(), None),
     )?;
-    let Some(split) = record_split(&whole, d.log, &d.raw, Some((p.start_s, p.period_s)))? else {
+    let Some(split) = record_split(&whole, (d.log, &d.raw), d.robot, Some((p.start_s, p.period_s)))? else {
         return Ok(None);
     };
     if split >= (1.0 - WHOLE_MARGIN) * period_split {
@@ -172,20 +175,24 @@ const WHOLE_MARGIN: f64 = 0.1;
 /// torque went through the data filter alike.
 pub(super) fn record_split(
     d: &Design,
-    log: &Path,
-    raw: &RawSamples,
+    read: (&Path, &RawSamples),
+    robot: &Arc<Robot>,
     period: Option<(f64, f64)>,
 ) -> Result<Option<f64>> {
-    Ok(design_system(d, log, raw)?.and_then(|sys| system_split(&sys, period)))
+    Ok(design_system(d, read, robot)?.and_then(|sys| system_split(&sys, period)))
 }
 
 /// The regressor system of a design's pipeline on `raw`, run in memory.
-fn design_system(d: &Design, log: &Path, raw: &RawSamples) -> Result<Option<robotid_stages::estimation::System>> {
+fn design_system(
+    d: &Design,
+    read: (&Path, &RawSamples),
+    robot: &Arc<Robot>,
+) -> Result<Option<robotid_stages::estimation::System>> {
     let plan = Plan {
         tables: Vec::new(),
         ..d.plan.clone()
     };
-    let chain = probe(&plan, d.plan.stages.clone(), log, raw)?;
+    let chain = probe(&plan, d.plan.stages.clone(), read, robot)?;
     Ok(chain.regressor.map(|r| r.system))
 }
 
@@ -388,14 +395,14 @@ fn refined_delay(
 /// (None: none).
 pub(super) fn split_delay(
     make: impl Fn(Option<f64>) -> Result<Design> + Sync,
-    log: &Path,
-    raw: &RawSamples,
+    (log, raw): (&Path, &RawSamples),
+    robot: &Arc<Robot>,
     fs: f64,
 ) -> Result<Design> {
     // (in sample, held out) of the design `k` samples late.
     let score = |k: f64| -> Result<Option<(f64, f64)>> {
         let d = make((k != 0.0).then_some(k / fs))?;
-        Ok(design_system(&d, log, raw)?.and_then(|sys| system_scores(&sys)))
+        Ok(design_system(&d, (log, raw), robot)?.and_then(|sys| system_scores(&sys)))
     };
     let grid: Vec<Option<(f64, f64)>> = SPLIT_DELAYS.par_iter().map(|&k| score(k)).collect::<Result<_>>()?;
     let zero = SPLIT_DELAYS.iter().position(|&k| k == 0.0).expect("0 on the grid");

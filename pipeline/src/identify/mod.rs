@@ -8,11 +8,12 @@
 //! gives the same tables byte for byte, and a user can pin and edit it.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use robotid_schemas::{metadata, RawSamples, TableKind};
-use robotid_stages::dynamics::load_robot;
+use robotid_stages::dynamics::Robot;
 use robotid_stages::dynamics::{FrictionTerms, ModelKind, StribeckShape};
 use robotid_stages::estimation::spectral::{FilterChoice, Score};
 use robotid_stages::signal::period::{excited_lines, infer_period, power_band_hz, LINE_MARGIN, LINE_RELATIVE};
@@ -323,9 +324,12 @@ fn at_step<E: Into<Error>>(log: &Path, step: impl Into<String>) -> impl FnOnce(E
 }
 
 /// A probe's stages run on the samples already read (the log is read once).
-fn probe(plan: &Plan, stages: Vec<StageConfig>, log: &Path, raw: &RawSamples) -> Result<Chain> {
+/// The robot file is the design's, read once.
+fn probe(plan: &Plan, stages: Vec<StageConfig>, (log, raw): (&Path, &RawSamples), robot: &Arc<Robot>) -> Result<Chain> {
     let plan = Plan { stages, ..plan.clone() };
-    let built = Pipeline::from_plan(plan)?.build()?;
+    let built = Pipeline::from_plan(plan)?
+        .with_robot(robot.clone())
+        .build_for_samples()?;
     let mut chain = Chain::from_raw(log.display().to_string(), "probe", raw.clone());
     built.run_stages(&mut chain, |_| {})?;
     Ok(chain)
@@ -344,14 +348,15 @@ pub fn file_text(plan: &Plan) -> Result<String> {
 /// whose regressor stage (and anti-alias filter, where this one declares
 /// none) the others take, so that their tables share one parameter set.
 pub fn design(log: &Path, robot: &Path, first: Option<&Design>) -> Result<Design> {
-    design_with(log, robot, first, None, None)
+    design_with(log, &Arc::new(Robot::read(robot)?), first, None, None)
 }
 
-/// The same with the read settings stated (`--read`) and the drives'
+/// The same with the robot file read (once for every design and probe),
+/// the read settings stated (`--read`) and the drives'
 /// joint torque per ampere (`--torque-per-amp`, for current channels).
 pub fn design_with(
     log: &Path,
-    robot: &Path,
+    robot: &Arc<Robot>,
     first: Option<&Design>,
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
@@ -364,7 +369,7 @@ pub fn design_with(
 /// its torques are not checked against the robot file's (a payload's own
 /// can be many times a light wrist's), and joints it holds still are
 /// said, not refused.
-pub fn design_loaded(log: &Path, robot: &Path) -> Result<Design> {
+pub fn design_loaded(log: &Path, robot: &Arc<Robot>) -> Result<Design> {
     design_checked(log, robot, None, (None, None), true)
 }
 
@@ -392,13 +397,13 @@ fn not_periodic_said(
 fn delayed_whole(
     make: impl Fn(Option<f64>) -> Result<Design> + Sync,
     (log, raw, fs): (&Path, &RawSamples, f64),
-    first: Option<&Design>,
+    (first, robot): (Option<&Design>, &Arc<Robot>),
     loaded: bool,
 ) -> Result<Design> {
     match first {
         Some(d) => make(d.delay_s),
         None => {
-            let mut d = split_delay(make, log, raw, fs)?;
+            let mut d = split_delay(make, (log, raw), robot, fs)?;
             if loaded {
                 d.held_out_split = None;
             }
@@ -419,7 +424,7 @@ fn locked_said<Q: std::fmt::Display>(locked: &[(String, Q)]) -> String {
 
 fn design_checked(
     log: &Path,
-    robot: &Path,
+    robot: &Arc<Robot>,
     first: Option<&Design>,
     (stated, torque_per_amp): (Option<&ReadConfig>, Option<&[f64]>),
     loaded: bool,
@@ -430,7 +435,7 @@ fn design_checked(
     let mut findings: Vec<(Found, String)> = Vec::new();
     let mut plan = Plan::draft(
         &log.with_extension("toml"),
-        Some(robot.to_path_buf()),
+        Some(robot.path().to_path_buf()),
         log.display().to_string(),
         read_cfg.clone(),
     );
@@ -472,13 +477,14 @@ fn design_checked(
                 (inverse.as_ref(), delay),
             )
         };
-        return delayed_whole(make, (log, &raw, fs), first, loaded);
+        return delayed_whole(make, (log, &raw, fs), (first, robot), loaded);
     }
     let (period, period_said) = period.expect("periodic: checked above");
     findings.push((Found::Period, period_said));
     periodic(
         Draft {
             log,
+            robot,
             first,
             model,
             raw,
@@ -500,11 +506,11 @@ fn design_checked(
 /// the identification recording's locks (one parameter set).
 fn unheld_locked(
     log: &Path,
-    robot: &Path,
+    robot: &Robot,
     first: Option<&Design>,
     stated: Option<&ReadConfig>,
 ) -> Result<(robotid_stages::dynamics::Model, Vec<(String, f64)>)> {
-    let model = load_robot(robot)?;
+    let model = robot.model(&Default::default())?.as_ref().clone();
     let joints = model.joint_names();
     let missing: Vec<String> = match first {
         Some(d) => d.plan.lock.keys().filter(|j| joints.contains(j)).cloned().collect(),
@@ -529,13 +535,13 @@ fn unheld_locked(
         return Ok((model, Vec::new()));
     }
     let keep: Vec<String> = joints.iter().filter(|j| !missing.contains(j)).cloned().collect();
-    let locked_model = robotid_stages::dynamics::load_robot_with(
-        robot,
-        &robotid_stages::dynamics::Locks {
+    let locked_model = robot
+        .model(&robotid_stages::dynamics::Locks {
             keep: Some(keep),
             positions: Default::default(),
-        },
-    )?;
+        })?
+        .as_ref()
+        .clone();
     // Written as `[lock]`: the pipeline file's model is this one.
     let locked: Vec<(String, f64)> = locked_model
         .locked
@@ -550,6 +556,8 @@ fn unheld_locked(
 /// declared, the draft pipeline and what was found so far.
 struct Draft<'a> {
     log: &'a Path,
+    /// The robot file, read once.
+    robot: &'a Arc<Robot>,
     /// The identification recording's design, when this one validates.
     first: Option<&'a Design>,
     model: robotid_stages::dynamics::Model,

@@ -119,6 +119,7 @@ pub(super) type StagesAfter<'a> =
 /// What the bands' candidates are scored with.
 pub(super) struct Scoring<'a> {
     pub(super) log: &'a Path,
+    pub(super) robot: &'a Arc<Robot>,
     pub(super) plan: &'a Plan,
     pub(super) raw: &'a RawSamples,
     pub(super) model: &'a robotid_stages::dynamics::Model,
@@ -201,7 +202,12 @@ pub(super) fn best_band(
             }
             _ => (stage, said, band),
         };
-        let chain = probe(sc.plan, (sc.stages_after)(None, None, stage), sc.log, sc.raw)?;
+        let chain = probe(
+            sc.plan,
+            (sc.stages_after)(None, None, stage),
+            (sc.log, sc.raw),
+            sc.robot,
+        )?;
         if tried.is_empty() && sc.torque_check {
             if let Some(why) = torque_check(chain.kinematics()?, sc.model) {
                 return Err(refuse(sc.log, why));
@@ -258,11 +264,11 @@ fn band_ladder(sc: &Scoring, to: f64, from: f64) -> Result<Band> {
         .iter()
         .map(|&f| (f, (sc.stages_after)(None, None, &dft_stage(f))))
         .collect();
-    let (plan, log, raw, model, regressor, moving) = (sc.plan, sc.log, sc.raw, sc.model, sc.regressor, sc.moving);
+    let (plan, read, model, regressor, moving) = (sc.plan, (sc.log, sc.raw), sc.model, sc.regressor, sc.moving);
     let scored: Vec<(f64, Option<f64>)> = stages
         .into_par_iter()
         .map(|(f, stages)| {
-            let chain = probe(plan, stages, log, raw)?;
+            let chain = probe(plan, stages, read, sc.robot)?;
             Ok((f, time_split(chain.kinematics()?, model, regressor, moving)?))
         })
         .collect::<Result<_>>()?;

@@ -194,9 +194,9 @@ pub(super) fn period_of(
 /// The steady periods: aligned with the default tolerance, then looser
 /// (`STEADY_LADDER`); the tolerance that found them and their chain.
 pub(super) fn steady(
-    log: &Path,
+    (log, raw): (&Path, &RawSamples),
+    robot: &Arc<Robot>,
     plan: &Plan,
-    raw: &RawSamples,
     (period, fs): (f64, f64),
     findings: &[(Found, String)],
 ) -> Result<(f64, Chain)> {
@@ -205,7 +205,7 @@ pub(super) fn steady(
     let mut found = None;
     for tol in STEADY_LADDER {
         let stages = vec![align(period, fs, tol), StageConfig::Average(AverageConfig::default())];
-        match probe(plan, stages, log, raw) {
+        match probe(plan, stages, (log, raw), robot) {
             Ok(chain) => {
                 found = Some((tol, chain));
                 break;

@@ -47,7 +47,7 @@ pub use model::{
 pub use patch_error::PatchError;
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
-pub use robot_file::{load_robot, load_robot_with, parse_robot_file};
+pub use robot_file::{load_robot, load_robot_with, parse_robot_file, Robot};
 pub use rollout::{
     closed_loop, noise_growth, noise_std, rollout, BaseDynamics, Channels, ClosedLoop, Pid, Rollout, Stopped, Window,
 };

@@ -147,12 +147,84 @@ pub fn load_robot(path: &Path) -> Result<Model> {
 
 /// Loads a robot with some joints of its URDF locked (see [`Locks`]).
 pub fn load_robot_with(path: &Path, locks: &Locks) -> Result<Model> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    model_of(&text, path, locks)
+}
+
+/// A robot file read once: its digest (what tables name as their robot's
+/// provenance) and its model for each set of locked joints, made on first
+/// use. A run hands one along instead of the path, so that its design,
+/// probes, pipelines and tables read the file once between them.
+pub struct Robot {
+    path: PathBuf,
+    text: String,
+    sha256: String,
+    models: std::sync::Mutex<Vec<(Locks, std::sync::Arc<Model>)>>,
+}
+
+impl std::fmt::Debug for Robot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Robot")
+            .field("path", &self.path)
+            .field("sha256", &self.sha256)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Robot {
+    /// Reads the robot file at `path` (a `.toml` robot file or a `.urdf`);
+    /// its model is made by [`Robot::model`].
+    pub fn read(path: &Path) -> Result<Robot> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let sha256 = crate::formats::sha256_hex(&bytes);
+        // The error `read_to_string` gives.
+        let text = String::from_utf8(bytes).map_err(|_| {
+            let e = std::io::Error::new(std::io::ErrorKind::InvalidData, "stream did not contain valid UTF-8");
+            Error::io(path, e)
+        })?;
+        Ok(Robot {
+            path: path.to_path_buf(),
+            text,
+            sha256,
+            models: Default::default(),
+        })
+    }
+
+    /// The file's path, as given to [`Robot::read`].
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The file's text.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// SHA-256 of the file's bytes, lowercase hex.
+    pub fn sha256(&self) -> &str {
+        &self.sha256
+    }
+
+    /// The model with `locks`, made once per set of locks.
+    pub fn model(&self, locks: &Locks) -> Result<std::sync::Arc<Model>> {
+        let mut models = self.models.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, m)) = models.iter().find(|(l, _)| l == locks) {
+            return Ok(m.clone());
+        }
+        let m = std::sync::Arc::new(model_of(&self.text, &self.path, locks)?);
+        models.push((locks.clone(), m.clone()));
+        Ok(m)
+    }
+}
+
+/// The model of a robot file's text (`path` tells a URDF by its
+/// extension, names the file in errors and anchors relative paths).
+fn model_of(text: &str, path: &Path, locks: &Locks) -> Result<Model> {
     let is_urdf = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
     let mut model = if is_urdf {
-        super::urdf::load_urdf_with(path, locks)?
+        super::urdf::parse_urdf_with(text, path, locks)?
     } else {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        parse_robot_file_with(&text, path, locks)?
+        parse_robot_file_with(text, path, locks)?
     };
     model.make_bodies_physical();
     model.validate().map_err(|p| Error::Robot {
