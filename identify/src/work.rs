@@ -75,26 +75,8 @@ fn report_page(
 pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identification> {
     request.payload.as_ref().map(payload_values).transpose()?;
     let paths = Paths::of(request)?;
-    // The robot file as the payload's table and exports see it, its link
-    // checked before anything runs.
-    let payload_model = match &request.payload {
-        Some(p) => {
-            let model = paths.robot_file.model(&Default::default())?.as_ref().clone();
-            payload_frame(&model, &p.link)?;
-            Some(model)
-        }
-        None => None,
-    };
-    // Everything is written into a staging folder and appears at once when
-    // identify ends, refused or not (robotid::output): a kill or a failure
-    // leaves the folder as it was. One identify or run at a time holds it.
-    let staging = robotid::output::prepare(&absolute_path(&paths.out)?, None, &paths.all)?;
-    if holds_anything(&paths.out) {
-        return Err(Error::Request(format!(
-            "{}: the output folder is not empty; give another, or remove it",
-            paths.out.display()
-        )));
-    }
+    let payload_model = payload_model(request, &paths)?;
+    let staging = staging_for(&paths)?;
     let (recordings, locked) = design_all(request, &paths)?;
     // Every output is written into the staging folder and named relative
     // to it: the files that name each other (the report, the exports, the
@@ -140,32 +122,14 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     if let (Some(p), Some(fit), Some(model), true) = (&request.payload, &payload, &payload_model, fitted) {
         payload_export(&p.link, fit, model, staged)?;
     }
-    let raw_tables: Vec<PathBuf> = recordings
-        .iter()
-        .filter(|r| r.role == Role::Validation)
-        .map(|r| recording_table(r, TableKind::RawSamples))
-        .collect();
-    let page = report_page(
+    let simulated = simulated_and_drawn(
         request,
         (staged, &paths),
-        (id_tables, val_tables, &raw_tables),
-        fitted,
-        payload.is_some(),
-    );
-    // Every simulation is run here, held on the identification; the page
-    // only draws them.
-    // Each run and failure named where its files will be, not where they
-    // were read.
-    let read = page.read()?;
-    let simulated = robotid::simulation::simulate(&page.asked()).relocated(staged, &paths.out);
-    robotid_report::report::render(&page, &read, &simulated)?;
-    script.report(
+        &recordings,
         (id_tables, val_tables),
-        fitted,
-        request.mujoco.is_some(),
-        payload.is_some(),
-        paths.controller.as_deref().map(|c| (c, raw_tables.as_slice())),
-    );
+        (fitted, payload.is_some()),
+        &mut script,
+    )?;
     std::fs::write(staged.join("identify.sh"), script.text()).map_err(io(&paths.out.join("identify.sh")))?;
     staging.commit()?;
     Ok(Identification {
@@ -186,6 +150,68 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
         payload,
         payload_validation,
     })
+}
+
+/// Everything is written into a staging folder and appears at once when
+/// identify ends, refused or not (robotid::output): a kill or a failure
+/// leaves the folder as it was. One identify or run at a time holds it.
+fn staging_for(paths: &Paths) -> Result<robotid::output::Staging> {
+    let staging = robotid::output::prepare(&absolute_path(&paths.out)?, None, &paths.all)?;
+    if holds_anything(&paths.out) {
+        return Err(Error::Request(format!(
+            "{}: the output folder is not empty; give another, or remove it",
+            paths.out.display()
+        )));
+    }
+    Ok(staging)
+}
+
+/// The robot file as the payload's table and exports see it, its link
+/// checked before anything runs (None: no payload asked for).
+fn payload_model(request: &Request, paths: &Paths) -> Result<Option<robotid_stages::dynamics::Model>> {
+    let Some(p) = &request.payload else {
+        return Ok(None);
+    };
+    let model = paths.robot_file.model(&Default::default())?.as_ref().clone();
+    payload_frame(&model, &p.link)?;
+    Ok(Some(model))
+}
+
+/// Every simulation the report shows, run here and held on the
+/// identification (the page only draws them), each run and failure named
+/// where its files will be, not where they were read; the page drawn and
+/// the script told.
+fn simulated_and_drawn(
+    request: &Request,
+    (staged, paths): (&Path, &Paths),
+    recordings: &[Recording],
+    (id_tables, val_tables): (&[PathBuf], &[PathBuf]),
+    (fitted, payload): (bool, bool),
+    script: &mut Script,
+) -> Result<robotid::simulation::Simulated> {
+    let raw_tables: Vec<PathBuf> = recordings
+        .iter()
+        .filter(|r| r.role == Role::Validation)
+        .map(|r| recording_table(r, TableKind::RawSamples))
+        .collect();
+    let page = report_page(
+        request,
+        (staged, paths),
+        (id_tables, val_tables, &raw_tables),
+        fitted,
+        payload,
+    );
+    let read = page.read()?;
+    let simulated = robotid::simulation::simulate(&page.asked()).relocated(staged, &paths.out);
+    robotid_report::report::render(&page, &read, &simulated)?;
+    script.report(
+        (id_tables, val_tables),
+        fitted,
+        request.mujoco.is_some(),
+        payload,
+        paths.controller.as_deref().map(|c| (c, raw_tables.as_slice())),
+    );
+    Ok(simulated)
 }
 
 /// A recording's regressor table, relative to the staging folder.

@@ -8,22 +8,18 @@ use super::*;
 /// harmonics excited, whether one joint moves, and (for an identification
 /// recording) the band, filter and Coulomb model held-out periods prefer.
 pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
+    let (log, robot, first, fs, loaded) = (d.log, d.robot, d.first, d.fs, d.loaded);
     let Draft {
-        log,
-        robot,
-        first,
-        model,
-        raw,
-        fs,
         mut plan,
         mut findings,
         mut regressor,
         mut inverse,
-        loaded,
+        ..
     } = d;
+    let (model, raw) = (&d.model, &d.raw);
     let (own_regressor, joints) = (first.is_none(), model.joint_names());
     let mut delay = first.and_then(|d| d.delay_s);
-    let (tol, chain) = steady((log, &raw), robot, &plan, (period, fs), &findings)?;
+    let (tol, chain) = steady((log, raw), robot, &plan, (period, fs), &findings)?;
     let p = chain.periods.as_ref().expect("aligned");
     let mean = chain.mean.as_ref().expect("averaged");
     findings.push((Found::Steady, steady_said(p, tol)));
@@ -52,8 +48,8 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
                 log,
                 robot,
                 plan: &plan,
-                raw: &raw,
-                model: &model,
+                raw,
+                model,
                 regressor: &regressor,
                 moving,
                 declared: inverse.as_ref().map(|(f, _)| *f),
@@ -80,19 +76,14 @@ pub(super) fn periodic(d: Draft, period: f64) -> Result<Design> {
         findings.push((Found::Differentiate, said.clone()));
     }
     let whole = match (held_out_relative, held_out_split) {
+        // The draft as found, to be taken whole.
         (None, Some(split)) if moving.is_none() && !loaded => whole_record(
             Draft {
-                log,
-                robot,
-                first,
-                model: model.clone(),
-                raw: raw.clone(),
-                fs,
                 plan: plan.clone(),
                 findings: as_found.0,
                 regressor: as_found.1,
                 inverse: as_found.2,
-                loaded,
+                ..d
             },
             p,
             split,

@@ -387,18 +387,8 @@ pub(super) fn choose_model(
     fs: f64,
     lowest_hz: f64,
 ) -> Result<ModelChoice> {
-    let kin = chain.kinematics()?;
-    let p = chain
-        .periods
-        .as_ref()
-        .ok_or_else(|| refuse(log, "no aligned periods to choose the model on"))?;
-    // One whole period and a steady stretch beyond it: scored on the
-    // stretch's first and last whole periods.
-    let stretched = (p.periods < 2).then(|| stretch_periods(p, kin)).flatten();
-    let (kin, p, overlap) = match &stretched {
-        Some((k, two, overlap)) => (k, two, Some(*overlap)),
-        None => (kin, p, None),
-    };
+    let (kin, p, overlap) = scored_on(log, chain)?;
+    let (kin, p) = (kin.as_ref(), p.as_ref());
     let margin = 3.0 * (2.0 / (chain_samples(kin) as f64)).sqrt();
     let systems = LineSystems::new(kin, p, model, template, moving);
     let (Some(sign), sign_names) = systems.system(template.friction, 0.0, None)? else {
@@ -430,24 +420,13 @@ pub(super) fn choose_model(
     let asymmetric = asymmetric_fit(&systems, &scorer, symmetric, pick.0, first)?;
     let (friction, friction_said, friction_scores, (filter, score)) =
         friction_choice(template.friction, symmetric, asymmetric, (filter, score), margin);
-    // Stribeck's static friction, where the fit is above the floor (a
-    // model at the floor has nothing left for it to explain).
-    let stribeck = match at_floor || template.friction.has_stribeck() {
-        true => None,
-        false => stribeck_fit(&systems, &scorer, (friction, pick.0), first, &score, margin)?,
-    };
-    let at = (friction, pick.0, first);
-    let (late, search, stribeck) = stribeck_again(
-        &systems,
-        &scorer,
-        at,
+    let tried = !(at_floor || template.friction.has_stribeck());
+    let (late, search, (friction, stribeck, stribeck_said), (filter, score)) = with_stribeck(
+        (&systems, &scorer),
+        (friction, pick.0, first),
         (declared, (lowest_hz, fs), margin),
-        (late, stribeck),
+        (late, (filter, score), tried),
     )?;
-    let (friction, stribeck, stribeck_said, (filter, score)) = match stribeck {
-        Some(s) => (friction.with_stribeck(true), s.shapes, Some(s.said), s.fit),
-        None => (friction, Default::default(), None, (filter, score)),
-    };
     let transition_said = transition_said(
         &scored,
         declared.is_some(),
@@ -662,6 +641,68 @@ fn stribeck_again(
             None => (late, search, Some(first_fit)),
         },
     )
+}
+
+/// The periods a model is chosen on, with the share of samples the two
+/// scored share: the chain's; or with one whole period and a steady
+/// stretch beyond it, the stretch's first and last whole periods.
+#[allow(clippy::type_complexity)]
+fn scored_on<'c>(
+    log: &Path,
+    chain: &'c robotid_stages::stage::Chain,
+) -> Result<(
+    std::borrow::Cow<'c, robotid_schemas::Kinematics>,
+    std::borrow::Cow<'c, robotid_stages::stage::Periods>,
+    Option<f64>,
+)> {
+    use std::borrow::Cow;
+    let kin = chain.kinematics()?;
+    let p = chain
+        .periods
+        .as_ref()
+        .ok_or_else(|| refuse(log, "no aligned periods to choose the model on"))?;
+    Ok(match (p.periods < 2).then(|| stretch_periods(p, kin)).flatten() {
+        Some((k, two, overlap)) => (Cow::Owned(k), Cow::Owned(two), Some(overlap)),
+        None => (Cow::Borrowed(kin), Cow::Borrowed(p), None),
+    })
+}
+
+/// Stribeck's static friction on top of `friction` (at turn-over `v`),
+/// tried where `tried`: where the fit is above the floor (a model at the
+/// floor has nothing left for it to explain); the delay and the filter
+/// searched again with it ([`stribeck_again`]). The delay and its search;
+/// the friction, its fades and what says so; and the fit (`fit` where
+/// Stribeck's is not taken).
+#[allow(clippy::type_complexity)]
+fn with_stribeck(
+    (systems, scorer): (&LineSystems, &Scorer),
+    (friction, v, first): (FrictionTerms, f64, Lines),
+    settings: (Option<FilterSpec>, (f64, f64), f64),
+    (late, fit, tried): (Late, (Option<FilterSpec>, Score), bool),
+) -> Result<(
+    Late,
+    Option<FilterChoice>,
+    (
+        FrictionTerms,
+        std::collections::BTreeMap<String, StribeckShape>,
+        Option<String>,
+    ),
+    (Option<FilterSpec>, Score),
+)> {
+    let stribeck = match tried {
+        true => stribeck_fit(systems, scorer, (friction, v), first, &fit.1, settings.2)?,
+        false => None,
+    };
+    let (late, search, stribeck) = stribeck_again(systems, scorer, (friction, v, first), settings, (late, stribeck))?;
+    Ok(match stribeck {
+        Some(s) => (
+            late,
+            search,
+            (friction.with_stribeck(true), s.shapes, Some(s.said)),
+            s.fit,
+        ),
+        None => (late, search, (friction, Default::default(), None), fit),
+    })
 }
 
 /// A joint's held-out ratio in `s` (infinite where not scored).

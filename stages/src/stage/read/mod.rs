@@ -724,16 +724,7 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     )?;
     let effort_unit = units.effort_unit(&mut md, &names[1])?;
     units.convert(("effort", side(&cfg.effort)), &effort_unit, &mut effort, &mut md)?;
-    // A torque from a current is only as good as its gain: said, so that
-    // what depends on the torque's absolute scale (a payload's mass) can
-    // carry the gain's uncertainty.
-    if let Ok(Scale::Current(_)) = unit_scale("effort", &effort_unit) {
-        let from = match cfg.torque_per_amp {
-            Some(_) => "the torque_per_amp given",
-            None => "the robot file's torque constant × gear ratio",
-        };
-        md.insert(metadata::EFFORT_GAINS.into(), format!("{effort_unit} × {from}"));
-    }
+    note_gains(cfg, &effort_unit, &mut md);
     if let Some(r) = &mut reference {
         units.convert(
             ("reference", side(&cfg.reference)),
@@ -768,6 +759,19 @@ pub fn read_log(log: Log, cfg: &ReadConfig, model: Option<&Model>) -> Result<Raw
     };
     raw.check_shape()?;
     Ok(raw)
+}
+
+/// A torque from a current is only as good as its gain: said, so that
+/// what depends on the torque's absolute scale (a payload's mass) can
+/// carry the gain's uncertainty.
+fn note_gains(cfg: &ReadConfig, effort_unit: &str, md: &mut std::collections::BTreeMap<String, String>) {
+    if let Ok(Scale::Current(_)) = unit_scale("effort", effort_unit) {
+        let from = match cfg.torque_per_amp {
+            Some(_) => "the torque_per_amp given",
+            None => "the robot file's torque constant × gear ratio",
+        };
+        md.insert(metadata::EFFORT_GAINS.into(), format!("{effort_unit} × {from}"));
+    }
 }
 
 /// The mapped channels of a log in format `ext`, and its hash.
