@@ -1340,4 +1340,11 @@ fn identify_reads_the_robot_file_once() {
     assert_eq!(opens(&trace, "robots/ur5.toml"), 1, "the robot file:\n{said}");
     // The URDF it names, once per model made of it (one set of locks).
     assert_eq!(opens(&trace, "robots/ur5.urdf"), 1, "its URDF:\n{said}");
+    // Each log, not yet once per design: the check that no two are one
+    // recording (its hash), the design's joint names for the lock and its
+    // read, the run's channel check and its read (a read maps the file
+    // once, channels and hash alike). 9 and 7 before (0a122e8).
+    for log in ["ur5/ur5.mcap", "ur5_validation/ur5_validation.mcap"] {
+        assert!(opens(&trace, log) <= 5, "{log}: {} opens:\n{said}", opens(&trace, log));
+    }
 }

@@ -776,6 +776,21 @@ fn note_gains(cfg: &ReadConfig, effort_unit: &str, md: &mut std::collections::BT
 
 /// The mapped channels of a log in format `ext`, and its hash.
 fn columns_of(log: Log, ext: &str, cfg: &ReadConfig, joints: &[String]) -> Result<(Columns, String)> {
+    // An MCAP or Parquet file is mapped once: its channels are read from
+    // the mapping and its hash taken of the same bytes (text is streamed,
+    // a rosbag2 folder read file by file).
+    let mapped;
+    let log = match log {
+        Log::File(p) if (ext == "mcap" || ext == "parquet") && p.is_file() => {
+            mapped = crate::formats::mapped(p)?;
+            Log::Bytes {
+                name: p,
+                format: ext,
+                bytes: &mapped,
+            }
+        }
+        other => other,
+    };
     // The recording's hash on a thread of its own while its channels are
     // read (a tenth of an MCAP read, a quarter of a Parquet one).
     let beside = |read: &dyn Fn() -> Result<Columns>| {
