@@ -484,3 +484,46 @@ fn apply_actuation(e: &JointEntry, d: &mut Drive, f: &mut Friction, l: &mut Limi
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A robot read once gives the model a load from its path gives, for
+    /// each set of locks, the same one when asked again, and the digest of
+    /// its bytes.
+    #[test]
+    fn a_robot_read_once_gives_what_loading_gives() {
+        let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots");
+        for (file, keep) in [("ur5.toml", None), ("arm_gripper.urdf", Some(2))] {
+            let path = fixtures.join(file);
+            let robot = Robot::read(&path).unwrap();
+            let all = Locks::default();
+            assert_eq!(
+                *robot.model(&all).unwrap(),
+                load_robot_with(&path, &all).unwrap(),
+                "{file}"
+            );
+            assert!(std::sync::Arc::ptr_eq(
+                &robot.model(&all).unwrap(),
+                &robot.model(&all).unwrap()
+            ));
+            if let Some(k) = keep {
+                let joints = robot.model(&all).unwrap().joint_names();
+                let locks = Locks {
+                    keep: Some(joints[..k].to_vec()),
+                    positions: Default::default(),
+                };
+                let locked = robot.model(&locks).unwrap();
+                assert_eq!(*locked, load_robot_with(&path, &locks).unwrap(), "{file}");
+                assert_eq!(locked.dof(), k, "{file}");
+                assert!(!locked.locked.is_empty(), "{file}");
+            }
+            let bytes = std::fs::read(&path).unwrap();
+            assert_eq!(robot.sha256(), crate::formats::sha256_hex(&bytes));
+            assert_eq!(robot.text().as_bytes(), &bytes[..]);
+        }
+        let missing = Robot::read(&fixtures.join("no_such_robot.urdf")).unwrap_err();
+        assert!(missing.to_string().contains("no_such_robot.urdf"), "{missing}");
+    }
+}
