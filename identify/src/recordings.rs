@@ -384,3 +384,89 @@ fn rerun(
     )?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn robot() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots/arm3.toml")
+    }
+
+    fn refused(request: &Request) -> String {
+        match Paths::of(request) {
+            Err(Error::Request(why)) => why,
+            Err(e) => panic!("not a request's error: {e}"),
+            Ok(_) => panic!("not refused"),
+        }
+    }
+
+    /// What a request asks is checked before any work, each refusal naming
+    /// what is wrong: no recording, one recording given twice (under two
+    /// names), an output folder that holds the recordings or is a file, a
+    /// controller with no validation record to run it on, a payload with
+    /// no loaded record.
+    #[test]
+    fn a_request_is_checked_before_any_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+        std::fs::write(&a, "t,q\n0,0\n").unwrap();
+        std::fs::write(&b, "t,q\n0,0\n").unwrap();
+        assert!(refused(&Request::new(Vec::new(), robot())).contains("no recording"));
+        let twice = refused(&Request::new(vec![a.clone(), b.clone()], robot()));
+        assert!(
+            twice.contains("a.csv") && twice.contains("b.csv") && twice.contains("same bytes"),
+            "{twice}"
+        );
+        std::fs::write(&b, "t,q\n0,1\n").unwrap();
+        let mut inside = Request::new(vec![a.clone()], robot());
+        inside.out = Some(dir.path().to_path_buf());
+        assert!(refused(&inside).contains("holds the recordings"));
+        let mut file = Request::new(vec![a.clone()], robot());
+        file.out = Some(b.clone());
+        assert!(refused(&file).contains("is a file"));
+        let mut alone = Request::new(vec![a.clone()], robot());
+        alone.out = Some(dir.path().join("out"));
+        alone.controller = Some(b.clone());
+        assert!(refused(&alone).contains("no --validate recording"));
+        let mut unloaded = Request::new(vec![a.clone()], robot());
+        unloaded.out = Some(dir.path().join("out"));
+        unloaded.payload = Some(crate::PayloadRequest {
+            loaded: Vec::new(),
+            link: "link3".into(),
+            known_mass: None,
+            bound: None,
+            validate: Vec::new(),
+        });
+        assert!(refused(&unloaded).contains("no recording with the payload"));
+        // And a request that is right reads the robot file once, for all.
+        let mut right = Request::new(vec![a, b], robot());
+        right.out = Some(dir.path().join("out"));
+        let paths = Paths::of(&right).unwrap();
+        assert_eq!(paths.robot_file.path(), paths.robot.as_path());
+        assert_eq!((paths.identifying, paths.all.len()), (2, 2));
+    }
+
+    /// The drives' gains: none, one for every joint, or one per joint;
+    /// another count, or a gain that is zero or not finite, is refused
+    /// with the numbers.
+    #[test]
+    fn the_drives_gains_are_one_for_all_or_one_per_joint() {
+        let robot = Robot::read(&robot()).unwrap();
+        let with = |k: &[f64]| {
+            let mut r = Request::new(Vec::new(), PathBuf::new());
+            r.torque_per_amp = k.to_vec();
+            gains(&r, &robot)
+        };
+        assert_eq!(with(&[]).unwrap(), None);
+        assert_eq!(with(&[2.0]).unwrap(), Some(vec![2.0; 3]));
+        assert_eq!(with(&[1.0, 2.0, 3.0]).unwrap(), Some(vec![1.0, 2.0, 3.0]));
+        let said = |k: &[f64]| match with(k) {
+            Err(Error::Request(why)) => why,
+            other => panic!("{k:?}: {other:?}"),
+        };
+        assert!(said(&[1.0, 2.0]).contains("2 values for 3 joints"));
+        assert!(said(&[1.0, 0.0, 3.0]).contains("0 N·m/A is not a drive's gain"));
+        assert!(said(&[f64::NAN]).contains("NaN N·m/A"));
+    }
+}
