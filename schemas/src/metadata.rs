@@ -197,12 +197,14 @@ pub const EXPRESSION: &str = "expression";
 pub const PERIOD: &str = "period";
 
 /// A payload table's link, the frame its body is given in, its bounded
-/// estimate (said), the drive gains' share of its uncertainty, the values
-/// the records leave undetermined and its validation on held-out loaded
+/// estimate (said) and how far the bound moved it (χ² in the covariance's
+/// metric), the drive gains' share of its uncertainty, the values the
+/// records leave undetermined and its validation on held-out loaded
 /// records.
 pub const PAYLOAD_LINK: &str = "robotid.payload.link";
 pub const PAYLOAD_FRAME: &str = "robotid.payload.frame";
 pub const PAYLOAD_BOUND: &str = "robotid.payload.bound";
+pub const PAYLOAD_BOUNDED_CHI2: &str = "robotid.payload.bounded_chi2";
 pub const PAYLOAD_GAINS: &str = "robotid.payload.gains";
 pub const PAYLOAD_UNDETERMINED: &str = "robotid.payload.undetermined";
 pub const PAYLOAD_VALIDATION: &str = "robotid.payload.validation";

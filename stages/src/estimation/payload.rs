@@ -793,7 +793,7 @@ fn payload_metadata(fit: &PayloadFit, link: &str) -> BTreeMap<String, String> {
         fit.estimate.covariance_from.name().to_string(),
     );
     if let Some(b) = &fit.bounded {
-        md.insert("robotid.payload.bounded_chi2".to_string(), b.chi2.to_string());
+        md.insert(metadata::PAYLOAD_BOUNDED_CHI2.to_string(), b.chi2.to_string());
     }
     if let Some(said) = &fit.bound_said {
         md.insert(metadata::PAYLOAD_BOUND.to_string(), said.clone());

@@ -447,7 +447,7 @@ mod tests {
                 Field::new("b", DataType::Boolean, false),
             ])
             .with_metadata(std::collections::HashMap::from([(
-                "robotid.table".to_string(),
+                robotid_schemas::metadata::TABLE.to_string(),
                 "test".to_string(),
             )])),
         );
