@@ -17,8 +17,7 @@ use crate::{Error, Ran, Recording, Request, Result, Role};
 
 /// The request's files made absolute and checked.
 pub(crate) struct Paths {
-    pub(crate) robot: PathBuf,
-    /// The robot file, read once for the whole run.
+    /// The robot file (its path made absolute), read once for the whole run.
     pub(crate) robot_file: Arc<Robot>,
     /// The user's MJCF, to patch.
     pub(crate) mjcf: Option<PathBuf>,
@@ -35,8 +34,7 @@ pub(crate) struct Paths {
 impl Paths {
     pub(crate) fn of(request: &Request) -> Result<Paths> {
         let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<robotid::Result<Vec<_>>>();
-        let robot = absolute(&request.robot)?;
-        let robot_file = Arc::new(Robot::read(&robot)?);
+        let robot_file = Arc::new(Robot::read(&absolute(&request.robot)?)?);
         let mjcf = request.mjcf.as_deref().map(absolute).transpose()?;
         if let Some(m) = mjcf.as_deref().filter(|m| !m.is_file()) {
             return Err(Error::Request(format!("--mjcf {}: no such file", m.display())));
@@ -93,7 +91,6 @@ impl Paths {
             )));
         }
         Ok(Paths {
-            robot,
             robot_file,
             mjcf,
             controller,
@@ -443,7 +440,7 @@ mod tests {
         let mut right = Request::new(vec![a, b], robot());
         right.out = Some(dir.path().join("out"));
         let paths = Paths::of(&right).unwrap();
-        assert_eq!(paths.robot_file.path(), paths.robot.as_path());
+        assert_eq!(paths.robot_file.path(), robot().canonicalize().unwrap());
         assert_eq!((paths.identifying, paths.all.len()), (2, 2));
     }
 

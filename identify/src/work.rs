@@ -83,7 +83,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     // estimate's provenance) hold paths that stay right when the folder
     // appears as `out`, and when it is moved.
     let staged = staging.staged_out();
-    let mut script = Script::new(&paths.robot);
+    let mut script = Script::new(paths.robot_file.path());
     let runs = run_pipelines(
         (request, &paths.robot_file),
         (staged, &paths.out),
@@ -108,7 +108,7 @@ pub fn identify(request: &Request, observer: &dyn Observer) -> Result<Identifica
     };
     script.validate("parameters.parquet", val_tables);
     let (payload, payload_validation) =
-        payload_part(request, staged, (id_tables, loaded_tables), payload_model.as_ref())?;
+        payload_part(request, staged, (id_tables, loaded_tables), payload_model.as_deref())?;
     let physical = physical_or_why(
         request,
         &mut judged,
@@ -168,11 +168,11 @@ fn staging_for(paths: &Paths) -> Result<robotid::output::Staging> {
 
 /// The robot file as the payload's table and exports see it, its link
 /// checked before anything runs (None: no payload asked for).
-fn payload_model(request: &Request, paths: &Paths) -> Result<Option<robotid_stages::dynamics::Model>> {
+fn payload_model(request: &Request, paths: &Paths) -> Result<Option<std::sync::Arc<robotid_stages::dynamics::Model>>> {
     let Some(p) = &request.payload else {
         return Ok(None);
     };
-    let model = paths.robot_file.model(&Default::default())?.as_ref().clone();
+    let model = paths.robot_file.model(&Default::default())?;
     payload_frame(&model, &p.link)?;
     Ok(Some(model))
 }
