@@ -598,7 +598,7 @@ pub fn output_problems(plan: &Plan) -> Vec<Placed> {
 /// stages' bands and harmonics beyond the Nyquist frequency of the rate
 /// declared (`align.sample_rate_hz`) or told by an MCAP summary.
 fn source_problems(plan: &Plan, logs: &[PathBuf], read_logs: bool) -> Vec<Placed> {
-    use robotid_stages::stage::read::{log_problems, log_rate};
+    use robotid_stages::stage::read::{log_problems, log_rate, Log, MappedLog};
     let at = |place: Place, message: String| Placed {
         file: plan.file.clone(),
         place,
@@ -606,9 +606,19 @@ fn source_problems(plan: &Plan, logs: &[PathBuf], read_logs: bool) -> Vec<Placed
     };
     let mut out = Vec::new();
     let logs = if read_logs { logs } else { &[] };
-    for log in logs {
+    // An MCAP log's summary tells its topics and its rate: mapped once for
+    // both (a text or Parquet log is not opened here).
+    let mapped: Vec<Option<MappedLog>> = logs
+        .iter()
+        .map(|l| match Log::File(l).format() == "mcap" {
+            true => MappedLog::open(l).ok(),
+            false => None,
+        })
+        .collect();
+    let log = |i: usize| mapped[i].as_ref().map_or(Log::File(&logs[i]), MappedLog::log);
+    for i in 0..logs.len() {
         out.extend(
-            log_problems(log, &plan.read)
+            log_problems(log(i), &plan.read)
                 .into_iter()
                 .map(|p| at(Place::Read(p.key), p.message)),
         );
@@ -619,8 +629,8 @@ fn source_problems(plan: &Plan, logs: &[PathBuf], read_logs: bool) -> Vec<Placed
     });
     let (rate, period) = declared.unwrap_or((None, None));
     let Some((fs, whose)) = rate.map(|r| (r, "align.sample_rate_hz".to_string())).or_else(|| {
-        logs.iter()
-            .find_map(|l| log_rate(l, &plan.read).map(|r| (r, format!("the rate of {}", l.display()))))
+        (0..logs.len())
+            .find_map(|i| log_rate(log(i), &plan.read).map(|r| (r, format!("the rate of {}", logs[i].display()))))
     }) else {
         return out;
     };

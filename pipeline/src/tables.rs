@@ -18,10 +18,18 @@ use crate::error::{Error, Result};
 
 /// The first two of `paths` that hold the same bytes (by the SHA-256 the
 /// reader records, streamed; a ROS 2 bag folder by its files), if any:
-/// one file given twice under two names.
+/// one file given twice under two names. Only files of one size can hold
+/// the same bytes: a file whose size no other shares is not opened.
 pub fn same_bytes(paths: &[PathBuf]) -> Result<Option<(&Path, &Path)>> {
+    // A folder's size is not its content's: None, always hashed.
+    let size = |p: &Path| std::fs::metadata(p).ok().filter(|m| m.is_file()).map(|m| m.len());
+    let sizes: Vec<Option<u64>> = paths.iter().map(|p| size(p)).collect();
+    let alike = |i: usize| sizes[i].is_none() || sizes.iter().enumerate().any(|(k, s)| k != i && *s == sizes[i]);
     let mut seen: Vec<(String, &Path)> = Vec::new();
-    for p in paths {
+    for (i, p) in paths.iter().enumerate() {
+        if !alike(i) {
+            continue;
+        }
         let hash = robotid_stages::stage::read::hash_recording(p)?;
         if let Some((_, first)) = seen.iter().find(|(h, _)| *h == hash) {
             return Ok(Some((first, p)));

@@ -96,6 +96,57 @@ fn bytes_in_memory_read_as_their_file() {
     }
 }
 
+/// A log mapped once (identify's design reads it many times: its header,
+/// its joint names, each layout tried) reads as its file: the same
+/// samples and metadata, header, width and joint names; a checksum kept
+/// beside it is verified when it is mapped.
+#[test]
+fn a_mapped_log_reads_as_its_file() {
+    use robotid_stages::stage::read::{log_columns, log_joint_names, log_width, MappedLog};
+    let dir = tempfile::tempdir().unwrap();
+    let (model, _) = recording(dir.path());
+    let cfg = ReadConfig::default();
+    for format in ["csv", "parquet", "mcap"] {
+        let file = dir.path().join(format!("rec.{format}"));
+        let mapped = MappedLog::open(&file).unwrap();
+        assert_eq!(mapped.log().path(), file);
+        assert_eq!(
+            read_log(mapped.log(), &cfg, Some(&model)).unwrap(),
+            read(&file, &cfg, Some(&model)).unwrap(),
+            "{format}"
+        );
+        assert_eq!(
+            log_columns(mapped.log()).unwrap(),
+            log_columns(&file).unwrap(),
+            "{format}"
+        );
+        assert_eq!(log_width(mapped.log()).unwrap(), log_width(&file).unwrap(), "{format}");
+        assert_eq!(
+            log_joint_names(mapped.log(), &cfg).unwrap(),
+            log_joint_names(&file, &cfg).unwrap(),
+            "{format}"
+        );
+    }
+    // What each says, so that the comparisons above are not of Nones.
+    let csv = dir.path().join("rec.csv");
+    let header = log_columns(MappedLog::open(&csv).unwrap().log()).unwrap().unwrap();
+    assert_eq!(
+        Some(header.len()),
+        log_width(MappedLog::open(&csv).unwrap().log()).unwrap()
+    );
+    assert!(header.iter().any(|h| h.starts_with("q_")), "{header:?}");
+    let names = log_joint_names(MappedLog::open(&dir.path().join("rec.mcap")).unwrap().log(), &cfg).unwrap();
+    assert_eq!(names, Some(model.joint_names()));
+    // A checksum beside it: verified once, when mapped.
+    let sha = robotid_stages::stage::read::hash_recording(&csv).unwrap();
+    let sidecar = dir.path().join("rec.csv.sha256");
+    std::fs::write(&sidecar, format!("{sha}  rec.csv\n")).unwrap();
+    MappedLog::open(&csv).unwrap();
+    std::fs::write(&sidecar, format!("{}  rec.csv\n", "0".repeat(64))).unwrap();
+    let e = err_of(MappedLog::open(&csv).map(|_| ()));
+    assert!(e.contains("rec.csv") && e.contains("do not match"), "{e}");
+}
+
 #[test]
 fn counts_and_degrees_are_converted() {
     let dir = tempfile::tempdir().unwrap();

@@ -791,10 +791,9 @@ pub(crate) struct Topic {
 
 /// The topics an MCAP log's summary lists; None without a readable summary
 /// (the messages then tell, at the read).
-pub(crate) fn mcap_topics(path: &Path) -> Result<Option<Vec<Topic>>> {
+pub(crate) fn mcap_topics(log: Log) -> Result<Option<Vec<Topic>>> {
     let mut topics: Vec<Topic> = Vec::new();
-    for f in bag_files(path)? {
-        let map = crate::formats::mapped(&f)?;
+    for (_, map) in maps_of(log)? {
         let Ok(Some(summary)) = mcap::read::Summary::read(&map) else {
             return Ok(None);
         };
@@ -835,12 +834,14 @@ fn schema_fields(encoding: &str, data: &[u8]) -> Option<Vec<String>> {
 /// The rate of an MCAP log's messages on `topic`, Hz, from its summary's
 /// statistics (one file; None without them): what `lint` checks the
 /// stages' bands against before any message is read.
-pub(crate) fn mcap_rate(path: &Path, topic: &str) -> Option<f64> {
-    if path.is_dir() {
+pub(crate) fn mcap_rate(log: Log, topic: &str) -> Option<f64> {
+    if matches!(log, Log::File(path) if path.is_dir()) {
         return None;
     }
-    let map = crate::formats::mapped(path).ok()?;
-    let summary = mcap::read::Summary::read(&map).ok()??;
+    let [(_, map)] = &maps_of(log).ok()?[..] else {
+        return None;
+    };
+    let summary = mcap::read::Summary::read(map).ok()??;
     let stats = summary.stats.as_ref()?;
     let id = summary
         .channels
@@ -855,11 +856,9 @@ pub(crate) fn mcap_rate(path: &Path, topic: &str) -> Option<f64> {
 /// The joint names an MCAP log's position messages carry (the last
 /// message's; JointState and its kin), None when they carry none (JSON
 /// arrays): what `robotid identify` matches the robot's joints against.
-pub(crate) fn mcap_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
-    let maps: Vec<(std::path::PathBuf, bytes::Bytes)> = bag_files(path)?
-        .into_iter()
-        .map(|f| crate::formats::mapped(&f).map(|m| (f, m)))
-        .collect::<Result<_>>()?;
+pub(crate) fn mcap_joint_names(log: Log, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
+    let path = log.path();
+    let maps = maps_of(log)?;
     let pos = wanted(&cfg.position, "/joint_states", "position");
     // No joints asked for: every message matches, its names kept.
     let mut series = [Series::new(0)];
@@ -876,16 +875,22 @@ pub(crate) fn mcap_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<V
     Ok((!s.names.is_empty()).then_some(s.names))
 }
 
-pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
-    let path = log.path();
-    let source = path.display().to_string();
-    let maps: Vec<(std::path::PathBuf, bytes::Bytes)> = match log {
+/// A log's files mapped, named: a rosbag2 folder's each, an MCAP file, or
+/// bytes already in memory.
+fn maps_of(log: Log) -> Result<Vec<(std::path::PathBuf, bytes::Bytes)>> {
+    match log {
         Log::File(path) => bag_files(path)?
             .into_iter()
             .map(|f| crate::formats::mapped(&f).map(|m| (f, m)))
-            .collect::<Result<_>>()?,
-        Log::Bytes { name, bytes, .. } => vec![(name.to_path_buf(), bytes.clone())],
-    };
+            .collect(),
+        Log::Bytes { name, bytes, .. } => Ok(vec![(name.to_path_buf(), bytes.clone())]),
+    }
+}
+
+pub(crate) fn read_mcap(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
+    let path = log.path();
+    let source = path.display().to_string();
+    let maps = maps_of(log)?;
     if cfg.position.as_ref().is_some_and(|c| c.column.is_some())
         || cfg.effort.as_ref().is_some_and(|c| c.column.is_some())
     {

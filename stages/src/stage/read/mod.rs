@@ -392,15 +392,15 @@ pub(crate) struct Columns {
 
 /// The column names of a text or Parquet log; None for a text log without
 /// a header line and for MCAP (topics, not columns).
-pub fn log_columns(path: &Path) -> Result<Option<Vec<String>>> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    match ext.as_str() {
-        e if TEXT_EXTENSIONS.contains(&e) => text::header_of(path),
+pub fn log_columns<'a>(log: impl Into<Log<'a>>) -> Result<Option<Vec<String>>> {
+    let log = log.into();
+    match log.format().as_str() {
+        e if TEXT_EXTENSIONS.contains(&e) => text::header_of(log),
         "parquet" => {
-            let builder = crate::formats::parquet::open(path)?;
+            let builder = match log {
+                Log::File(path) => crate::formats::parquet::open(path)?,
+                Log::Bytes { name, bytes, .. } => crate::formats::parquet::open_bytes(name, bytes.clone())?,
+            };
             Ok(Some(
                 builder.schema().fields().iter().map(|f| f.name().clone()).collect(),
             ))
@@ -436,8 +436,9 @@ fn invisible(c: char) -> bool {
 
 /// The rate a log's positions are sampled at, Hz, when it can be told
 /// without reading them (an MCAP summary's statistics); None otherwise.
-pub fn log_rate(path: &Path, cfg: &ReadConfig) -> Option<f64> {
-    if Log::File(path).format() != "mcap" {
+pub fn log_rate<'a>(log: impl Into<Log<'a>>, cfg: &ReadConfig) -> Option<f64> {
+    let log = log.into();
+    if log.format() != "mcap" {
         return None;
     }
     let topic = cfg
@@ -445,16 +446,17 @@ pub fn log_rate(path: &Path, cfg: &ReadConfig) -> Option<f64> {
         .as_ref()
         .and_then(|c| c.topic.clone())
         .unwrap_or_else(|| "/joint_states".into());
-    mcap::mcap_rate(path, &topic)
+    mcap::mcap_rate(log, &topic)
 }
 
 /// What the read settings ask of a log that its format or its summary
 /// refuses before a sample is read (what `lint` checks): columns on an
 /// MCAP log, topics and fields on a text or Parquet one, an MCAP topic
 /// the file does not have, a JointState field that is not one.
-pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
-    let name = path.display();
-    let mcap = Log::File(path).format() == "mcap";
+pub fn log_problems<'a>(log: impl Into<Log<'a>>, cfg: &ReadConfig) -> Vec<Problem> {
+    let log = log.into();
+    let name = log.path().display();
+    let mcap = log.format() == "mcap";
     let mut out = Vec::new();
     for (key, ch) in cfg.channels() {
         let Some(c) = ch else { continue };
@@ -474,7 +476,7 @@ pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
     if !mcap {
         return out;
     }
-    let Ok(Some(topics)) = mcap::mcap_topics(path) else {
+    let Ok(Some(topics)) = mcap::mcap_topics(log) else {
         return out;
     };
     let wanted = [
@@ -534,29 +536,71 @@ pub fn log_problems(path: &Path, cfg: &ReadConfig) -> Vec<Problem> {
 pub fn mcap_has_reference(path: &Path) -> bool {
     let is_mcap = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
     is_mcap
-        && matches!(mcap::mcap_topics(path), Ok(Some(topics)) if topics.iter().any(|t| t.topic == crate::formats::mcap::TOPIC_REFERENCE))
+        && matches!(mcap::mcap_topics(Log::File(path)), Ok(Some(topics)) if topics.iter().any(|t| t.topic == crate::formats::mcap::TOPIC_REFERENCE))
 }
 
 /// The joint names an MCAP log's position messages carry (JointState and
 /// its kin); None for other formats and for messages without names.
-pub fn log_joint_names(path: &Path, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
-    if Log::File(path).format() == "mcap" {
-        mcap::mcap_joint_names(path, cfg)
+pub fn log_joint_names<'a>(log: impl Into<Log<'a>>, cfg: &ReadConfig) -> Result<Option<Vec<String>>> {
+    let log = log.into();
+    if log.format() == "mcap" {
+        mcap::mcap_joint_names(log, cfg)
     } else {
         Ok(None)
     }
 }
 
 /// The number of fields of a text log's lines (None for other formats).
-pub fn log_width(path: &Path) -> Result<Option<usize>> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    if TEXT_EXTENSIONS.contains(&ext.as_str()) {
-        text::width_of(path)
+pub fn log_width<'a>(log: impl Into<Log<'a>>) -> Result<Option<usize>> {
+    let log = log.into();
+    if TEXT_EXTENSIONS.contains(&log.format().as_str()) {
+        text::width_of(log)
     } else {
         Ok(None)
+    }
+}
+
+/// A log file mapped into memory once, for the many reads one design
+/// makes of it (its header, its joint names, each layout tried): each
+/// reads the mapping rather than opening the file again. Its checksum
+/// file, where it has one, is verified here, once. A rosbag2 folder
+/// stays a folder, read file by file.
+pub struct MappedLog {
+    path: std::path::PathBuf,
+    format: String,
+    bytes: Option<bytes::Bytes>,
+}
+
+impl MappedLog {
+    pub fn open(path: &Path) -> Result<MappedLog> {
+        let format = Log::File(path).format();
+        let bytes = match path.is_dir() {
+            true => None,
+            false => {
+                let bytes = crate::formats::mapped(path)?;
+                if checksum_path(path).is_file() {
+                    verify_checksum(path, &crate::formats::sha256_hex(&bytes))?;
+                }
+                Some(bytes)
+            }
+        };
+        Ok(MappedLog {
+            path: path.to_path_buf(),
+            format,
+            bytes,
+        })
+    }
+
+    /// The log to read: the mapping, named by the file's path.
+    pub fn log(&self) -> Log<'_> {
+        match &self.bytes {
+            Some(bytes) => Log::Bytes {
+                name: &self.path,
+                format: &self.format,
+                bytes,
+            },
+            None => Log::File(&self.path),
+        }
     }
 }
 
@@ -595,7 +639,7 @@ impl Log<'_> {
     }
 
     /// Its format as a lower-case extension; a rosbag2 folder's is `mcap`.
-    fn format(&self) -> String {
+    pub fn format(&self) -> String {
         match self {
             Log::File(p) if p.is_dir() => "mcap".into(),
             Log::File(p) => p

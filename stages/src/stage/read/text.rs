@@ -310,9 +310,14 @@ fn read_record(reader: &mut impl BufRead, line: &mut String) -> std::io::Result<
 
 /// A text log's first line that is neither blank nor a comment, without
 /// its byte-order mark and surrounding space; None for an empty log.
-fn first_line(path: &Path) -> Result<Option<String>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut reader = std::io::BufReader::new(file);
+fn first_line(log: Log) -> Result<Option<String>> {
+    let path = log.path();
+    let mut reader: Box<dyn BufRead> = match log {
+        Log::File(path) => Box::new(std::io::BufReader::new(
+            std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
+        )),
+        Log::Bytes { bytes, .. } => Box::new(&bytes[..]),
+    };
     let mut line = String::new();
     loop {
         line.clear();
@@ -335,8 +340,8 @@ fn first_line(path: &Path) -> Result<Option<String>> {
 
 /// The names on a text log's first line, or None when it holds numbers
 /// (no header).
-pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
-    let Some(t) = first_line(path)? else { return Ok(None) };
+pub(crate) fn header_of(log: Log) -> Result<Option<Vec<String>>> {
+    let Some(t) = first_line(log)? else { return Ok(None) };
     let names: Vec<String> = fields(&t, separator_of(&t))
         .map(|f| f.trim().trim_matches('"').to_string())
         .collect();
@@ -349,8 +354,8 @@ pub(crate) fn header_of(path: &Path) -> Result<Option<Vec<String>>> {
 }
 
 /// The number of fields on a text log's first line (header or data).
-pub(crate) fn width_of(path: &Path) -> Result<Option<usize>> {
-    Ok(first_line(path)?.map(|t| fields(&t, separator_of(&t)).count()))
+pub(crate) fn width_of(log: Log) -> Result<Option<usize>> {
+    Ok(first_line(log)?.map(|t| fields(&t, separator_of(&t)).count()))
 }
 
 /// Delimited text: CSV, semicolon, tab or whitespace separated, with or
