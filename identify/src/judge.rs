@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use robotid::identify::{Design, Found};
+use crate::design::{Design, Found};
 use robotid::validation::Validated;
 use robotid::verdict::{channel_gains, Measured, Refusal, Verdict};
 use robotid::Observer;

@@ -1,12 +1,13 @@
 //! `identify` as one library call: from recordings and a robot file to a
 //! validated model — the pipelines designed from the data
-//! ([`robotid::identify`]), run, the estimate judged against the noise
+//! ([`design`]), run, the estimate judged against the noise
 //! floor and held-out data (the refusal policy, [`robotid::verdict`]), its
 //! physically consistent fit, the report and the exports — returned typed
 //! as an [`Identification`] for the command line to print, for Python and
 //! for Ray. Everything is written into a staging folder that appears as
 //! the output folder at once when identify ends, refused or not.
 
+pub mod design;
 mod judge;
 mod payload;
 mod recordings;
@@ -16,7 +17,7 @@ mod work;
 
 use std::path::{Path, PathBuf};
 
-use robotid::identify::Design;
+use crate::design::Design;
 use robotid::validation::Validated;
 use robotid::verdict::{Policy, Verdict};
 use robotid::RunReport;
@@ -299,6 +300,22 @@ pub enum Error {
     Stage(#[from] robotid_stages::Error),
     #[error(transparent)]
     Export(#[from] robotid_report::export::ExportError),
+    /// identify refused a recording, or found no pipeline for it: why,
+    /// with the numbers.
+    #[error("{}: {message}", log.display())]
+    Design { log: PathBuf, message: String },
+    /// A step of designing a recording's pipeline failed: which, and the
+    /// cause.
+    #[error("{}: {step}", log.display())]
+    DesignStep {
+        log: PathBuf,
+        step: String,
+        #[source]
+        source: Box<Error>,
+    },
+    /// A designed plan could not be written as a pipeline file.
+    #[error("writing a pipeline file: {0}")]
+    Write(#[from] toml::ser::Error),
     /// A request identify cannot take: what, and why.
     #[error("{0}")]
     Request(String),

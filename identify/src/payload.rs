@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use robotid::identify::{absolute, design_with};
+use crate::design::{absolute, design_with};
 use robotid::Observer;
 use robotid_stages::dynamics::Robot;
 use robotid_stages::estimation::payload::{
@@ -98,7 +98,7 @@ fn loaded_recordings(
         // are not held against its own.
         let mut design = match recordings.first() {
             Some(r) => design_with(log, robot, Some(&r.design), None, None)?,
-            None => robotid::identify::design_loaded(log, robot)?,
+            None => crate::design::design_loaded(log, robot)?,
         };
         // The table's model, this record's band.
         let band = design.regressor.band_limit_hz;
@@ -111,7 +111,7 @@ fn loaded_recordings(
                 *c = design.regressor.clone();
             }
         }
-        design.text = robotid::identify::file_text(&design.plan)?;
+        design.text = crate::design::file_text(&design.plan)?;
         recordings.push(Recording {
             role: Role::Loaded,
             name,
@@ -137,11 +137,7 @@ pub fn payload_against_parameters(
     observer: &dyn Observer,
 ) -> Result<PayloadFit> {
     let robot = std::sync::Arc::new(Robot::read(&absolute(robot)?)?);
-    let loaded = request
-        .loaded
-        .iter()
-        .map(|p| absolute(p))
-        .collect::<robotid::Result<Vec<_>>>()?;
+    let loaded = request.loaded.iter().map(|p| absolute(p)).collect::<Result<Vec<_>>>()?;
     if loaded.is_empty() {
         return Err(Error::Request("--payload-on: no recording with the payload".into()));
     }

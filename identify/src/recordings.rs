@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use robotid::identify::{absolute, design_with, Design, Found};
+use crate::design::{absolute, design_with, Design, Found};
 use robotid::{Observer, RunOptions};
 use robotid_schemas::TableKind;
 use robotid_stages::dynamics::Robot;
@@ -33,7 +33,7 @@ pub(crate) struct Paths {
 
 impl Paths {
     pub(crate) fn of(request: &Request) -> Result<Paths> {
-        let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<robotid::Result<Vec<_>>>();
+        let absolutes = |ps: &[PathBuf]| ps.iter().map(|p| absolute(p)).collect::<Result<Vec<_>>>();
         let robot_file = Arc::new(Robot::read(&absolute(&request.robot)?)?);
         let mjcf = request.mjcf.as_deref().map(absolute).transpose()?;
         if let Some(m) = mjcf.as_deref().filter(|m| !m.is_file()) {
@@ -149,7 +149,7 @@ pub(crate) fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Record
                 c.payload = true;
             }
         }
-        d.text = robotid::identify::file_text(&d.plan)?;
+        d.text = crate::design::file_text(&d.plan)?;
     }
     // Under a declared controller, the validation records' raw samples
     // (their references with them) are kept for the closed loop.
@@ -174,7 +174,7 @@ pub(crate) fn design_all(request: &Request, paths: &Paths) -> Result<(Vec<Record
                     side: None,
                 });
             }
-            d.text = robotid::identify::file_text(&d.plan)?;
+            d.text = crate::design::file_text(&d.plan)?;
         }
     }
     let locked = lock_unrecorded(&mut designs, paths.identifying)?;
@@ -232,7 +232,7 @@ fn lock_unrecorded(designs: &mut [Design], identifying: usize) -> Result<Option<
             None => said.clone(),
         };
         d.plan.inferred.insert(Found::Locked.key().into(), all);
-        d.text = robotid::identify::file_text(&d.plan)?;
+        d.text = crate::design::file_text(&d.plan)?;
     }
     Ok(Some(said))
 }
@@ -415,6 +415,16 @@ mod tests {
             twice.contains("a.csv") && twice.contains("b.csv") && twice.contains("same bytes"),
             "{twice}"
         );
+        // Found among files of other sizes (those are not opened to hash).
+        let (c, d) = (dir.path().join("c.csv"), dir.path().join("d.csv"));
+        std::fs::write(&c, "t,q\n0,0\n1,0\n").unwrap();
+        std::fs::write(&d, "t,q\n0,0\n").unwrap();
+        let among = refused(&Request::new(vec![a.clone(), c.clone(), d.clone()], robot()));
+        assert!(
+            among.contains("a.csv and") && among.contains("d.csv hold") && !among.contains("c.csv"),
+            "{among}"
+        );
+        // Of one size, other bytes: two recordings (below, `right`).
         std::fs::write(&b, "t,q\n0,1\n").unwrap();
         let mut inside = Request::new(vec![a.clone()], robot());
         inside.out = Some(dir.path().to_path_buf());

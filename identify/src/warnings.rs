@@ -1,8 +1,8 @@
 //! What an identification warns of, as values: the command line prints
 //! them and Python returns them, so both say the same.
 
+use crate::design::Found;
 use crate::{Identification, Physical};
-use robotid::identify::Found;
 
 /// A model rolls out over this many times the robot file's position error
 /// on a joint: warned, since there the robot file simulates better.

@@ -108,18 +108,6 @@ pub enum Error {
     /// A plan made in code could not be written as a pipeline file.
     #[error("writing a pipeline file: {0}")]
     Write(#[from] toml::ser::Error),
-    /// `identify` refused a recording, or found no pipeline for it: why,
-    /// with the numbers.
-    #[error("{}: {message}", log.display())]
-    Identify { log: PathBuf, message: String },
-    /// A step of `identify` on a recording failed: which, and the cause.
-    #[error("{}: {step}", log.display())]
-    IdentifyStep {
-        log: PathBuf,
-        step: String,
-        #[source]
-        source: Box<Error>,
-    },
     /// A table a run wrote does not read as the kind it should be.
     #[error("{}: {source}", path.display())]
     Table {
@@ -162,13 +150,8 @@ impl Error {
         use robotid_stages::relocate_path as moved;
         match self {
             Error::Stage(e) => e.relocate(from, to),
-            Error::Io { path, .. }
-            | Error::Identify { log: path, .. }
-            | Error::Unfit { path, .. }
-            | Error::NotTheRobot { parameters: path, .. } => moved(path, from, to),
-            Error::IdentifyStep { log, source, .. } => {
-                moved(log, from, to);
-                source.relocate(from, to);
+            Error::Io { path, .. } | Error::Unfit { path, .. } | Error::NotTheRobot { parameters: path, .. } => {
+                moved(path, from, to)
             }
             Error::Table { path, source } => {
                 moved(path, from, to);

@@ -2,18 +2,18 @@
 //! pipeline files (`plan`), the entry point (`pipeline`: [`Pipeline`] →
 //! [`Built`] → [`RunReport`]), the execution over many recordings (`run`,
 //! told to an [`Observer`]), the one commit of a run's outputs (`output`),
-//! `identify`'s design of pipelines from recordings, merged summaries,
-//! validation statistics and every simulation a page shows (`simulation`:
-//! rollouts, the closed loop, MuJoCo). Pictures, reports and exports are the
-//! `robotid-report` crate's, the command line `robotid-cli`'s, runs read as
-//! a dataset `robotid-dataset`'s.
+//! merged summaries, validation statistics and every simulation a page
+//! shows (`simulation`: rollouts, the closed loop, MuJoCo). Pictures,
+//! reports and exports are the `robotid-report` crate's, identify (the
+//! pipelines designed from recordings, and the one call from recordings
+//! to a model) `robotid-identify`'s, the command line `robotid-cli`'s,
+//! runs read as a dataset `robotid-dataset`'s.
 
 pub mod error;
 // The fuzz targets' entry points (fuzz/, pipeline/tests/suite/fuzz_regressions.rs):
 // public for them, not part of the library's API.
 #[doc(hidden)]
 pub mod fuzz;
-pub mod identify;
 pub mod mujoco;
 pub mod output;
 pub mod pipeline;

@@ -1,6 +1,6 @@
 use std::path::PathBuf;
 
-use robotid::identify::Found;
+use robotid_identify::design::Found;
 use robotid_identify::{Identification, PayloadRequest, Physical, Request};
 
 #[derive(clap::Args)]

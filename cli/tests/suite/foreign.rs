@@ -8,8 +8,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use robotid::identify::Found;
 use robotid::verdict::Refusal;
+use robotid_identify::design::Found;
 use robotid_identify::Request;
 use robotid_stages::estimation::parameters_from_table;
 use robotid_stages::formats::parquet::read_parquet;

@@ -21,12 +21,13 @@ pub(super) enum Layout {
 /// `/joint_states`) when they fit the log, else guessed from its column
 /// names, else, for a headerless text log, the usual layouts tried.
 pub(super) fn read_settings(
-    log: &Path,
+    source: Log,
     joints: &[String],
     model: &robotid_stages::dynamics::Model,
     stated: Option<&ReadConfig>,
     torque_per_amp: Option<&[f64]>,
 ) -> Result<(ReadConfig, RawSamples, Layout)> {
+    let log = source.path();
     // Every candidate reads currents with the gains given.
     let with_gains = |mut cfg: ReadConfig| {
         if let Some(k) = torque_per_amp {
@@ -36,10 +37,10 @@ pub(super) fn read_settings(
     };
     if let Some(cfg) = stated {
         let cfg = with_gains(cfg.clone());
-        let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the stated [read]"))?;
+        let raw = read_log(source, &cfg, Some(model)).map_err(at_step(log, "read with the stated [read]"))?;
         return Ok((cfg, raw, Layout::Stated));
     }
-    let default_err = match read(log, &with_gains(ReadConfig::default()), Some(model)) {
+    let default_err = match read_log(source, &with_gains(ReadConfig::default()), Some(model)) {
         Ok(raw) => return Ok((with_gains(ReadConfig::default()), raw, Layout::Default)),
         // The file itself is unreadable (missing, empty, truncated,
         // corrupt): no layout would read it, and none is blamed.
@@ -48,7 +49,7 @@ pub(super) fn read_settings(
         }
         Err(e) => e,
     };
-    if let Some(header) = log_columns(log)? {
+    if let Some(header) = log_columns(source)? {
         let cfg = guess_read(&header, joints).map(with_gains).map_err(|e| {
             refuse(
                 log,
@@ -58,10 +59,10 @@ pub(super) fn read_settings(
                 ),
             )
         })?;
-        let raw = read(log, &cfg, Some(model)).map_err(at_step(log, "read with the guessed columns"))?;
+        let raw = read_log(source, &cfg, Some(model)).map_err(at_step(log, "read with the guessed columns"))?;
         return Ok((cfg, raw, Layout::Named));
     }
-    if log_width(log)?.is_none() {
+    if log_width(source)?.is_none() {
         // Not text (MCAP, a rosbag2 folder): its topics and names are what
         // the default read said of them.
         return Err(at_step(
@@ -69,7 +70,7 @@ pub(super) fn read_settings(
             "read at the default topics (/joint_states: position, effort); give others with `--read FILE.toml` (a `[read]` table, docs/your-recordings.md)",
         )(default_err));
     }
-    headerless(log, joints, model, &with_gains, default_err)
+    headerless(source, joints, model, &with_gains, default_err)
 }
 
 /// A headerless log: each usual layout read (positions outside the joints'
@@ -77,18 +78,19 @@ pub(super) fn read_settings(
 /// positions change little from sample to sample, a torque carries its
 /// noise on every one. None reading: `default_err`, with what was tried.
 pub(super) fn headerless(
-    log: &Path,
+    source: Log,
     joints: &[String],
     model: &robotid_stages::dynamics::Model,
     with_gains: &dyn Fn(ReadConfig) -> ReadConfig,
     default_err: robotid_stages::Error,
 ) -> Result<(ReadConfig, RawSamples, Layout)> {
-    let layouts = log_width(log)?.map_or_else(Vec::new, |w| headerless_layouts(w, joints.len()));
+    let log = source.path();
+    let layouts = log_width(source)?.map_or_else(Vec::new, |w| headerless_layouts(w, joints.len()));
     let mut tried = Vec::new();
     let mut best: Option<(f64, ReadConfig, RawSamples, String)> = None;
     for (cfg, said) in layouts {
         let cfg = with_gains(cfg);
-        match read(log, &cfg, Some(model)) {
+        match read_log(source, &cfg, Some(model)) {
             Ok(raw) => {
                 let r = roughness(&raw.q);
                 tried.push(format!("{said}: roughness {r:.3}"));

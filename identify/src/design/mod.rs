@@ -24,24 +24,34 @@ use robotid_stages::stage::differentiate::{DifferentiateConfig, Differentiation}
 use robotid_stages::stage::inverse_filter::InverseFilterConfig;
 use robotid_stages::stage::noise::NoiseConfig;
 use robotid_stages::stage::read::{
-    guess_read, headerless_layouts, log_columns, log_joint_names, log_width, named_joints, read, ReadConfig,
+    guess_read, headerless_layouts, log_columns, log_joint_names, log_width, named_joints, read_log, Log, MappedLog,
+    ReadConfig,
 };
 use robotid_stages::stage::regressor::RegressorConfig;
 use robotid_stages::stage::Chain;
 
-use crate::error::{Error, Result};
-use crate::plan::{Plan, StageConfig};
-use crate::Pipeline;
+use robotid::plan::{Plan, StageConfig};
+use robotid::Pipeline;
 
-mod design;
+use crate::{Error, Result};
+
+mod band;
+mod delay;
+mod kinds;
 mod layout;
+mod lines;
 mod model;
 mod periods;
+mod stribeck;
 
-use design::*;
+use band::*;
+use delay::*;
+use kinds::*;
 use layout::*;
+use lines::*;
 use model::*;
 use periods::*;
+use stribeck::*;
 
 /// What identify found, by kind: printed one line each, and written in
 /// the pipeline file's `[inferred]` under its [`Found::key`].
@@ -307,7 +317,7 @@ fn inverse_filter(inverse: Option<&(FilterSpec, f64)>, delay_s: Option<f64>, fs:
 
 /// identify's refusal of `log`, or what it could not find there.
 fn refuse(log: &Path, message: impl Into<String>) -> Error {
-    Error::Identify {
+    Error::Design {
         log: log.to_path_buf(),
         message: message.into(),
     }
@@ -316,7 +326,7 @@ fn refuse(log: &Path, message: impl Into<String>) -> Error {
 /// A step of identify on `log` that failed, with its cause.
 fn at_step<E: Into<Error>>(log: &Path, step: impl Into<String>) -> impl FnOnce(E) -> Error {
     let (log, step) = (log.to_path_buf(), step.into());
-    move |e| Error::IdentifyStep {
+    move |e| Error::DesignStep {
         log,
         step,
         source: Box::new(e.into()),
@@ -429,9 +439,12 @@ fn design_checked(
     (stated, torque_per_amp): (Option<&ReadConfig>, Option<&[f64]>),
     loaded: bool,
 ) -> Result<Design> {
-    let (model, locked) = unheld_locked(log, robot, first, stated)?;
+    // Mapped once: its header, joint names and each layout tried read the mapping.
+    let mapped = MappedLog::open(log).map_err(at_step(log, "read"))?;
+    let (model, locked) = unheld_locked(mapped.log(), robot, first, stated)?;
     let joints = model.joint_names();
-    let (read_cfg, raw, layout) = read_settings(log, &joints, &model, stated, torque_per_amp)?;
+    let (read_cfg, raw, layout) = read_settings(mapped.log(), &joints, &model, stated, torque_per_amp)?;
+    drop(mapped);
     let mut findings: Vec<(Found, String)> = Vec::new();
     let mut plan = Plan::draft(
         &log.with_extension("toml"),
@@ -505,7 +518,7 @@ fn design_checked(
 /// position for them, and returned with it. A validation recording takes
 /// the identification recording's locks (one parameter set).
 fn unheld_locked(
-    log: &Path,
+    source: Log,
     robot: &Robot,
     first: Option<&Design>,
     stated: Option<&ReadConfig>,
@@ -517,9 +530,10 @@ fn unheld_locked(
         // The user's `joints` are what the log holds.
         None if stated.is_some_and(|c| c.joints.is_some()) => Vec::new(),
         None => {
-            let held: Option<Vec<String>> = match log_columns(log).map_err(at_step(log, "read its header"))? {
+            let log = source.path();
+            let held: Option<Vec<String>> = match log_columns(source).map_err(at_step(log, "read its header"))? {
                 Some(header) => Some(named_joints(&header, &joints)),
-                None => log_joint_names(log, &stated.cloned().unwrap_or_default())
+                None => log_joint_names(source, &stated.cloned().unwrap_or_default())
                     .map_err(at_step(log, "read its joint names"))?
                     .map(|names| joints.iter().filter(|j| names.contains(j)).cloned().collect()),
             };
