@@ -193,6 +193,43 @@ def test_identify_from_python_writes_the_command_lines_files(examples, tmp_path)
         assert abs(model.body_mass[-1] - masses[k]) <= 1e-9 * masses[k], (model.body_mass, masses[k])
 
 
+def example_robot(path: str) -> pathlib.Path:
+    """A URDF of the `example-robot-data` package (scripts/test.sh installs it)."""
+    urdf = pathlib.Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots" / path
+    if not urdf.is_file():
+        pytest.skip(f"{urdf}: example-robot-data is not installed (scripts/test.sh installs it)")
+    return urdf
+
+
+# Records robotid did not make: three of an independent simulator (the
+# foreign corpus, truth beside them) and the real LWR4+ (issue 62).
+NOT_OURS = {
+    "ur5": ("foreign/ur5", "excitation.mcap", ["validation.mcap"], "ur_description/urdf/ur5_robot.urdf"),
+    "ur5_lab": ("foreign/ur5_lab", "excitation.mcap", ["validation.mcap"], "ur_description/urdf/ur5_robot.urdf"),
+    "panda": ("foreign/panda", "excitation.csv", ["validation.csv"], "panda_description/urdf/panda.urdf"),
+    "kuka_lwr4": ("realdata/kuka_lwr4", "measurements_1.csv", ["measurements_2.csv", "measurements_3.csv"], None),
+}
+
+
+@pytest.mark.parametrize("name", sorted(NOT_OURS))
+def test_records_robotid_did_not_make_give_the_command_lines_bytes(name, tmp_path):
+    """On records robotid did not make (a lab's shape, a late effort
+    channel, CSV and MCAP, a real arm), Python writes the command line's
+    files byte for byte, with the same warnings and the same verdict."""
+    folder, excitation, validation, urdf = NOT_OURS[name]
+    case = SHARED / folder
+    if not case.exists():
+        pytest.skip(f"{case} is absent (../shared sits beside the repository)")
+    robot = example_robot(urdf) if urdf else case / "kuka_lwr4.urdf"
+    by_cli, by_python, result = identify_both(
+        tmp_path, [case / excitation], robot, [case / v for v in validation]
+    )
+    assert sorted(by_cli) == sorted(by_python)
+    assert [str(p) for p in by_cli if by_cli[p] != by_python[p]] == []
+    assert pathlib.Path("parameters.parquet") in by_cli and pathlib.Path("report.html") in by_cli
+    assert result.identified and result.refused is None, result.refused
+
+
 def test_a_refused_identification_is_a_result_with_the_cause(tmp_path):
     """A foreign recording (made without robotid) under a tolerance no
     model meets: refused by both (exit 3 from the command line), the same
@@ -200,12 +237,7 @@ def test_a_refused_identification_is_a_result_with_the_cause(tmp_path):
     case = SHARED / "foreign" / "ur5"
     if not case.exists():
         pytest.skip(f"{case} is absent (the foreign recordings sit beside the repository)")
-    urdf = (
-        pathlib.Path(sysconfig.get_paths()["purelib"])
-        / "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
-    )
-    if not urdf.is_file():
-        pytest.skip(f"{urdf}: example-robot-data is not installed (scripts/test.sh installs it)")
+    urdf = example_robot("ur_description/urdf/ur5_robot.urdf")
     out = tmp_path / "out"
     done = cli("identify", case / "excitation.mcap", "--robot", urdf, "--out", out, "--tolerance", "0.01", check=False)
     assert done.returncode == 3, done.stderr
