@@ -10,10 +10,10 @@ use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, RecordBatch, Str
 use arrow::datatypes::{DataType, Field, Schema};
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, parameter_unit, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, MjcfPatch, Model,
-    Patched, Robot, UrdfPatch,
+    parameter_names, parameter_unit, standard_parameters, with_standard_parameters, Model, Robot,
 };
 use robotid_stages::estimation::{physically_consistent, LinkBound};
+use robotid_stages::export::{to_mjcf, to_urdf, MjcfPatch, Patched, UrdfPatch};
 use robotid_stages::formats::parquet::{read_parquet, write_parquet};
 use robotid_stages::formats::{sha256_hex, write_atomic};
 
@@ -98,12 +98,12 @@ pub enum ExportError {
     #[error("{}: the identified dynamics cannot be written into it: {problem}", robot.display())]
     Patch {
         robot: PathBuf,
-        problem: Box<robotid_stages::dynamics::PatchError>,
+        problem: Box<robotid_stages::export::PatchError>,
     },
     #[error("--mjcf {}: the identified dynamics cannot be written into it: {problem}", mjcf.display())]
     MjcfPatch {
         mjcf: PathBuf,
-        problem: Box<robotid_stages::dynamics::PatchError>,
+        problem: Box<robotid_stages::export::PatchError>,
     },
     #[error("{}: {source}", path.display())]
     Io {
@@ -374,7 +374,7 @@ pub(crate) fn user_mjcf(mjcf: Option<&Path>, model: &Model) -> Result<Option<Mjc
     Ok(Some(MjcfPatch::new(text, model).map_err(|p| mjcf_error(path, p))?))
 }
 
-pub(crate) fn mjcf_error(mjcf: &Path, problem: robotid_stages::dynamics::PatchError) -> ExportError {
+pub(crate) fn mjcf_error(mjcf: &Path, problem: robotid_stages::export::PatchError) -> ExportError {
     ExportError::MjcfPatch {
         mjcf: mjcf.to_path_buf(),
         problem: Box::new(problem),
@@ -428,7 +428,7 @@ pub(crate) fn user_urdf(robot: &Robot, model: &Model) -> Result<Option<UrdfPatch
     ))
 }
 
-pub(crate) fn patch_error(robot: &Path, problem: robotid_stages::dynamics::PatchError) -> ExportError {
+pub(crate) fn patch_error(robot: &Path, problem: robotid_stages::export::PatchError) -> ExportError {
     ExportError::Patch {
         robot: robot.to_path_buf(),
         problem: Box::new(problem),

@@ -16,9 +16,10 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use robotid_schemas::metadata;
 use robotid_stages::dynamics::{
-    parameter_names, prior_scales, standard_parameters, to_mjcf, to_urdf, with_standard_parameters, Model, Robot,
+    parameter_names, prior_scales, standard_parameters, with_standard_parameters, Model, Robot,
 };
 use robotid_stages::estimation::{link_bounds, physically_consistent};
+use robotid_stages::export::{to_mjcf, to_urdf};
 use robotid_stages::formats::parquet::write_parquet;
 use robotid_stages::formats::sha256_hex;
 

@@ -9,12 +9,15 @@
 //!   filters), [`estimation`] (least squares, maximum likelihood, physical
 //!   consistency, the Projection Method, dedicated experiments),
 //!   [`excitation`] (optimal excitation design), [`simulation`] (the
-//!   closed-loop simulator), [`trajectory`] and [`formats`] (files).
+//!   closed-loop simulator), [`trajectory`] and [`formats`] (files), and
+//!   [`export`] (a model written as URDF or MJCF, or patched into the
+//!   user's own).
 
 pub mod dynamics;
 mod error;
 pub mod estimation;
 pub mod excitation;
+pub mod export;
 pub mod formats;
 pub mod signal;
 pub mod simulation;

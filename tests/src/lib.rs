@@ -438,7 +438,7 @@ pub fn mjcf_patch_checked_in_mujoco(
 ) -> (f64, String) {
     export(robotid, robot, params, dir, &["--mjcf".as_ref(), mjcf.as_os_str()]);
     let (model, locked) = exported_model(robot, params, dir);
-    let patch = robotid_stages::dynamics::MjcfPatch::new(std::fs::read_to_string(mjcf).unwrap(), &model).unwrap();
+    let patch = robotid_stages::export::MjcfPatch::new(std::fs::read_to_string(mjcf).unwrap(), &model).unwrap();
     let theirs = patch.on_its_kinematics(&model);
     let exported = dir.join("identified.xml");
     (

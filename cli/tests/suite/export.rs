@@ -200,7 +200,8 @@ bandwidth_hz = 1.0
 /// out of the forearm's.
 #[test]
 fn a_users_mjcf_in_other_frames_moves_as_the_identified_model() {
-    use robotid_stages::dynamics::{load_urdf_with, Locks, MjcfPatch};
+    use robotid_stages::dynamics::{load_urdf_with, Locks};
+    use robotid_stages::export::MjcfPatch;
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/robots");
     let locks = Locks {
         keep: Some(vec!["shoulder".into(), "elbow".into()]),

@@ -7,7 +7,8 @@
 
 use std::path::{Path, PathBuf};
 
-use robotid_stages::dynamics::{forward_dynamics, load_robot, rnea, rnea_terms, to_mjcf, Data, Model, Terms};
+use robotid_stages::dynamics::{forward_dynamics, load_robot, rnea, rnea_terms, Data, Model, Terms};
+use robotid_stages::export::to_mjcf;
 use robotid_stages::stage::read::{read_log, Channel, Log, ReadConfig};
 use robotid_tests::example_urdf;
 

@@ -17,7 +17,7 @@ use super::xml::XmlError;
 
 /// A rigid transform: rotate by `r`, then move by `p`.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Pose {
+pub(crate) struct Pose {
     pub r: Matrix3<f64>,
     pub p: Vector3<f64>,
 }
@@ -69,7 +69,7 @@ impl Pose {
 
 /// An MJCF joint as MuJoCo reads it, its class's defaults applied.
 #[derive(Debug, Clone)]
-pub(super) struct MjJoint {
+pub(crate) struct MjJoint {
     pub name: String,
     /// hinge, slide, ball or free.
     pub kind: String,
@@ -92,11 +92,11 @@ pub(super) struct MjJoint {
 }
 
 /// The joint attributes a patch writes, in [`MjJoint::own`]'s order.
-pub(super) const DYNAMICS: [&str; 3] = ["armature", "damping", "frictionloss"];
+pub(crate) const DYNAMICS: [&str; 3] = ["armature", "damping", "frictionloss"];
 
 /// A body of the MJCF.
 #[derive(Debug, Clone)]
-pub(super) struct MjBody {
+pub(crate) struct MjBody {
     pub name: String,
     pub parent: Option<usize>,
     /// In its parent body's frame (its frames composed).
@@ -114,7 +114,7 @@ pub(super) struct MjBody {
 }
 
 /// An MJCF's bodies (worldbody's children and theirs, depth first).
-pub(super) struct Mjcf {
+pub(crate) struct Mjcf {
     pub bodies: Vec<MjBody>,
 }
 
@@ -415,7 +415,7 @@ impl<'a> Reader<'a> {
             joints: Vec::new(),
             inertial: None,
             open_end,
-            indent: super::urdf_patch::indent(self.text, &c, "  "),
+            indent: super::xml::indent(self.text, &c, "  "),
         });
         let id = self.bodies.len() - 1;
         self.contents(
@@ -541,7 +541,7 @@ impl Mjcf {
 
 /// The motion a joint adds at `x` from its reference (a hinge turns
 /// about its axis through its position, a slide moves along it).
-pub(super) fn joint_motion(j: &MjJoint, x: f64) -> Pose {
+pub(crate) fn joint_motion(j: &MjJoint, x: f64) -> Pose {
     let d = x - j.reference;
     match j.kind.as_str() {
         "hinge" => {

@@ -12,20 +12,15 @@ mod decoupled;
 mod forward_dynamics;
 mod kinematics;
 pub mod lagrange;
-mod mjcf;
-mod mjcf_export;
-mod mjcf_patch;
+pub(crate) mod mjcf;
 pub mod model;
-mod patch_error;
 mod r_factor;
 mod rnea;
 mod robot_file;
 mod rollout;
 mod stl;
 mod torque_regressor;
-mod urdf;
-mod urdf_export;
-mod urdf_patch;
+pub(crate) mod urdf;
 pub mod xml;
 
 pub use agreement::{torque_agreement, Agreement};
@@ -38,13 +33,10 @@ pub use data::Data;
 pub use decoupled::{decoupled_names, decoupled_regressor, gravity_amplitude_offset};
 pub use forward_dynamics::{cholesky_solve_in_place, forward_dynamics, try_cholesky_solve_in_place};
 pub use kinematics::{end_effector_position, forward_kinematics};
-pub use mjcf_export::{principal_axes, to_mjcf};
-pub use mjcf_patch::MjcfPatch;
 pub use model::{
     Coupling, Drive, Extent, Friction, Geometry, Inertial, Joint, Limits, Model, Shape, Stribeck, DEFAULT_GAIN_REL_STD,
     LISTED,
 };
-pub use patch_error::PatchError;
 pub use r_factor::RFactor;
 pub use rnea::{mass_matrix, rnea, rnea_terms, Terms};
 pub use robot_file::{load_robot, load_robot_with, parse_robot_file, Robot};
@@ -56,5 +48,3 @@ pub use torque_regressor::{
     with_standard_parameters, FrictionTerms, ParameterKind, RegressorTerms, Spring,
 };
 pub use urdf::{load_urdf, load_urdf_with, parse_urdf, parse_urdf_with, Locks};
-pub use urdf_export::to_urdf;
-pub use urdf_patch::{patch_urdf, Patched, UrdfPatch};

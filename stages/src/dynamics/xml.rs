@@ -189,6 +189,20 @@ fn depth_within(text: &str) -> Result<(), XmlError> {
     Ok(())
 }
 
+/// The indentation of the children of `element`: its first child
+/// element's, else its own plus `step`.
+pub fn indent(text: &str, element: &roxmltree::Node, step: &str) -> String {
+    let line = |at: usize| {
+        let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
+        let lead = &text[start..at];
+        lead.chars().all(|c| c == ' ' || c == '\t').then(|| lead.to_string())
+    };
+    match element.children().find(|c| c.is_element()) {
+        Some(c) => line(c.range().start).unwrap_or_else(|| step.repeat(2)),
+        None => line(element.range().start).map_or_else(|| step.to_string(), |own| own + step),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

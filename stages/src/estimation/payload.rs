@@ -671,7 +671,7 @@ pub enum PayloadExportError {
     #[error("the URDF: {0}")]
     Urdf(crate::dynamics::xml::XmlError),
     #[error(transparent)]
-    Mjcf(#[from] crate::dynamics::PatchError),
+    Mjcf(#[from] crate::export::PatchError),
 }
 
 /// The body the exports write: the bounded estimate when there is one,
@@ -712,7 +712,7 @@ pub fn mjcf_with_payload(
         com: pos + rot * body.com,
         inertia_com: rot * body.inertia_com * rot.transpose(),
     };
-    Ok(crate::dynamics::MjcfPatch::new(mjcf.to_string(), model)?.with_body(
+    Ok(crate::export::MjcfPatch::new(mjcf.to_string(), model)?.with_body(
         "robotid_payload",
         &in_last,
         &format!("the identified payload ({from}, payload.parquet)"),

@@ -1,7 +1,7 @@
 //! Why a user's URDF or MJCF cannot take the identified bodies: typed, so
 //! that each front end words it and a program can tell the cases apart.
 
-use super::xml::XmlError;
+use crate::dynamics::xml::XmlError;
 
 /// Why a user's robot file (URDF or MJCF) cannot be patched with a model's
 /// bodies.

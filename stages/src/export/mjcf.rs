@@ -21,7 +21,7 @@ use std::fmt::Write;
 
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion, Vector3};
 
-use super::model::{Geometry, Model, Shape};
+use crate::dynamics::model::{Geometry, Model, Shape};
 
 /// The time constant of each joint's friction-loss constraint, s: twice
 /// MuJoCo's default timestep, the shortest it keeps stable. At MuJoCo's
@@ -124,7 +124,7 @@ impl Meshes {
                     let _ = writeln!(
                         s,
                         "{pad}<!-- robotid: mesh {} not drawn (not found as an STL file, which MuJoCo reads) -->",
-                        super::xml::comment(name)
+                        crate::dynamics::xml::comment(name)
                     );
                     continue;
                 }
@@ -143,7 +143,7 @@ fn xml_attr(text: &str) -> String {
 /// The MJCF text of `model`; `note` goes into a comment at the top.
 pub fn to_mjcf(model: &Model, note: &str) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "<!-- {} -->", super::xml::comment(note));
+    let _ = writeln!(s, "<!-- {} -->", crate::dynamics::xml::comment(note));
     let _ = writeln!(s, "<mujoco model=\"{}\">", model.name);
     let _ = writeln!(s, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
     let _ = writeln!(s, "  <option gravity=\"{}\"/>", v3(&model.gravity));

@@ -23,10 +23,10 @@ use std::ops::Range;
 
 use nalgebra::Vector3;
 
-use super::mjcf::{joint_motion, Mjcf, Pose, DYNAMICS};
-use super::model::{axis_rotation, Inertial, Joint, Model};
-use super::patch_error::PatchError;
+use super::error::PatchError;
 use super::urdf_patch::Patched;
+use crate::dynamics::mjcf::{joint_motion, Mjcf, Pose, DYNAMICS};
+use crate::dynamics::model::{axis_rotation, Inertial, Joint, Model};
 
 /// Kinematics farther than this from the robot file's (rad or m) are
 /// another robot's, or another zero pose.
@@ -124,7 +124,7 @@ impl MjcfPatch {
             }
             let element = format!(
                 "<!-- robotid: {} -->\n{}{}",
-                super::xml::comment(&comment),
+                crate::dynamics::xml::comment(&comment),
                 body.indent,
                 inertial(&written)
             );
@@ -133,7 +133,7 @@ impl MjcfPatch {
                 let welded = &self.mjcf.bodies[l];
                 let element = format!(
                     "<!-- robotid: this body's mass is in the identified body of `{}` -->\n{}<inertial pos=\"0 0 0\" mass=\"0\" diaginertia=\"0 0 0\"/>",
-                    super::xml::comment(&body.name),
+                    crate::dynamics::xml::comment(&body.name),
                     welded.indent
                 );
                 edits.push(place_inertial(welded, element));
@@ -153,7 +153,7 @@ impl MjcfPatch {
                 let p = &self.placed[j];
                 self.mjcf.bodies[p.body].joints[p.joint].name.clone()
             };
-            edits.push((end..end, super::mjcf_export::coupled_tendons(model, &name)));
+            edits.push((end..end, super::mjcf::coupled_tendons(model, &name)));
         }
         Ok((super::urdf_patch::apply(text, edits), patched))
     }
@@ -216,7 +216,7 @@ impl MjcfPatch {
         let pad = &parent.indent;
         let element = format!(
             "\n{pad}<!-- robotid: {} -->\n{pad}<body name=\"{name}\">\n{pad}  {}\n{pad}</body>",
-            super::xml::comment(note),
+            crate::dynamics::xml::comment(note),
             inertial(&p.link_in_body.inertial(carried))
         );
         Ok(super::urdf_patch::apply(
@@ -450,7 +450,7 @@ fn inertial(i: &Inertial) -> String {
 
 /// The edit that puts `element` in place of `body`'s `<inertial>`, else
 /// as its first child.
-fn place_inertial(body: &super::mjcf::MjBody, element: String) -> (Range<usize>, String) {
+fn place_inertial(body: &crate::dynamics::mjcf::MjBody, element: String) -> (Range<usize>, String) {
     match &body.inertial {
         Some((r, _)) => (r.clone(), element),
         None => (body.open_end..body.open_end, format!("\n{}{element}", body.indent)),
@@ -547,7 +547,8 @@ mod tests {
         // The joints carry the model's friction and armature; the elbow's
         // class gave it armature and frictionloss, now its own.
         let elbow = &back.bodies[fore].joints[0];
-        let value = |j: &super::super::mjcf::MjJoint, k: usize| text[j.own[k].clone().unwrap()].parse::<f64>().unwrap();
+        let value =
+            |j: &crate::dynamics::mjcf::MjJoint, k: usize| text[j.own[k].clone().unwrap()].parse::<f64>().unwrap();
         assert_eq!([value(elbow, 0), value(elbow, 1), value(elbow, 2)], [0.0, 0.35, 0.55]);
         let shoulder = &back.bodies[0].joints[0];
         assert_eq!(value(shoulder, 0), model.drives[0].reflected_inertia());

@@ -10,7 +10,7 @@ use std::fmt::Write;
 
 use nalgebra::{Rotation3, Vector3};
 
-use super::model::{Inertial, Model};
+use crate::dynamics::model::{Inertial, Model};
 
 fn v3(v: &Vector3<f64>) -> String {
     format!("{} {} {}", v.x, v.y, v.z)
@@ -45,7 +45,7 @@ pub(super) fn friction_comment(model: &Model, i: usize) -> String {
 /// plus two spaces and its close by `indent`; `comment` first inside it.
 pub(super) fn inertial(l: &Inertial, indent: &str, comment: Option<&str>) -> String {
     let ic = (l.inertia_com + l.inertia_com.transpose()) * 0.5;
-    let comment = comment.map(|c| format!("\n{indent}  <!-- {} -->", super::xml::comment(c)));
+    let comment = comment.map(|c| format!("\n{indent}  <!-- {} -->", crate::dynamics::xml::comment(c)));
     format!(
         "<inertial>{}\n{indent}  <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n{indent}  <mass value=\"{}\"/>\n{indent}  <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n{indent}</inertial>",
         comment.unwrap_or_default(),
@@ -74,7 +74,7 @@ pub(super) fn dynamics(model: &Model, i: usize) -> String {
 pub fn to_urdf(model: &Model, note: &str) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "<?xml version=\"1.0\"?>");
-    let _ = writeln!(s, "<!-- {} -->", super::xml::comment(note));
+    let _ = writeln!(s, "<!-- {} -->", crate::dynamics::xml::comment(note));
     let _ = writeln!(s, "<robot name=\"{}\">", model.name);
     let g = model.gravity;
     let mut parent = "base_link".to_string();

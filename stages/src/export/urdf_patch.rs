@@ -16,10 +16,11 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
 use std::path::Path;
 
-use super::model::{Inertial, Model};
-use super::patch_error::PatchError;
-use super::urdf::{parse_urdf_with, Locks};
-use super::urdf_export::{dynamics, friction_comment, inertial};
+use super::error::PatchError;
+use super::urdf::{dynamics, friction_comment, inertial};
+use crate::dynamics::model::{Inertial, Model};
+use crate::dynamics::urdf::{parse_urdf_with, Locks};
+use crate::dynamics::xml::indent;
 
 /// What patching did to one link, for the sidecar and the command's
 /// report.
@@ -125,7 +126,7 @@ impl<'a, 'i> Tree<'a, 'i> {
 
 impl UrdfPatch {
     pub fn new(text: String, path: &Path, model: &Model) -> Result<UrdfPatch, PatchError> {
-        let doc = super::xml::parse(&text)?;
+        let doc = crate::dynamics::xml::parse(&text)?;
         let tree = Tree::of(&doc, model)?;
         // The carried links' share of each body, at their locked positions:
         // the robot file's bodies with and without their inertials.
@@ -146,7 +147,7 @@ impl UrdfPatch {
     /// what was done to each link.
     pub fn apply(&self, model: &Model, note: &str) -> Result<(String, Vec<Patched>), PatchError> {
         let text = self.text.as_str();
-        let doc = super::xml::parse(text)?;
+        let doc = crate::dynamics::xml::parse(text)?;
         let tree = Tree::of(&doc, model)?;
         let mut edits: Vec<(Range<usize>, String)> = Vec::new();
         let mut patched = Vec::new();
@@ -225,7 +226,7 @@ fn body_edits(
         if let Some(own) = tree.inertial_of(l) {
             let why = format!(
                 "<!-- robotid: this link's inertial is in the identified body of {} -->",
-                super::xml::comment(link_name)
+                crate::dynamics::xml::comment(link_name)
             );
             edits.push((own.range(), why));
         }
@@ -288,20 +289,6 @@ fn below<'a>(link: &str, carried: bool, rigid: &BTreeMap<&'a str, Vec<(&'a str, 
         out.extend(below(c, carried || locked, rigid));
     }
     out
-}
-
-/// The indentation of the children of `element`: its first child
-/// element's, else its own plus `step`.
-pub(super) fn indent(text: &str, element: &roxmltree::Node, step: &str) -> String {
-    let line = |at: usize| {
-        let start = text[..at].rfind('\n').map_or(0, |n| n + 1);
-        let lead = &text[start..at];
-        lead.chars().all(|c| c == ' ' || c == '\t').then(|| lead.to_string())
-    };
-    match element.children().find(|c| c.is_element()) {
-        Some(c) => line(c.range().start).unwrap_or_else(|| step.repeat(2)),
-        None => line(element.range().start).map_or_else(|| step.to_string(), |own| own + step),
-    }
 }
 
 /// The edit that puts `inertial` in `link`: in place of its own, else as

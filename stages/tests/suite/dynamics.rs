@@ -233,7 +233,8 @@ fn modified_dh_equals_explicit_origin() {
 /// so they are left out of the comparison.
 #[test]
 fn urdf_export_round_trips() {
-    use robotid_stages::dynamics::{parse_urdf, rnea, to_urdf, Friction};
+    use robotid_stages::dynamics::{parse_urdf, rnea, Friction};
+    use robotid_stages::export::to_urdf;
     for robot in ["kuka_axis3.toml", "arm3.toml", "ur5.urdf"] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../fixtures/robots")
