@@ -1,6 +1,7 @@
-//! Where a log's channels are and how fast it was sampled: the read
-//! settings tried (robotid's defaults, the column names, a headerless log's
-//! usual layouts), the sample rate, the filter a log declares.
+//! Where a log's channels are and how fast it was sampled: the joints it
+//! holds (the robot file's others locked), the read settings tried
+//! (robotid's defaults, the column names, a headerless log's usual
+//! layouts), the sample rate, the filter a log declares.
 
 use super::*;
 
@@ -247,4 +248,68 @@ pub(super) fn declared_filter(
         )),
     }
     Ok(inverse)
+}
+
+/// What the design says of the joints it locked.
+pub(super) fn locked_said<Q: std::fmt::Display>(locked: &[(String, Q)]) -> String {
+    let said = locked
+        .iter()
+        .map(|(j, q)| format!("{j} at {q}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!("{said}: joints of the robot file that the log does not hold (a gripper, a tool), locked where the robot file puts them (its zero, or the nearest limit); their links move with their parents'")
+}
+
+/// The robot as the log holds it: joints of the robot file that a log
+/// naming its joints does not hold (a gripper, a tool changer: URDFs
+/// carry them, arm logs often do not) are locked at the robot file's
+/// position for them, and returned with it. A validation recording takes
+/// the identification recording's locks (one parameter set).
+pub(super) fn unheld_locked(
+    source: Log,
+    robot: &Robot,
+    first: Option<&Design>,
+    stated: Option<&ReadConfig>,
+) -> Result<(robotid_stages::dynamics::Model, Vec<(String, f64)>)> {
+    let model = robot.model(&Default::default())?.as_ref().clone();
+    let joints = model.joint_names();
+    let missing: Vec<String> = match first {
+        Some(d) => d.plan.lock.keys().filter(|j| joints.contains(j)).cloned().collect(),
+        // The user's `joints` are what the log holds.
+        None if stated.is_some_and(|c| c.joints.is_some()) => Vec::new(),
+        None => {
+            let log = source.path();
+            let held: Option<Vec<String>> = match log_columns(source).map_err(at_step(log, "read its header"))? {
+                Some(header) => Some(named_joints(&header, &joints)),
+                None => log_joint_names(source, &stated.cloned().unwrap_or_default())
+                    .map_err(at_step(log, "read its joint names"))?
+                    .map(|names| joints.iter().filter(|j| names.contains(j)).cloned().collect()),
+            };
+            match held {
+                Some(h) if !h.is_empty() && h.len() < joints.len() => {
+                    joints.iter().filter(|j| !h.contains(j)).cloned().collect()
+                }
+                _ => Vec::new(),
+            }
+        }
+    };
+    if missing.is_empty() {
+        return Ok((model, Vec::new()));
+    }
+    let keep: Vec<String> = joints.iter().filter(|j| !missing.contains(j)).cloned().collect();
+    let locked_model = robot
+        .model(&robotid_stages::dynamics::Locks {
+            keep: Some(keep),
+            positions: Default::default(),
+        })?
+        .as_ref()
+        .clone();
+    // Written as `[lock]`: the pipeline file's model is this one.
+    let locked: Vec<(String, f64)> = locked_model
+        .locked
+        .iter()
+        .filter(|(j, _)| missing.contains(j))
+        .cloned()
+        .collect();
+    Ok((locked_model, locked))
 }
