@@ -607,12 +607,14 @@ fn source_problems(plan: &Plan, logs: &[PathBuf], read_logs: bool) -> Vec<Placed
     let mut out = Vec::new();
     let logs = if read_logs { logs } else { &[] };
     // An MCAP log's summary tells its topics and its rate: mapped once for
-    // both (a text or Parquet log is not opened here).
+    // both, not hashed (the run's read verifies its checksum); a text or
+    // Parquet log is not opened here.
     let mapped: Vec<Option<MappedLog>> = logs
         .iter()
-        .map(|l| match Log::File(l).format() == "mcap" {
-            true => MappedLog::open(l).ok(),
-            false => None,
+        .map(|l| {
+            (Log::File(l).format() == "mcap")
+                .then(|| MappedLog::unverified(l).ok())
+                .flatten()
         })
         .collect();
     let log = |i: usize| mapped[i].as_ref().map_or(Log::File(&logs[i]), MappedLog::log);

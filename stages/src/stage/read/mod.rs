@@ -572,21 +572,26 @@ pub struct MappedLog {
 }
 
 impl MappedLog {
+    /// Mapped, its checksum file (where it has one) verified: for reading
+    /// its samples.
     pub fn open(path: &Path) -> Result<MappedLog> {
-        let format = Log::File(path).format();
+        let log = MappedLog::unverified(path)?;
+        if let Some(bytes) = log.bytes.as_ref().filter(|_| checksum_path(path).is_file()) {
+            verify_checksum(path, &crate::formats::sha256_hex(bytes))?;
+        }
+        Ok(log)
+    }
+
+    /// Mapped, not hashed: for what reads only a summary (the lint's MCAP
+    /// topics and rate), whose read later verifies the bytes it reads.
+    pub fn unverified(path: &Path) -> Result<MappedLog> {
         let bytes = match path.is_dir() {
             true => None,
-            false => {
-                let bytes = crate::formats::mapped(path)?;
-                if checksum_path(path).is_file() {
-                    verify_checksum(path, &crate::formats::sha256_hex(&bytes))?;
-                }
-                Some(bytes)
-            }
+            false => Some(crate::formats::mapped(path)?),
         };
         Ok(MappedLog {
             path: path.to_path_buf(),
-            format,
+            format: Log::File(path).format(),
             bytes,
         })
     }

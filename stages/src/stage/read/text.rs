@@ -308,16 +308,21 @@ fn read_record(reader: &mut impl BufRead, line: &mut String) -> std::io::Result<
     Ok(read)
 }
 
-/// A text log's first line that is neither blank nor a comment, without
-/// its byte-order mark and surrounding space; None for an empty log.
-fn first_line(log: Log) -> Result<Option<String>> {
-    let path = log.path();
-    let mut reader: Box<dyn BufRead> = match log {
+/// A text log's lines as they come: a file streamed, or bytes in memory.
+fn reader_of<'a>(log: Log<'a>) -> Result<Box<dyn BufRead + 'a>> {
+    Ok(match log {
         Log::File(path) => Box::new(std::io::BufReader::new(
             std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
         )),
         Log::Bytes { bytes, .. } => Box::new(&bytes[..]),
-    };
+    })
+}
+
+/// A text log's first line that is neither blank nor a comment, without
+/// its byte-order mark and surrounding space; None for an empty log.
+fn first_line(log: Log) -> Result<Option<String>> {
+    let path = log.path();
+    let mut reader = reader_of(log)?;
     let mut line = String::new();
     loop {
         line.clear();
@@ -365,12 +370,7 @@ pub(crate) fn width_of(log: Log) -> Result<Option<usize>> {
 pub(crate) fn read_text(log: Log, cfg: &ReadConfig, joints: &[String]) -> Result<Columns> {
     let path = log.path();
     let source = path.display().to_string();
-    let reader: Box<dyn BufRead + '_> = match log {
-        Log::File(path) => Box::new(std::io::BufReader::new(
-            std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
-        )),
-        Log::Bytes { bytes, .. } => Box::new(&bytes[..]),
-    };
+    let reader = reader_of(log)?;
     let mut lines = Lines {
         reader,
         path,
